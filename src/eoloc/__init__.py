@@ -1,0 +1,47 @@
+"""eoloc — geolocation of ground targets seen by airborne electro-optical sensors.
+
+Conventions (one per concept, everywhere in the library):
+
+- Ellipsoid WGS-84 (a = 6 378 137 m, f = 1/298.257223563). Geodetic latitude/longitude in
+  **degrees** at the API (radians inside), heights **ellipsoidal** in metres; metres everywhere.
+- ECEF: WGS-84 Earth-centred Earth-fixed. Local level: NED at the aircraft (ENU as a conversion).
+- Body: FRD (x nose, y right wing, z down). Attitude: yaw (heading, clockwise from true north),
+  pitch (nose up +), roll (right wing down +); R_ned_body = Rz(yaw) Ry(pitch) Rx(roll).
+- All rotation matrices are **active**: ``v_a = R_a_b @ v_b``.
+- Camera: x right in the image, y down, z along the boresight. Pixels: u = column, v = row, the
+  centre of the top-left pixel is (0, 0).
+- Results: :class:`Fixes` with a per-target :class:`Status`; NaN coordinates where not OK.
+"""
+
+from ._backend import available_backends, get_backend, set_backend, use_backend
+from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
+from .locate import locate_ellipsoid, locate_range, stop_at_ellipsoid, stop_at_range
+from .result import Fixes, Status
+from .sensor import AzElGimbal, Camera, FixedMount, Pose, Rays, RollPitchGimbal, SensorModel
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "WGS84",
+    "AzElGimbal",
+    "Camera",
+    "Ellipsoid",
+    "FixedMount",
+    "Fixes",
+    "Pose",
+    "Rays",
+    "RollPitchGimbal",
+    "SensorModel",
+    "Status",
+    "__version__",
+    "available_backends",
+    "ecef_to_geodetic",
+    "geodetic_to_ecef",
+    "get_backend",
+    "locate_ellipsoid",
+    "locate_range",
+    "set_backend",
+    "stop_at_ellipsoid",
+    "stop_at_range",
+    "use_backend",
+]

@@ -1,0 +1,319 @@
+"""Component-wise numerical kernels: the single implementation of eoloc's math.
+
+Every function here takes floats or numpy arrays that broadcast, works component by component
+(a vector is three values ``x, y, z``; a rotation is a 9-tuple in row-major order) and uses only
+arithmetic, numpy ufuncs and :func:`_pick` / :func:`_finite`.  Angles are radians, lengths metres.
+
+Two backends run these *same* functions:
+
+- numpy: called directly on arrays (the reference path, always available);
+- numba: :mod:`eoloc._nb` compiles each function for scalars (``_pick`` becomes a branch) and
+  loops over elements in gufuncs, and the single-target fast path calls them directly.
+
+So the real-time path, batches and Monte Carlo never have a second implementation of the math.
+Rotations are *active*: ``mat_vec(R_a_b, v_b)`` gives the vector expressed in frame ``a``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Status codes (mirrors eoloc.result.Status; kept here as ints so kernels stay free of Python
+# objects that numba cannot compile).
+OK = 0
+NO_INTERSECTION = 1
+OUT_OF_COVERAGE = 2
+DEM_VOID = 3
+INVALID_INPUT = 4
+
+_NEWTON_STEPS = 1  # ray-ellipsoid height refinement: one step takes the < 2 cm start to < 1 µm
+
+
+def _pick(cond, a, b):
+    """``a`` where ``cond`` else ``b`` (numpy: np.where; numba: a branch)."""
+    return np.where(cond, a, b)
+
+
+def _finite(s):
+    """True where ``s`` is finite: ``inf - inf`` and ``nan - nan`` are NaN, which is not 0."""
+    return (s - s) == 0.0
+
+
+# ---------------------------------------------------------------- 3x3 algebra on 9-tuples
+
+
+def mat_mul(A, B):
+    """Product of two rotations given as row-major 9-tuples."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
+    return (
+        a0 * b0 + a1 * b3 + a2 * b6,
+        a0 * b1 + a1 * b4 + a2 * b7,
+        a0 * b2 + a1 * b5 + a2 * b8,
+        a3 * b0 + a4 * b3 + a5 * b6,
+        a3 * b1 + a4 * b4 + a5 * b7,
+        a3 * b2 + a4 * b5 + a5 * b8,
+        a6 * b0 + a7 * b3 + a8 * b6,
+        a6 * b1 + a7 * b4 + a8 * b7,
+        a6 * b2 + a7 * b5 + a8 * b8,
+    )
+
+
+def mat_vec(A, x, y, z):
+    """``A @ (x, y, z)``."""
+    return (
+        A[0] * x + A[1] * y + A[2] * z,
+        A[3] * x + A[4] * y + A[5] * z,
+        A[6] * x + A[7] * y + A[8] * z,
+    )
+
+
+def mat_t_vec(A, x, y, z):
+    """``A.T @ (x, y, z)`` (the inverse rotation)."""
+    return (
+        A[0] * x + A[3] * y + A[6] * z,
+        A[1] * x + A[4] * y + A[7] * z,
+        A[2] * x + A[5] * y + A[8] * z,
+    )
+
+
+def rot_x(t):
+    """Active rotation by ``t`` about x (y turns toward z)."""
+    c = np.cos(t)
+    s = np.sin(t)
+    o = 0.0 * t
+    return (o + 1.0, o, o, o, c, -s, o, s, c)
+
+
+def rot_y(t):
+    """Active rotation by ``t`` about y (z turns toward x)."""
+    c = np.cos(t)
+    s = np.sin(t)
+    o = 0.0 * t
+    return (c, o, s, o, o + 1.0, o, -s, o, c)
+
+
+def rot_z(t):
+    """Active rotation by ``t`` about z (x turns toward y)."""
+    c = np.cos(t)
+    s = np.sin(t)
+    o = 0.0 * t
+    return (c, -s, o, s, c, o, o, o, o + 1.0)
+
+
+def r_ned_body(yaw, pitch, roll):
+    """R_ned_body = Rz(yaw) Ry(pitch) Rx(roll), written out (ZYX, active)."""
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    return (
+        cy * cp,
+        cy * sp * sr - sy * cr,
+        cy * sp * cr + sy * sr,
+        sy * cp,
+        sy * sp * sr + cy * cr,
+        sy * sp * cr - cy * sr,
+        -sp,
+        cp * sr,
+        cp * cr,
+    )
+
+
+def r_ecef_ned(lat, lon):
+    """R_ecef_ned: columns are the north, east and down unit vectors in ECEF."""
+    sl, cl = np.sin(lat), np.cos(lat)
+    so, co = np.sin(lon), np.cos(lon)
+    return (-sl * co, -so, -cl * co, -sl * so, co, -cl * so, cl, 0.0 * lat, -sl)
+
+
+def r_body_cam_azel(az, el, sensor_roll):
+    """Azimuth-elevation turret: G = Rz(az) Ry(el) Rx(sensor_roll); camera z = G x, x = G y, y = G z."""
+    g = mat_mul(rot_z(az), mat_mul(rot_y(el), rot_x(sensor_roll)))
+    return (g[1], g[2], g[0], g[4], g[5], g[3], g[7], g[8], g[6])
+
+
+def r_body_cam_rollpitch(frame_roll, frame_pitch, sensor_roll):
+    """Roll-pitch framed camera ([Q]): S = Rx(roll) Ry(pitch) Rz(sensor_roll), camera = S C.
+
+    C maps the computer-vision camera frame into [Q]'s sensor frame S: the ray of pixel (u, v) in S
+    is (v - cy, -(u - cx), f), i.e. image rows grow toward S +x and columns toward S -y.
+    """
+    s = mat_mul(rot_x(frame_roll), mat_mul(rot_y(frame_pitch), rot_z(sensor_roll)))
+    return (-s[1], s[0], s[2], -s[4], s[3], s[5], -s[7], s[6], s[8])
+
+
+# ---------------------------------------------------------------- geodesy
+
+
+def geodetic_to_ecef(lat, lon, h, a, e2):
+    """Geodetic (rad, rad, m ellipsoidal) to ECEF metres."""
+    sl = np.sin(lat)
+    cl = np.cos(lat)
+    n = a / np.sqrt(1.0 - e2 * sl * sl)
+    r = (n + h) * cl
+    return r * np.cos(lon), r * np.sin(lon), (n * (1.0 - e2) + h) * sl
+
+
+def _bowring(x, y, z, a, b, e2, ep2, steps):
+    """Sine and cosine of the geodetic latitude, p = sqrt(x² + y²) and h, without any atan2.
+
+    Bowring's formula from the reduced latitude of the point's projection. Two steps: 2 nm
+    worst case from -10 km to 100 km (one step: latitude 0.09 mm off at 100 km, but h still
+    within 5 nm, enough where only h matters). No division by p, so the poles are exact; h from
+    sin/cos of the latitude stays exact there too.
+    """
+    p = np.sqrt(x * x + y * y)
+    su = a * z
+    cu = b * p
+    for _ in range(steps):
+        k = 1.0 / np.sqrt(su * su + cu * cu)
+        su = su * k
+        cu = cu * k
+        num = z + ep2 * b * su * su * su  # (num, den) is parallel to (sin lat, cos lat)
+        den = p - e2 * a * cu * cu * cu
+        su = b * num  # tan(reduced lat) = (b / a) tan(lat)
+        cu = a * den
+    k = 1.0 / np.sqrt(num * num + den * den)
+    sl = num * k
+    cl = den * k
+    h = p * cl + z * sl - a * np.sqrt(1.0 - e2 * sl * sl)
+    return sl, cl, p, h
+
+
+def ecef_to_geodetic(x, y, z, a, b, e2, ep2):
+    """ECEF metres to geodetic (rad, rad, m ellipsoidal); longitude 0 on the polar axis."""
+    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    return np.arctan2(sl, cl), np.arctan2(y, x), h
+
+
+# ---------------------------------------------------------------- pose and rays
+
+
+def pose_frame(lat, lon, h, yaw, pitch, roll, R_body_cam, lx, ly, lz, a, e2):
+    """Camera pose in ECEF: (R_ecef_cam 9-tuple, camera origin x, y, z).
+
+    ``R_body_cam`` already includes gimbal angles and misalignments; (lx, ly, lz) is the lever
+    arm from the INS reference point to the camera, body frame, metres.
+    """
+    R_ecef_ned = r_ecef_ned(lat, lon)
+    R_ecef_body = mat_mul(R_ecef_ned, r_ned_body(yaw, pitch, roll))
+    R_ecef_cam = mat_mul(R_ecef_body, R_body_cam)
+    px, py, pz = geodetic_to_ecef(lat, lon, h, a, e2)
+    dx, dy, dz = mat_vec(R_ecef_body, lx, ly, lz)
+    return R_ecef_cam, px + dx, py + dy, pz + dz
+
+
+def ray_direction(R_ecef_cam, xn, yn):
+    """Unit ECEF direction of the ray through normalised image point (xn, yn) = ((u-cx)/fx, (v-cy)/fy)."""
+    k = 1.0 / np.sqrt(xn * xn + yn * yn + 1.0)
+    return mat_vec(R_ecef_cam, xn * k, yn * k, k)
+
+
+def project_point(R_ecef_cam, ox, oy, oz, px, py, pz):
+    """Ground to image: normalised image point (xn, yn) and depth along the boresight (m)."""
+    cx, cy, cz = mat_t_vec(R_ecef_cam, px - ox, py - oy, pz - oz)
+    zs = _pick(cz > 0.0, cz, np.nan)
+    return cx / zs, cy / zs, cz
+
+
+# ---------------------------------------------------------------- stop rules
+
+
+def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
+    """M1: the point at slant range ``rng`` (m) along the ray -> (lat, lon, h, range, status)."""
+    valid = _finite(ox + oy + oz + dx + dy + dz + rng) & (rng > 0.0)
+    r = _pick(valid, rng, np.nan)
+    lat, lon, h = ecef_to_geodetic(ox + r * dx, oy + r * dy, oz + r * dz, a, b, e2, ep2)
+    return lat, lon, h, r, _pick(valid, OK, INVALID_INPUT)
+
+
+def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
+    """M3: first point along the ray whose geodetic height is ``ht`` (m) -> (lat, lon, h, range, status).
+
+    Starts from the ray's intersection with the inflated ellipsoid (a + ht, b + ht), which is not
+    the constant-height surface (cm-level off at 10 km), then Newton-refines along the ray with
+    d h / d t = up . d (the gradient of geodetic height is the unit ellipsoid normal).
+    A ray that misses, or whose intersections are all behind the origin, gives NaN and
+    NO_INTERSECTION; never the nearest point on the ray.
+    """
+    valid = _finite(ox + oy + oz + dx + dy + dz + ht)
+    A = a + ht
+    B = b + ht
+    ia = 1.0 / (A * A)
+    ib = 1.0 / (B * B)
+    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
+    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
+    qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
+    disc = qb * qb - qa * qc
+    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
+    t1 = (-qb - sq) / qa
+    t2 = (-qb + sq) / qa
+    t = _pick(t1 > 0.0, t1, _pick(t2 > 0.0, t2, np.nan))
+    for _ in range(_NEWTON_STEPS):
+        x = ox + t * dx
+        y = oy + t * dy
+        sl, cl, p, h = _bowring(x, y, oz + t * dz, a, b, e2, ep2, 1)
+        cl_p = _pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
+        t = t - (h - ht) / (cl_p * (x * dx + y * dy) + sl * dz)
+    t = _pick(t > 0.0, t, np.nan)
+    lat, lon, h = ecef_to_geodetic(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2)
+    hit = t == t
+    return lat, lon, h, t, _pick(valid, _pick(hit, OK, NO_INTERSECTION), INVALID_INPUT)
+
+
+# ---------------------------------------------------------------- whole chain, one call
+
+
+def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore):
+    """R_body_cam = R_mount . gimbal(g1, g2, g3) . R_bore for gimbal ``kind``.
+
+    kind 0: azimuth-elevation turret (g1 az, g2 el, g3 sensor roll);
+    kind 1: roll-pitch framed camera (g1 frame roll, g2 frame pitch, g3 sensor roll);
+    kind 2: fixed/generic mount ``R_fixed`` followed by a sensor roll g3 about the boresight.
+    """
+    if kind == 0:
+        G = r_body_cam_azel(g1, g2, g3)
+    elif kind == 1:
+        G = r_body_cam_rollpitch(g1, g2, g3)
+    else:
+        G = mat_mul(R_fixed, rot_z(g3))
+    return mat_mul(R_mount, mat_mul(G, R_bore))
+
+
+def _tuple9(p, i):
+    return (p[i], p[i + 1], p[i + 2], p[i + 3], p[i + 4], p[i + 5], p[i + 6], p[i + 7], p[i + 8])
+
+
+# Layout of the parameter vector built by SensorModel._params().
+P_FX, P_FY, P_CX, P_CY, P_KIND, P_MOUNT, P_FIXED, P_BORE, P_LEVER, P_ELL = 0, 1, 2, 3, 4, 5, 14, 23, 32, 35
+N_PARAMS = 39
+STOP_RANGE = 0
+STOP_ELLIPSOID = 1
+
+
+def locate_one(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3, u, v, stop_kind, stop_value):
+    """Pixel (u, v) of one pose to ground, everything in degrees/metres at the edges.
+
+    Returns (lat_deg, lon_deg, h_m, range_m, status). ``params`` is SensorModel._params().
+    """
+    d = np.pi / 180.0
+    a = params[P_ELL]
+    b = params[P_ELL + 1]
+    e2 = params[P_ELL + 2]
+    ep2 = params[P_ELL + 3]
+    Rbc = r_body_cam(
+        int(params[P_KIND]), g1 * d, g2 * d, g3 * d,
+        _tuple9(params, P_MOUNT), _tuple9(params, P_FIXED), _tuple9(params, P_BORE),
+    )
+    R, ox, oy, oz = pose_frame(
+        lat * d, lon * d, h, yaw * d, pitch * d, roll * d, Rbc,
+        params[P_LEVER], params[P_LEVER + 1], params[P_LEVER + 2], a, e2,
+    )
+    dx, dy, dz = ray_direction(R, (u - params[P_CX]) / params[P_FX], (v - params[P_CY]) / params[P_FY])
+    if stop_kind == STOP_RANGE:
+        rlat, rlon, rh, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, stop_value, a, b, e2, ep2)
+    else:
+        rlat, rlon, rh, t, st = stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, stop_value, a, b, e2, ep2)
+    if not np.abs(lat) <= 90.0:  # also catches NaN; out-of-range angles elsewhere just rotate
+        return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
+    return rlat / d, rlon / d, rh, t, st

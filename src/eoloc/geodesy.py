@@ -1,0 +1,160 @@
+"""WGS-84 geodesy: geodetic <-> ECEF, the local NED/ENU frames, offsets between points.
+
+Units: degrees at the API (``degrees=False`` for radians), metres everywhere; heights are
+ellipsoidal (h above WGS-84). ECEF is WGS-84 Earth-centred Earth-fixed.
+Accuracy: geodetic <-> ECEF agrees with PROJ to < 1 micrometre from -10 km to +100 km height
+at every latitude including the poles (tests/test_geodesy.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import _kernels
+from ._backend import run
+
+__all__ = [
+    "WGS84",
+    "Ellipsoid",
+    "R_ecef_enu",
+    "R_ecef_ned",
+    "ecef_to_enu",
+    "ecef_to_geodetic",
+    "ecef_to_ned",
+    "enu_to_ecef",
+    "geodetic_to_ecef",
+    "geodetic_to_ned",
+    "ned_to_ecef",
+]
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """A reference ellipsoid given by semi-major axis ``a`` (m) and flattening ``f``."""
+
+    a: float
+    f: float
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if not (self.a > 0 and 0 <= self.f < 1):
+            raise ValueError(f"ellipsoid needs a > 0 and 0 <= f < 1, got a={self.a!r}, f={self.f!r}")
+
+    @cached_property
+    def b(self) -> float:
+        """Semi-minor axis (m), computed from a and f, never rounded."""
+        return self.a * (1.0 - self.f)
+
+    @cached_property
+    def e2(self) -> float:
+        """First eccentricity squared."""
+        return self.f * (2.0 - self.f)
+
+    @cached_property
+    def ep2(self) -> float:
+        """Second eccentricity squared."""
+        return self.e2 / (1.0 - self.e2)
+
+    @property
+    def constants(self) -> tuple[float, float, float, float]:
+        """(a, b, e2, ep2), the form the kernels take."""
+        return (self.a, self.b, self.e2, self.ep2)
+
+
+WGS84 = Ellipsoid(6378137.0, 1.0 / 298.257223563, "WGS-84")
+
+
+def _out(values: tuple[np.ndarray, ...]):
+    """Scalar in, scalar out: 0-d arrays become numpy floats."""
+    return tuple(v[()] if v.ndim == 0 else v for v in values)
+
+
+def geodetic_to_ecef(lat: ArrayLike, lon: ArrayLike, h: ArrayLike, *, degrees: bool = True,
+                     ell: Ellipsoid = WGS84):
+    """Geodetic latitude, longitude (deg, or rad with ``degrees=False``) and ellipsoidal height (m)
+    to ECEF x, y, z (m). Inputs broadcast."""
+    lat = np.asarray(lat, dtype=np.float64)
+    lon = np.asarray(lon, dtype=np.float64)
+    if degrees:
+        lat, lon = np.radians(lat), np.radians(lon)
+    return _out(run("geodetic_to_ecef", lat, lon, h, ell.a, ell.e2))
+
+
+def ecef_to_geodetic(x: ArrayLike, y: ArrayLike, z: ArrayLike, *, degrees: bool = True,
+                     ell: Ellipsoid = WGS84):
+    """ECEF x, y, z (m) to geodetic latitude, longitude (deg, or rad) and ellipsoidal height (m).
+
+    Longitude is in (-180, 180]; on the polar axis it is 0. The Earth's centre gives NaN.
+    """
+    lat, lon, h = run("ecef_to_geodetic", x, y, z, *ell.constants)
+    if degrees:
+        lat, lon = np.degrees(lat), np.degrees(lon)
+    return _out((lat, lon, h))
+
+
+def _as_matrix(t: tuple) -> np.ndarray:
+    """9-tuple of broadcastable components -> (..., 3, 3)."""
+    comps = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in t))
+    return np.stack(comps, axis=-1).reshape((*comps[0].shape, 3, 3))
+
+
+def R_ecef_ned(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.ndarray:
+    """Rotation (..., 3, 3) whose columns are the north, east and down unit vectors in ECEF at
+    geodetic (lat, lon): ``v_ecef = R_ecef_ned @ v_ned``."""
+    lat = np.asarray(lat, dtype=np.float64)
+    lon = np.asarray(lon, dtype=np.float64)
+    if degrees:
+        lat, lon = np.radians(lat), np.radians(lon)
+    return _as_matrix(_kernels.r_ecef_ned(lat, lon))
+
+
+_NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def R_ecef_enu(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.ndarray:
+    """Rotation (..., 3, 3) whose columns are east, north, up in ECEF."""
+    return R_ecef_ned(lat, lon, degrees=degrees) @ _NED_TO_ENU
+
+
+def _local(p_ecef, lat0, lon0, h0, degrees, ell, R_fn):
+    p_ecef = np.asarray(p_ecef, dtype=np.float64)
+    o = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat0, lon0, h0, degrees=degrees, ell=ell)), -1)
+    R = R_fn(lat0, lon0, degrees=degrees)
+    return np.einsum("...ji,...j->...i", R, p_ecef - o)
+
+
+def _from_local(v, lat0, lon0, h0, degrees, ell, R_fn):
+    v = np.asarray(v, dtype=np.float64)
+    o = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat0, lon0, h0, degrees=degrees, ell=ell)), -1)
+    R = R_fn(lat0, lon0, degrees=degrees)
+    return np.einsum("...ij,...j->...i", R, v) + o
+
+
+def ecef_to_ned(p_ecef: ArrayLike, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):
+    """ECEF points (..., 3) to NED offsets (..., 3) in metres from the origin (lat0, lon0, h0)."""
+    return _local(p_ecef, lat0, lon0, h0, degrees, ell, R_ecef_ned)
+
+
+def ned_to_ecef(v_ned: ArrayLike, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):
+    """NED offsets (..., 3) in metres from (lat0, lon0, h0) to ECEF points (..., 3)."""
+    return _from_local(v_ned, lat0, lon0, h0, degrees, ell, R_ecef_ned)
+
+
+def ecef_to_enu(p_ecef: ArrayLike, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):
+    """ECEF points (..., 3) to ENU offsets (..., 3) in metres from the origin (lat0, lon0, h0)."""
+    return _local(p_ecef, lat0, lon0, h0, degrees, ell, R_ecef_enu)
+
+
+def enu_to_ecef(v_enu: ArrayLike, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):
+    """ENU offsets (..., 3) in metres from (lat0, lon0, h0) to ECEF points (..., 3)."""
+    return _from_local(v_enu, lat0, lon0, h0, degrees, ell, R_ecef_enu)
+
+
+def geodetic_to_ned(lat, lon, h, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):
+    """NED offsets (..., 3) in metres of geodetic points from the origin (lat0, lon0, h0)."""
+    p = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat, lon, h, degrees=degrees, ell=ell)), -1)
+    return ecef_to_ned(p, lat0, lon0, h0, degrees=degrees, ell=ell)

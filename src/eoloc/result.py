@@ -1,0 +1,81 @@
+"""The one result type of every stop rule: per-target fixes with a status code each."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+
+class Status(IntEnum):
+    """Per-target outcome. Coordinates are NaN wherever the status is not OK."""
+
+    OK = 0
+    NO_INTERSECTION = 1  # ray misses the surface (above the horizon) or it lies behind the camera
+    OUT_OF_COVERAGE = 2  # ray leaves the terrain model's coverage before hitting it
+    DEM_VOID = 3  # ray meets a no-data cell of the terrain model
+    INVALID_INPUT = 4  # NaN/inf or out-of-range input (angle, range, pixel, pose)
+    NO_TELEMETRY = 5  # a detection with no pose at its time/frame
+
+    @property
+    def explanation(self) -> str:
+        return _EXPLAIN[self]
+
+
+_EXPLAIN = {
+    Status.OK: "located",
+    Status.NO_INTERSECTION: "the ray does not reach the surface (above the horizon or pointing away)",
+    Status.OUT_OF_COVERAGE: "the ray leaves the terrain model's coverage",
+    Status.DEM_VOID: "the ray meets a void (no-data) in the terrain model",
+    Status.INVALID_INPUT: "an input is NaN, infinite or out of range",
+    Status.NO_TELEMETRY: "no telemetry record matches the detection's time or frame",
+}
+
+
+@dataclass(frozen=True)
+class Fixes:
+    """Geolocated targets, all arrays of one broadcast shape (scalars for a single target).
+
+    lat_deg, lon_deg: WGS-84 geodetic degrees; h_m: ellipsoidal height (m); range_m: slant range
+    from the camera (m); status: :class:`Status` codes (int8). NaN where status != OK.
+    """
+
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    range_m: np.ndarray
+    status: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Boolean mask of located targets."""
+        return np.asarray(self.status) == Status.OK
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return np.shape(self.lat_deg)
+
+    def __len__(self) -> int:
+        return int(np.size(self.lat_deg))
+
+    def p_ecef(self) -> np.ndarray:
+        """ECEF positions (..., 3) in metres (NaN where not OK)."""
+        from .geodesy import geodetic_to_ecef
+
+        return np.stack(np.broadcast_arrays(*geodetic_to_ecef(self.lat_deg, self.lon_deg, self.h_m)), -1)
+
+    def status_counts(self) -> dict[str, int]:
+        """How many targets ended with each status (only those that occur)."""
+        codes, counts = np.unique(np.asarray(self.status).ravel(), return_counts=True)
+        return {Status(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
+
+
+def mask_invalid(fixes_arrays: tuple, invalid: np.ndarray) -> tuple:
+    """Set INVALID_INPUT and NaN coordinates where ``invalid`` (input checks done outside kernels)."""
+    lat, lon, h, rng, st = fixes_arrays
+    if not np.any(invalid):
+        return fixes_arrays
+    nan = np.float64("nan")
+    return (np.where(invalid, nan, lat), np.where(invalid, nan, lon), np.where(invalid, nan, h),
+            np.where(invalid, nan, rng), np.where(invalid, np.int8(Status.INVALID_INPUT), st).astype(np.int8))

@@ -1,0 +1,17 @@
+"""Sensor model: camera intrinsics, gimbal models, misalignment and lever arm -> rays."""
+
+from .camera import Camera
+from .gimbal import AzElGimbal, FixedMount, Gimbal, RollPitchGimbal, gimbal_from_name
+from .model import Pose, Rays, SensorModel
+
+__all__ = [
+    "AzElGimbal",
+    "Camera",
+    "FixedMount",
+    "Gimbal",
+    "Pose",
+    "Rays",
+    "RollPitchGimbal",
+    "SensorModel",
+    "gimbal_from_name",
+]

@@ -1,0 +1,122 @@
+"""Pinhole camera intrinsics and the pixel <-> camera-ray mapping.
+
+Camera frame (computer vision): x right in the image, y down, z along the boresight out of the
+lens. Pixels: u = column (right), v = row (down); the centre of the top-left pixel is (0, 0), so
+the default principal point of a W x H image is ((W - 1) / 2, (H - 1) / 2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole intrinsics: focal lengths fx, fy and principal point cx, cy in pixels; image size."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self) -> None:
+        if not (int(self.width) == self.width > 0 and int(self.height) == self.height > 0):
+            raise ValueError(f"image size must be positive whole pixels, got {self.width} x {self.height}")
+        for name in ("fx", "fy"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"camera {name} must be a positive number of pixels, got {value!r}")
+        for name in ("cx", "cy"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"camera {name} must be finite, got {getattr(self, name)!r}")
+
+    # -- named constructors (units vary with the source) --------------------------------------
+
+    @classmethod
+    def from_focal_mm(cls, focal_mm: float, pixel_um: float, width: int, height: int, *,
+                      pixel_um_y: float | None = None, cx: float | None = None,
+                      cy: float | None = None) -> Camera:
+        """From focal length (mm) and pixel pitch (µm); principal point at the image centre unless given."""
+        if not (focal_mm > 0 and pixel_um > 0):
+            raise ValueError(f"focal_mm and pixel_um must be > 0, got {focal_mm!r} and {pixel_um!r}")
+        f_px = focal_mm * 1e3 / pixel_um
+        fy = focal_mm * 1e3 / (pixel_um_y or pixel_um)
+        return cls(width, height, f_px, fy, *_centre(width, height, cx, cy))
+
+    @classmethod
+    def from_hfov(cls, hfov_deg: float, width: int, height: int, *, vfov_deg: float | None = None,
+                  cx: float | None = None, cy: float | None = None) -> Camera:
+        """From the horizontal field of view (deg) across ``width`` pixels (square pixels unless
+        ``vfov_deg`` is given). The FOV spans the outer edges of the edge pixels."""
+        if not 0 < hfov_deg < 180:
+            raise ValueError(f"hfov_deg must be in (0, 180), got {hfov_deg!r}")
+        fx = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+        fy = fx if vfov_deg is None else (height / 2.0) / math.tan(math.radians(vfov_deg) / 2.0)
+        return cls(width, height, fx, fy, *_centre(width, height, cx, cy))
+
+    @classmethod
+    def from_matrix(cls, K: ArrayLike, width: int, height: int) -> Camera:
+        """From a 3x3 intrinsic matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] (skew must be 0)."""
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3) or K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+            raise ValueError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}")
+        return cls(width, height, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
+
+    # -- properties ---------------------------------------------------------------------------
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsic matrix (3, 3)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def hfov_deg(self) -> float:
+        return math.degrees(2.0 * math.atan(self.width / (2.0 * self.fx)))
+
+    @property
+    def vfov_deg(self) -> float:
+        return math.degrees(2.0 * math.atan(self.height / (2.0 * self.fy)))
+
+    @property
+    def centre_px(self) -> tuple[float, float]:
+        """The principal point (u, v)."""
+        return (self.cx, self.cy)
+
+    def corners_px(self) -> np.ndarray:
+        """Outer corners of the image (4, 2): top-left, top-right, bottom-right, bottom-left."""
+        w, h = self.width - 0.5, self.height - 0.5
+        return np.array([[-0.5, -0.5], [w, -0.5], [w, h], [-0.5, h]])
+
+    # -- mapping ------------------------------------------------------------------------------
+
+    def pixel_to_normalized(self, u: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels to normalised image coordinates ((u - cx) / fx, (v - cy) / fy)."""
+        u = np.asarray(u, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        return (u - self.cx) / self.fx, (v - self.cy) / self.fy
+
+    def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised image coordinates to pixels."""
+        return np.asarray(xn) * self.fx + self.cx, np.asarray(yn) * self.fy + self.cy
+
+    def pixel_to_los_cam(self, u: ArrayLike, v: ArrayLike) -> np.ndarray:
+        """Unit line-of-sight vectors (..., 3) in the camera frame for pixels (u, v)."""
+        xn, yn = self.pixel_to_normalized(u, v)
+        los = np.stack(np.broadcast_arrays(xn, yn, np.ones_like(xn)), -1)
+        return los / np.linalg.norm(los, axis=-1, keepdims=True)
+
+    def los_cam_to_pixel(self, los_cam: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame directions (..., 3) to pixels; NaN for directions not in front (z <= 0)."""
+        los = np.asarray(los_cam, dtype=np.float64)
+        z = np.where(los[..., 2] > 0, los[..., 2], np.nan)
+        return self.normalized_to_pixel(los[..., 0] / z, los[..., 1] / z)
+
+
+def _centre(width: int, height: int, cx: float | None, cy: float | None) -> tuple[float, float]:
+    return ((width - 1) / 2.0 if cx is None else float(cx), (height - 1) / 2.0 if cy is None else float(cy))

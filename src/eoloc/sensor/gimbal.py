@@ -1,0 +1,125 @@
+"""Gimbal models: each maps gimbal angles to R_body_cam (camera frame -> body FRD frame).
+
+- :class:`AzElGimbal` — two-axis turret ([S13], [Z15]): azimuth about body z (positive to the
+  right of the nose), then elevation about the new y (positive up, negative looks down); an
+  optional third angle rolls the sensor about its boresight. Boresight in body =
+  (cos el cos az, cos el sin az, -sin el); camera x = turret y, camera y = turret z.
+- :class:`RollPitchGimbal` — framed reconnaissance camera ([Q]): outer frame rolls about body x,
+  inner frame pitches about the rolled y; at zero the boresight is body +z (nadir). Boresight in
+  body = (sin p, -sin r cos p, cos r cos p): a positive roll looks LEFT, a positive pitch looks
+  forward. Pixel layout is [Q]'s: image rows grow toward the nose, columns toward the left wing
+  (sensor ray of pixel (row i, col j) is -T_S' = (a(i - (M+1)/2), a((N+1)/2 - j), f)).
+- :class:`FixedMount` — any R_body_cam given as a matrix or a quaternion (w, x, y, z), plus an
+  optional sensor roll about the boresight (the first gimbal angle).
+
+The kernels live in :mod:`eoloc._kernels` (``r_body_cam``); these classes name the angles and
+carry the constant part.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+_IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Gimbal:
+    """Base of the gimbal models: ``kind`` selects the kernel, ``angle_names`` the angles' order."""
+
+    kind: int = field(init=False, default=-1)
+    angle_names: tuple[str, ...] = field(init=False, default=())
+    R_fixed9: tuple[float, ...] = field(init=False, default=_IDENTITY9)
+
+    @property
+    def name(self) -> str:
+        raise NotImplementedError
+
+    def angles(self, gimbal_deg: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Three gimbal angles in radians from the pose's gimbal tuple (missing ones are 0)."""
+        n = len(self.angle_names)
+        if not 0 <= len(gimbal_deg) <= n + 1:
+            raise ValueError(
+                f"{self.name} gimbal takes {n} angles ({', '.join(self.angle_names)}) and an optional "
+                f"sensor roll, got {len(gimbal_deg)} values: {gimbal_deg!r}"
+            )
+        padded = [np.asarray(a, dtype=np.float64) for a in gimbal_deg] + [np.float64(0.0)] * (3 - len(gimbal_deg))
+        if self.kind == 2:  # fixed mount: the only angle is the sensor roll, kernel reads it third
+            padded = [np.float64(0.0), np.float64(0.0), padded[0]]
+        return tuple(np.radians(a) for a in padded)
+
+
+@dataclass(frozen=True)
+class AzElGimbal(Gimbal):
+    """Azimuth-elevation turret. Angles: (azimuth, elevation[, sensor_roll]) in degrees."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", 0)
+        object.__setattr__(self, "angle_names", ("azimuth", "elevation"))
+
+    @property
+    def name(self) -> str:
+        return "az-el"
+
+
+@dataclass(frozen=True)
+class RollPitchGimbal(Gimbal):
+    """Roll-pitch framed camera ([Q]). Angles: (frame_roll, frame_pitch[, sensor_roll]) in degrees."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", 1)
+        object.__setattr__(self, "angle_names", ("frame_roll", "frame_pitch"))
+
+    @property
+    def name(self) -> str:
+        return "roll-pitch"
+
+
+@dataclass(frozen=True)
+class FixedMount(Gimbal):
+    """A camera fixed to the body: R_body_cam from ``matrix`` (3x3) or ``quaternion`` (w, x, y, z).
+
+    Angles: (sensor_roll,) optional, degrees, about the boresight. The default (identity) makes the
+    camera axes the body axes: boresight down (nadir), image x toward the nose, image y toward
+    the right wing.
+    """
+
+    matrix: tuple[tuple[float, ...], ...] | None = None
+    quaternion: tuple[float, float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        from ..rotation import matrix_from_quaternion
+
+        if self.matrix is not None and self.quaternion is not None:
+            raise ValueError("give FixedMount a matrix or a quaternion, not both")
+        if self.quaternion is not None:
+            R = matrix_from_quaternion(self.quaternion)
+        elif self.matrix is not None:
+            R = np.asarray(self.matrix, dtype=np.float64)
+            if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+                raise ValueError(f"FixedMount matrix must be a proper 3x3 rotation, got {R.tolist()}")
+        else:
+            R = np.eye(3)
+        object.__setattr__(self, "kind", 2)
+        object.__setattr__(self, "angle_names", ())
+        object.__setattr__(self, "R_fixed9", tuple(float(x) for x in R.ravel()))
+
+    @property
+    def name(self) -> str:
+        return "fixed"
+
+
+_BY_NAME = {"az-el": AzElGimbal, "azel": AzElGimbal, "roll-pitch": RollPitchGimbal,
+            "rollpitch": RollPitchGimbal, "fixed": FixedMount}
+
+
+def gimbal_from_name(name: str, **kwargs: ArrayLike) -> Gimbal:
+    """'az-el', 'roll-pitch' or 'fixed' (with matrix= or quaternion=) -> a gimbal model."""
+    try:
+        cls = _BY_NAME[name.strip().lower()]
+    except KeyError:
+        raise ValueError(f"unknown gimbal model {name!r}; expected one of 'az-el', 'roll-pitch', 'fixed'") from None
+    return cls(**kwargs)

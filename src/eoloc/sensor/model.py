@@ -1,0 +1,242 @@
+"""The sensor model: pose + pixels -> rays in ECEF, and the inverse ground -> image projection.
+
+Chain (SPEC §2.2): pixel -> unit ray in the camera frame -> R_body_cam (mount misalignment .
+gimbal . boresight misalignment) -> R_ned_body (yaw, pitch, roll) -> R_ecef_ned (lat, lon), from
+the camera origin P0 = ecef(lat, lon, h) + R_ecef_body . lever_arm.
+
+Broadcasting: every pose field and the pixel arrays broadcast together. One pose and N pixels:
+pose scalars, pixels (N,). F frames of K targets: pose fields (F, 1), pixels (F, K). Monte
+Carlo: everything (n_samples, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .. import _kernels
+from .._backend import get_backend, run
+from ..geodesy import WGS84, Ellipsoid, _as_matrix
+from ..rotation import small_angle_rotation
+from .camera import Camera
+from .gimbal import AzElGimbal, Gimbal
+
+
+def _f64(x: ArrayLike) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Aircraft pose and gimbal angles at the instant of an image (arrays broadcast).
+
+    lat_deg, lon_deg: WGS-84 geodetic degrees of the INS reference point; h_m: its ellipsoidal
+    height (m); yaw_deg (heading, clockwise from true north), pitch_deg (nose up +), roll_deg
+    (right wing down +); gimbal_deg: the gimbal model's angles in its order, degrees.
+    """
+
+    lat_deg: ArrayLike
+    lon_deg: ArrayLike
+    h_m: ArrayLike
+    yaw_deg: ArrayLike = 0.0
+    pitch_deg: ArrayLike = 0.0
+    roll_deg: ArrayLike = 0.0
+    gimbal_deg: tuple = ()
+
+    def __post_init__(self) -> None:
+        for name in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg"):
+            object.__setattr__(self, name, _f64(getattr(self, name)))
+        g = self.gimbal_deg
+        if not isinstance(g, (tuple, list)):
+            g = (g,) if np.ndim(g) == 0 else tuple(g)  # a bare number, or an array of angle rows
+        object.__setattr__(self, "gimbal_deg", tuple(_f64(a) for a in g))
+
+    def invalid(self) -> np.ndarray:
+        """True where the pose cannot be used: NaN/inf anywhere, |lat| > 90°."""
+        fields = (self.lat_deg, self.lon_deg, self.h_m, self.yaw_deg, self.pitch_deg, self.roll_deg, *self.gimbal_deg)
+        with np.errstate(invalid="ignore"):
+            total = sum(fields)
+            return ~np.isfinite(total) | (np.abs(self.lat_deg) > 90.0)
+
+
+@dataclass(frozen=True)
+class Rays:
+    """Rays in ECEF: origins (camera positions) and unit directions, component arrays (m)."""
+
+    ox: np.ndarray
+    oy: np.ndarray
+    oz: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    invalid: np.ndarray = field(default_factory=lambda: np.bool_(False))
+
+    @property
+    def origin_ecef(self) -> np.ndarray:
+        """(..., 3) camera positions, ECEF metres."""
+        return np.stack(np.broadcast_arrays(self.ox, self.oy, self.oz), -1)
+
+    @property
+    def dir_ecef(self) -> np.ndarray:
+        """(..., 3) unit directions, ECEF."""
+        return np.stack((self.dx, self.dy, self.dz), -1)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return np.shape(self.dx)
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """The camera's pose in ECEF for each pose element: R_ecef_cam 9-tuple and origin."""
+
+    R: tuple
+    ox: np.ndarray
+    oy: np.ndarray
+    oz: np.ndarray
+    invalid: np.ndarray
+
+    @property
+    def R_ecef_cam(self) -> np.ndarray:
+        return _as_matrix(self.R)
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Camera + gimbal + installation: everything constant about the sensor.
+
+    mount_misalignment_deg: small rotation (about body x, y, z) of the gimbal base relative to the
+    INS body axes (installation error); boresight_misalignment_deg: small rotation (about camera
+    x, y, z) of the optical axis relative to the gimbal (collimation); lever_arm_m: camera
+    position relative to the INS reference point, body FRD metres.
+    """
+
+    camera: Camera
+    gimbal: Gimbal = field(default_factory=AzElGimbal)
+    mount_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    boresight_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ellipsoid: Ellipsoid = WGS84
+
+    def __post_init__(self) -> None:
+        for name in ("mount_misalignment_deg", "boresight_misalignment_deg", "lever_arm_m"):
+            value = tuple(float(x) for x in np.ravel(getattr(self, name)))
+            if len(value) != 3 or not all(np.isfinite(value)):
+                raise ValueError(f"{name} needs three finite numbers, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, value)
+
+    # -- constant parts -------------------------------------------------------------------------
+
+    @cached_property
+    def _R_mount9(self) -> tuple:
+        return tuple(small_angle_rotation(self.mount_misalignment_deg).ravel())
+
+    @cached_property
+    def _R_bore9(self) -> tuple:
+        return tuple(small_angle_rotation(self.boresight_misalignment_deg).ravel())
+
+    @cached_property
+    def _params(self) -> np.ndarray:
+        """Parameter vector of the single-target kernel (layout in eoloc._kernels)."""
+        c = self.camera
+        p = np.concatenate([
+            [c.fx, c.fy, c.cx, c.cy, float(self.gimbal.kind)],
+            self._R_mount9, self.gimbal.R_fixed9, self._R_bore9, self.lever_arm_m, self.ellipsoid.constants,
+        ]).astype(np.float64)
+        assert p.size == _kernels.N_PARAMS
+        return p
+
+    # -- chain ----------------------------------------------------------------------------------
+
+    def R_body_cam(self, gimbal_deg: tuple) -> np.ndarray:
+        """R_body_cam (..., 3, 3) for gimbal angles (degrees), misalignments included."""
+        g1, g2, g3 = self.gimbal.angles(tuple(gimbal_deg))
+        return _as_matrix(_kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
+                                              self.gimbal.R_fixed9, self._R_bore9))
+
+    def camera_frame(self, pose: Pose) -> CameraFrame:
+        """Camera orientation (R_ecef_cam) and position (ECEF m) for every pose element."""
+        g1, g2, g3 = self.gimbal.angles(pose.gimbal_deg)
+        Rbc = _kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9, self.gimbal.R_fixed9, self._R_bore9)
+        out = run("pose_frame", np.radians(pose.lat_deg), np.radians(pose.lon_deg), pose.h_m,
+                  np.radians(pose.yaw_deg), np.radians(pose.pitch_deg), np.radians(pose.roll_deg),
+                  *Rbc, *self.lever_arm_m, self.ellipsoid.a, self.ellipsoid.e2)
+        invalid = pose.invalid()
+        return CameraFrame(out[:9], out[9], out[10], out[11], invalid)
+
+    def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
+        u, v = _split_pixels(pixels, self.camera)
+        return self.camera.pixel_to_normalized(u, v)
+
+    def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
+        """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point)."""
+        frame = self.camera_frame(pose)
+        xn, yn = self.normalized(pixels)
+        dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
+        shape = dx.shape
+        return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
+                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape))
+
+    def ground_to_image(self, pose: Pose, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Project ECEF points (..., 3) into the image: pixels (u, v); NaN where the point is behind
+        the camera. Points outside the image bounds still get their (out-of-range) pixel."""
+        p = _f64(p_ecef)
+        if p.shape[-1:] != (3,):
+            raise ValueError(f"p_ecef must have 3 components in its last axis, got shape {p.shape}")
+        frame = self.camera_frame(pose)
+        xn, yn, _depth = run("project_point", *frame.R, frame.ox, frame.oy, frame.oz, p[..., 0], p[..., 1], p[..., 2])
+        u, v = self.camera.normalized_to_pixel(xn, yn)
+        bad = np.broadcast_to(frame.invalid, u.shape)
+        return np.where(bad, np.nan, u), np.where(bad, np.nan, v)
+
+    # -- single-target fast path ---------------------------------------------------------------
+
+    def locate_one(self, lat_deg: float, lon_deg: float, h_m: float, yaw_deg: float, pitch_deg: float,
+                   roll_deg: float, g1_deg: float, g2_deg: float = 0.0, u: float | None = None,
+                   v: float | None = None, *, g3_deg: float = 0.0, range_m: float | None = None,
+                   height_m: float | None = None) -> tuple[float, float, float, float, int]:
+        """One pose, one pixel -> (lat_deg, lon_deg, h_m, range_m, status code) in about a microsecond.
+
+        Give ``range_m`` (M1) or ``height_m`` (M3, ellipsoidal). For a fixed mount g1_deg is the
+        sensor roll. Same kernels as the array path; compare the status with ``Status.OK``.
+        """
+        if range_m is not None and height_m is None:
+            stop_kind, stop_value = _kernels.STOP_RANGE, range_m
+        elif height_m is not None and range_m is None:
+            stop_kind, stop_value = _kernels.STOP_ELLIPSOID, height_m
+        else:
+            raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
+        if self.gimbal.kind == 2:
+            g1_deg, g3_deg = 0.0, g1_deg
+        fn = self._one_fn()
+        return fn(self._params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
+                  self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
+
+    @staticmethod
+    def _one_fn():
+        if get_backend() == "numba":
+            from .. import _nb
+
+            return _nb.locate_one
+        return _locate_one_numpy
+
+
+def _locate_one_numpy(*args):
+    with np.errstate(all="ignore"):
+        lat, lon, h, t, st = _kernels.locate_one(*args)
+    return float(lat), float(lon), float(h), float(t), int(st)
+
+
+def _split_pixels(pixels: ArrayLike | None, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    if pixels is None:
+        return np.float64(camera.cx), np.float64(camera.cy)
+    if isinstance(pixels, tuple) and len(pixels) == 2:
+        return _f64(pixels[0]), _f64(pixels[1])
+    arr = _f64(pixels)
+    if arr.shape[-1:] != (2,):
+        raise ValueError(f"pixels must be a (u, v) pair of arrays or an (..., 2) array, got shape {arr.shape}")
+    return arr[..., 0], arr[..., 1]
