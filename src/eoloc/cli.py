@@ -1,0 +1,244 @@
+"""The `eoloc` command: geolocate targets from telemetry, or one observation given as options."""
+
+from __future__ import annotations
+
+import json
+import sys
+from importlib import resources
+from pathlib import Path
+
+import click
+import numpy as np
+from rich.console import Console
+from rich.table import Table as RichTable
+
+from . import __version__
+from .io.config import ConfigError, load_config
+from .io.export import fix_rows, write_csv, write_geojson
+from .io.table import TableError
+from .io.telemetry import read_detections, read_telemetry
+from .pipeline import RANGE_FROM_FILES, locate_tables
+from .result import Status
+from .sensor import Camera, Pose, SensorModel, gimbal_from_name
+
+CONVENTIONS = """
+\b
+Units and conventions (the same everywhere in eoloc):
+  lat/lon      WGS-84 geodetic degrees; heights ellipsoidal metres (not MSL)
+  yaw          heading, degrees clockwise from true north
+  pitch        degrees, nose up positive; roll: degrees, right wing down positive
+  attitude     R_ned_body = Rz(yaw) Ry(pitch) Rx(roll); body x nose, y right wing, z down
+  az-el        gimbal azimuth about body z (right of the nose +), elevation (up +, -90 = down)
+  roll-pitch   framed camera: frame roll about body x (+ looks left), frame pitch (+ looks forward)
+  pixels       u = column (right), v = row (down); top-left pixel centre is (0, 0)
+  status       OK, NO_INTERSECTION, OUT_OF_COVERAGE, DEM_VOID, INVALID_INPUT, NO_TELEMETRY;
+               coordinates are empty wherever the status is not OK
+"""
+
+err_console = Console(stderr=True)
+
+
+def _fail(message: str) -> None:
+    err_console.print(f"[bold red]error:[/] {message}")
+    sys.exit(2)
+
+
+@click.group(help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n" + CONVENTIONS)
+@click.version_option(__version__, prog_name="eoloc")
+def main() -> None:
+    pass
+
+
+LOCATE_HELP = """Geolocate targets: from files, or one observation given as options.
+
+\b
+FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--range [R] | --height H)
+  TELEMETRY.csv columns: time_s and/or frame, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg,
+    roll_deg, gimbal1_deg, gimbal2_deg (or azimuth_deg, elevation_deg / frame_roll_deg,
+    frame_pitch_deg), optional sensor_roll_deg, optional range_m (laser slant range).
+  DETECTIONS.csv columns: time_s or frame, target_id, u_px, v_px, optional range_m.
+  Without DETECTIONS the image centre of every record is located.
+  --range alone takes each target's range_m from the files; --range R uses R metres for all;
+  --height H (same as --target-height) stops at ellipsoidal height H.
+  Writes fixes.csv and fixes.geojson into --out. Bad lines are reported (file:line) and skipped;
+  every good record is kept.
+
+\b
+ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitch 5 --roll -2
+                  --gimbal az-el --gimbal-angles 45 -75 --range 10200 [--json]
+  --height is then the aircraft's ellipsoidal height and --target-height H the stop rule;
+  --pixel U V needs --config for the camera (image centre when omitted).
+"""
+
+
+@main.command(help=LOCATE_HELP + CONVENTIONS)
+@click.argument("telemetry", required=False, type=click.Path(dir_okay=False))
+@click.argument("detections", required=False, type=click.Path(dir_okay=False))
+@click.option("--config", "config_path", type=click.Path(dir_okay=False), help="Camera/gimbal/installation TOML.")
+@click.option("--range", "range_opt", is_flag=False, flag_value=RANGE_FROM_FILES, default=None,
+              help="Stop at a slant range: R metres, or alone to read range_m from the files.")
+@click.option("--target-height", type=float, help="Stop rule: the target's ellipsoidal height, metres.")
+@click.option("--height", type=float, help="One observation: aircraft ellipsoidal height (m). File mode: "
+                                           "same as --target-height.")
+@click.option("--lat", type=float, help="One observation: aircraft latitude, degrees.")
+@click.option("--lon", type=float, help="One observation: aircraft longitude, degrees.")
+@click.option("--yaw", type=float, default=0.0, show_default=True, help="Heading, degrees from true north.")
+@click.option("--pitch", type=float, default=0.0, show_default=True, help="Pitch, degrees, nose up +.")
+@click.option("--roll", type=float, default=0.0, show_default=True, help="Roll, degrees, right wing down +.")
+@click.option("--gimbal", type=click.Choice(["az-el", "roll-pitch", "fixed"]), default=None,
+              help="Gimbal model (one observation; default: the config's, else az-el).")
+@click.option("--gimbal-angles", nargs=2, type=float, default=None, metavar="A B",
+              help="az-el: azimuth elevation; roll-pitch: frame roll, frame pitch (degrees).")
+@click.option("--sensor-roll", type=float, default=0.0, show_default=True, help="Sensor roll about the boresight.")
+@click.option("--pixel", nargs=2, type=float, default=None, metavar="U V", help="Pixel (needs --config).")
+@click.option("--json", "as_json", is_flag=True, help="One observation: print one JSON object.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
+              help="File mode: folder for fixes.csv and fixes.geojson.")
+@click.option("--time-tolerance", type=float, default=0.02, show_default=True,
+              help="File mode: max |Δt| (s) pairing a detection with a telemetry record.")
+def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
+           gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance) -> None:
+    if telemetry is None:
+        _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
+                    sensor_roll, pixel, as_json)
+        return
+    if lat is not None or lon is not None:
+        _fail("give either a TELEMETRY file or --lat/--lon for one observation, not both")
+    if target_height is not None and height is not None:
+        _fail("in file mode --height and --target-height mean the same; give one")
+    stop_height = target_height if target_height is not None else height
+    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance)
+
+
+def _stop_rule(range_opt, target_height) -> tuple[float | str | None, float | None]:
+    if (range_opt is None) == (target_height is None):
+        _fail("choose one stop rule: --range [R] (laser slant range) or --target-height H (ellipsoidal metres)")
+    if range_opt not in (None, RANGE_FROM_FILES):
+        try:
+            range_opt = float(range_opt)
+        except ValueError:
+            _fail(f"--range takes metres or nothing (then range_m from the files), got {range_opt!r}")
+    return range_opt, target_height
+
+
+def _load_sensor(config_path) -> SensorModel:
+    try:
+        return load_config(config_path).sensor()
+    except ConfigError as exc:
+        _fail(str(exc))
+
+
+def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
+                sensor_roll, pixel, as_json) -> None:
+    if lat is None or lon is None or height is None:
+        _fail("one observation needs --lat, --lon and --height (aircraft, ellipsoidal m), or give a TELEMETRY file")
+    rng, stop_h = _stop_rule(range_opt, target_height)
+    if rng == RANGE_FROM_FILES:
+        _fail("--range needs a value (metres) for one observation")
+    if config_path is not None:
+        sensor = _load_sensor(config_path)
+        if gimbal is not None and gimbal != sensor.gimbal.name:
+            _fail(f"--gimbal {gimbal} contradicts the config's gimbal model {sensor.gimbal.name!r}")
+    else:
+        if pixel is not None:
+            _fail("--pixel needs --config FILE to know the camera (without it the image centre is used)")
+        # the centre pixel's ray is the boresight whatever the intrinsics: any camera will do
+        sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), gimbal_from_name(gimbal or "az-el"))
+    if sensor.gimbal.kind == 2:
+        angles = (sensor_roll,)
+    else:
+        if gimbal_angles is None:
+            _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
+                  f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
+        angles = (*gimbal_angles, sensor_roll)
+    from .locate import locate_ellipsoid, locate_range
+
+    pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
+    pixels = None if pixel is None else (pixel[0], pixel[1])
+    f = locate_range(sensor, pose, rng, pixels) if rng is not None else locate_ellipsoid(sensor, pose, stop_h, pixels)
+    status = Status(int(f.status))
+    out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
+           "status": status.name}
+    if as_json:
+        click.echo(json.dumps(out))
+        return
+    table = RichTable(title="eoloc fix", show_header=True)
+    for k in ("lat", "lon", "h", "range", "status"):
+        table.add_column(k + {"lat": " (deg)", "lon": " (deg)", "h": " (m, ellipsoidal)", "range": " (m)"}.get(k, ""))
+    table.add_row(*(_cell(k, out[k]) for k in ("lat", "lon", "h", "range", "status")))
+    Console().print(table)
+    if status != Status.OK:
+        err_console.print(f"[yellow]{status.name}[/]: {status.explanation}")
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return None if np.isnan(x) else x
+
+
+def _cell(key: str, v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.8f}" if key in ("lat", "lon") else f"{v:.3f}"
+    return str(v)
+
+
+def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance) -> None:
+    if config_path is None:
+        _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
+    rng, stop_h = _stop_rule(range_opt, stop_height)
+    sensor = _load_sensor(config_path)
+    try:
+        tel = read_telemetry(telemetry)
+        det = read_detections(detections) if detections else None
+    except TableError as exc:
+        _fail(str(exc))
+    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
+    if len(tel) == 0:
+        _report_issues(issues)
+        _fail(f"telemetry file {telemetry!r} has no usable record")
+    with err_console.status("locating..."):
+        located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, time_tolerance_s=time_tolerance)
+    issues += located.issues
+    _report_issues(issues)
+    rows = fix_rows(located.fixes, located.extra)
+    out = Path(out_dir)
+    csv_path = write_csv(out / "fixes.csv", rows)
+    geo_path = write_geojson(out / "fixes.geojson", rows)
+    _summary(rows, located.fixes.status_counts())
+    Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
+
+
+def _report_issues(issues, limit: int = 15) -> None:
+    for issue in issues[:limit]:
+        err_console.print(f"[yellow]warning:[/] {issue}", highlight=False)
+    if len(issues) > limit:
+        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
+
+
+def _summary(rows: list[dict], counts: dict[str, int], limit: int = 12) -> None:
+    table = RichTable(title=f"{len(rows)} targets: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    cols = ("time_s", "frame", "target_id", "lat_deg", "lon_deg", "h_m", "range_m", "status")
+    cols = tuple(c for c in cols if any(r.get(c) is not None for r in rows))  # drop empty columns
+    for c in cols:
+        table.add_column(c)
+    for row in rows[:limit]:
+        table.add_row(*(_cell("lat" if c.endswith("_deg") else c, row.get(c)) for c in cols))
+    if len(rows) > limit:
+        table.caption = f"first {limit} of {len(rows)} rows"
+    Console().print(table)
+
+
+@main.command(help="Run the bundled example: a short flight over static targets, located by laser range "
+                   "and on the ellipsoid, compared with the known truth; plus the [S13] reference case.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-demo", show_default=True,
+              help="Folder for the outputs (CSV and GeoJSON).")
+def demo(out_dir) -> None:
+    from .demo import run_demo
+
+    run_demo(Path(out_dir), console=Console(), data=resources.files("eoloc") / "data" / "demo")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,1 @@
+"""I/O at the edges: telemetry and detection CSVs, the TOML configuration, result writers."""

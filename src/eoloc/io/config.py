@@ -1,0 +1,114 @@
+"""The platform/camera configuration file (TOML), validated on load.
+
+    [camera]                 # one of: focal_mm + pixel_um | hfov_deg | fx (+ fy)
+    width = 1024             # pixels
+    height = 768
+    focal_mm = 50.0
+    pixel_um = 5.5
+    # cx, cy = principal point in pixels (default: image centre, (W-1)/2, (H-1)/2)
+
+    [gimbal]
+    model = "az-el"          # "az-el" | "roll-pitch" | "fixed" (then quaternion = [w,x,y,z] or matrix)
+
+    [installation]           # all optional, default zero
+    mount_misalignment_deg = [0.0, 0.0, 0.0]      # gimbal base vs INS, about body x, y, z
+    boresight_misalignment_deg = [0.0, 0.0, 0.0]  # optical axis vs gimbal, about camera x, y, z
+    lever_arm_m = [0.0, 0.0, 0.0]                 # camera from INS reference, body FRD metres
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from ..sensor import Camera, SensorModel, gimbal_from_name
+
+
+class ConfigError(ValueError):
+    """The configuration file is missing, not TOML, or fails validation (message names the key)."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class CameraConfig(_Strict):
+    width: int = Field(gt=0, description="image width, pixels")
+    height: int = Field(gt=0, description="image height, pixels")
+    focal_mm: float | None = Field(None, gt=0)
+    pixel_um: float | None = Field(None, gt=0)
+    hfov_deg: float | None = Field(None, gt=0, lt=180)
+    fx: float | None = Field(None, gt=0)
+    fy: float | None = Field(None, gt=0)
+    cx: float | None = None
+    cy: float | None = None
+
+    @model_validator(mode="after")
+    def _one_focal(self) -> CameraConfig:
+        ways = [self.focal_mm is not None or self.pixel_um is not None, self.hfov_deg is not None, self.fx is not None]
+        if sum(ways) != 1:
+            raise ValueError("give the focal length one way: focal_mm + pixel_um, or hfov_deg, or fx (+ fy)")
+        if (self.focal_mm is None) != (self.pixel_um is None):
+            raise ValueError("focal_mm and pixel_um go together")
+        return self
+
+    def build(self) -> Camera:
+        if self.focal_mm is not None:
+            return Camera.from_focal_mm(self.focal_mm, self.pixel_um, self.width, self.height, cx=self.cx, cy=self.cy)
+        if self.hfov_deg is not None:
+            return Camera.from_hfov(self.hfov_deg, self.width, self.height, cx=self.cx, cy=self.cy)
+        cx = (self.width - 1) / 2 if self.cx is None else self.cx
+        cy = (self.height - 1) / 2 if self.cy is None else self.cy
+        return Camera(self.width, self.height, self.fx, self.fy or self.fx, cx, cy)
+
+
+class GimbalConfig(_Strict):
+    model: Literal["az-el", "roll-pitch", "fixed"] = "az-el"
+    quaternion: tuple[float, float, float, float] | None = None
+    matrix: tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]] | None = None
+
+
+class InstallationConfig(_Strict):
+    mount_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    boresight_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class Config(_Strict):
+    camera: CameraConfig
+    gimbal: GimbalConfig = GimbalConfig()
+    installation: InstallationConfig = InstallationConfig()
+
+    def sensor(self) -> SensorModel:
+        """The SensorModel this configuration describes."""
+        extra = {}
+        if self.gimbal.model == "fixed":
+            extra = {"quaternion": self.gimbal.quaternion, "matrix": self.gimbal.matrix}
+        elif self.gimbal.quaternion is not None or self.gimbal.matrix is not None:
+            raise ConfigError(f"gimbal.quaternion/matrix only apply to model = 'fixed', not {self.gimbal.model!r}")
+        return SensorModel(self.camera.build(), gimbal_from_name(self.gimbal.model, **extra),
+                           self.installation.mount_misalignment_deg, self.installation.boresight_misalignment_deg,
+                           self.installation.lever_arm_m)
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a TOML configuration; errors name the file and the key."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"config file {str(path)!r} does not exist (check the path)") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
+    try:
+        cfg = Config.model_validate(raw)
+        cfg.sensor()
+    except ValidationError as exc:
+        lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}" for e in exc.errors()]
+        raise ConfigError(f"config file {str(path)!r} is invalid:\n" + "\n".join(lines)) from None
+    except ValueError as exc:
+        raise ConfigError(f"config file {str(path)!r} is invalid: {exc}") from None
+    return cfg

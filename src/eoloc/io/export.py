@@ -1,0 +1,73 @@
+"""Writers: fixes to CSV and GeoJSON (every record kept; failed ones with their status and no point)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..result import Fixes, Status
+
+FIX_COLUMNS = ("lat_deg", "lon_deg", "h_m", "range_m", "status")
+
+
+def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None) -> list[dict]:
+    """One dict per target: the ``extra`` columns first (ids, times, pixels), then the fix."""
+    extra = dict(extra or {})
+    n = len(fixes)
+    flat = {k: np.ravel(getattr(fixes, k)) for k in FIX_COLUMNS}
+    rows = []
+    for i in range(n):
+        row = {k: _plain(v[i]) for k, v in extra.items()}
+        row.update({k: _plain(flat[k][i]) for k in FIX_COLUMNS[:-1]})
+        row["status"] = Status(int(flat["status"][i])).name
+        rows.append(row)
+    return rows
+
+
+def _plain(v):
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and math.isnan(v):
+        return None
+    return v
+
+
+def write_csv(path: str | Path, rows: list[dict]) -> Path:
+    """CSV with a header; empty cells where there is no value. Angles with 9 decimals (< 0.1 mm)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fields = list(rows[0]) if rows else list(FIX_COLUMNS)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: _fmt(k, v) for k, v in row.items()})
+    return path
+
+
+def _fmt(key: str, v):
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.9f}" if key.endswith("_deg") else f"{v:.4f}"
+    return v
+
+
+def write_geojson(path: str | Path, rows: list[dict]) -> Path:
+    """GeoJSON FeatureCollection (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
+    features = []
+    for row in rows:
+        props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
+        ok = row.get("status") == "OK"
+        geom = {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"], row["h_m"]]} if ok else None
+        features.append({"type": "Feature", "geometry": geom, "properties": props})
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1) + "\n",
+                    encoding="utf-8")
+    return path

@@ -1,0 +1,109 @@
+"""Telemetry and detections CSVs (the schemas are documented in the README and `eoloc locate --help`).
+
+Telemetry, one row per image/record:
+    time_s | frame (at least one), lat_deg, lon_deg, h_m (ellipsoidal), yaw_deg, pitch_deg,
+    roll_deg, gimbal1_deg, gimbal2_deg (az-el: azimuth_deg, elevation_deg; roll-pitch:
+    frame_roll_deg, frame_pitch_deg), optional sensor_roll_deg, optional range_m.
+Detections, one row per target seen in an image:
+    time_s | frame, target_id, u_px, v_px, optional range_m.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..sensor.model import Pose
+from .table import Column, Issue, Table, read_table
+
+TELEMETRY_COLUMNS = [
+    Column("time_s", required=False, unit="s"),
+    Column("frame", required=False, lo=0),
+    Column("lat_deg", ("lat", "latitude"), lo=-90, hi=90, unit="deg"),
+    Column("lon_deg", ("lon", "longitude"), lo=-180, hi=360, unit="deg"),
+    Column("h_m", ("height_m", "hae_m", "alt_hae_m"), lo=-12_000, hi=100_000, unit="m"),
+    Column("yaw_deg", ("heading_deg",), lo=-360, hi=360, unit="deg"),
+    Column("pitch_deg", (), lo=-90, hi=90, unit="deg"),
+    Column("roll_deg", (), lo=-180, hi=180, unit="deg"),
+    Column("gimbal1_deg", ("azimuth_deg", "frame_roll_deg"), required=False, lo=-360, hi=360, unit="deg"),
+    Column("gimbal2_deg", ("elevation_deg", "frame_pitch_deg"), required=False, lo=-360, hi=360, unit="deg"),
+    Column("sensor_roll_deg", (), required=False, lo=-360, hi=360, unit="deg"),
+    Column("range_m", ("slant_range_m",), required=False, lo=0, hi=1e7, unit="m"),
+]
+
+DETECTION_COLUMNS = [
+    Column("time_s", required=False, unit="s"),
+    Column("frame", required=False, lo=0),
+    Column("target_id", ("id", "target"), text=True),
+    Column("u_px", ("u", "col", "x_px"), unit="px"),
+    Column("v_px", ("v", "row", "y_px"), unit="px"),
+    Column("range_m", ("slant_range_m",), required=False, lo=0, hi=1e7, unit="m"),
+]
+
+
+def read_telemetry(path: str | Path) -> Table:
+    """Read a telemetry CSV; bad values become NaN (reported), unusable lines are skipped (reported)."""
+    t = read_table(path, TELEMETRY_COLUMNS, what="telemetry", key=("time_s", "frame"))
+    for name in ("gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "range_m", "time_s", "frame"):
+        t.columns.setdefault(name, np.full(len(t), np.nan))
+    return t
+
+
+def read_detections(path: str | Path) -> Table:
+    """Read a detections CSV (time_s or frame, target_id, u_px, v_px[, range_m])."""
+    t = read_table(path, DETECTION_COLUMNS, what="detections", key=("time_s", "frame"))
+    for name in ("range_m", "time_s", "frame"):
+        t.columns.setdefault(name, np.full(len(t), np.nan))
+    return t
+
+
+def telemetry_pose(t: Table, index: np.ndarray | slice = slice(None)) -> Pose:
+    """The poses of telemetry records ``index`` (gimbal angles: gimbal1, gimbal2, sensor roll)."""
+    c = t.columns
+    sensor_roll = np.nan_to_num(c["sensor_roll_deg"][index], nan=0.0)
+    return Pose(c["lat_deg"][index], c["lon_deg"][index], c["h_m"][index], c["yaw_deg"][index],
+                c["pitch_deg"][index], c["roll_deg"][index],
+                (c["gimbal1_deg"][index], c["gimbal2_deg"][index], sensor_roll))
+
+
+@dataclass
+class Matched:
+    """Detections paired with the telemetry record of their image (-1: none)."""
+
+    record: np.ndarray
+    issues: list[Issue]
+
+
+def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) -> Matched:
+    """Pair each detection with its telemetry record: same ``frame`` if both files have frames,
+    else the record nearest in ``time_s`` within ``time_tolerance_s``. Unmatched detections get -1
+    and a reported issue (they end as NO_TELEMETRY; nothing is interpolated here)."""
+    n = len(det)
+    record = np.full(n, -1, dtype=np.int64)
+    issues: list[Issue] = []
+    use_frames = np.isfinite(det.columns["frame"]).any() and np.isfinite(tel.columns["frame"]).any()
+    if use_frames:
+        lookup = {int(f): i for i, f in enumerate(tel.columns["frame"]) if math.isfinite(f)}
+        for j, f in enumerate(det.columns["frame"]):
+            record[j] = lookup.get(int(f), -1) if math.isfinite(f) else -1
+    else:
+        tt = tel.columns["time_s"]
+        good = np.flatnonzero(np.isfinite(tt))
+        order = good[np.argsort(tt[good], kind="stable")]
+        ts = tt[order]
+        td = det.columns["time_s"]
+        if ts.size:
+            pos = np.clip(np.searchsorted(ts, td), 1, max(ts.size - 1, 1))
+            left = np.clip(pos - 1, 0, ts.size - 1)
+            right = np.clip(pos, 0, ts.size - 1)
+            pick = np.where(np.abs(td - ts[left]) <= np.abs(ts[right] - td), left, right)
+            close = np.abs(ts[pick] - td) <= time_tolerance_s
+            record = np.where(close & np.isfinite(td), order[pick], -1)
+    for j in np.flatnonzero(record < 0):
+        key = f"frame {det.columns['frame'][j]:g}" if use_frames else f"time {det.columns['time_s'][j]:g} s"
+        hint = "" if use_frames else f" within {time_tolerance_s:g} s (widen --time-tolerance?)"
+        issues.append(Issue(det.path, int(det.line[j]), f"no telemetry record for {key}{hint}"))
+    return Matched(record, issues)

@@ -1,0 +1,77 @@
+"""Files-level geolocation: telemetry (+ detections) + sensor + stop rule -> one row per target.
+
+No file access here: takes parsed tables, returns rows and issues; the CLI reads and writes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .io.table import Issue, Table
+from .io.telemetry import match_detections, telemetry_pose
+from .locate import locate_ellipsoid, locate_range
+from .result import Fixes, Status
+from .sensor import SensorModel
+
+RANGE_FROM_FILES = "files"
+
+
+@dataclass
+class Located:
+    """Fixes, the per-target descriptive columns (time, frame, id, pixel, source line) and issues."""
+
+    fixes: Fixes
+    extra: dict[str, np.ndarray]
+    issues: list[Issue] = field(default_factory=list)
+
+
+def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
+                  range_m: float | str | None = None, height_m: float | None = None,
+                  time_tolerance_s: float = 0.02) -> Located:
+    """Geolocate every detection (or, without detections, every record's image centre).
+
+    Stop rule: ``height_m`` (M3, ellipsoidal metres) or ``range_m`` (M1): a number for all, or
+    ``"files"`` to take each detection's ``range_m`` column (without detections: the telemetry's
+    boresight range). A telemetry range is never applied along another pixel's ray.
+    """
+    if (range_m is None) == (height_m is None):
+        raise ValueError("choose one stop rule: a range (range_m) or a target height (height_m)")
+    issues: list[Issue] = []
+    cx, cy = sensor.camera.centre_px
+    if det is None:
+        record = np.arange(len(tel))
+        u = np.full(len(tel), cx)
+        v = np.full(len(tel), cy)
+        extra = {"line": tel.line, "time_s": tel.columns["time_s"], "frame": tel.columns["frame"],
+                 "target_id": np.full(len(tel), "centre", dtype=object), "u_px": u, "v_px": v}
+        file_range = tel.columns["range_m"]
+        range_source = (tel.path, tel.line)
+    else:
+        matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
+        issues += matched.issues
+        record = matched.record
+        u, v = det.columns["u_px"], det.columns["v_px"]
+        extra = {"line": det.line, "time_s": det.columns["time_s"], "frame": det.columns["frame"],
+                 "target_id": det.columns["target_id"], "u_px": u, "v_px": v}
+        file_range = det.columns["range_m"]
+        range_source = (det.path, det.line)
+    has_pose = record >= 0
+    pose = telemetry_pose(tel, np.where(has_pose, record, 0))
+    if height_m is not None:
+        fixes = locate_ellipsoid(sensor, pose, height_m, (u, v))
+    else:
+        rng = np.asarray(file_range if range_m == RANGE_FROM_FILES else np.full(u.shape, float(range_m)))
+        if range_m == RANGE_FROM_FILES:
+            path, lines = range_source
+            for j in np.flatnonzero(~np.isfinite(rng) & has_pose):
+                issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
+                                                         "a constant --range R, or use --height H"))
+        fixes = locate_range(sensor, pose, rng, (u, v))
+    if not has_pose.all():
+        nan = np.where(has_pose, 1.0, np.nan)
+        fixes = Fixes(fixes.lat_deg * nan, fixes.lon_deg * nan, fixes.h_m * nan, fixes.range_m * nan,
+                      np.where(has_pose, fixes.status, np.int8(Status.NO_TELEMETRY)).astype(np.int8))
+    extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1) if len(tel) else record
+    return Located(fixes, extra, issues)

@@ -1,0 +1,189 @@
+"""Telemetry/detection readers, the config file, writers and the `eoloc` command, end to end."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import eoloc
+from eoloc.cli import main
+from eoloc.io.config import ConfigError, load_config
+from eoloc.io.table import TableError
+from eoloc.io.telemetry import match_detections, read_detections, read_telemetry
+from eoloc.pipeline import locate_tables
+
+DEMO = Path(eoloc.__file__).parent / "data" / "demo"
+S13_ARGS = ["--lat", "42", "--lon", "125", "--height", "10000", "--yaw", "10", "--pitch", "5", "--roll", "-2",
+            "--gimbal", "az-el", "--gimbal-angles", "45", "-75"]
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.fixture
+def camera_toml(tmp_path):
+    return _write(tmp_path / "cam.toml", '[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 50\npixel_um = 5.5\n'
+                                         '[gimbal]\nmodel = "az-el"\n')
+
+
+# ---------------------------------------------------------------- readers
+
+
+def test_malformed_lines_are_reported_with_line_numbers_and_the_rest_kept(tmp_path):
+    p = _write(tmp_path / "t.csv",
+               "# comment line\n"
+               "time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,azimuth_deg,elevation_deg\n"
+               "0,42,125,10000,10,5,-2,45,-75\n"
+               "1,42,125,10000,10,abc,-2,45,-75\n"      # line 4: bad number -> NaN, kept
+               "2,42,125,10000\n"                       # line 5: short -> skipped
+               "3,95,125,10000,10,5,-2,45,-75\n"         # line 6: latitude out of range -> NaN, kept
+               ",42,125,10000,10,5,-2,45,-75\n"          # line 7: no time -> skipped
+               "5,42,125,10000,10,5,-2,45,nan\n"         # line 8: explicit NaN -> reported
+               "\n"
+               "6,42,125,10000,10,5,-2,45,-75\n")
+    t = read_telemetry(p)
+    assert t.line.tolist() == [3, 4, 6, 8, 10]
+    msgs = {i.line: i.message for i in t.issues}
+    assert set(msgs) == {4, 5, 6, 7, 8}
+    assert "'abc' is not a number" in msgs[4] and "pitch_deg" in msgs[4]
+    assert "fields where the header has" in msgs[5]
+    assert "outside [-90, 90]" in msgs[6]
+    assert "no usable time_s or frame" in msgs[7]
+    assert str(t.issues[0]).startswith(str(p) + ":4: ")
+    located = locate_tables(eoloc.SensorModel(eoloc.Camera(1, 1, 1, 1, 0, 0)), t, range_m=10_200.0)
+    assert located.fixes.status.tolist() == [0, 4, 4, 4, 0]  # bad records end INVALID_INPUT, never a point
+    assert np.isnan(located.fixes.lat_deg[1:4]).all()
+
+
+def test_missing_columns_and_files_are_clear_errors(tmp_path):
+    with pytest.raises(TableError, match="does not exist"):
+        read_telemetry(tmp_path / "nope.csv")
+    p = _write(tmp_path / "t.csv", "time_s,lat_deg,lon_deg\n0,1,2\n")
+    with pytest.raises(TableError, match=r"lacks required column\(s\) h_m"):
+        read_telemetry(p)
+    with pytest.raises(TableError, match="empty"):
+        read_telemetry(_write(tmp_path / "e.csv", "# nothing\n"))
+
+
+def test_detections_match_by_time_within_tolerance_and_by_frame(tmp_path):
+    tel = _write(tmp_path / "t.csv", "time_s,frame,lat,lon,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                 + "".join(f"{i * 0.1:.1f},{i},42,125,1000,0,0,0,0,-90\n" for i in range(10)))
+    det = _write(tmp_path / "d.csv", "time_s,target_id,u_px,v_px\n0.31,a,1,1\n0.34,b,1,1\n5.0,c,1,1\n")
+    m = match_detections(read_telemetry(tel), read_detections(det), time_tolerance_s=0.02)
+    assert m.record.tolist() == [3, -1, -1]
+    assert [i.line for i in m.issues] == [3, 4] and "widen --time-tolerance" in m.issues[0].message
+    detf = _write(tmp_path / "f.csv", "frame,target_id,u_px,v_px\n7,a,1,1\n42,b,1,1\n")
+    m = match_detections(read_telemetry(tel), read_detections(detf))
+    assert m.record.tolist() == [7, -1]
+
+
+# ---------------------------------------------------------------- config
+
+
+def test_config_validation_names_the_key(tmp_path):
+    bad = _write(tmp_path / "c.toml", "[camera]\nwidth = 100\nheight = 0\nfocal_mm = 3\npixel_um = 2\nfoo = 1\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(bad)
+    assert "camera.height" in str(exc.value) and "camera.foo" in str(exc.value) and str(bad) in str(exc.value)
+    with pytest.raises(ConfigError, match="one way"):
+        load_config(_write(tmp_path / "d.toml", "[camera]\nwidth = 1\nheight = 1\nfocal_mm = 3\npixel_um = 2\n"
+                                                "hfov_deg = 5\n"))
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(_write(tmp_path / "e.toml", "[camera\n"))
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "none.toml")
+
+
+def test_config_builds_the_sensor(tmp_path):
+    cfg = load_config(_write(tmp_path / "c.toml",
+                             "[camera]\nwidth = 640\nheight = 512\nhfov_deg = 30\n"
+                             '[gimbal]\nmodel = "fixed"\nquaternion = [1, 0, 0, 0]\n'
+                             "[installation]\nlever_arm_m = [1, 2, 3]\n"))
+    s = cfg.sensor()
+    assert s.gimbal.name == "fixed" and s.lever_arm_m == (1.0, 2.0, 3.0)
+    assert s.camera.hfov_deg == pytest.approx(30.0)
+    assert s.camera.cx == 319.5 and s.camera.cy == 255.5
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def test_cli_one_observation_json_S13():
+    r = CliRunner().invoke(main, ["locate", *S13_ARGS, "--range", "10200", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.output)
+    assert out["status"] == "OK"
+    assert out["lat"] == pytest.approx(42.02058646, abs=1e-7)
+    assert out["lon"] == pytest.approx(125.03195512, abs=1e-7)
+    assert out["h"] == pytest.approx(419.58, abs=0.01)
+
+
+def test_cli_one_observation_above_horizon_is_no_intersection():
+    args = [a if a != "-75" else "10" for a in S13_ARGS]
+    r = CliRunner().invoke(main, ["locate", *args, "--target-height", "0", "--json"])
+    assert r.exit_code == 0
+    assert json.loads(r.output) == {"lat": None, "lon": None, "h": None, "range": None, "status": "NO_INTERSECTION"}
+
+
+def test_cli_one_observation_pixel_with_config(camera_toml):
+    r = CliRunner().invoke(main, ["locate", *S13_ARGS, "--target-height", "400", "--pixel", "100", "700",
+                                  "--config", str(camera_toml), "--json"])
+    assert r.exit_code == 0, r.output
+    got = json.loads(r.output)
+    sensor = load_config(camera_toml).sensor()
+    ref = eoloc.locate_ellipsoid(sensor, eoloc.Pose(42, 125, 10000, 10, 5, -2, (45, -75)), 400.0, (100.0, 700.0))
+    assert got["lat"] == pytest.approx(float(ref.lat_deg), abs=1e-12)
+
+
+def test_cli_errors_name_the_fix(camera_toml):
+    runner = CliRunner()
+    r = runner.invoke(main, ["locate", *S13_ARGS, "--json"])
+    assert r.exit_code == 2 and "choose one stop rule" in r.output
+    r = runner.invoke(main, ["locate", *S13_ARGS, "--range", "1", "--pixel", "1", "2"])
+    assert r.exit_code == 2 and "--pixel needs --config" in r.output
+    r = runner.invoke(main, ["locate", "missing.csv", "--config", str(camera_toml), "--range"])
+    assert r.exit_code == 2 and "does not exist" in r.output
+
+
+def test_cli_file_mode_writes_csv_and_geojson(tmp_path):
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"),
+                                  "--config", str(DEMO / "camera.toml"), "--height", "600", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "telemetry.csv:16" in r.output and "not a number" in r.output  # the demo's malformed line
+    with (out / "fixes.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 91  # every detection has a row, located or not
+    statuses = [row["status"] for row in rows]
+    assert statuses.count("OK") == 87 and statuses.count("NO_TELEMETRY") == 1
+    gj = json.loads((out / "fixes.geojson").read_text())
+    assert gj["type"] == "FeatureCollection" and len(gj["features"]) == 91
+    ok = [f for f in gj["features"] if f["properties"]["status"] == "OK"]
+    assert all(f["geometry"]["type"] == "Point" and len(f["geometry"]["coordinates"]) == 3 for f in ok)
+    assert all(f["geometry"] is None for f in gj["features"] if f["properties"]["status"] != "OK")
+    lon, lat, h = ok[0]["geometry"]["coordinates"]
+    assert 112.6 < lon < 112.7 and 35.1 < lat < 35.2 and h == pytest.approx(600.0, abs=1e-3)
+
+
+def test_cli_demo_runs_and_matches_truth_statistically(tmp_path):
+    r = CliRunner().invoke(main, ["demo", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    assert "[S13] reference case" in r.output
+    with (tmp_path / "fixes_ellipsoid.csv").open() as fh:
+        errs = [float(row["error_vs_truth_m"]) for row in csv.DictReader(fh) if row["status"] == "OK"]
+    # the demo flight carries [Z15]'s telemetry noise: CEP of the same order as its 28.7 m
+    assert 10.0 < float(np.median(errs)) < 50.0
+
+
+def test_help_explains_units_and_conventions():
+    r = CliRunner().invoke(main, ["--help"])
+    assert r.exit_code == 0
+    for words in ("ellipsoidal", "clockwise from true north", "right wing down", "top-left pixel"):
+        assert words in r.output
