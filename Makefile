@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/eoloc demo --out out/demo
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff check src tests bench examples
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -n 2 -q

@@ -139,3 +139,22 @@ def test_backends_agree_to_1e8_m():
             assert np.max(np.abs(a[i] - b[i])) < 1e-8
         assert np.max(np.abs(a[3] - b[3])) * M_PER_DEG < 1e-8
         assert np.max(np.abs(a[5] - b[5])) < 1e-8
+
+
+def test_auto_backend_picks_per_kernel_and_agrees():
+    from eoloc._backend import _SIMD_MIN, backend_for
+
+    with eoloc.use_backend("auto"):
+        assert backend_for("pose_frame", 10**7) == eoloc.get_backend()
+        assert backend_for("ecef_to_geodetic", 10) == eoloc.get_backend()
+        big = backend_for("ecef_to_geodetic", _SIMD_MIN)
+        assert big in eoloc.available_backends()
+        lat, lon, h = _sample(_SIMD_MIN, 4)
+        x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
+        auto = eoloc.ecef_to_geodetic(x, y, z)
+    for b in eoloc.available_backends():
+        with eoloc.use_backend(b):
+            forced = eoloc.ecef_to_geodetic(x, y, z)
+        assert np.max(np.abs(auto[2] - forced[2])) < 1e-8
+    with eoloc.use_backend("numba" if "numba" in eoloc.available_backends() else "numpy"):
+        assert backend_for("ecef_to_geodetic", 10**7) == eoloc.get_backend()  # forcing is forcing

@@ -1,8 +1,10 @@
 """Backend selection and the one dispatcher every public function goes through.
 
-``numba`` (compiled gufuncs, the default where numba imports) or ``numpy`` (the reference path).
-Choose with the environment variable ``EOLOC_BACKEND`` or :func:`use_backend`; both run the same
-kernels from :mod:`eoloc._kernels`.
+``numba`` (compiled loops) or ``numpy`` (chunked array code, the reference path); both run the
+same kernels from :mod:`eoloc._kernels` and agree to 1e-8 m (tested). ``auto``, the default,
+picks per kernel and size: numba, except that large batches of the atan2-heavy kernels go to
+numpy where numpy has AVX-512 SIMD math (its vector atan2 is ~10x numba's scalar libm call;
+measured in bench/RESULTS.md). Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
 """
 
 from __future__ import annotations
@@ -29,8 +31,31 @@ def available_backends() -> tuple[str, ...]:
 
 
 def get_backend() -> str:
-    """The backend in force: 'numba' or 'numpy'."""
+    """The backend in force for scalar and small work: 'numba' or 'numpy'."""
     return _state["resolved"] or _resolve()
+
+
+# Kernels whose cost is dominated by atan2: numpy's SIMD version beats a scalar libm call.
+_SIMD_KERNELS = frozenset({"ecef_to_geodetic", "stop_at_ellipsoid"})
+_SIMD_MIN = 4 * 16384  # below this, numba's lower per-call overhead wins
+
+
+@functools.cache
+def _numpy_has_simd_math() -> bool:
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # pragma: no cover - older numpy layout
+        return False
+    return bool(features.get("AVX512_SKX"))
+
+
+def backend_for(name: str, n: int) -> str:
+    """The backend that runs kernel ``name`` on ``n`` elements under the current setting."""
+    chosen = get_backend()
+    if (_state["name"] == "auto" and chosen == "numba" and name in _SIMD_KERNELS and n >= _SIMD_MIN
+            and _numpy_has_simd_math()):
+        return "numpy"
+    return chosen
 
 
 def _resolve() -> str:
@@ -101,7 +126,7 @@ def run(name: str, *args):
     outs = [np.empty(n) for _ in range(N_OUT[name])]
     if name in STATUS_OUT:
         outs[-1] = np.empty(n, dtype=np.int8)
-    if get_backend() == "numba":
+    if backend_for(name, n) == "numba":
         from . import _nb
 
         getattr(_nb, name)(n, *flat_in, *outs)

@@ -1,0 +1,18 @@
+"""Run every benchmark and print one markdown table (paste into bench/RESULTS.md)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+import bench_geodesy
+import bench_locate
+from _common import HEADER, machine
+
+if __name__ == "__main__":
+    print(f"Machine: {machine()}\n")
+    print(HEADER)
+    for line in bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000):
+        print(line, flush=True)
