@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import time
@@ -36,3 +37,12 @@ def row(work: str, figure: str, peer: str, ratio: float | None) -> str:
 
 
 HEADER = "| work | eoloc | peer (same run) | eoloc / peer |\n|---|---|---|---|"
+
+
+def script(main: Callable[[int], list[str]], doc: str | None) -> None:
+    """Command-line entry of one benchmark script: ``--n`` elements, prints the machine and a table."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, default=1_000_000, help="elements per batch (default 10^6)")
+    print(machine())
+    print(HEADER)
+    print("\n".join(main(ap.parse_args().n)))

@@ -5,13 +5,11 @@
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 import pyproj
 
 import eoloc
-from _common import HEADER, best_time, machine, row
+from _common import best_time, row, script
 
 
 def main(n: int) -> list[str]:
@@ -35,9 +33,4 @@ def main(n: int) -> list[str]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=1_000_000)
-    args = ap.parse_args()
-    print(machine())
-    print(HEADER)
-    print("\n".join(main(args.n)))
+    script(main, __doc__)

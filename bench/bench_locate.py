@@ -10,13 +10,11 @@ an azimuth/tilt already in the local frame, so the comparison flatters pymap3d.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 from pymap3d.los import lookAtSpheroid
 
 import eoloc
-from _common import HEADER, best_time, machine, row
+from _common import best_time, row, script
 from eoloc import AzElGimbal, Camera, Pose, SensorModel
 
 SENSOR = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
@@ -76,9 +74,4 @@ def main(n: int) -> list[str]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=1_000_000)
-    args = ap.parse_args()
-    print(machine())
-    print(HEADER)
-    print("\n".join(main(args.n)))
+    script(main, __doc__)

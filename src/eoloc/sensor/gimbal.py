@@ -19,6 +19,7 @@ carry the constant part.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,20 +31,21 @@ _IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 class Gimbal:
     """Base of the gimbal models: ``kind`` selects the kernel, ``angle_names`` the angles' order."""
 
-    kind: int = field(init=False, default=-1)
-    angle_names: tuple[str, ...] = field(init=False, default=())
-    R_fixed9: tuple[float, ...] = field(init=False, default=_IDENTITY9)
+    kind: ClassVar[int] = -1
+    name: ClassVar[str] = ""
+    angle_names: ClassVar[tuple[str, ...]] = ()
 
     @property
-    def name(self) -> str:
-        raise NotImplementedError
+    def R_fixed9(self) -> tuple[float, ...]:
+        """The constant rotation of a fixed mount, row-major (identity for moving gimbals)."""
+        return _IDENTITY9
 
     def angles(self, gimbal_deg: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Three gimbal angles in radians from the pose's gimbal tuple (missing ones are 0)."""
         n = len(self.angle_names)
         if not 0 <= len(gimbal_deg) <= n + 1:
             raise ValueError(
-                f"{self.name} gimbal takes {n} angles ({', '.join(self.angle_names)}) and an optional "
+                f"{self.name} gimbal takes {n} angles ({', '.join(self.angle_names) or 'none'}) and an optional "
                 f"sensor roll, got {len(gimbal_deg)} values: {gimbal_deg!r}"
             )
         padded = [np.asarray(a, dtype=np.float64) for a in gimbal_deg] + [np.float64(0.0)] * (3 - len(gimbal_deg))
@@ -56,26 +58,18 @@ class Gimbal:
 class AzElGimbal(Gimbal):
     """Azimuth-elevation turret. Angles: (azimuth, elevation[, sensor_roll]) in degrees."""
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "kind", 0)
-        object.__setattr__(self, "angle_names", ("azimuth", "elevation"))
-
-    @property
-    def name(self) -> str:
-        return "az-el"
+    kind: ClassVar[int] = 0
+    name: ClassVar[str] = "az-el"
+    angle_names: ClassVar[tuple[str, ...]] = ("azimuth", "elevation")
 
 
 @dataclass(frozen=True)
 class RollPitchGimbal(Gimbal):
     """Roll-pitch framed camera ([Q]). Angles: (frame_roll, frame_pitch[, sensor_roll]) in degrees."""
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "kind", 1)
-        object.__setattr__(self, "angle_names", ("frame_roll", "frame_pitch"))
-
-    @property
-    def name(self) -> str:
-        return "roll-pitch"
+    kind: ClassVar[int] = 1
+    name: ClassVar[str] = "roll-pitch"
+    angle_names: ClassVar[tuple[str, ...]] = ("frame_roll", "frame_pitch")
 
 
 @dataclass(frozen=True)
@@ -87,8 +81,11 @@ class FixedMount(Gimbal):
     the right wing.
     """
 
+    kind: ClassVar[int] = 2
+    name: ClassVar[str] = "fixed"
     matrix: tuple[tuple[float, ...], ...] | None = None
     quaternion: tuple[float, float, float, float] | None = None
+    _R9: tuple[float, ...] = field(init=False, repr=False, default=_IDENTITY9)
 
     def __post_init__(self) -> None:
         from ..rotation import matrix_from_quaternion
@@ -103,13 +100,11 @@ class FixedMount(Gimbal):
                 raise ValueError(f"FixedMount matrix must be a proper 3x3 rotation, got {R.tolist()}")
         else:
             R = np.eye(3)
-        object.__setattr__(self, "kind", 2)
-        object.__setattr__(self, "angle_names", ())
-        object.__setattr__(self, "R_fixed9", tuple(float(x) for x in R.ravel()))
+        object.__setattr__(self, "_R9", tuple(float(x) for x in R.ravel()))
 
     @property
-    def name(self) -> str:
-        return "fixed"
+    def R_fixed9(self) -> tuple[float, ...]:
+        return self._R9
 
 
 _BY_NAME = {"az-el": AzElGimbal, "azel": AzElGimbal, "roll-pitch": RollPitchGimbal,
