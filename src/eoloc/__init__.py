@@ -15,16 +15,19 @@ Conventions (one per concept, everywhere in the library):
 
 from ._backend import available_backends, get_backend, set_backend, use_backend
 from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
-from .locate import locate_ellipsoid, locate_range, stop_at_ellipsoid, stop_at_range
+from .locate import locate_ellipsoid, locate_flat, locate_range, stop_at_ellipsoid, stop_at_range
 from .result import Fixes, Status
 from .sensor import AzElGimbal, Camera, FixedMount, Pose, Rays, RollPitchGimbal, SensorModel
+from .sensor.distortion import BrownConrady, DistortionRatio
 
 __version__ = "0.1.0"
 
 __all__ = [
     "WGS84",
     "AzElGimbal",
+    "BrownConrady",
     "Camera",
+    "DistortionRatio",
     "Ellipsoid",
     "FixedMount",
     "Fixes",
@@ -39,6 +42,7 @@ __all__ = [
     "geodetic_to_ecef",
     "get_backend",
     "locate_ellipsoid",
+    "locate_flat",
     "locate_range",
     "set_backend",
     "stop_at_ellipsoid",

@@ -8,15 +8,18 @@ the default principal point of a W x H image is ((W - 1) / 2, (H - 1) / 2).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .distortion import Distortion
+
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole intrinsics: focal lengths fx, fy and principal point cx, cy in pixels; image size."""
+    """Pinhole intrinsics: focal lengths fx, fy and principal point cx, cy in pixels; image size;
+    optional lens distortion (removed on pixel -> ray, applied on ray -> pixel)."""
 
     width: int
     height: int
@@ -24,6 +27,7 @@ class Camera:
     fy: float
     cx: float
     cy: float
+    distortion: Distortion | None = None
 
     def __post_init__(self) -> None:
         if not (int(self.width) == self.width > 0 and int(self.height) == self.height > 0):
@@ -68,6 +72,10 @@ class Camera:
             raise ValueError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}")
         return cls(width, height, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
 
+    def with_distortion(self, distortion: Distortion | None) -> Camera:
+        """The same camera with a lens distortion model."""
+        return replace(self, distortion=distortion)
+
     # -- properties ---------------------------------------------------------------------------
 
     @property
@@ -96,13 +104,18 @@ class Camera:
     # -- mapping ------------------------------------------------------------------------------
 
     def pixel_to_normalized(self, u: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels to normalised image coordinates ((u - cx) / fx, (v - cy) / fy)."""
+        """Pixels to ideal (undistorted) normalised image coordinates ((u - cx) / fx, (v - cy) / fy)."""
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        return (u - self.cx) / self.fx, (v - self.cy) / self.fy
+        xn, yn = (u - self.cx) / self.fx, (v - self.cy) / self.fy
+        if self.distortion is not None:
+            xn, yn = self.distortion.undistort(xn, yn)
+        return xn, yn
 
     def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Normalised image coordinates to pixels."""
+        """Ideal normalised image coordinates to (distorted) pixels."""
+        if self.distortion is not None:
+            xn, yn = self.distortion.distort(xn, yn)
         return np.asarray(xn) * self.fx + self.cx, np.asarray(yn) * self.fy + self.cy
 
     def pixel_to_los_cam(self, u: ArrayLike, v: ArrayLike) -> np.ndarray:

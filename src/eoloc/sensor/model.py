@@ -212,6 +212,11 @@ class SensorModel:
             raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
         if self.gimbal.kind == 2:
             g1_deg, g3_deg = 0.0, g1_deg
+        if self.camera.distortion is not None and (u is not None or v is not None):
+            # the compiled single-target kernel is distortion-free: undistort the pixel first
+            xn, yn = self.camera.pixel_to_normalized(self.camera.cx if u is None else u,
+                                                     self.camera.cy if v is None else v)
+            u, v = float(xn * self.camera.fx + self.camera.cx), float(yn * self.camera.fy + self.camera.cy)
         fn = self._one_fn()
         return fn(self._params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
                   self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
