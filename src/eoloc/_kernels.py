@@ -317,3 +317,33 @@ def locate_one(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3, u, v, stop_kin
     if not np.abs(lat) <= 90.0:  # also catches NaN; out-of-range angles elsewhere just rotate
         return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
     return rlat / d, rlon / d, rh, t, st
+
+
+# ---------------------------------------------------------------- terrain grids
+
+
+def _floor_index(x, hi):
+    """floor(x) as an integer index, clamped to [0, hi] (numpy: arrays; numba: a branch)."""
+    return np.clip(np.floor(x), 0, hi).astype(np.int64)
+
+
+def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
+    """Bilinear height of a lat/lon grid at (lat, lon) in degrees -> (height, inside).
+
+    ``z[i, j]`` is the post at (lat0 + i dlat, lon0 + j dlon). Outside the posts' extent:
+    NaN and inside = False; a cell with a void (NaN) corner gives NaN with inside = True.
+    """
+    nrow = z.shape[0]
+    ncol = z.shape[1]
+    fr = (lat - lat0) / dlat
+    fc = (lon - lon0) / dlon
+    eps = 1e-9  # edge posts computed as 999.0000000001 are still edge posts
+    inside = (fr >= -eps) & (fr <= nrow - 1.0 + eps) & (fc >= -eps) & (fc <= ncol - 1.0 + eps)
+    r0 = _floor_index(_pick(inside, fr, 0.0), nrow - 2)
+    c0 = _floor_index(_pick(inside, fc, 0.0), ncol - 2)
+    ar = fr - r0
+    ac = fc - c0
+    top = (1.0 - ac) * z[r0, c0] + ac * z[r0, c0 + 1]
+    bottom = (1.0 - ac) * z[r0 + 1, c0] + ac * z[r0 + 1, c0 + 1]
+    h = (1.0 - ar) * top + ar * bottom
+    return _pick(inside, h, np.nan), inside

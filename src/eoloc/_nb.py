@@ -16,6 +16,7 @@ import types as pytypes
 from pathlib import Path
 
 import numba
+import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
@@ -38,6 +39,10 @@ def _pick_scalar(cond, a, b):
     return a if cond else b
 
 
+def _floor_index_scalar(x, hi):
+    return min(max(int(np.floor(x)), 0), hi)
+
+
 def _at(x, i):
     """Element i of a flat array, or the scalar itself (resolved at compile time)."""
 
@@ -53,7 +58,7 @@ _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
     "pose_frame", "ray_direction", "project_point", "stop_at_range", "stop_at_ellipsoid",
-    "r_body_cam", "_tuple9", "locate_one",
+    "r_body_cam", "_tuple9", "locate_one", "grid_height",
 )
 
 _saved_cache_dir = numba.config.CACHE_DIR
@@ -61,6 +66,7 @@ numba.config.CACHE_DIR = _cache_dir()
 try:
     _g = dict(vars(K))
     _g["_pick"] = njit(**_JIT)(_pick_scalar)
+    _g["_floor_index"] = njit(**_JIT)(_floor_index_scalar)
     for _name in _KERNELS:
         _f = getattr(K, _name)
         _g[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _g, _name, _f.__defaults__))
