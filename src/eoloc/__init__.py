@@ -15,14 +15,24 @@ Conventions (one per concept, everywhere in the library):
 
 from ._backend import available_backends, get_backend, set_backend, use_backend
 from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
-from .locate import locate_ellipsoid, locate_flat, locate_range, stop_at_ellipsoid, stop_at_range
+from .locate import (
+    locate_dem,
+    locate_ellipsoid,
+    locate_flat,
+    locate_range,
+    stop_at_dem,
+    stop_at_ellipsoid,
+    stop_at_range,
+)
 from .result import Fixes, Status
 from .sensor import AzElGimbal, Camera, FixedMount, Pose, Rays, RollPitchGimbal, SensorModel
 from .sensor.distortion import BrownConrady, DistortionRatio
+from .terrain import DEM, open_dem
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "DEM",
     "WGS84",
     "AzElGimbal",
     "BrownConrady",
@@ -41,10 +51,13 @@ __all__ = [
     "ecef_to_geodetic",
     "geodetic_to_ecef",
     "get_backend",
+    "locate_dem",
     "locate_ellipsoid",
     "locate_flat",
     "locate_range",
+    "open_dem",
     "set_backend",
+    "stop_at_dem",
     "stop_at_ellipsoid",
     "stop_at_range",
     "use_backend",

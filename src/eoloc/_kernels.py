@@ -227,6 +227,21 @@ def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
     return lat, lon, h, r, _pick(valid, OK, INVALID_INPUT)
 
 
+def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
+    """Both ray parameters (t1 <= t2, NaN if none) where the ray meets the inflated ellipsoid
+    (a + ht, b + ht): within ~2 cm of the surface of geodetic height ht at 10 km."""
+    A = a + ht
+    B = b + ht
+    ia = 1.0 / (A * A)
+    ib = 1.0 / (B * B)
+    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
+    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
+    qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
+    disc = qb * qb - qa * qc
+    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
+    return (-qb - sq) / qa, (-qb + sq) / qa
+
+
 def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     """M3: first point along the ray whose geodetic height is ``ht`` (m) -> (lat, lon, h, range, status).
 
@@ -237,17 +252,7 @@ def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     NO_INTERSECTION; never the nearest point on the ray.
     """
     valid = _finite(ox + oy + oz + dx + dy + dz + ht)
-    A = a + ht
-    B = b + ht
-    ia = 1.0 / (A * A)
-    ib = 1.0 / (B * B)
-    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
-    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
-    qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
-    disc = qb * qb - qa * qc
-    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
-    t1 = (-qb - sq) / qa
-    t2 = (-qb + sq) / qa
+    t1, t2 = inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b)
     t = _pick(t1 > 0.0, t1, _pick(t2 > 0.0, t2, np.nan))
     for _ in range(_NEWTON_STEPS):
         x = ox + t * dx
@@ -347,3 +352,31 @@ def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     bottom = (1.0 - ac) * z[r0 + 1, c0] + ac * z[r0 + 1, c0 + 1]
     h = (1.0 - ar) * top + ar * bottom
     return _pick(inside, h, np.nan), inside
+
+
+def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
+    """First s in [s_lo, s_hi] where a straight ray meets one cell's bilinear surface; NaN if none.
+
+    In the cell, local coordinates ar = ar0 + dar s (rows), ac = ac0 + dac s (columns) and the
+    ray height h = h0 + dh s are linear in s; the bilinear height z00 (1-ar)(1-ac) + z01 (1-ar) ac
+    + z10 ar (1-ac) + z11 ar ac is then quadratic in s, so ray minus surface is a quadratic
+    c0 + c1 s + c2 s^2 solved exactly: no crossing inside the cell can be stepped over.
+    A ray already at or below the surface at s_lo meets it at s_lo.
+    """
+    B = z10 - z00
+    C = z01 - z00
+    D = z00 - z01 - z10 + z11
+    c0 = h0 - (z00 + B * ar0 + C * ac0 + D * ar0 * ac0)
+    c1 = dh - (B * dar + C * dac + D * (ar0 * dac + ac0 * dar))
+    c2 = -D * dar * dac
+    g_lo = c0 + s_lo * (c1 + s_lo * c2)
+    disc = c1 * c1 - 4.0 * c2 * c0
+    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
+    q = -0.5 * (c1 + _pick(c1 >= 0.0, sq, -sq))  # stable quadratic roots: q / c2 and c0 / q
+    quad = np.abs(c2) > 1e-12 * (np.abs(c1) + np.abs(c0) + 1e-300)
+    r1 = _pick(quad, q / c2, -c0 / c1)
+    r2 = _pick(quad, c0 / q, np.nan)
+    ok1 = (r1 >= s_lo) & (r1 <= s_hi)
+    ok2 = (r2 >= s_lo) & (r2 <= s_hi)
+    first = _pick(ok1 & ok2, np.minimum(r1, r2), _pick(ok1, r1, _pick(ok2, r2, np.nan)))
+    return _pick(g_lo <= 0.0, s_lo, first)

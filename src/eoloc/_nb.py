@@ -21,6 +21,7 @@ from numba import njit, types
 from numba.extending import overload
 
 from . import _kernels as K
+from . import _march as M
 
 _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 
@@ -30,7 +31,7 @@ def _cache_dir() -> str:
         os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "eoloc"
     )
     digest = hashlib.sha256()
-    for mod in (K.__file__, __file__):
+    for mod in (K.__file__, M.__file__, __file__):
         digest.update(Path(mod).read_bytes())
     return os.path.join(root, f"numba-{numba.__version__}-{digest.hexdigest()[:16]}")
 
@@ -58,7 +59,7 @@ _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
     "pose_frame", "ray_direction", "project_point", "stop_at_range", "stop_at_ellipsoid",
-    "r_body_cam", "_tuple9", "locate_one", "grid_height",
+    "r_body_cam", "_tuple9", "locate_one", "grid_height", "inflated_roots", "cell_first_root",
 )
 
 _saved_cache_dir = numba.config.CACHE_DIR
@@ -72,6 +73,22 @@ try:
         _g[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _g, _name, _f.__defaults__))
     # Explicit signature: compiled once (cached), and ints are converted at dispatch instead of
     # compiling a specialisation per mix of int and float arguments.
+    # the M4 march: its helpers compiled with the kernels' twins in their globals
+    _gm = dict(vars(M))
+    _gm.update({name: _g[name] for name in (*_KERNELS, "_pick", "_floor_index")})
+    for _name in ("_band", "_grid_point", "_surface_gap", "_walk_cells", "_coarse_clear", "_polish", "march_ray"):
+        _f = getattr(M, _name)
+        _gm[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _gm, _name, _f.__defaults__))
+    _march_ray = _gm["march_ray"]
+
+    @njit(**_JIT)
+    def terrain_march(n, ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin,
+                      a, b, e2, ep2, lat, lon, h, t, st):
+        for i in range(n):
+            lat[i], lon[i], h[i], t[i], st[i] = _march_ray(
+                _at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i), z, bmax, lat0, lon0, dlat,
+                dlon, hmin, hmax, fine, coarse, margin, a, b, e2, ep2)
+
     locate_one = njit((types.float64[::1], *[types.float64] * 11, types.int64, types.float64), **_JIT)(
         pytypes.FunctionType(K.locate_one.__code__, _g, "locate_one_sig")
     )

@@ -1,0 +1,210 @@
+"""M4 ray ∩ DEM: synthetic scenes checked both ways, first hit, ridges, statuses, [Q]'s descent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyproj
+import pytest
+
+import eoloc
+from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy, open_dem
+from eoloc.rotation import R_ned_body
+
+DATA = Path(__file__).parent / "data" / "dem"
+GEOD = pyproj.Geod(ellps="WGS84")
+SENSOR = SensorModel(Camera.from_hfov(20.0, 1000, 800))
+
+
+@pytest.fixture(scope="module")
+def srtm():
+    return open_dem(DATA / "srtm_ref.tif")
+
+
+@pytest.fixture(scope="module")
+def front_range():
+    return open_dem(DATA / "SRTMGL3_boulder_front_range.asc", assume_crs="EPSG:4326")
+
+
+def analytic():
+    """Smooth hills with a 400 m relief over 0.2 x 0.2 deg, posts every 1 arc-second (~30 m)."""
+    def f(lat, lon):
+        return 800.0 + 200.0 * np.sin(lat * 180.0) * np.cos(lon * 150.0) + 150.0 * np.cos((lat + lon) * 90.0)
+    return DEM.from_function(f, (10.0, 45.0, 10.2, 45.2), 1.0 / 3600.0, source="analytic hills")
+
+
+def aim(target_lat, target_lon, target_h, off_nadir_deg, azimuth_deg, height_above_m):
+    """Aircraft pose (level, heading north) that looks at the target with the given off-nadir
+    angle from the given direction, and the az-el gimbal angles that put it on the boresight."""
+    off = np.radians(off_nadir_deg)
+    horiz = height_above_m * np.tan(off)
+    az = np.radians(azimuth_deg)
+    # the aircraft sits back along the line of sight: -horiz in the look direction, +height up
+    ned = np.stack([-horiz * np.cos(az), -horiz * np.sin(az), -np.full_like(horiz, height_above_m)], -1)
+    p = geodesy.ned_to_ecef(ned, target_lat, target_lon, target_h)
+    lat, lon, h = eoloc.ecef_to_geodetic(p[..., 0], p[..., 1], p[..., 2])
+    t = np.stack(eoloc.geodetic_to_ecef(target_lat, target_lon, target_h), -1)
+    los_ned = np.einsum("...ji,...j->...i", geodesy.R_ecef_ned(lat, lon), t - p)
+    los_body = np.einsum("...ji,...j->...i", R_ned_body(0.0, 0.0, 0.0), los_ned)
+    r = np.linalg.norm(los_body, axis=-1)
+    gaz = np.degrees(np.arctan2(los_body[..., 1], los_body[..., 0]))
+    gel = -np.degrees(np.arcsin(los_body[..., 2] / r))
+    return Pose(lat, lon, h, 0.0, 0.0, 0.0, (gaz, gel)), t
+
+
+def first_crossing_brute_force(rays, dem, t_max, step=0.25):
+    """Smallest t (to ``step``) where the ray is at or below the DEM, by dense sampling."""
+    out = np.full(rays.shape, np.nan)
+    for i in range(rays.shape[0]):
+        t = np.arange(0.0, t_max[i] + step, step)
+        p = rays.origin_ecef[i] + t[:, None] * rays.dir_ecef[i]
+        lat, lon, h = eoloc.ecef_to_geodetic(p[:, 0], p[:, 1], p[:, 2])
+        below = h - dem.height(lat, lon) <= 0.0
+        if below.any():
+            out[i] = t[np.argmax(below)]
+    return out
+
+
+@pytest.mark.parametrize("terrain", ["srtm", "front_range", "analytic"])
+def test_synthetic_scene_both_ways_0_to_80_deg(backend, terrain, request):
+    dem = analytic() if terrain == "analytic" else request.getfixturevalue(terrain)
+    w, s, e, n = dem.bounds
+    rng = np.random.default_rng(7)
+    k = 400
+    lat = rng.uniform(s + 0.3 * (n - s), n - 0.3 * (n - s), k)
+    lon = rng.uniform(w + 0.3 * (e - w), e - 0.3 * (e - w), k)
+    h = dem.height(lat, lon)
+    off = np.linspace(0.0, 80.0, k)
+    pose, t_ecef = aim(lat, lon, h, off, rng.uniform(0, 360, k), rng.uniform(800.0, 2500.0, k))
+    u, v = SENSOR.ground_to_image(pose, t_ecef)
+    np.testing.assert_allclose([u, v], [np.full(k, 499.5), np.full(k, 399.5)], atol=1e-6)  # truth on the boresight
+    rays = SENSOR.rays(pose, (u, v))
+    f = eoloc.stop_at_dem(rays, dem, sensor=SENSOR)
+    assert (f.status == Status.OK).all()
+    true_range = np.linalg.norm(t_ecef - rays.origin_ecef, axis=-1)
+    _, _, d = GEOD.inv(f.lon_deg, f.lat_deg, lon, lat)
+    visible = np.abs(f.range_m - true_range) < 0.5
+    assert np.max(d[visible]) < 0.05  # located back to < 5 cm where the target is the first hit
+    assert visible.mean() > 0.6
+    # where it is not, something is in front: the march stopped earlier, on the terrain surface
+    assert (f.range_m[~visible] < true_range[~visible]).all()
+    np.testing.assert_array_less(np.abs(f.h_m - dem.height(f.lat_deg, f.lon_deg)), 0.01)
+    # and it is the FIRST hit: a dense scan finds nothing before it
+    pick = np.flatnonzero(~visible)[:20].tolist() + np.flatnonzero(visible)[-10:].tolist()
+    sub = eoloc.Rays(*(np.asarray(x)[pick] for x in (rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz)))
+    brute = first_crossing_brute_force(sub, dem, f.range_m[pick] + 1.0)
+    np.testing.assert_allclose(brute, f.range_m[pick], atol=0.3)
+
+
+def _flat_with_wall(wall_h):
+    """Flat ground at 100 m with a one-post-wide north-south wall of height wall_h at lon 10.05."""
+    n = 181
+    z = np.full((n, n), 100.0)
+    z[:, 90] = wall_h  # lon0 + 90 * 1/1800 = 10.05
+    return DEM.from_array(z, lat0=45.05, lon0=10.0, dlat=-1 / 1800, dlon=1 / 1800)
+
+
+def test_ridge_in_front_of_the_target_is_found(backend):
+    dem = _flat_with_wall(400.0)
+    # target on the flat ground 118 m east of a one-post-wide wall, seen from the west 24 deg off
+    # nadir: the ray crosses the wall's line about 265 m above the ground, 35 m below the crest
+    pose, _ = aim(45.025, 10.0515, 100.0, 24.0, 90.0, 1000.0)
+    f = eoloc.locate_dem(SENSOR, pose, dem)
+    assert f.status == Status.OK
+    assert 10.0494 < f.lon_deg < 10.0500 and f.h_m > 300.0  # on the wall's west face, not on the target
+    assert abs(f.h_m - dem.height(f.lat_deg, f.lon_deg)) < 0.01
+    # [Q]'s descent samples the ray where it is at 400, 300, 200, 100, 0 m: both samples near the
+    # wall fall beside its thin crest, so it lands on a LATER crossing, behind the wall
+    desc = eoloc.locate_dem(SENSOR, pose, dem, method="descent", eps_h=100.0)
+    assert desc.status == Status.OK and desc.lon_deg > 10.0515
+
+
+def test_one_post_spike_is_not_tunnelled(backend):
+    z = np.full((101, 101), 0.0)
+    z[50, 50] = 300.0  # a single post: a bilinear pyramid two cells wide around (0.95, 2.05)
+    dem = DEM.from_array(z, lat0=1.0, lon0=2.0, dlat=-0.001, dlon=0.001)
+    # aim a nearly horizontal ray (88 deg off nadir) from the west at a point on the spike's EAST
+    # flank: it has to stop on the west flank first
+    pose, _ = aim(0.95, 2.0502, float(dem.height(0.95, 2.0502)), 88.0, 90.0, 100.0)
+    f = eoloc.locate_dem(SENSOR, pose, dem)
+    assert f.status == Status.OK and f.lon_deg < 2.05 and f.h_m > 200.0
+
+
+def test_descent_agrees_with_march_within_its_step(backend, srtm):
+    rng = np.random.default_rng(3)
+    k = 60
+    w, s, e, n = srtm.bounds
+    lat = rng.uniform(s + 0.3, n - 0.3, k)
+    lon = rng.uniform(w + 0.3, e - 0.3, k)
+    pose, _ = aim(lat, lon, srtm.height(lat, lon), rng.uniform(0, 30, k), rng.uniform(0, 360, k), 3000.0)
+    march = eoloc.locate_dem(SENSOR, pose, srtm)
+    for eps in (1.0, 5.0):
+        desc = eoloc.locate_dem(SENSOR, pose, srtm, method="descent", eps_h=eps)
+        same = np.abs(desc.range_m - march.range_m) < 200.0  # same crossing (not a later one)
+        assert same.mean() > 0.9
+        assert np.max(np.abs(desc.h_m[same] - march.h_m[same])) <= eps + 1e-6
+
+
+def test_flat_terrain_M4_equals_M3_and_M2(backend):
+    flat = DEM.constant(587.0, bounds=(112.6, 35.0, 112.8, 35.2))
+    pose = Pose(35.125225, 112.680649, 1140.0, 290.5, 2.1, 0.0, (89.9, -35.0))
+    u = np.array([386, 352, 511, 379, 854, 756, 685.0])
+    v = np.array([304, 379, 277, 524, 463, 584, 706.0])
+    cam = Camera.from_focal_mm(50.0, 5.5, 1024, 768)
+    sensor = SensorModel(cam)
+    m4 = eoloc.locate_dem(sensor, pose, flat, (u, v))
+    m3 = eoloc.locate_ellipsoid(sensor, pose, 587.0, (u, v))
+    np.testing.assert_allclose(m4.range_m, m3.range_m, atol=1e-4)
+    main = eoloc.locate_dem(sensor, pose, flat)
+    m2 = eoloc.locate_flat(sensor, pose, float(main.range_m), (u, v))
+    _, _, d = GEOD.inv(m2.lon_deg, m2.lat_deg, m4.lon_deg, m4.lat_deg)
+    assert np.max(d) < 0.01
+
+
+def test_statuses_never_a_plausible_wrong_point(backend):
+    dem = open_dem(DATA / "n00_e006_3arc_v2.dt1")
+    void_rc = np.argwhere(np.isnan(dem.grid.z))
+    r, c = void_rc[len(void_rc) // 2]
+    vlat, vlon = dem.grid.lat0 + r * dem.grid.dlat, dem.grid.lon0 + c * dem.grid.dlon
+    # the highest cell whose four posts are all valid; the camera 100 m under its centre
+    zz = dem.grid.z
+    cell_max = np.fmax(np.fmax(zz[:-1, :-1], zz[1:, :-1]), np.fmax(zz[:-1, 1:], zz[1:, 1:]))
+    cell_max[np.isnan(zz[:-1, :-1] + zz[1:, :-1] + zz[:-1, 1:] + zz[1:, 1:])] = -np.inf
+    tr, tc = np.unravel_index(np.argmax(cell_max), cell_max.shape)
+    top_lat, top_lon = dem.grid.lat0 + (tr + 0.5) * dem.grid.dlat, dem.grid.lon0 + (tc + 0.5) * dem.grid.dlon
+    top_h = float(dem.height(top_lat, top_lon))
+    cases = {
+        # straight down onto a void
+        "void": (Pose(vlat, vlon, 3000.0, 0, 0, 0, (0.0, -90.0)), Status.DEM_VOID),
+        # near the east edge looking east, low: leaves the tile before meeting the sea (0 m)
+        "edge": (Pose(0.5, 6.999, 2500.0, 90.0, 0, 0, (0.0, -5.0)), Status.OUT_OF_COVERAGE),
+        # above the horizon
+        "sky": (Pose(0.3, 6.6, 3000.0, 0, 0, 0, (0.0, 10.0)), Status.NO_INTERSECTION),
+        # camera 100 m below the highest (non-void) post
+        "underground": (Pose(top_lat, top_lon, top_h - 100.0, 0, 0, 0, (0.0, -90.0)), Status.INVALID_INPUT),
+        "nan": (Pose(np.nan, 6.6, 3000.0, 0, 0, 0, (0.0, -90.0)), Status.INVALID_INPUT),
+    }
+    for name, (pose, expected) in cases.items():
+        f = eoloc.locate_dem(SENSOR, pose, dem)
+        assert f.status == expected, name
+        assert np.isnan(f.lat_deg) and np.isnan(f.h_m), name
+
+
+def test_backends_agree_on_M4():
+    if len(eoloc.available_backends()) < 2:
+        pytest.skip("numba not installed: one backend only")
+    dem = analytic()
+    rng = np.random.default_rng(5)
+    k = 500
+    pose = Pose(45.1 + rng.uniform(-0.05, 0.05, k), 10.1 + rng.uniform(-0.05, 0.05, k), 2500.0,
+                rng.uniform(0, 360, k), 0.0, 0.0, (rng.uniform(-180, 180, k), rng.uniform(-89, -12, k)))
+    out = {}
+    for b in ("numba", "numpy"):
+        with eoloc.use_backend(b):
+            out[b] = eoloc.locate_dem(SENSOR, pose, dem)
+    np.testing.assert_array_equal(out["numba"].status, out["numpy"].status)
+    ok = out["numba"].ok
+    assert ok.mean() > 0.8
+    diff = out["numba"].p_ecef()[ok] - out["numpy"].p_ecef()[ok]
+    assert np.max(np.abs(diff)) < 1e-6
