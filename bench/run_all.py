@@ -9,10 +9,11 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import bench_geodesy
 import bench_locate
+import bench_terrain
 from _common import HEADER, machine
 
 if __name__ == "__main__":
     print(f"Machine: {machine()}\n")
     print(HEADER)
-    for line in bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000):
+    for line in bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000):
         print(line, flush=True)

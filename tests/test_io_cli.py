@@ -187,3 +187,39 @@ def test_help_explains_units_and_conventions():
     assert r.exit_code == 0
     for words in ("ellipsoidal", "clockwise from true north", "right wing down", "top-left pixel"):
         assert words in r.output
+
+
+def test_cli_dem_stop_rule_one_observation_and_errors(tmp_path):
+    dem_file = Path(__file__).parent / "data" / "dem" / "srtm_ref.tif"
+    args = ["locate", "--lat", "39.6", "--lon", "40.4", "--height", "6000", "--gimbal", "az-el",
+            "--gimbal-angles", "0", "-90", "--dem", str(dem_file), "--json"]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    got = json.loads(r.output)
+    dem = eoloc.open_dem(dem_file)
+    assert got["status"] == "OK" and got["lat"] == pytest.approx(39.6, abs=1e-9)
+    assert got["h"] == pytest.approx(float(dem.height(39.6, 40.4)), abs=0.01)  # straight down onto the DEM
+    r = CliRunner().invoke(main, [*args[:-1], "--range", "5", "--json"])
+    assert r.exit_code == 2 and "choose one stop rule" in r.output
+    asc = Path(__file__).parent / "data" / "dem" / "SRTMGL3_boulder_front_range.asc"
+    r = CliRunner().invoke(main, [*args[:-3], "--dem", str(asc), "--json"])
+    assert r.exit_code == 2 and "--dem-crs EPSG:4326" in r.output
+
+
+def test_cli_file_mode_with_dem(tmp_path):
+    # the demo flight over a flat DEM at the targets' height gives the ellipsoid answer
+    flat = tmp_path / "flat.tif"
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with rasterio.open(flat, "w", driver="GTiff", width=50, height=50, count=1, dtype="float64", crs="EPSG:4326",
+                       transform=from_origin(112.6, 35.2, 0.004, 0.004)) as out:
+        out.write(np.full((50, 50), 600.0), 1)
+    out_dir = tmp_path / "out"
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config",
+                                  str(DEMO / "camera.toml"), "--dem", str(flat), "--vertical", "ellipsoid",
+                                  "--out", str(out_dir)])
+    assert r.exit_code == 0, r.output
+    with (out_dir / "fixes.csv").open() as fh:
+        rows = [row for row in csv.DictReader(fh) if row["status"] == "OK"]
+    assert len(rows) == 87 and all(abs(float(row["h_m"]) - 600.0) < 0.01 for row in rows)

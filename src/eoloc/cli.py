@@ -52,14 +52,16 @@ def main() -> None:
 LOCATE_HELP = """Geolocate targets: from files, or one observation given as options.
 
 \b
-FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--range [R] | --height H)
+FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--range [R] | --height H | --dem F)
   TELEMETRY.csv columns: time_s and/or frame, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg,
     roll_deg, gimbal1_deg, gimbal2_deg (or azimuth_deg, elevation_deg / frame_roll_deg,
     frame_pitch_deg), optional sensor_roll_deg, optional range_m (laser slant range).
   DETECTIONS.csv columns: time_s or frame, target_id, u_px, v_px, optional range_m.
   Without DETECTIONS the image centre of every record is located.
   --range alone takes each target's range_m from the files; --range R uses R metres for all;
-  --height H (same as --target-height) stops at ellipsoidal height H.
+  --height H (same as --target-height) stops at ellipsoidal height H; --dem FILE (repeat for
+  tiles: GeoTIFF, DTED, SRTM .hgt/.zip, ESRI ASCII) stops at the first hit on the terrain
+  (heights taken as EGM96 and converted with the bundled geoid unless --vertical says otherwise).
   Writes fixes.csv and fixes.geojson into --out. Bad lines are reported (file:line) and skipped;
   every good record is kept.
 
@@ -96,23 +98,43 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
               help="File mode: folder for fixes.csv and fixes.geojson.")
 @click.option("--time-tolerance", type=float, default=0.02, show_default=True,
               help="File mode: max |Δt| (s) pairing a detection with a telemetry record.")
+@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False),
+              help="Stop rule M4: DEM file(s); repeat for several tiles.")
+@click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96", show_default=True,
+              help="Vertical datum of the DEM heights (converted to ellipsoidal).")
+@click.option("--geoid", type=click.Path(dir_okay=False), default=None,
+              help="Geoid grid for --vertical (default: the bundled EGM96 15').")
+@click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
 def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
-           gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance) -> None:
+           gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance, dem_paths, vertical, geoid,
+           dem_crs) -> None:
+    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     if telemetry is None:
         _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
-                    sensor_roll, pixel, as_json)
+                    sensor_roll, pixel, as_json, dem)
         return
     if lat is not None or lon is not None:
         _fail("give either a TELEMETRY file or --lat/--lon for one observation, not both")
     if target_height is not None and height is not None:
         _fail("in file mode --height and --target-height mean the same; give one")
     stop_height = target_height if target_height is not None else height
-    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance)
+    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem)
 
 
-def _stop_rule(range_opt, target_height) -> tuple[float | str | None, float | None]:
-    if (range_opt is None) == (target_height is None):
-        _fail("choose one stop rule: --range [R] (laser slant range) or --target-height H (ellipsoidal metres)")
+def _open_dem(paths, vertical, geoid, dem_crs):
+    from .terrain import DEMError, open_dem
+
+    try:
+        with err_console.status("reading the DEM..."):
+            return open_dem(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
+    except DEMError as exc:
+        _fail(str(exc))
+
+
+def _stop_rule(range_opt, target_height, dem=None) -> tuple[float | str | None, float | None]:
+    if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
+        _fail("choose one stop rule: --range [R] (laser slant range), --target-height H (ellipsoidal metres) "
+              "or --dem FILE (terrain)")
     if range_opt not in (None, RANGE_FROM_FILES):
         try:
             range_opt = float(range_opt)
@@ -129,10 +151,10 @@ def _load_sensor(config_path) -> SensorModel:
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
-                sensor_roll, pixel, as_json) -> None:
+                sensor_roll, pixel, as_json, dem=None) -> None:
     if lat is None or lon is None or height is None:
         _fail("one observation needs --lat, --lon and --height (aircraft, ellipsoidal m), or give a TELEMETRY file")
-    rng, stop_h = _stop_rule(range_opt, target_height)
+    rng, stop_h = _stop_rule(range_opt, target_height, dem)
     if rng == RANGE_FROM_FILES:
         _fail("--range needs a value (metres) for one observation")
     if config_path is not None:
@@ -151,11 +173,16 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
             _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
                   f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
         angles = (*gimbal_angles, sensor_roll)
-    from .locate import locate_ellipsoid, locate_range
+    from .locate import locate_dem, locate_ellipsoid, locate_range
 
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
     pixels = None if pixel is None else (pixel[0], pixel[1])
-    f = locate_range(sensor, pose, rng, pixels) if rng is not None else locate_ellipsoid(sensor, pose, stop_h, pixels)
+    if dem is not None:
+        f = locate_dem(sensor, pose, dem, pixels)
+    elif rng is not None:
+        f = locate_range(sensor, pose, rng, pixels)
+    else:
+        f = locate_ellipsoid(sensor, pose, stop_h, pixels)
     status = Status(int(f.status))
     out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
            "status": status.name}
@@ -184,10 +211,11 @@ def _cell(key: str, v) -> str:
     return str(v)
 
 
-def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance) -> None:
+def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance,
+                  dem=None) -> None:
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
-    rng, stop_h = _stop_rule(range_opt, stop_height)
+    rng, stop_h = _stop_rule(range_opt, stop_height, dem)
     sensor = _load_sensor(config_path)
     try:
         tel = read_telemetry(telemetry)
@@ -199,7 +227,8 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
         _report_issues(issues)
         _fail(f"telemetry file {telemetry!r} has no usable record")
     with err_console.status("locating..."):
-        located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, time_tolerance_s=time_tolerance)
+        located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, dem=dem,
+                                time_tolerance_s=time_tolerance)
     issues += located.issues
     _report_issues(issues)
     rows = fix_rows(located.fixes, located.extra)

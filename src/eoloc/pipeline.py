@@ -11,7 +11,7 @@ import numpy as np
 
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
-from .locate import locate_ellipsoid, locate_range
+from .locate import locate_dem, locate_ellipsoid, locate_range
 from .result import Fixes, Status
 from .sensor import SensorModel
 
@@ -28,16 +28,17 @@ class Located:
 
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
-                  range_m: float | str | None = None, height_m: float | None = None,
+                  range_m: float | str | None = None, height_m: float | None = None, dem=None,
                   time_tolerance_s: float = 0.02) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
-    Stop rule: ``height_m`` (M3, ellipsoidal metres) or ``range_m`` (M1): a number for all, or
-    ``"files"`` to take each detection's ``range_m`` column (without detections: the telemetry's
-    boresight range). A telemetry range is never applied along another pixel's ray.
+    Stop rule (exactly one): ``height_m`` (M3, ellipsoidal metres), ``dem`` (M4, a
+    :class:`eoloc.DEM`) or ``range_m`` (M1): a number for all, or ``"files"`` to take each
+    detection's ``range_m`` column (without detections: the telemetry's boresight range). A
+    telemetry range is never applied along another pixel's ray.
     """
-    if (range_m is None) == (height_m is None):
-        raise ValueError("choose one stop rule: a range (range_m) or a target height (height_m)")
+    if sum(x is not None for x in (range_m, height_m, dem)) != 1:
+        raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
     issues: list[Issue] = []
     cx, cy = sensor.camera.centre_px
     if det is None:
@@ -59,7 +60,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
         range_source = (det.path, det.line)
     has_pose = record >= 0
     pose = telemetry_pose(tel, np.where(has_pose, record, 0))
-    if height_m is not None:
+    if dem is not None:
+        fixes = locate_dem(sensor, pose, dem, (u, v))
+    elif height_m is not None:
         fixes = locate_ellipsoid(sensor, pose, height_m, (u, v))
     else:
         rng = np.asarray(file_range if range_m == RANGE_FROM_FILES else np.full(u.shape, float(range_m)))
