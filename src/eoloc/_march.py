@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _kernels
 from ._kernels import (
     DEM_VOID,
     INVALID_INPUT,
