@@ -342,4 +342,4 @@ def descent_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax,
     return out[0], out[1], out[2], out[3], st
 
 
-__all__ = ["_kernels", "block_max", "descent_numpy", "march_numpy", "march_params", "march_ray"]
+__all__ = ["block_max", "descent_numpy", "march_numpy", "march_params", "march_ray"]
