@@ -142,13 +142,13 @@ def test_backends_agree_to_1e8_m():
 
 
 def test_auto_backend_picks_per_kernel_and_agrees():
-    from eoloc._backend import _SIMD_MIN, backend_for
+    from eoloc._backend import _SIMD_MIN, _numpy_has_simd_math, backend_for
 
     with eoloc.use_backend("auto"):
         assert backend_for("pose_frame", 10**7) == eoloc.get_backend()
         assert backend_for("ecef_to_geodetic", 10) == eoloc.get_backend()
         big = backend_for("ecef_to_geodetic", _SIMD_MIN)
-        assert big in eoloc.available_backends()
+        assert big == ("numpy" if _numpy_has_simd_math() else eoloc.get_backend())
         lat, lon, h = _sample(_SIMD_MIN, 4)
         x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
         auto = eoloc.ecef_to_geodetic(x, y, z)

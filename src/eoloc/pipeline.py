@@ -12,7 +12,7 @@ import numpy as np
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
 from .locate import locate_dem, locate_ellipsoid, locate_range
-from .result import Fixes, Status
+from .result import Fixes, Status, with_status
 from .sensor import SensorModel
 
 RANGE_FROM_FILES = "files"
@@ -72,9 +72,6 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
                 issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
                                                          "a constant --range R, or use --height H"))
         fixes = locate_range(sensor, pose, rng, (u, v))
-    if not has_pose.all():
-        nan = np.where(has_pose, 1.0, np.nan)
-        fixes = Fixes(fixes.lat_deg * nan, fixes.lon_deg * nan, fixes.h_m * nan, fixes.range_m * nan,
-                      np.where(has_pose, fixes.status, np.int8(Status.NO_TELEMETRY)).astype(np.int8))
-    extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1) if len(tel) else record
+    fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
+    extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
     return Located(fixes, extra, issues)

@@ -71,11 +71,17 @@ class Fixes:
         return {Status(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
 
 
-def mask_invalid(fixes_arrays: tuple, invalid: np.ndarray) -> tuple:
-    """Set INVALID_INPUT and NaN coordinates where ``invalid`` (input checks done outside kernels)."""
+def mask_invalid(fixes_arrays: tuple, invalid: np.ndarray, status: Status = Status.INVALID_INPUT) -> tuple:
+    """Set ``status`` and NaN coordinates where ``invalid`` (checks made outside the kernels)."""
     lat, lon, h, rng, st = fixes_arrays
     if not np.any(invalid):
         return fixes_arrays
     nan = np.float64("nan")
     return (np.where(invalid, nan, lat), np.where(invalid, nan, lon), np.where(invalid, nan, h),
-            np.where(invalid, nan, rng), np.where(invalid, np.int8(Status.INVALID_INPUT), st).astype(np.int8))
+            np.where(invalid, nan, rng), np.where(invalid, np.int8(status), st).astype(np.int8))
+
+
+def with_status(fixes: Fixes, where: np.ndarray, status: Status) -> Fixes:
+    """``fixes`` with ``status`` and NaN coordinates wherever ``where`` holds."""
+    out = mask_invalid((fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m, fixes.status), where, status)
+    return Fixes(*(np.asarray(a)[()] if np.ndim(a) == 0 else a for a in out))

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..geodesy import R_ecef_ned
-from ..result import Fixes, Status
+from ..result import Fixes, Status, with_status
 from ..sensor.model import Pose, SensorModel
 from ._common import stop
 from .ranged import stop_at_range
@@ -42,9 +42,4 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     with np.errstate(invalid="ignore", divide="ignore"):
         rng = np.where(cos_k > 0, height_above_plane / cos_k, np.inf)  # inf: parallel or away
     fixes = stop("stop_at_range", rays, rng, sensor.ellipsoid)
-    missed = np.isinf(rng) & np.isfinite(height_above_plane)
-    if np.any(missed):
-        status = np.where(missed, np.int8(Status.NO_INTERSECTION), fixes.status).astype(np.int8)
-        fixes = Fixes(fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m,
-                      status[()] if status.ndim == 0 else status)
-    return fixes
+    return with_status(fixes, np.isinf(rng) & np.isfinite(height_above_plane), Status.NO_INTERSECTION)

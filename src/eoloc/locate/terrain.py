@@ -15,16 +15,17 @@ import numpy as np
 
 from .. import _march
 from .._backend import get_backend
-from ..result import Fixes, mask_invalid
+from ..geodesy import WGS84
+from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
+from ._common import to_fixes
 
 
 def stop_at_dem(rays: Rays, dem: DEM, *, method: str = "march", eps_h: float = 1.0,
                 sensor: SensorModel | None = None) -> Fixes:
     """First crossing of each ray with ``dem`` (ellipsoidal heights)."""
-    ell = (sensor.ellipsoid if sensor is not None else None) or _default_ell()
-    a, b, e2, ep2 = ell.constants
+    a, b, e2, ep2 = (sensor.ellipsoid if sensor is not None else WGS84).constants
     shape = rays.shape
     flat = [np.ascontiguousarray(np.broadcast_to(x, shape), dtype=np.float64).reshape(-1)
             for x in (rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz)]
@@ -41,33 +42,16 @@ def stop_at_dem(rays: Rays, dem: DEM, *, method: str = "march", eps_h: float = 1
 
             n = flat[0].size
             out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
-            _nb.terrain_march(n, *flat, g.z, _block_max(dem), g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine,
+            _nb.terrain_march(n, *flat, g.z, dem.block_max, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine,
                               coarse, margin, a, b, e2, ep2, *out)
         else:
             out = _march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
     else:
         raise ValueError(f"unknown DEM method {method!r}; use 'march' (default) or 'descent'")
-    lat, lon, h, t, st = (np.asarray(x).reshape(shape) for x in out)
-    lat, lon, h, t, st = mask_invalid((np.degrees(lat), np.degrees(lon), h, t, st.astype(np.int8)),
-                                      np.broadcast_to(rays.invalid, shape))
-    return Fixes(*(x[()] if x.ndim == 0 else x for x in (lat, lon, h, t, st)))
+    return to_fixes([np.asarray(x).reshape(shape) for x in out], rays)
 
 
 def locate_dem(sensor: SensorModel, pose: Pose, dem: DEM, pixels=None, *, method: str = "march",
                eps_h: float = 1.0) -> Fixes:
     """M4: pixels (default: principal point) of ``pose`` to their first hit on ``dem``."""
     return stop_at_dem(sensor.rays(pose, pixels), dem, method=method, eps_h=eps_h, sensor=sensor)
-
-
-def _block_max(dem: DEM) -> np.ndarray:
-    cached = dem.__dict__.get("_block_max")
-    if cached is None:
-        cached = _march.block_max(dem.grid.z)
-        dem.__dict__["_block_max"] = cached
-    return cached
-
-
-def _default_ell():
-    from ..geodesy import WGS84
-
-    return WGS84

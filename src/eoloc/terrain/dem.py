@@ -16,6 +16,7 @@ from __future__ import annotations
 import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +91,14 @@ class DEM:
         w, s, e, n = self.bounds
         lat = np.radians(0.5 * (s + n))
         return float(min(abs(self.grid.dlat) * 111_132.0, self.grid.dlon * 111_320.0 * max(np.cos(lat), 1e-6)))
+
+    @cached_property
+    def block_max(self) -> np.ndarray:
+        """Highest post of each 8 x 8-cell block (+inf where a block holds a void), built once:
+        lets the M4 march skip stretches where the ray is above all terrain."""
+        from .._march import block_max
+
+        return block_max(self.grid.z)
 
     @property
     def n_voids(self) -> int:
