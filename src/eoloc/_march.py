@@ -4,11 +4,12 @@ The algorithm, per ray (see README "M4"):
 
 1. Band: the ray can only meet the terrain between the DEM's lowest and highest (ellipsoidal)
    heights. March from where it enters the top of the band (or from the camera, if the camera is
-   inside the band) to where it reaches the bottom (or leaves the band upward).
-2. Coarse steps (about 8 cells): exact geodetic coordinates at both ends; the step is skipped
+   inside the band) to where it reaches the bottom (or leaves the band upward). Along the ray,
+   grid coordinates come from exact knots every 4 km and cubic Hermite interpolation (< 1 µm).
+2. Coarse steps (about 8 cells): grid coordinates at both ends; the step is skipped
    when the ray's lowest height over it (minus a margin for the linearisation, >= 5 cm) is
    above the highest post of every 8 x 8 block its bounding box touches.
-3. Fine steps (about 2 cells): exact geodetic coordinates at both ends, linear in between
+3. Fine steps (about 2 cells): grid coordinates at both ends, linear in between
    (< 0.1 mm off); a grid walk visits every cell the step crosses, and in each cell the
    ray-minus-bilinear-surface quadratic is solved exactly (``_kernels.cell_first_root``), so the
    first crossing is found however thin the peak or ridge.
@@ -34,6 +35,7 @@ from ._kernels import (
     NO_INTERSECTION,
     OK,
     OUT_OF_COVERAGE,
+    _bowring,
     _finite,
     _pick,
     cell_first_root,
@@ -44,6 +46,7 @@ from ._kernels import (
 )
 
 BLOCK = 8  # cells per side of a coarse block
+_KNOT_M = 4000.0  # longest distance between exact geodetic knots along a ray (m)
 _R_EARTH = 6_371_000.0
 _D2R = np.pi / 180.0
 
@@ -158,33 +161,108 @@ def _coarse_clear(bmax, fr_a, fc_a, fr_b, fc_b, h_low):
     return True
 
 
+def _band_fast(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b):
+    """(t_start, t_end, camera inside the band) from inflated ellipsoids only (no trigonometry).
+
+    The inflated ellipsoid (a + H, b + H) is within 2 cm of the surface of geodetic height H at
+    10 km; padding the band by 1 m + 1e-4 |H| keeps it a superset of the true band.
+    """
+    pad_top = 1.0 + 1e-4 * abs(hmax)
+    pad_bottom = 1.0 + 1e-4 * abs(hmin)
+    t_top_in, t_top_out = inflated_roots(ox, oy, oz, dx, dy, dz, hmax + pad_top, a, b)
+    t_bottom, _ = inflated_roots(ox, oy, oz, dx, dy, dz, hmin - pad_bottom, a, b)
+    inside = t_top_in <= 0.0 and t_top_out >= 0.0
+    t_start = 0.0 if inside else t_top_in
+    if t_top_out < 0.0:  # the whole band is behind the camera
+        t_start = np.nan
+    t_end = t_bottom if t_bottom > 0.0 else t_top_out
+    return t_start, t_end, inside
+
+
+def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_near):
+    """Exact grid coordinates of the ray point at t and their derivatives per metre along the ray.
+
+    -> (fractional row, fractional column, geodetic height, d row/dt, d column/dt, dh/dt, p), the
+    column unwrapped by whole turns to lie within half a turn of ``fc_near``; p is the distance
+    from the polar axis (it sets how far apart knots may be).
+    """
+    x = ox + t * dx
+    y = oy + t * dy
+    z = oz + t * dz
+    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    fr = (np.arctan2(sl, cl) / _D2R - lat0) / dlat
+    fc = (np.arctan2(y, x) / _D2R - lon0) / dlon
+    turn = 360.0 / abs(dlon)
+    fc = fc - turn * np.floor((fc - fc_near) / turn + 0.5)
+    inv_p = 1.0 / p if p > 0.0 else 0.0
+    cn = x * inv_p if p > 0.0 else 1.0  # cos and sin of the longitude
+    sn = y * inv_p
+    d_north = -sl * (cn * dx + sn * dy) + cl * dz
+    d_east = -sn * dx + cn * dy
+    d_up = cl * (cn * dx + sn * dy) + sl * dz
+    w2 = 1.0 - e2 * sl * sl
+    m_plus_h = a * (1.0 - e2) / (w2 * np.sqrt(w2)) + h  # meridian radius of curvature + h
+    return fr, fc, h, d_north / m_plus_h / _D2R / dlat, d_east * inv_p / _D2R / dlon, d_up, p
+
+
+def _knot_length(p):
+    """Knot spacing (m): cubic Hermite between exact knots is then < 1 µm off (README "M4")."""
+    return min(_KNOT_M, max(0.002 * p, 1.0))
+
+
+def _hermite(t, tk, length, k0, k1):
+    """(fr, fc, h) at t by cubic Hermite interpolation between knots k0 (at tk) and k1 (tk + length)."""
+    s = (t - tk) / length
+    s2 = s * s
+    s3 = s2 * s
+    w00 = 2.0 * s3 - 3.0 * s2 + 1.0
+    w10 = (s3 - 2.0 * s2 + s) * length
+    w01 = 3.0 * s2 - 2.0 * s3
+    w11 = (s3 - s2) * length
+    return (w00 * k0[0] + w10 * k0[3] + w01 * k1[0] + w11 * k1[3],
+            w00 * k0[1] + w10 * k0[4] + w01 * k1[1] + w11 * k1[4],
+            w00 * k0[2] + w10 * k0[5] + w01 * k1[2] + w11 * k1[5])
+
+
 def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin,
               a, b, e2, ep2):
-    """First crossing of one ray with the DEM -> (lat rad, lon rad, h, t, status)."""
+    """First crossing of one ray with the DEM -> (lat rad, lon rad, h, t, status).
+
+    Grid coordinates along the ray come from exact knots every few km (``_knot``) and cubic
+    Hermite interpolation between them, so a coarse or fine step costs a few multiplications
+    instead of an exact geodetic conversion; the hit is then polished on exact coordinates.
+    """
     if not _finite(ox + oy + oz + dx + dy + dz):
         return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
-    t_start, t_end, h_cam = _band(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b, e2, ep2)
+    t_start, t_end, inside = _band_fast(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b)
     if not t_start == t_start:
         return np.nan, np.nan, np.nan, np.nan, NO_INTERSECTION
-    if h_cam <= hmax:
+    if inside:
         gap = _surface_gap(ox, oy, oz, dx, dy, dz, 0.0, z, a, b, e2, ep2, lat0, lon0, dlat, dlon)
         if gap < 0.0:
             return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
     if not t_end == t_end:
         t_end = t_start + 2.0e6  # never leaves the band (grazing from inside): bounded by coverage
     t = t_start
-    fr_a, fc_a, h_a = _grid_point(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2, lat0, lon0, dlat, dlon)
+    k0 = _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, 0.5 * z.shape[1])
+    tk = t
+    length = _knot_length(k0[6])
+    k1 = _knot(ox, oy, oz, dx, dy, dz, tk + length, a, b, e2, ep2, lat0, lon0, dlat, dlon, k0[1])
+    fr_a, fc_a, h_a = k0[0], k0[1], k0[2]
     while t < t_end:
         t_b = min(t + coarse, t_end)
-        fr_b, fc_b, h_b = _grid_point(ox + t_b * dx, oy + t_b * dy, oz + t_b * dz, a, b, e2, ep2,
-                                      lat0, lon0, dlat, dlon)
+        while t_b > tk + length:  # next knot interval (fine steps below may extrapolate < 1 step back)
+            tk = tk + length
+            k0 = k1
+            length = _knot_length(k0[6])
+            k1 = _knot(ox, oy, oz, dx, dy, dz, tk + length, a, b, e2, ep2, lat0, lon0, dlat, dlon, k0[1])
+        fr_b, fc_b, h_b = _hermite(t_b, tk, length, k0, k1)
         if not _coarse_clear(bmax, fr_a, fc_a, fr_b, fc_b, min(h_a, h_b) - margin):
             tf = t
             fr_f, fc_f, h_f = fr_a, fc_a, h_a
             while tf < t_b:
                 tf_b = min(tf + fine, t_b)
-                fr_g, fc_g, h_g = _grid_point(ox + tf_b * dx, oy + tf_b * dy, oz + tf_b * dz, a, b, e2, ep2,
-                                              lat0, lon0, dlat, dlon)
+                fr_g, fc_g, h_g = _hermite(tf_b, tk, length, k0, k1)
                 status, s = _walk_cells(z, fr_f, fc_f, h_f, fr_g, fc_g, h_g)
                 if status == OK:
                     return _polish(ox, oy, oz, dx, dy, dz, tf + s * (tf_b - tf), (h_g - h_f) / (tf_b - tf), z,
