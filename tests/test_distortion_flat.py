@@ -129,3 +129,24 @@ def test_M2_frames_broadcast_and_horizon(backend):
 def test_M2_bad_main_range_flags_every_target(backend):
     f = eoloc.locate_flat(SensorModel(CAM), Z15_POSE, np.nan, Z15_SUBTARGETS)
     assert (f.status == Status.INVALID_INPUT).all() and np.isnan(f.lat_deg).all()
+
+
+@pytest.mark.parametrize("lens", [None, LENSES[0], "ratio"])
+def test_M2_one_frame_compiled_call_equals_the_array_path(lens):
+    """One frame on numba runs as a single compiled call with the undistortion inside; it must give
+    what the general (numpy, broadcasting) path gives, statuses included."""
+    cam = CAM if lens is None else CAM.with_distortion(DistortionRatio.for_camera(CAM) if lens == "ratio" else lens)
+    sensor = SensorModel(cam, mount_misalignment_deg=(0.1, -0.2, 0.3), lever_arm_m=(0.5, 0.2, -0.3))
+    u, v = _pixels(200, 7, cam)
+    pose = Pose(35.125225, 112.680649, 1140.0, 290.5, 0.0, 0.4, (89.9, -1.0))  # shallow: top rows see the sky
+    out = {}
+    for b in ("numba", "numpy"):
+        with eoloc.use_backend(b):
+            out[b] = eoloc.locate_flat(sensor, pose, 3000.0, (u, v), main_pixel=(600.0, 500.0))
+    np.testing.assert_array_equal(out["numba"].status, out["numpy"].status)
+    assert {Status.OK, Status.NO_INTERSECTION} <= set(out["numba"].status.tolist())
+    ok = out["numba"].ok
+    np.testing.assert_allclose(out["numba"].p_ecef()[ok], out["numpy"].p_ecef()[ok], rtol=0, atol=1e-6)
+    with eoloc.use_backend("numba"):
+        bad = eoloc.locate_flat(sensor, Pose(np.nan, 112.7, 1140.0, 0.0, 0.0, 0.0, (0.0, -30.0)), 3000.0, (u, v))
+    assert (bad.status == Status.INVALID_INPUT).all() and np.isnan(bad.lat_deg).all()

@@ -158,3 +158,12 @@ def test_auto_backend_picks_per_kernel_and_agrees():
         assert np.max(np.abs(auto[2] - forced[2])) < 1e-8
     with eoloc.use_backend("numba" if "numba" in eoloc.available_backends() else "numpy"):
         assert backend_for("ecef_to_geodetic", 10**7) == eoloc.get_backend()  # forcing is forcing
+
+
+def test_use_backend_restores_the_previous_backend():
+    """Leaving a ``use_backend`` block must put back what was in force, not keep the inner one."""
+    outer = eoloc.get_backend()
+    for inner in eoloc.available_backends():
+        with eoloc.use_backend(inner):
+            assert eoloc.get_backend() == inner
+        assert eoloc.get_backend() == outer

@@ -91,7 +91,7 @@ def use_backend(name: str) -> Iterator[None]:
     try:
         yield
     finally:
-        _state["name"] = previous
+        set_backend(previous)
 
 
 # The numba drivers take a rotation as 9 flat arguments; the numpy kernels take it as one 9-tuple.
@@ -99,14 +99,15 @@ _NUMPY_FLAT = {
     "pose_frame": lambda *a: _kernels.pose_frame(*a[:6], a[6:15], *a[15:]),
     "ray_direction": lambda *a: _kernels.ray_direction(a[:9], *a[9:]),
     "project_point": lambda *a: _kernels.project_point(a[:9], *a[9:]),
+    "flat_target": lambda *a: _kernels.flat_target(a[:9], *a[9:]),
 }
 
 
 # Outputs of each kernel as the drivers see them (rotations flattened); the last of a stop rule
 # is its int8 status.
 N_OUT = {"geodetic_to_ecef": 3, "ecef_to_geodetic": 3, "pose_frame": 12, "ray_direction": 3,
-         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5}
-STATUS_OUT = frozenset({"stop_at_range", "stop_at_ellipsoid"})
+         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5}
+STATUS_OUT = frozenset({"stop_at_range", "stop_at_ellipsoid", "flat_target"})
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
 
 

@@ -216,6 +216,85 @@ def project_point(R_ecef_cam, ox, oy, oz, px, py, pz):
     return cx / zs, cy / zs, cz
 
 
+# ---------------------------------------------------------------- lens distortion
+
+# Distortion model codes and their packed parameters ``dp`` (eoloc.sensor.distortion):
+# DIST_BROWN: (k1, k2, p1, p2, k3), OpenCV's order; DIST_RATIO: (w0, n, n breakpoints of the
+# normalised field, then 4 cubic coefficients per interval, highest power first).
+DIST_NONE, DIST_BROWN, DIST_RATIO = 0, 1, 2
+_BROWN_NEWTON_STEPS = 12
+_RATIO_FIXED_POINT_STEPS = 30
+
+
+def distort_brown(x, y, k1, k2, p1, p2, k3):
+    """OpenCV's Brown-Conrady model: ideal normalised (x, y) -> distorted normalised."""
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xy = x * y
+    return (x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy)
+
+
+def undistort_brown(xd, yd, k1, k2, p1, p2, k3):
+    """Inverse of :func:`distort_brown` by Newton's method on the 2x2 Jacobian (to ~1e-15)."""
+    x = xd
+    y = yd
+    for _ in range(_BROWN_NEWTON_STEPS):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+        fx, fy = distort_brown(x, y, k1, k2, p1, p2, k3)
+        fx = fx - xd
+        fy = fy - yd
+        jxx = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+        jxy = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+        jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+        det = jxx * jyy - jxy * jxy
+        x = x - (jyy * fx - jxy * fy) / det
+        y = y - (jxx * fy - jxy * fx) / det
+    return x, y
+
+
+def ppoly_eval(x, dp, i0, n):
+    """Piecewise cubic at x: breakpoints dp[i0 : i0 + n], then 4 coefficients per interval
+    (highest power first, in powers of x - breakpoint); the end pieces extrapolate."""
+    idx = 0
+    for j in range(1, n - 1):
+        idx = idx + _pick(x >= dp[i0 + j], 1, 0)
+    c = i0 + n + 4 * idx
+    s = x - dp[i0 + idx]
+    return ((dp[c] * s + dp[c + 1]) * s + dp[c + 2]) * s + dp[c + 3]
+
+
+def distortion_ratio(r, dp):
+    """[Z15]'s distortion ratio D at distorted normalised image height r (field w = atan(r) / w0)."""
+    return ppoly_eval(np.arctan(r) / dp[0], dp, 2, int(dp[1]))
+
+
+def undistort(kind, dp, xd, yd):
+    """Distorted normalised image coordinates -> ideal ones, for distortion model ``kind``."""
+    if kind == DIST_BROWN:
+        return undistort_brown(xd, yd, dp[0], dp[1], dp[2], dp[3], dp[4])
+    if kind == DIST_RATIO:
+        k = 1.0 + distortion_ratio(np.sqrt(xd * xd + yd * yd), dp)
+        return xd / k, yd / k
+    return xd, yd
+
+
+def distort(kind, dp, x, y):
+    """Ideal normalised image coordinates -> distorted ones, for distortion model ``kind``."""
+    if kind == DIST_BROWN:
+        return distort_brown(x, y, dp[0], dp[1], dp[2], dp[3], dp[4])
+    if kind == DIST_RATIO:
+        zeta = np.sqrt(x * x + y * y)
+        eta = zeta
+        for _ in range(_RATIO_FIXED_POINT_STEPS):  # a contraction: |dD/deta| zeta << 1
+            eta = zeta * (1.0 + distortion_ratio(eta, dp))
+        k = 1.0 + distortion_ratio(eta, dp)
+        return x * k, y * k
+    return x, y
+
+
 # ---------------------------------------------------------------- stop rules
 
 
@@ -264,6 +343,39 @@ def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     lat, lon, h = ecef_to_geodetic(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2)
     hit = t == t
     return lat, lon, h, t, _pick(valid, _pick(hit, OK, NO_INTERSECTION), INVALID_INPUT)
+
+
+def flat_plane(R_ecef_cam, ox, oy, oz, xn0, yn0, rng0, a, b, e2, ep2):
+    """M2 ([Z15]) ground plane: through the main target at slant range ``rng0`` (m) on the ray
+    through normalised (xn0, yn0), perpendicular to the local vertical there.
+
+    -> (down x, y, z: unit ECEF normal at the main target, H: camera height above the plane
+    along it, m); NaN when the range is not a positive number.
+    """
+    dx, dy, dz = ray_direction(R_ecef_cam, xn0, yn0)
+    r = _pick(_finite(rng0) & (rng0 > 0.0), rng0, np.nan)
+    x = ox + r * dx
+    y = oy + r * dy
+    sl, cl, p, _ = _bowring(x, y, oz + r * dz, a, b, e2, ep2, 2)
+    cn = _pick(p > 0.0, x / p, 1.0)  # cos and sin of the main target's longitude
+    sn = _pick(p > 0.0, y / p, 0.0)
+    nx = -cl * cn
+    ny = -cl * sn
+    nz = -sl
+    return nx, ny, nz, r * (dx * nx + dy * ny + dz * nz)
+
+
+def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
+    """M2: the ray through normalised (xn, yn) to the plane of :func:`flat_plane`.
+
+    range = H / (ray . down); rays parallel to the plane or pointing above it get
+    NO_INTERSECTION. -> (lat, lon, h, range, status) like every stop rule.
+    """
+    dx, dy, dz = ray_direction(R_ecef_cam, xn, yn)
+    c = dx * nx + dy * ny + dz * nz
+    away = c <= 0.0
+    lat, lon, h, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, _pick(away, np.nan, H / c), a, b, e2, ep2)
+    return lat, lon, h, t, _pick(away & _finite(H), NO_INTERSECTION, st)
 
 
 # ---------------------------------------------------------------- whole chain, one call

@@ -60,6 +60,8 @@ _KERNELS = (
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
     "pose_frame", "ray_direction", "project_point", "stop_at_range", "stop_at_ellipsoid",
     "r_body_cam", "_tuple9", "locate_one", "grid_height", "inflated_roots", "cell_first_root",
+    "distort_brown", "undistort_brown", "ppoly_eval", "distortion_ratio", "undistort", "distort",
+    "flat_plane", "flat_target",
 )
 
 _saved_cache_dir = numba.config.CACHE_DIR
@@ -100,6 +102,49 @@ try:
     _project_point = _g["project_point"]
     _stop_range = _g["stop_at_range"]
     _stop_ellipsoid = _g["stop_at_ellipsoid"]
+
+    _flat_plane = _g["flat_plane"]
+    _flat_target = _g["flat_target"]
+    _undistort = _g["undistort"]
+    _r_body_cam = _g["r_body_cam"]
+    _tuple9 = _g["_tuple9"]
+    _finite = _g["_finite"]
+
+    @njit(**_JIT)
+    def flat_target(n, r0, r1, r2, r3, r4, r5, r6, r7, r8, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2,
+                    lat, lon, h, t, st):
+        for i in range(n):
+            R = (_at(r0, i), _at(r1, i), _at(r2, i), _at(r3, i), _at(r4, i), _at(r5, i), _at(r6, i),
+                 _at(r7, i), _at(r8, i))
+            lat[i], lon[i], h[i], t[i], st[i] = _flat_target(R, _at(ox, i), _at(oy, i), _at(oz, i), _at(nx, i),
+                                                             _at(ny, i), _at(nz, i), _at(H, i), _at(xn, i),
+                                                             _at(yn, i), a, b, e2, ep2)
+
+    @njit(**_JIT)
+    def flat_frame(params, dist_kind, dist_params, pose, main_px, main_range, u, v, lat, lon, h, t, st):
+        """M2 for one frame in one call: pose = (lat, lon, h, yaw, pitch, roll, g1, g2, g3) in
+        radians/metres; main_px = (u0, v0); pixels u, v distorted; outputs in radians/metres."""
+        fx = params[K.P_FX]
+        fy = params[K.P_FY]
+        cx = params[K.P_CX]
+        cy = params[K.P_CY]
+        a = params[K.P_ELL]
+        b = params[K.P_ELL + 1]
+        e2 = params[K.P_ELL + 2]
+        ep2 = params[K.P_ELL + 3]
+        Rbc = _r_body_cam(int(params[K.P_KIND]), pose[6], pose[7], pose[8],
+                          _tuple9(params, K.P_MOUNT), _tuple9(params, K.P_FIXED), _tuple9(params, K.P_BORE))
+        R, ox, oy, oz = _pose_frame(pose[0], pose[1], pose[2], pose[3], pose[4], pose[5], Rbc,
+                                    params[K.P_LEVER], params[K.P_LEVER + 1], params[K.P_LEVER + 2], a, e2)
+        xn0, yn0 = _undistort(dist_kind, dist_params, (main_px[0] - cx) / fx, (main_px[1] - cy) / fy)
+        nx, ny, nz, H = _flat_plane(R, ox, oy, oz, xn0, yn0, main_range, a, b, e2, ep2)
+        bad = not (np.abs(pose[0]) <= 0.5 * np.pi and _finite(pose.sum()))
+        for i in range(u.size):
+            xn, yn = _undistort(dist_kind, dist_params, (u[i] - cx) / fx, (v[i] - cy) / fy)
+            lat[i], lon[i], h[i], t[i], st[i] = _flat_target(R, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2)
+            if bad:
+                lat[i] = lon[i] = h[i] = t[i] = np.nan
+                st[i] = K.INVALID_INPUT
 
     @njit(**_JIT)
     def geodetic_to_ecef(n, lat, lon, h, a, e2, x, y, z):

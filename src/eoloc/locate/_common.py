@@ -12,12 +12,14 @@ from ..sensor.model import Rays
 
 def stop(kernel: str, rays: Rays, value, ell: Ellipsoid = WGS84) -> Fixes:
     """Run stop-rule ``kernel`` with its parameter ``value`` (range, height, ...) on ``rays``."""
-    return to_fixes(run(kernel, rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz, value, *ell.constants), rays)
+    out = run(kernel, rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz, value, *ell.constants)
+    return to_fixes(out, rays.invalid)
 
 
-def to_fixes(out, rays: Rays) -> Fixes:
-    """Kernel outputs (lat rad, lon rad, h, range, status) -> Fixes, INVALID_INPUT where the pose was."""
+def to_fixes(out, invalid) -> Fixes:
+    """Kernel outputs (lat rad, lon rad, h, range, status) -> Fixes, INVALID_INPUT where ``invalid``
+    (the pose could not be used)."""
     lat, lon, h, t, st = (np.asarray(x) for x in out)
     lat, lon, h, t, st = mask_invalid((np.degrees(lat), np.degrees(lon), h, t, st.astype(np.int8, copy=False)),
-                                      np.broadcast_to(rays.invalid, st.shape))
+                                      np.broadcast_to(invalid, st.shape))
     return Fixes(*(a[()] if a.ndim == 0 else a for a in (lat, lon, h, t, st)))

@@ -17,11 +17,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..geodesy import R_ecef_ned
-from ..result import Fixes, Status, with_status
-from ..sensor.model import Pose, SensorModel
-from ._common import stop
-from .ranged import stop_at_range
+from .. import _kernels
+from .._backend import get_backend, run
+from ..result import Fixes
+from ..sensor.model import Pose, SensorModel, _split_pixels
+from ._common import to_fixes
 
 
 def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels: ArrayLike | None = None, *,
@@ -30,16 +30,46 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     (default: the principal point) whose slant range is ``main_range_m`` (m).
 
     Pose fields and ``main_range_m`` broadcast against the pixels like every stop rule (F frames
-    of K targets: pose fields and ranges (F, 1), pixels (F, K)).
+    of K targets: pose fields and ranges (F, 1), pixels (F, K)). One frame (scalar pose and
+    range) on the numba backend runs as a single compiled call, undistortion included: the
+    real-time path.
     """
-    main_rays = sensor.rays(pose, main_pixel)
-    main = stop_at_range(main_rays, main_range_m, sensor=sensor)
-    down = R_ecef_ned(main.lat_deg, main.lon_deg)[..., :, 2]  # NaN where the main fix failed
-    cos_main = (main_rays.dir_ecef * down).sum(-1)
-    height_above_plane = np.asarray(main.range_m) * cos_main
-    rays = sensor.rays(pose, pixels)
-    cos_k = (rays.dir_ecef * down).sum(-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rng = np.where(cos_k > 0, height_above_plane / cos_k, np.inf)  # inf: parallel or away
-    fixes = stop("stop_at_range", rays, rng, sensor.ellipsoid)
-    return with_status(fixes, np.isinf(rng) & np.isfinite(height_above_plane), Status.NO_INTERSECTION)
+    if get_backend() == "numba" and _one_frame(pose, main_range_m, main_pixel):
+        return _flat_frame_numba(sensor, pose, float(main_range_m), pixels, main_pixel)
+    ell = sensor.ellipsoid.constants
+    frame = sensor.camera_frame(pose)
+    xn0, yn0 = sensor.normalized(main_pixel)
+    with np.errstate(all="ignore"):
+        nx, ny, nz, H = _kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
+                                            np.asarray(main_range_m, dtype=np.float64), *ell)
+    xn, yn = sensor.normalized(pixels)
+    out = run("flat_target", *frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
+    return to_fixes(out, frame.invalid)
+
+
+def _one_frame(pose: Pose, main_range_m, main_pixel) -> bool:
+    fields = (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, *pose.gimbal_deg)
+    return (all(np.ndim(f) == 0 for f in fields) and np.ndim(main_range_m) == 0
+            and (main_pixel is None or np.size(main_pixel) == 2))
+
+
+def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixels, main_pixel) -> Fixes:
+    from .. import _nb
+
+    pose9 = np.radians([pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, 0, 0, 0])
+    pose9[2] = pose.h_m
+    pose9[6:] = sensor.gimbal.angles(pose.gimbal_deg)
+    cam = sensor.camera
+    main = np.array([cam.cx, cam.cy] if main_pixel is None else np.ravel(main_pixel), dtype=np.float64)
+    u, v = _split_pixels(pixels, cam)
+    shape = np.broadcast_shapes(np.shape(u), np.shape(v))
+    u = np.ascontiguousarray(np.broadcast_to(u, shape)).reshape(-1)
+    v = np.ascontiguousarray(np.broadcast_to(v, shape)).reshape(-1)
+    out = [np.empty(u.size) for _ in range(4)] + [np.empty(u.size, dtype=np.int8)]
+    dist = cam.distortion
+    _nb.flat_frame(sensor._params, 0 if dist is None else dist.kind, _NO_DIST if dist is None else dist.packed,
+                   pose9, main, main_range_m, u, v, *out)
+    return to_fixes([o.reshape(shape) for o in out], False)
+
+
+_NO_DIST = np.zeros(1)

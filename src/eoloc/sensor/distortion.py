@@ -10,6 +10,8 @@
   cubic polynomials (PCHIP). Undistorting is direct (x_r = x / (1 + D)); distorting solves
   eta = zeta (1 + D(w(eta))) by fixed-point iteration.
 
+Both models are evaluated by :mod:`eoloc._kernels` (``undistort`` / ``distort``), so the
+compiled frame kernels and the array path share one implementation.
 Every stop rule sees undistorted rays: the camera applies ``undistort`` in pixel -> ray and
 ``distort`` in ground -> pixel.
 """
@@ -18,16 +20,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .. import _kernels
+
 # [Z15] measured table: normalised field w -> distortion ratio D in percent
 Z15_FIELD = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
 Z15_D_PERCENT = (0.0, 0.003, 0.057, 0.160, 0.309, 0.500, 0.731, 1.000, 1.303, 1.637, 2.000)
-
-_NEWTON_STEPS = 12
-_FIXED_POINT_STEPS = 30
 
 
 @dataclass(frozen=True)
@@ -41,42 +43,26 @@ class BrownConrady:
     k3: float = 0.0
 
     name = "brown-conrady"
+    kind: ClassVar[int] = _kernels.DIST_BROWN
 
     @property
     def coefficients(self) -> np.ndarray:
         """OpenCV's distCoeffs order: (k1, k2, p1, p2, k3)."""
         return np.array([self.k1, self.k2, self.p1, self.p2, self.k3])
 
+    @cached_property
+    def packed(self) -> np.ndarray:
+        """Parameters as the compiled kernels take them (eoloc._kernels.undistort)."""
+        return self.coefficients
+
     def distort(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Ideal normalised coordinates -> distorted normalised coordinates."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        xy = x * y
-        return (x * radial + 2.0 * self.p1 * xy + self.p2 * (r2 + 2.0 * x * x),
-                y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * xy)
+        return _kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
 
     def undistort(self, xd: ArrayLike, yd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Distorted normalised coordinates -> ideal ones (Newton, converged to ~1e-15)."""
-        xd = np.asarray(xd, dtype=np.float64)
-        yd = np.asarray(yd, dtype=np.float64)
-        x, y = xd.copy(), yd.copy()
-        k1, k2, k3, p1, p2 = self.k1, self.k2, self.k3, self.p1, self.p2
-        for _ in range(_NEWTON_STEPS):
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
-            fx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
-            fy = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-            jxx = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
-            jxy = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
-            jyx = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
-            jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
-            det = jxx * jyy - jxy * jyx
-            x = x - (jyy * fx - jxy * fy) / det
-            y = y - (jxx * fy - jyx * fx) / det
-        return x, y
+        with np.errstate(all="ignore"):
+            return _kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
 
 
 @dataclass(frozen=True)
@@ -89,6 +75,7 @@ class DistortionRatio:
     d_percent: tuple[float, ...] = Z15_D_PERCENT
 
     name = "ratio"
+    kind: ClassVar[int] = _kernels.DIST_RATIO
 
     def __post_init__(self) -> None:
         if not self.r_max > 0:
@@ -106,31 +93,27 @@ class DistortionRatio:
         return cls(r_max, tuple(field), tuple(d_percent))
 
     @cached_property
-    def _fit(self):
+    def packed(self) -> np.ndarray:
+        """(w0, n, breakpoints, PCHIP coefficients per interval): the layout of
+        eoloc._kernels.ppoly_eval. scipy fits the monotone cubic pieces; the kernels evaluate them."""
         from scipy.interpolate import PchipInterpolator
 
-        return PchipInterpolator(np.asarray(self.field), np.asarray(self.d_percent) / 100.0, extrapolate=True)
+        fit = PchipInterpolator(np.asarray(self.field), np.asarray(self.d_percent) / 100.0)
+        return np.concatenate([[np.arctan(self.r_max), len(self.field)], fit.x, fit.c.T.ravel()]).astype(np.float64)
 
     def ratio(self, r_distorted: ArrayLike) -> np.ndarray:
         """D at distorted normalised image height(s) r = eta / f."""
-        w0 = np.arctan(self.r_max)
-        return self._fit(np.arctan(np.asarray(r_distorted, dtype=np.float64)) / w0)
+        return _kernels.distortion_ratio(_f64(r_distorted), self.packed)
 
     def undistort(self, xd: ArrayLike, yd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        xd = np.asarray(xd, dtype=np.float64)
-        yd = np.asarray(yd, dtype=np.float64)
-        k = 1.0 + self.ratio(np.hypot(xd, yd))
-        return xd / k, yd / k
+        return _kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
 
     def distort(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        zeta = np.hypot(x, y)
-        eta = zeta.copy()
-        for _ in range(_FIXED_POINT_STEPS):  # contraction: |dD/deta| * zeta << 1
-            eta = zeta * (1.0 + self.ratio(eta))
-        k = 1.0 + self.ratio(eta)
-        return x * k, y * k
+        return _kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
+
+
+def _f64(x: ArrayLike) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
 
 
 Distortion = BrownConrady | DistortionRatio
