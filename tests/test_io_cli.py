@@ -223,3 +223,29 @@ def test_cli_file_mode_with_dem(tmp_path):
     with (out_dir / "fixes.csv").open() as fh:
         rows = [row for row in csv.DictReader(fh) if row["status"] == "OK"]
     assert len(rows) == 87 and all(abs(float(row["h_m"]) - 600.0) < 0.01 for row in rows)
+
+
+def test_cli_footprint_writes_polygons_that_map_back_to_the_image_border(tmp_path):
+    out = tmp_path / "fp"
+    r = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
+                                  "--height", "600", "--edge-samples", "4", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((out / "footprints.geojson").read_text())
+    tel = read_telemetry(DEMO / "telemetry.csv")
+    assert len(doc["features"]) == len(tel)
+    statuses = [f["properties"]["status"] for f in doc["features"]]
+    assert statuses.count("INVALID_INPUT") == 1 and statuses.count("OK") == len(tel) - 1
+    # the first frame's ring, projected back into its camera, is the image border (4 points a side)
+    from eoloc.footprint import border_pixels
+    from eoloc.io.telemetry import telemetry_pose
+
+    sensor = load_config(DEMO / "camera.toml").sensor()
+    ring = np.array(doc["features"][0]["geometry"]["coordinates"][0][:-1])
+    p = np.stack(eoloc.geodetic_to_ecef(ring[:, 1], ring[:, 0], ring[:, 2]), -1)
+    u, v = sensor.ground_to_image(telemetry_pose(tel, 0), p)
+    px = {(round(a, 4), round(b, 4)) for a, b in zip(u, v, strict=True)}
+    assert px == {(round(a, 4), round(b, 4)) for a, b in border_pixels(sensor.camera, 4)}
+    rows = list(csv.DictReader((out / "footprints.csv").open()))
+    assert len(rows) == len(tel) and float(rows[0]["area_m2"]) > 0
+    bad = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml")])
+    assert bad.exit_code == 2 and "--height H" in bad.output

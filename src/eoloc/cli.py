@@ -13,6 +13,7 @@ from rich.console import Console
 from rich.table import Table as RichTable
 
 from . import __version__
+from .footprint import write_footprints_geojson
 from .io.config import ConfigError, load_config
 from .io.export import fix_rows, write_csv, write_geojson
 from .io.table import TableError
@@ -257,6 +258,87 @@ def _summary(rows: list[dict], counts: dict[str, int], limit: int = 12) -> None:
     if len(rows) > limit:
         table.caption = f"first {limit} of {len(rows)} rows"
     Console().print(table)
+
+
+FOOTPRINT_HELP = """Frame footprints: the ground outline of every telemetry record's image.
+
+\b
+eoloc footprint TELEMETRY.csv --config CAMERA.toml (--height H | --dem FILE...) [--edge-samples N]
+  The image border (N points per side, clockwise from the top-left corner) is located on the
+  ellipsoidal height H or on the DEM. Where the border sees sky or leaves the DEM, the outline is
+  clipped at the grazing ray / the DEM edge (found by bisection), never extended to a made-up
+  point. Writes footprints.geojson (polygons, RFC 7946) and footprints.csv (one row per frame:
+  status, area, vertex counts, the image centre's fix) into --out.
+"""
+
+
+@main.command(help=FOOTPRINT_HELP + CONVENTIONS)
+@click.argument("telemetry", type=click.Path(dir_okay=False))
+@click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
+              help="Camera/gimbal/installation TOML.")
+@click.option("--height", type=float, help="Ground: this ellipsoidal height (m).")
+@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False),
+              help="Ground: DEM file(s); repeat for several tiles.")
+@click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96", show_default=True,
+              help="Vertical datum of the DEM heights (converted to ellipsoidal).")
+@click.option("--geoid", type=click.Path(dir_okay=False), default=None, help="Geoid grid for --vertical.")
+@click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
+@click.option("--edge-samples", type=click.IntRange(1, 1000), default=16, show_default=True,
+              help="Points per image side.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
+              help="Folder for footprints.geojson and footprints.csv.")
+def footprint(telemetry, config_path, height, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir) -> None:
+    if (height is None) == (not dem_paths):
+        _fail("choose the ground: --height H (ellipsoidal metres) or --dem FILE")
+    surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
+    sensor = _load_sensor(config_path)
+    try:
+        tel = read_telemetry(telemetry)
+    except TableError as exc:
+        _fail(str(exc))
+    _report_issues(list(tel.issues))
+    if len(tel) == 0:
+        _fail(f"telemetry file {telemetry!r} has no usable record")
+    rows, prints = footprint_rows(sensor, tel, surface, edge_samples)
+    out = Path(out_dir)
+    geo = write_footprints_geojson(out / "footprints.geojson", prints, rows)
+    csv_path = write_csv(out / "footprints.csv", [
+        {**r, "status": p.status.name, "area_m2": p.area_m2, "vertices": len(p),
+         "clipped_vertices": int(p.clipped.sum()), "centre_lat_deg": p.centre[0], "centre_lon_deg": p.centre[1],
+         "centre_h_m": p.centre[2]}
+        for r, p in zip(rows, prints, strict=True)])
+    counts: dict[str, int] = {}
+    for p in prints:
+        counts[p.status.name] = counts.get(p.status.name, 0) + 1
+    clipped = sum(bool(p.clipped.any()) for p in prints)
+    Console().print(f"{len(prints)} footprints: " + ", ".join(f"{k} {v}" for k, v in counts.items())
+                    + f"; {clipped} clipped at the horizon or the DEM edge")
+    Console().print(f"wrote [bold]{geo}[/] and [bold]{csv_path}[/]")
+
+
+def footprint_rows(sensor, tel, surface, edge_samples: int, chunk: int = 64):
+    """Footprints of every telemetry record, in chunks behind a progress bar -> (rows, footprints)."""
+    from rich.progress import Progress
+
+    from .footprint import footprints
+    from .io.telemetry import telemetry_pose
+
+    prints = []
+    with Progress(console=err_console, transient=True) as bar:
+        task = bar.add_task("footprints", total=len(tel))
+        for start in range(0, len(tel), chunk):
+            idx = np.arange(start, min(start + chunk, len(tel)))
+            prints += footprints(sensor, telemetry_pose(tel, idx), surface, edge_samples=edge_samples)
+            bar.advance(task, idx.size)
+    c = tel.columns
+    rows = [{"line": int(tel.line[i]), "time_s": _plain(c["time_s"][i]), "frame": _plain(c["frame"][i])}
+            for i in range(len(tel))]
+    return rows, prints
+
+
+def _plain(x):
+    x = x.item() if isinstance(x, np.generic) else x
+    return None if isinstance(x, float) and np.isnan(x) else x
 
 
 @main.command(help="Run the bundled example: a short flight over static targets, located by laser range "

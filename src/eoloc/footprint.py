@@ -1,0 +1,213 @@
+"""Frame footprints: the ground outline of what a frame sees, on the ellipsoid or on a DEM.
+
+The outline follows the image border (``edge_samples`` points per side, clockwise from the
+top-left corner), each point located with the same stop rule as the targets (M3 on a constant
+ellipsoidal height, or M4 on a DEM). Where a border ray misses the ground (above the horizon,
+off the DEM, into a void), the outline is clipped instead of invented:
+
+- the border point is replaced by the last ray that still meets the ground on the image segment
+  from an *anchor* (the principal point, or the border point with the shortest range when the
+  principal point misses) to it;
+- where the border passes from ground to miss, the crossing point on the border is added.
+
+Both are found by bisection on the ray's hit/miss status to 1e-9 of the segment (pixels), so the
+vertices on the horizon are the grazing rays themselves. On the ellipsoid the image region that
+sees the ground is convex (the rays meeting a convex body form a convex cone), so this outline is
+exact; on a DEM the seen region need not be star-shaped from the anchor, and the outline is the
+one visible from the anchor's direction (documented limitation).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyproj
+from numpy.typing import ArrayLike
+
+from .locate import locate_dem, locate_ellipsoid
+from .result import Fixes, Status
+from .sensor.model import Pose, SensorModel
+from .terrain.dem import DEM
+
+_BISECTIONS = 40  # 2^-40 of a segment: below 1e-9 px on any practical image
+_GEOD = pyproj.Geod(ellps="WGS84")
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """The ground outline of one frame (vertices in order, not closed).
+
+    lat_deg, lon_deg, h_m: vertices (WGS-84 degrees, ellipsoidal m); u_px, v_px: the image point
+    of each; clipped: True where the vertex is on the horizon / DEM edge / void edge rather than
+    the image border's own ray; clip_status: why (NO_INTERSECTION: horizon, OUT_OF_COVERAGE: DEM
+    edge, DEM_VOID), OK for unclipped vertices. status: OK, NO_INTERSECTION (no ground in view)
+    or INVALID_INPUT (unusable pose). centre: the principal point's fix (NaN if it misses).
+    """
+
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    u_px: np.ndarray
+    v_px: np.ndarray
+    clipped: np.ndarray
+    clip_status: np.ndarray
+    status: Status
+    centre: tuple[float, float, float]
+
+    def __len__(self) -> int:
+        return int(self.lat_deg.size)
+
+    @property
+    def area_m2(self) -> float:
+        """Geodesic area on the WGS-84 ellipsoid (pyproj), m^2; 0 without an outline."""
+        if len(self) < 3:
+            return 0.0
+        area, _ = _GEOD.polygon_area_perimeter(self.lon_deg, self.lat_deg)
+        return abs(float(area))
+
+    def geojson_geometry(self) -> dict | None:
+        """RFC 7946 Polygon (lon, lat, h), exterior ring closed and counter-clockwise."""
+        if len(self) < 3:
+            return None
+        ring = np.column_stack([self.lon_deg, self.lat_deg, self.h_m])
+        area, _ = _GEOD.polygon_area_perimeter(self.lon_deg, self.lat_deg)
+        if area < 0:  # pyproj: positive = counter-clockwise
+            ring = ring[::-1]
+        ring = np.vstack([ring, ring[:1]])
+        return {"type": "Polygon", "coordinates": [[[round(float(c), 10) for c in p] for p in ring]]}
+
+
+def border_pixels(camera, edge_samples: int) -> np.ndarray:
+    """(4 * edge_samples, 2) points on the image's outer border, clockwise from the top-left corner."""
+    if edge_samples < 1:
+        raise ValueError(f"edge_samples must be >= 1, got {edge_samples}")
+    corners = camera.corners_px()
+    s = np.arange(edge_samples)[:, None] / edge_samples
+    return np.vstack([corners[k] + s * (corners[(k + 1) % 4] - corners[k]) for k in range(4)])
+
+
+def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_samples: int = 16) -> list[Footprint]:
+    """Footprint of every pose element (a frame each; pose fields scalars or 1-D arrays).
+
+    ``surface``: a constant ellipsoidal height (m, M3) or a :class:`eoloc.DEM` (M4).
+    """
+    n = _n_frames(pose)
+    frames = _take(pose, np.arange(n))
+    border = border_pixels(sensor.camera, edge_samples)
+    S = border.shape[0]
+    fb = _stop(sensor, _take(frames, np.repeat(np.arange(n), S)), np.tile(border, (n, 1)), surface)
+    ok_b = (fb.status == Status.OK).reshape(n, S)
+    centre_px = np.array(sensor.camera.centre_px)
+    fc = _stop(sensor, frames, np.tile(centre_px, (n, 1)), surface)
+    anchor = np.tile(centre_px, (n, 1))
+    has_anchor = fc.status == Status.OK
+    rng_b = np.where(ok_b, np.reshape(fb.range_m, (n, S)), np.inf)
+    use_border = ~has_anchor & ok_b.any(axis=1)
+    anchor[use_border] = border[np.argmin(rng_b[use_border], axis=1)]
+    has_anchor |= use_border
+    # segments to bisect: anchor -> missing border point, and across each hit/miss change on the border
+    f_miss, i_miss = np.nonzero(~ok_b & has_anchor[:, None])
+    nxt = np.roll(ok_b, -1, axis=1)
+    f_tr, i_tr = np.nonzero((ok_b != nxt) & has_anchor[:, None])
+    j_tr = (i_tr + 1) % S
+    a_tr = np.where(ok_b[f_tr, i_tr][:, None], border[i_tr], border[j_tr])
+    b_tr = np.where(ok_b[f_tr, i_tr][:, None], border[j_tr], border[i_tr])
+    seg_f = np.concatenate([f_miss, f_tr])
+    seg_a = np.concatenate([anchor[f_miss], a_tr]).reshape(-1, 2)
+    seg_b = np.concatenate([border[i_miss], b_tr]).reshape(-1, 2)
+    hit, px, why = _bisect(sensor, _take(frames, seg_f), seg_a, seg_b, surface)
+    n_miss = f_miss.size
+    clip_at = {(int(f), int(i)): k for k, (f, i) in enumerate(zip(f_miss, i_miss, strict=True))}
+    trans_at = {(int(f), int(i)): n_miss + k for k, (f, i) in enumerate(zip(f_tr, i_tr, strict=True))}
+    lat_b, lon_b, h_b = (np.reshape(x, (n, S)) for x in (fb.lat_deg, fb.lon_deg, fb.h_m))
+    invalid = np.reshape(fb.status == Status.INVALID_INPUT, (n, S)).all(axis=1)
+    out = []
+    for f in range(n):
+        rows = []  # (lat, lon, h, u, v, clipped, clip_status)
+        for i in range(S):
+            if ok_b[f, i]:
+                rows.append((lat_b[f, i], lon_b[f, i], h_b[f, i], *border[i], False, Status.OK))
+            elif (f, i) in clip_at:
+                k = clip_at[(f, i)]
+                rows.append((hit.lat_deg[k], hit.lon_deg[k], hit.h_m[k], *px[k], True, why[k]))
+            if (f, i) in trans_at:
+                k = trans_at[(f, i)]
+                rows.append((hit.lat_deg[k], hit.lon_deg[k], hit.h_m[k], *px[k], True, why[k]))
+        cols = list(zip(*rows, strict=True)) if rows else [()] * 7
+        status = Status.INVALID_INPUT if invalid[f] else (Status.OK if rows else Status.NO_INTERSECTION)
+        out.append(Footprint(*(np.asarray(c, dtype=np.float64) for c in cols[:5]), np.asarray(cols[5], dtype=bool),
+                             np.asarray(cols[6], dtype=np.int8), status,
+                             (float(np.ravel(fc.lat_deg)[f]), float(np.ravel(fc.lon_deg)[f]),
+                              float(np.ravel(fc.h_m)[f]))))
+    return out
+
+
+def _bisect(sensor: SensorModel, pose: Pose, a: np.ndarray, b: np.ndarray,
+            surface) -> tuple[Fixes, np.ndarray, np.ndarray]:
+    """On each segment a (ray hits) -> b (ray misses): the last hit. -> (its fix, its pixel, the
+    status just beyond it)."""
+    lo = np.zeros(a.shape[0])
+    hi = np.ones(a.shape[0])
+    why = np.full(a.shape[0], Status.NO_INTERSECTION, dtype=np.int8)
+    if a.shape[0] == 0:
+        return _stop(sensor, pose, a, surface), a, why
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        f = _stop(sensor, pose, a + mid[:, None] * (b - a), surface)
+        ok = f.status == Status.OK
+        lo = np.where(ok, mid, lo)
+        hi = np.where(ok, hi, mid)
+        why = np.where(ok, why, f.status)
+    px = a + lo[:, None] * (b - a)
+    return _stop(sensor, pose, px, surface), px, why
+
+
+def _stop(sensor: SensorModel, pose: Pose, pixels: np.ndarray, surface) -> Fixes:
+    uv = (pixels[..., 0], pixels[..., 1])
+    if isinstance(surface, DEM):
+        return locate_dem(sensor, pose, surface, uv)
+    return locate_ellipsoid(sensor, pose, float(surface), uv)
+
+
+def _n_frames(pose: Pose) -> int:
+    fields = (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, *pose.gimbal_deg)
+    shape = np.broadcast_shapes(*(np.shape(f) for f in fields))
+    if len(shape) > 1:
+        raise ValueError(f"footprints takes one pose or a 1-D array of poses (one per frame), got shape {shape}")
+    return int(shape[0]) if shape else 1
+
+
+def _take(pose: Pose, idx: np.ndarray) -> Pose:
+    def pick(x: ArrayLike) -> np.ndarray:
+        x = np.asarray(x)
+        return x[()] if x.ndim == 0 else x[idx]
+    return Pose(pick(pose.lat_deg), pick(pose.lon_deg), pick(pose.h_m), pick(pose.yaw_deg), pick(pose.pitch_deg),
+                pick(pose.roll_deg), tuple(pick(g) for g in pose.gimbal_deg))
+
+
+def write_footprints_geojson(path: str | Path, prints: list[Footprint], properties: list[dict] | None = None) -> Path:
+    """FeatureCollection of footprint polygons (null geometry where a frame sees no ground), with
+    status, area, vertex counts and the centre fix as properties."""
+    features = []
+    for k, fp in enumerate(prints):
+        props = dict(properties[k]) if properties else {}
+        props.update({"status": fp.status.name, "area_m2": round(fp.area_m2, 1), "vertices": len(fp),
+                      "clipped_vertices": int(fp.clipped.sum()),
+                      "clipped_by": sorted({Status(int(s)).name for s in fp.clip_status[fp.clipped]}),
+                      "centre_lat_deg": _none(fp.centre[0]), "centre_lon_deg": _none(fp.centre[1]),
+                      "centre_h_m": _none(fp.centre[2])})
+        features.append({"type": "Feature", "geometry": fp.geojson_geometry(), "properties": props})
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n", encoding="utf-8")
+    return path
+
+
+def _none(x: float) -> float | None:
+    return None if np.isnan(x) else x
+
+
+__all__ = ["Footprint", "border_pixels", "footprints", "write_footprints_geojson"]
