@@ -112,6 +112,20 @@ def test_config_builds_the_sensor(tmp_path):
     assert s.camera.cx == 319.5 and s.camera.cy == 255.5
 
 
+def test_config_distortion_models(tmp_path):
+    base = "[camera]\nwidth = 640\nheight = 512\nhfov_deg = 30\n"
+    bc = load_config(_write(tmp_path / "b.toml", base + '[camera.distortion]\nmodel = "brown-conrady"\n'
+                                                        "k1 = -0.2\np2 = 0.001\n")).sensor().camera.distortion
+    assert isinstance(bc, eoloc.BrownConrady) and (bc.k1, bc.p2) == (-0.2, 0.001)
+    ratio = load_config(_write(tmp_path / "r.toml", base + '[camera.distortion]\nmodel = "ratio"\n')).sensor()
+    cam = ratio.camera
+    assert cam.distortion == eoloc.DistortionRatio.for_camera(cam)
+    with pytest.raises(ConfigError, match="k1, k2, p1, p2, k3 belong to model = 'brown-conrady'"):
+        load_config(_write(tmp_path / "x.toml", base + '[camera.distortion]\nmodel = "ratio"\nk1 = 0.1\n'))
+    with pytest.raises(ConfigError, match=r"camera\.distortion\.model"):
+        load_config(_write(tmp_path / "y.toml", base + '[camera.distortion]\nmodel = "fisheye"\n'))
+
+
 # ---------------------------------------------------------------- CLI
 
 
@@ -180,6 +194,16 @@ def test_cli_demo_runs_and_matches_truth_statistically(tmp_path):
         errs = [float(row["error_vs_truth_m"]) for row in csv.DictReader(fh) if row["status"] == "OK"]
     # the demo flight carries [Z15]'s telemetry noise: CEP of the same order as its 28.7 m
     assert 10.0 < float(np.median(errs)) < 50.0
+    # the mountain flight: M4 on real SRTM terrain. Off the summits, errors are at the level of the
+    # telemetry noise (2 m, 0.03 deg at ~9 km: ~5-10 m); the far hill beyond the DEM has no point.
+    with (tmp_path / "fixes_dem.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    lake = [float(r["error_vs_truth_m"]) for r in rows if r["target_id"] == "CHASM_LAKE" and r["status"] == "OK"]
+    assert len(lake) == 40 and float(np.median(lake)) < 15.0
+    far = [r for r in rows if r["target_id"] == "FAR_HILL"]
+    assert len(far) == 5 and all(r["status"] == "OUT_OF_COVERAGE" and r["lat_deg"] == "" for r in far)
+    doc = json.loads((tmp_path / "footprints_dem.geojson").read_text())
+    assert len(doc["features"]) == 8 and all(f["geometry"]["type"] == "Polygon" for f in doc["features"])
 
 
 def test_help_explains_units_and_conventions():

@@ -7,6 +7,11 @@
     pixel_um = 5.5
     # cx, cy = principal point in pixels (default: image centre, (W-1)/2, (H-1)/2)
 
+    [camera.distortion]      # optional
+    model = "brown-conrady"  # k1, k2, p1, p2, k3 (OpenCV's coefficients, normalised coordinates)
+    k1 = -0.28
+    # model = "ratio": [Z15]'s distortion-ratio table; field / d_percent (default: [Z15]'s own)
+
     [gimbal]
     model = "az-el"          # "az-el" | "roll-pitch" | "fixed" (then quaternion = [w,x,y,z] or matrix)
 
@@ -24,7 +29,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..sensor import Camera, SensorModel, gimbal_from_name
+from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_from_name
 
 
 class ConfigError(ValueError):
@@ -33,6 +38,34 @@ class ConfigError(ValueError):
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DistortionConfig(_Strict):
+    model: Literal["brown-conrady", "ratio"]
+    k1: float = 0.0
+    k2: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    k3: float = 0.0
+    field: tuple[float, ...] | None = None
+    d_percent: tuple[float, ...] | None = None
+
+    @model_validator(mode="after")
+    def _fits_model(self) -> DistortionConfig:
+        brown = any(getattr(self, k) != 0.0 for k in ("k1", "k2", "p1", "p2", "k3"))
+        if self.model == "ratio" and brown:
+            raise ValueError("k1, k2, p1, p2, k3 belong to model = 'brown-conrady', not 'ratio'")
+        if self.model == "brown-conrady" and (self.field is not None or self.d_percent is not None):
+            raise ValueError("field / d_percent belong to model = 'ratio', not 'brown-conrady'")
+        if (self.field is None) != (self.d_percent is None):
+            raise ValueError("field and d_percent go together (the distortion table)")
+        return self
+
+    def build(self, camera: Camera) -> Camera:
+        if self.model == "brown-conrady":
+            return camera.with_distortion(BrownConrady(self.k1, self.k2, self.p1, self.p2, self.k3))
+        table = {} if self.field is None else {"field": self.field, "d_percent": self.d_percent}
+        return camera.with_distortion(DistortionRatio.for_camera(camera, **table))
 
 
 class CameraConfig(_Strict):
@@ -45,6 +78,7 @@ class CameraConfig(_Strict):
     fy: float | None = Field(None, gt=0)
     cx: float | None = None
     cy: float | None = None
+    distortion: DistortionConfig | None = None
 
     @model_validator(mode="after")
     def _one_focal(self) -> CameraConfig:
@@ -56,6 +90,10 @@ class CameraConfig(_Strict):
         return self
 
     def build(self) -> Camera:
+        camera = self._pinhole()
+        return camera if self.distortion is None else self.distortion.build(camera)
+
+    def _pinhole(self) -> Camera:
         if self.focal_mm is not None:
             return Camera.from_focal_mm(self.focal_mm, self.pixel_um, self.width, self.height, cx=self.cx, cy=self.cy)
         if self.hfov_deg is not None:

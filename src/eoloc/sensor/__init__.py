@@ -1,12 +1,15 @@
 """Sensor model: camera intrinsics, gimbal models, misalignment and lever arm -> rays."""
 
 from .camera import Camera
+from .distortion import BrownConrady, DistortionRatio
 from .gimbal import AzElGimbal, FixedMount, Gimbal, RollPitchGimbal, gimbal_from_name
 from .model import Pose, Rays, SensorModel
 
 __all__ = [
     "AzElGimbal",
+    "BrownConrady",
     "Camera",
+    "DistortionRatio",
     "FixedMount",
     "Gimbal",
     "Pose",
