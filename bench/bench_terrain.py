@@ -83,6 +83,13 @@ def main(n: int) -> list[str]:
     t_frame = best_time(lambda: eoloc.locate_flat(s, pose, 965.0, (u, v)), repeat=5, number=200)
     lines.append(row("one frame, 50 targets, M2 + [Z15] distortion correction", f"{t_frame * 1e3:.3f} ms/frame",
                      "[Z15] Matlab 20 ms (0.4 ms/target)", 20e-3 / t_frame))
+    from eoloc.footprint import footprints
+
+    fp_pose = Pose(39.58, 40.42, 5500.0, 0.0, 0.0, 0.0, (0.0, -8.0))  # the top of the image sees past the DEM
+    t_fp = best_time(lambda: footprints(sensor, fp_pose, dem, edge_samples=16), repeat=3)
+    n_clip = int(footprints(sensor, fp_pose, dem, edge_samples=16)[0].clipped.sum())
+    lines.append(row(f"footprint of one frame on the 30 m DEM, 64 border rays ({n_clip} clipped by bisection)",
+                     f"{t_fp * 1e3:.1f} ms/frame", "", None))
     return lines
 
 

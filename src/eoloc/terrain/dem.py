@@ -80,9 +80,9 @@ class DEM:
         """(west, south, east, north) degrees."""
         return self.grid.bounds
 
-    @property
+    @cached_property
     def height_range(self) -> tuple[float, float]:
-        """(lowest, highest) ellipsoidal height of the posts (voids ignored)."""
+        """(lowest, highest) ellipsoidal height of the posts (voids ignored); computed once."""
         return float(np.nanmin(self.grid.z)), float(np.nanmax(self.grid.z))
 
     @property
