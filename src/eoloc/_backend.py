@@ -100,13 +100,15 @@ _NUMPY_FLAT = {
     "ray_direction": lambda *a: _kernels.ray_direction(a[:9], *a[9:]),
     "project_point": lambda *a: _kernels.project_point(a[:9], *a[9:]),
     "flat_target": lambda *a: _kernels.flat_target(a[:9], *a[9:]),
+    "r_body_cam": lambda *a: _kernels.r_body_cam(int(a[0]), a[1], a[2], a[3], a[4:13], a[13:22], a[22:31], a[31]),
 }
 
 
 # Outputs of each kernel as the drivers see them (rotations flattened); the last of a stop rule
 # is its int8 status.
 N_OUT = {"geodetic_to_ecef": 3, "ecef_to_geodetic": 3, "pose_frame": 12, "ray_direction": 3,
-         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5}
+         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5,
+         "r_body_cam": 9}
 STATUS_OUT = frozenset({"stop_at_range", "stop_at_ellipsoid", "flat_target"})
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
 

@@ -126,19 +126,21 @@ def r_ecef_ned(lat, lon):
     return (-sl * co, -so, -cl * co, -sl * so, co, -cl * so, cl, 0.0 * lat, -sl)
 
 
-def r_body_cam_azel(az, el, sensor_roll):
-    """Azimuth-elevation turret: G = Rz(az) Ry(el) Rx(sensor_roll); camera z = G x, x = G y, y = G z."""
-    g = mat_mul(rot_z(az), mat_mul(rot_y(el), rot_x(sensor_roll)))
+def r_body_cam_azel(az, el, sensor_roll, skew):
+    """Azimuth-elevation turret: G = Rz(az) Rx(skew) Ry(el) Rx(sensor_roll); camera z = G x, x = G y,
+    y = G z. ``skew``: non-orthogonality of the elevation axis to the azimuth axis (0 for a perfect turret)."""
+    g = mat_mul(mat_mul(rot_z(az), rot_x(skew)), mat_mul(rot_y(el), rot_x(sensor_roll)))
     return (g[1], g[2], g[0], g[4], g[5], g[3], g[7], g[8], g[6])
 
 
-def r_body_cam_rollpitch(frame_roll, frame_pitch, sensor_roll):
-    """Roll-pitch framed camera ([Q]): S = Rx(roll) Ry(pitch) Rz(sensor_roll), camera = S C.
+def r_body_cam_rollpitch(frame_roll, frame_pitch, sensor_roll, skew):
+    """Roll-pitch framed camera ([Q]): S = Rx(roll) Rz(skew) Ry(pitch) Rz(sensor_roll), camera = S C
+    (``skew``: non-orthogonality of the pitch axis to the roll axis, 0 for a perfect gimbal).
 
     C maps the computer-vision camera frame into [Q]'s sensor frame S: the ray of pixel (u, v) in S
     is (v - cy, -(u - cx), f), i.e. image rows grow toward S +x and columns toward S -y.
     """
-    s = mat_mul(rot_x(frame_roll), mat_mul(rot_y(frame_pitch), rot_z(sensor_roll)))
+    s = mat_mul(mat_mul(rot_x(frame_roll), rot_z(skew)), mat_mul(rot_y(frame_pitch), rot_z(sensor_roll)))
     return (-s[1], s[0], s[2], -s[4], s[3], s[5], -s[7], s[6], s[8])
 
 
@@ -381,17 +383,18 @@ def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
 # ---------------------------------------------------------------- whole chain, one call
 
 
-def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore):
-    """R_body_cam = R_mount . gimbal(g1, g2, g3) . R_bore for gimbal ``kind``.
+def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew):
+    """R_body_cam = R_mount . gimbal(g1, g2, g3) . R_bore for gimbal ``kind`` (``skew``: gimbal axes
+    non-orthogonality, rad; 0 for a perfect gimbal, ignored by a fixed mount).
 
     kind 0: azimuth-elevation turret (g1 az, g2 el, g3 sensor roll);
     kind 1: roll-pitch framed camera (g1 frame roll, g2 frame pitch, g3 sensor roll);
     kind 2: fixed/generic mount ``R_fixed`` followed by a sensor roll g3 about the boresight.
     """
     if kind == 0:
-        G = r_body_cam_azel(g1, g2, g3)
+        G = r_body_cam_azel(g1, g2, g3, skew)
     elif kind == 1:
-        G = r_body_cam_rollpitch(g1, g2, g3)
+        G = r_body_cam_rollpitch(g1, g2, g3, skew)
     else:
         G = mat_mul(R_fixed, rot_z(g3))
     return mat_mul(R_mount, mat_mul(G, R_bore))
@@ -420,7 +423,7 @@ def locate_one(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3, u, v, stop_kin
     ep2 = params[P_ELL + 3]
     Rbc = r_body_cam(
         int(params[P_KIND]), g1 * d, g2 * d, g3 * d,
-        _tuple9(params, P_MOUNT), _tuple9(params, P_FIXED), _tuple9(params, P_BORE),
+        _tuple9(params, P_MOUNT), _tuple9(params, P_FIXED), _tuple9(params, P_BORE), 0.0,
     )
     R, ox, oy, oz = pose_frame(
         lat * d, lon * d, h, yaw * d, pitch * d, roll * d, Rbc,

@@ -111,6 +111,20 @@ try:
     _finite = _g["_finite"]
 
     @njit(**_JIT)
+    def r_body_cam(n, kind, g1, g2, g3, m0, m1, m2, m3, m4, m5, m6, m7, m8, f0, f1, f2, f3, f4, f5, f6, f7, f8,
+                   b0, b1, b2, b3, b4, b5, b6, b7, b8, skew, o0, o1, o2, o3, o4, o5, o6, o7, o8):
+        k = int(kind)
+        for i in range(n):
+            Rm = (_at(m0, i), _at(m1, i), _at(m2, i), _at(m3, i), _at(m4, i), _at(m5, i), _at(m6, i), _at(m7, i),
+                  _at(m8, i))
+            Rf = (_at(f0, i), _at(f1, i), _at(f2, i), _at(f3, i), _at(f4, i), _at(f5, i), _at(f6, i), _at(f7, i),
+                  _at(f8, i))
+            Rb = (_at(b0, i), _at(b1, i), _at(b2, i), _at(b3, i), _at(b4, i), _at(b5, i), _at(b6, i), _at(b7, i),
+                  _at(b8, i))
+            R = _r_body_cam(k, _at(g1, i), _at(g2, i), _at(g3, i), Rm, Rf, Rb, _at(skew, i))
+            o0[i], o1[i], o2[i], o3[i], o4[i], o5[i], o6[i], o7[i], o8[i] = R
+
+    @njit(**_JIT)
     def flat_target(n, r0, r1, r2, r3, r4, r5, r6, r7, r8, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2,
                     lat, lon, h, t, st):
         for i in range(n):
@@ -133,7 +147,7 @@ try:
         e2 = params[K.P_ELL + 2]
         ep2 = params[K.P_ELL + 3]
         Rbc = _r_body_cam(int(params[K.P_KIND]), pose[6], pose[7], pose[8],
-                          _tuple9(params, K.P_MOUNT), _tuple9(params, K.P_FIXED), _tuple9(params, K.P_BORE))
+                          _tuple9(params, K.P_MOUNT), _tuple9(params, K.P_FIXED), _tuple9(params, K.P_BORE), 0.0)
         R, ox, oy, oz = _pose_frame(pose[0], pose[1], pose[2], pose[3], pose[4], pose[5], Rbc,
                                     params[K.P_LEVER], params[K.P_LEVER + 1], params[K.P_LEVER + 2], a, e2)
         xn0, yn0 = _undistort(dist_kind, dist_params, (main_px[0] - cx) / fx, (main_px[1] - cy) / fy)

@@ -103,11 +103,20 @@ class Camera:
 
     # -- mapping ------------------------------------------------------------------------------
 
-    def pixel_to_normalized(self, u: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels to ideal (undistorted) normalised image coordinates ((u - cx) / fx, (v - cy) / fy)."""
+    def pixel_to_normalized(self, u: ArrayLike, v: ArrayLike, *, focal_error_px: ArrayLike = 0.0,
+                            principal_point_error_px: tuple[ArrayLike, ArrayLike] = (0.0, 0.0),
+                            ) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels to ideal (undistorted) normalised image coordinates ((u - cx) / fx, (v - cy) / fy).
+
+        ``focal_error_px`` (added to fx, fy scaled alike) and ``principal_point_error_px`` (added to
+        cx, cy) let Monte Carlo perturb the intrinsics per sample; they broadcast with the pixels.
+        """
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        xn, yn = (u - self.cx) / self.fx, (v - self.cy) / self.fy
+        scale = 1.0 + np.asarray(focal_error_px, dtype=np.float64) / self.fx
+        dcx, dcy = principal_point_error_px
+        xn = (u - (self.cx + dcx)) / (self.fx * scale)
+        yn = (v - (self.cy + dcy)) / (self.fy * scale)
         if self.distortion is not None:
             xn, yn = self.distortion.undistort(xn, yn)
         return xn, yn

@@ -155,17 +155,34 @@ class SensorModel:
         """R_body_cam (..., 3, 3) for gimbal angles (degrees), misalignments included."""
         g1, g2, g3 = self.gimbal.angles(tuple(gimbal_deg))
         return _as_matrix(_kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
-                                              self.gimbal.R_fixed9, self._R_bore9))
+                                              self.gimbal.R_fixed9, self._R_bore9, 0.0))
 
-    def camera_frame(self, pose: Pose) -> CameraFrame:
-        """Camera orientation (R_ecef_cam) and position (ECEF m) for every pose element."""
+    def camera_frame(self, pose: Pose, *, mount_misalignment_deg: ArrayLike | None = None,
+                     boresight_misalignment_deg: ArrayLike | None = None,
+                     gimbal_skew_deg: ArrayLike = 0.0) -> CameraFrame:
+        """Camera orientation (R_ecef_cam) and position (ECEF m) for every pose element.
+
+        The keyword arguments replace the sensor's own installation angles (arrays (..., 3) of
+        degrees that broadcast with the pose) and add a gimbal axes non-orthogonality: how Monte
+        Carlo draws them per sample through the same kernels.
+        """
         g1, g2, g3 = self.gimbal.angles(pose.gimbal_deg)
-        Rbc = _kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9, self.gimbal.R_fixed9, self._R_bore9)
+        R_mount = self._R_mount9 if mount_misalignment_deg is None else _rot9(mount_misalignment_deg)
+        R_bore = self._R_bore9 if boresight_misalignment_deg is None else _rot9(boresight_misalignment_deg)
+        Rbc = run("r_body_cam", self.gimbal.kind, g1, g2, g3, *R_mount, *self.gimbal.R_fixed9, *R_bore,
+                  np.radians(_f64(gimbal_skew_deg)))
         out = run("pose_frame", np.radians(pose.lat_deg), np.radians(pose.lon_deg), pose.h_m,
                   np.radians(pose.yaw_deg), np.radians(pose.pitch_deg), np.radians(pose.roll_deg),
                   *Rbc, *self.lever_arm_m, self.ellipsoid.a, self.ellipsoid.e2)
         invalid = pose.invalid()
         return CameraFrame(out[:9], out[9], out[10], out[11], invalid)
+
+    def rays_from(self, frame: CameraFrame, xn: ArrayLike, yn: ArrayLike) -> Rays:
+        """Rays of normalised, undistorted image points (xn, yn) from camera frame(s) ``frame``."""
+        dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
+        shape = dx.shape
+        return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
+                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape))
 
     def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
@@ -174,12 +191,7 @@ class SensorModel:
 
     def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
         """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point)."""
-        frame = self.camera_frame(pose)
-        xn, yn = self.normalized(pixels)
-        dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
-        shape = dx.shape
-        return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
-                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape))
+        return self.rays_from(self.camera_frame(pose), *self.normalized(pixels))
 
     def ground_to_image(self, pose: Pose, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Project ECEF points (..., 3) into the image: pixels (u, v); NaN where the point is behind
@@ -234,6 +246,12 @@ def _locate_one_numpy(*args):
     with np.errstate(all="ignore"):
         lat, lon, h, t, st = _kernels.locate_one(*args)
     return float(lat), float(lon), float(h), float(t), int(st)
+
+
+def _rot9(angles_deg: ArrayLike) -> tuple:
+    """Small-angle misalignment rotation(s) from (..., 3) degrees as a 9-tuple of arrays."""
+    R = small_angle_rotation(_f64(angles_deg))
+    return tuple(R[..., i, j] for i in range(3) for j in range(3))
 
 
 def _split_pixels(pixels: ArrayLike | None, camera: Camera) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,311 @@
+"""Monte Carlo error analysis: perturb the inputs, run the SAME geolocation chain, measure the scatter.
+
+Delta y = f(x + Delta x) - f(x) (SPEC §4.1): the nominal observation is located once without
+errors (the truth), then n perturbed copies of it go through ``SensorModel.camera_frame`` /
+``rays_from`` and the stop rule's kernel, exactly as real-time fixes do. Samples are drawn and
+located in chunks (bounded memory); chunk i always uses the i-th child of
+``numpy.random.SeedSequence(seed)``, so a run is reproducible and gives identical samples
+wherever its chunks are computed (locally or on a cluster).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from .. import geodesy
+from ..locate import stop_at_dem, stop_at_ellipsoid, stop_at_range
+from ..result import Fixes, Status
+from ..sensor.model import Pose, Rays, SensorModel
+from ..terrain.dem import DEM
+from .budget import ErrorBudget
+from .cep import cep_bivariate, cep_empirical, drms, error_ellipse
+
+DEFAULT_CHUNK = 200_000
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A nominal observation and its error budget.
+
+    pose: one aircraft pose (scalars); pixels: (K, 2) target pixels (default: the principal
+    point); stop: "range" (M1, ``range_m``), "height" (M3, ``height_m`` ellipsoidal) or "dem"
+    (M4, ``dem``); velocity_ned_mps: the aircraft's velocity, used by the time-offset source.
+    """
+
+    name: str
+    sensor: SensorModel
+    pose: Pose
+    budget: ErrorBudget
+    stop: Literal["range", "height", "dem"] = "height"
+    range_m: float | None = None
+    height_m: float | None = None
+    dem: DEM | None = None
+    pixels: np.ndarray | None = None
+    velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem}
+        if self.stop not in need:
+            raise ValueError(f"scenario {self.name}: stop must be 'range', 'height' or 'dem', got {self.stop!r}")
+        if need[self.stop] is None:
+            raise ValueError(f"scenario {self.name}: stop = {self.stop!r} needs "
+                             f"{ {'range': 'range_m', 'height': 'height_m', 'dem': 'dem'}[self.stop] }")
+        px = np.array([self.sensor.camera.centre_px]) if self.pixels is None else np.asarray(self.pixels, float)
+        object.__setattr__(self, "pixels", px.reshape(-1, 2))
+
+    @property
+    def n_targets(self) -> int:
+        return int(self.pixels.shape[0])
+
+    def with_budget(self, budget: ErrorBudget) -> Scenario:
+        return replace(self, budget=budget)
+
+
+def perturbed_fixes(scn: Scenario, d: dict[str, np.ndarray], n: int) -> Fixes:
+    """Fixes (n, K) of the scenario's K targets with the errors ``d`` (name -> (n,) draws) applied."""
+
+    def z(name: str):
+        x = d.get(name)
+        return 0.0 if x is None else np.asarray(x, dtype=np.float64).reshape(n, 1)
+
+    p = scn.pose
+    sensor = scn.sensor
+    lat = p.lat_deg + z("lat_deg")
+    lon = p.lon_deg + z("lon_deg")
+    h = p.h_m + z("h_m")
+    dt = z("time_s")
+    if np.any(np.asarray(scn.velocity_ned_mps) != 0.0) and not np.isscalar(dt):
+        m_lat, m_lon = _metres_per_degree(float(p.lat_deg), float(p.h_m), sensor.ellipsoid)
+        vn, ve, vd = scn.velocity_ned_mps
+        lat = lat + vn * dt / m_lat
+        lon = lon + ve * dt / m_lon
+        h = h - vd * dt
+    g = list(p.gimbal_deg)
+    if sensor.gimbal.kind == 2:  # fixed mount: the tuple holds the sensor roll only
+        g = [(g[0] if g else 0.0) + z("sensor_roll_deg")]
+    else:
+        g = g + [0.0] * (3 - len(g))
+        g = [g[0] + z("gimbal1_deg"), g[1] + z("gimbal2_deg"), g[2] + z("sensor_roll_deg")]
+    pose = Pose(lat, lon, h, p.yaw_deg + z("yaw_deg") + z("vibration_yaw_deg"),
+                p.pitch_deg + z("pitch_deg") + z("vibration_pitch_deg"),
+                p.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
+    mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), n)
+    bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), n)
+    frame = sensor.camera_frame(pose, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
+                                gimbal_skew_deg=z("gimbal_skew_deg"))
+    u = scn.pixels[:, 0][None, :] + z("u_px")
+    v = scn.pixels[:, 1][None, :] + z("v_px")
+    xn, yn = sensor.camera.pixel_to_normalized(u, v, focal_error_px=z("focal_px"),
+                                               principal_point_error_px=(z("cx_px"), z("cy_px")))
+    rays = sensor.rays_from(frame, xn, yn)
+    terrain = z("terrain_m")
+    if scn.stop == "range":
+        return stop_at_range(rays, scn.range_m + z("range_m"), sensor=sensor)
+    if scn.stop == "height":
+        return stop_at_ellipsoid(rays, scn.height_m + terrain, sensor=sensor)
+    return _stop_on_shifted_dem(rays, scn.dem, terrain, sensor)
+
+
+def _stop_on_shifted_dem(rays: Rays, dem: DEM, shift, sensor: SensorModel) -> Fixes:
+    """M4 on the DEM raised by ``shift`` m: the camera is lowered by the shift along its local
+    vertical instead (same geometry to shift x distance / R, ~1e-3 of the shift at 20 km)."""
+    if np.isscalar(shift):
+        return stop_at_dem(rays, dem, sensor=sensor)
+    lat, lon, _ = geodesy.ecef_to_geodetic(rays.ox, rays.oy, rays.oz, ell=sensor.ellipsoid)
+    up = -geodesy.R_ecef_ned(lat, lon)[..., :, 2]
+    s = np.broadcast_to(shift, rays.shape)
+    moved = Rays(rays.ox - s * up[..., 0], rays.oy - s * up[..., 1], rays.oz - s * up[..., 2],
+                 rays.dx, rays.dy, rays.dz, rays.invalid)
+    f = stop_at_dem(moved, dem, sensor=sensor)
+    return replace(f, h_m=f.h_m + s)
+
+
+def _angles(nominal, d, prefix, axes, n):
+    names = [f"{prefix}_{a}_deg" for a in axes]
+    if not any(k in d for k in names):
+        return None
+    out = np.broadcast_to(np.asarray(nominal, dtype=np.float64), (n, 1, 3)).copy()
+    for i, k in enumerate(names):
+        if k in d:
+            out[:, 0, i] += d[k]
+    return out
+
+
+def _metres_per_degree(lat_deg: float, h: float, ell) -> tuple[float, float]:
+    s = np.sin(np.radians(lat_deg))
+    w = np.sqrt(1.0 - ell.e2 * s * s)
+    m = ell.a * (1.0 - ell.e2) / w**3
+    n_ = ell.a / w
+    return np.radians(1.0) * (m + h), np.radians(1.0) * (n_ + h) * np.cos(np.radians(lat_deg))
+
+
+# ---------------------------------------------------------------- statistics
+
+
+@dataclass(frozen=True)
+class TargetStats:
+    """Scatter of one target's fixes around its true (error-free) position.
+
+    Metric errors in the local east/north/up frame at the truth (m); lat/lon/h sigmas in degrees
+    and metres. bias = mean error (the systematic part), sigma = standard deviation (n - 1; the
+    random part). cep50: empirical median radius around the truth; cep50_parametric: the
+    bivariate-normal CEP of (bias, sigma, rho); ce90 / le90: 90 % horizontal radius / vertical
+    error; drms: sqrt(sigma_e^2 + sigma_n^2) (what [Q] calls CEP); ellipse: 1-sigma (semi-major,
+    semi-minor, azimuth of the major axis deg).
+    """
+
+    n: int
+    n_failed: int
+    truth: tuple[float, float, float]
+    bias_enu: tuple[float, float, float]
+    sigma_enu: tuple[float, float, float]
+    rho_en: float
+    sigma_lat_deg: float
+    sigma_lon_deg: float
+    sigma_h_m: float
+    cep50: float
+    cep50_parametric: float
+    ce90: float
+    le90: float
+    drms: float
+    ellipse: tuple[float, float, float]
+
+    @classmethod
+    def from_samples(cls, truth, enu: np.ndarray, dlat: np.ndarray, dlon: np.ndarray, dh: np.ndarray,
+                     n_failed: int) -> TargetStats:
+        e, n_, u = enu[:, 0], enu[:, 1], enu[:, 2]
+        if e.size < 2:
+            nan = float("nan")
+            return cls(int(e.size), n_failed, truth, (nan,) * 3, (nan,) * 3, nan, nan, nan, nan, nan, nan, nan,
+                       nan, nan, (nan,) * 3)
+        bias = tuple(float(x) for x in enu.mean(axis=0))
+        sig = tuple(float(x) for x in enu.std(axis=0, ddof=1))
+        cov = np.cov(e, n_)
+        rho = float(cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1])) if cov[0, 0] > 0 and cov[1, 1] > 0 else 0.0
+        return cls(
+            n=int(e.size), n_failed=n_failed, truth=truth, bias_enu=bias, sigma_enu=sig, rho_en=rho,
+            sigma_lat_deg=float(np.std(dlat, ddof=1)), sigma_lon_deg=float(np.std(dlon, ddof=1)),
+            sigma_h_m=float(np.std(dh, ddof=1)),
+            cep50=cep_empirical(e, n_), cep50_parametric=cep_bivariate(bias[0], bias[1], sig[0], sig[1], rho),
+            ce90=cep_empirical(e, n_, 0.9), le90=float(np.quantile(np.abs(u), 0.9)), drms=drms(sig[0], sig[1]),
+            ellipse=error_ellipse(cov),
+        )
+
+
+@dataclass
+class MonteCarloResult:
+    """Per-target statistics and (optionally) the error samples: enu (n, K, 3) metres and the
+    geodetic differences dlat/dlon (deg) and dh (m), NaN where a sample failed (status kept)."""
+
+    scenario: Scenario
+    n: int
+    seed: int
+    stats: list[TargetStats]
+    enu: np.ndarray | None = None
+    dllh: np.ndarray | None = None
+    status: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+
+def truth_fixes(scn: Scenario) -> Fixes:
+    """The error-free fixes of the scenario's targets (shape (K,))."""
+    f = perturbed_fixes(scn, {}, 1)
+    return Fixes(*(np.ravel(x) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
+
+
+def chunk_sizes(n: int, chunk: int) -> list[int]:
+    return [min(chunk, n - i) for i in range(0, n, chunk)]
+
+
+def run_chunk(scn: Scenario, seed_seq: np.random.SeedSequence, size: int, truth: Fixes):
+    """Draw and locate one chunk -> (enu (size, K, 3), dllh (size, K, 3), status (size, K))."""
+    rng = np.random.default_rng(seed_seq)
+    d = scn.budget.draw(rng, size)
+    f = perturbed_fixes(scn, d, size)
+    lat, lon, h = (np.broadcast_to(x, (size, scn.n_targets)) for x in (f.lat_deg, f.lon_deg, f.h_m))
+    p = np.stack(geodesy.geodetic_to_ecef(lat, lon, h, ell=scn.sensor.ellipsoid), -1)
+    enu = np.empty(p.shape)
+    for k in range(scn.n_targets):
+        enu[:, k] = geodesy.ecef_to_enu(p[:, k], truth.lat_deg[k], truth.lon_deg[k], truth.h_m[k],
+                                        ell=scn.sensor.ellipsoid)
+    dlon = (lon - truth.lon_deg + 180.0) % 360.0 - 180.0
+    dllh = np.stack([lat - truth.lat_deg, dlon, h - truth.h_m], -1)
+    return enu, dllh, np.broadcast_to(f.status, (size, scn.n_targets))
+
+
+def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CHUNK, keep_samples: bool = False,
+                progress: Callable[[int], None] | None = None, chunk_runner=None) -> MonteCarloResult:
+    """Monte Carlo of ``n`` samples of the scenario; ``progress(k)`` is called after each chunk of k.
+
+    ``chunk_runner(scn, seed_seqs, sizes, truth)`` may compute the chunks elsewhere (e.g. Dask) and
+    must return the list of ``run_chunk`` outputs in order; the statistics are then identical.
+    """
+    if n < 2:
+        raise ValueError(f"Monte Carlo needs n >= 2 samples, got {n}")
+    truth = truth_fixes(scn)
+    bad = np.flatnonzero(truth.status != Status.OK)
+    if bad.size:
+        raise ValueError(f"scenario {scn.name}: target(s) {bad.tolist()} cannot be located even without errors "
+                         f"({', '.join(Status(int(truth.status[i])).name for i in bad)}); check the pose and pixels")
+    sizes = chunk_sizes(n, chunk)
+    seeds = np.random.SeedSequence(seed).spawn(len(sizes))
+    if chunk_runner is None:
+        parts = []
+        for s, size in zip(seeds, sizes, strict=True):
+            parts.append(run_chunk(scn, s, size, truth))
+            if progress is not None:
+                progress(size)
+    else:
+        parts = chunk_runner(scn, seeds, sizes, truth)
+    enu = np.concatenate([q[0] for q in parts])
+    dllh = np.concatenate([q[1] for q in parts])
+    status = np.concatenate([q[2] for q in parts])
+    stats = []
+    for k in range(scn.n_targets):
+        ok = status[:, k] == Status.OK
+        t = (float(truth.lat_deg[k]), float(truth.lon_deg[k]), float(truth.h_m[k]))
+        stats.append(TargetStats.from_samples(t, enu[ok, k], dllh[ok, k, 0], dllh[ok, k, 1], dllh[ok, k, 2],
+                                              int((~ok).sum())))
+    if keep_samples:
+        return MonteCarloResult(scn, n, seed, stats, enu, dllh, status)
+    return MonteCarloResult(scn, n, seed, stats)
+
+
+# ---------------------------------------------------------------- sensitivity
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """One source alone ([S13]): sigma_in (its unit) and mu = sigma_out / sigma_in for the target's
+    latitude and longitude (deg per unit), height (m per unit), east/north/horizontal (m per unit)."""
+
+    source: str
+    unit: str
+    law: str
+    sigma_in: float
+    mu_lat: float
+    mu_lon: float
+    mu_h: float
+    mu_east: float
+    mu_north: float
+    sigma_horizontal_m: float
+
+
+def sensitivity(scn: Scenario, n: int, *, seed: int = 0, target: int = 0, chunk: int = DEFAULT_CHUNK,
+                progress: Callable[[int], None] | None = None) -> list[Sensitivity]:
+    """Each error source of the budget alone: its sensitivity coefficients for target ``target``."""
+    rows = []
+    for src in scn.budget:
+        r = monte_carlo(scn.with_budget(scn.budget.only(src.name)), n, seed=seed, chunk=chunk, progress=progress)
+        st = r.stats[target]
+        s_in = src.sigma
+        k = 1.0 / s_in if s_in > 0 else float("nan")
+        rows.append(Sensitivity(src.name, src.unit, src.describe(), s_in, st.sigma_lat_deg * k, st.sigma_lon_deg * k,
+                                st.sigma_h_m * k, st.sigma_enu[0] * k, st.sigma_enu[1] * k,
+                                float(np.hypot(st.sigma_enu[0], st.sigma_enu[1]))))
+    return rows
