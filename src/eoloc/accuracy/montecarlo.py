@@ -187,6 +187,7 @@ class TargetStats:
         sig = tuple(float(x) for x in enu.std(axis=0, ddof=1))
         cov = np.cov(e, n_)
         rho = float(cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1])) if cov[0, 0] > 0 and cov[1, 1] > 0 else 0.0
+        rho = min(max(rho, -1.0), 1.0)  # one error source alone: perfectly correlated, up to rounding
         return cls(
             n=int(e.size), n_failed=n_failed, truth=truth, bias_enu=bias, sigma_enu=sig, rho_en=rho,
             sigma_lat_deg=float(np.std(dlat, ddof=1)), sigma_lon_deg=float(np.std(dlon, ddof=1)),

@@ -115,10 +115,48 @@ class InstallationConfig(_Strict):
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+class PoseConfig(_Strict):
+    lat_deg: float = Field(ge=-90, le=90)
+    lon_deg: float
+    h_m: float
+    yaw_deg: float = 0.0
+    pitch_deg: float = 0.0
+    roll_deg: float = 0.0
+    gimbal_deg: tuple[float, ...] = ()
+
+
+class AccuracyConfig(_Strict):
+    """[accuracy]: the nominal observation and its error budget (eoloc accuracy CONFIG)."""
+
+    pose: PoseConfig
+    stop: Literal["range", "height", "dem"]
+    range_m: float | None = Field(None, gt=0)
+    height_m: float | None = None
+    dem: list[str] | None = None
+    dem_vertical: Literal["egm96", "egm2008", "ellipsoid"] = "egm96"
+    pixels: list[tuple[float, float]] | None = None
+    velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    samples: int = Field(100_000, ge=2)
+    seed: int = 0
+    budget: dict[str, dict[str, float]]
+
+    @model_validator(mode="after")
+    def _stop_value(self) -> AccuracyConfig:
+        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem}[self.stop]
+        if need is None:
+            key = {"range": "range_m", "height": "height_m", "dem": "dem"}[self.stop]
+            raise ValueError(f"stop = {self.stop!r} needs {key}")
+        from ..accuracy.budget import ErrorBudget
+
+        ErrorBudget.from_mapping(self.budget)  # names and laws checked here, with the key in the message
+        return self
+
+
 class Config(_Strict):
     camera: CameraConfig
     gimbal: GimbalConfig = GimbalConfig()
     installation: InstallationConfig = InstallationConfig()
+    accuracy: AccuracyConfig | None = None
 
     def sensor(self) -> SensorModel:
         """The SensorModel this configuration describes."""
@@ -130,6 +168,27 @@ class Config(_Strict):
         return SensorModel(self.camera.build(), gimbal_from_name(self.gimbal.model, **extra),
                            self.installation.mount_misalignment_deg, self.installation.boresight_misalignment_deg,
                            self.installation.lever_arm_m)
+
+
+def accuracy_scenario(cfg: Config, path: str | Path):
+    """The Monte Carlo scenario of a config's [accuracy] section (DEM paths relative to the file)."""
+    from ..accuracy.budget import ErrorBudget
+    from ..accuracy.montecarlo import Scenario
+    from ..sensor import Pose
+    from ..terrain import open_dem
+
+    a = cfg.accuracy
+    if a is None:
+        raise ConfigError(f"config file {str(path)!r} has no [accuracy] section (pose, stop rule, budget); "
+                          "see the README, or use --scenario for a built-in one")
+    p = a.pose
+    dem = None
+    if a.stop == "dem":
+        dem = open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical)
+    return Scenario(Path(path).stem, cfg.sensor(),
+                    Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
+                    ErrorBudget.from_mapping(a.budget), stop=a.stop, range_m=a.range_m, height_m=a.height_m, dem=dem,
+                    pixels=None if a.pixels is None else a.pixels, velocity_ned_mps=a.velocity_ned_mps)
 
 
 def load_config(path: str | Path) -> Config:
