@@ -20,7 +20,6 @@ import numpy as np
 
 import eoloc
 from eoloc import geodesy
-from eoloc.rotation import R_ned_body
 
 OUT = Path(__file__).resolve().parents[1] / "src" / "eoloc" / "data" / "demo"
 GROUND_H = 600.0
@@ -50,13 +49,7 @@ def main() -> None:
     pitch = np.full(n_frames, 2.1)
     roll = np.zeros(n_frames)
     yaw = np.full(n_frames, heading)
-    # turret angles that put T1 on the boresight: LOS in body, then az = atan2(y, x), el = -asin(z)
-    p0 = np.stack(eoloc.geodetic_to_ecef(lat, lon, h), -1)
-    los_ned = np.einsum("nji,nj->ni", geodesy.R_ecef_ned(lat, lon), t1 - p0)
-    los_body = np.einsum("nji,nj->ni", R_ned_body(yaw, pitch, roll), los_ned)
-    rng_true = np.linalg.norm(los_body, axis=-1)
-    az = np.degrees(np.arctan2(los_body[:, 1], los_body[:, 0]))
-    el = -np.degrees(np.arcsin(los_body[:, 2] / rng_true))
+    az, el, rng_true = eoloc.AzElGimbal.pointing(lat, lon, h, yaw, pitch, roll, t1)  # T1 on the boresight
 
     def noisy(x, s):
         return x + rng.normal(0.0, s, np.shape(x))

@@ -26,7 +26,6 @@ from rasterio.windows import from_bounds
 
 import eoloc
 from eoloc import geodesy
-from eoloc.rotation import R_ned_body
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "src" / "eoloc" / "data" / "demo" / "mountain"
@@ -74,11 +73,7 @@ def main(source: Path) -> None:
     pitch = np.full(n, 1.5)
     roll = np.zeros(n)
     p0 = np.stack(eoloc.geodetic_to_ecef(lat, lon, h), -1)
-    los_ned = np.einsum("nji,nj->ni", geodesy.R_ecef_ned(lat, lon), summit - p0)
-    los_body = np.einsum("nji,nj->ni", R_ned_body(yaw, pitch, roll), los_ned)
-    r = np.linalg.norm(los_body, axis=-1)
-    az = np.degrees(np.arctan2(los_body[:, 1], los_body[:, 0]))
-    el = -np.degrees(np.arcsin(los_body[:, 2] / r))
+    az, el, _ = eoloc.AzElGimbal.pointing(lat, lon, h, yaw, pitch, roll, summit)  # the turret tracks the summit
     true_pose = eoloc.Pose(lat, lon, h, yaw, pitch, roll, (az, el))
 
     def noisy(x, s):

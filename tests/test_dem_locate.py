@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 
 import eoloc
 from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy, open_dem
-from eoloc.rotation import R_ned_body
 
 DATA = Path(__file__).parent / "data" / "dem"
 GEOD = pyproj.Geod(ellps="WGS84")
@@ -47,11 +46,7 @@ def aim(target_lat, target_lon, target_h, off_nadir_deg, azimuth_deg, height_abo
     p = geodesy.ned_to_ecef(ned, target_lat, target_lon, target_h)
     lat, lon, h = eoloc.ecef_to_geodetic(p[..., 0], p[..., 1], p[..., 2])
     t = np.stack(eoloc.geodetic_to_ecef(target_lat, target_lon, target_h), -1)
-    los_ned = np.einsum("...ji,...j->...i", geodesy.R_ecef_ned(lat, lon), t - p)
-    los_body = np.einsum("...ji,...j->...i", R_ned_body(0.0, 0.0, 0.0), los_ned)
-    r = np.linalg.norm(los_body, axis=-1)
-    gaz = np.degrees(np.arctan2(los_body[..., 1], los_body[..., 0]))
-    gel = -np.degrees(np.arcsin(los_body[..., 2] / r))
+    gaz, gel, _ = eoloc.AzElGimbal.pointing(lat, lon, h, 0.0, 0.0, 0.0, t)
     return Pose(lat, lon, h, 0.0, 0.0, 0.0, (gaz, gel)), t
 
 

@@ -346,3 +346,13 @@ def test_los_ned_of_centre_pixel_matches_chain():
     los = _los_ned(AZEL, S13_POSE)
     expected = R_ned_body(10.0, 5.0, -2.0) @ AZEL.R_body_cam((45.0, -75.0)) @ [0, 0, 1]
     np.testing.assert_allclose(los, expected, atol=1e-15)
+
+
+def test_azel_pointing_inverts_the_turret_S13():
+    """Cue the turret to [S13]'s published target: its azimuth/elevation and range are the inputs
+    of Table 2 (45, -75, 10 200 m) to the precision of the published coordinates (h to the cm:
+    1e-6 rad at 10 km, 6e-5 deg)."""
+    target = np.stack(eoloc.geodetic_to_ecef(42.02058646, 125.03195512, 419.58), -1)
+    az, el, rng = eoloc.AzElGimbal.pointing(42.0, 125.0, 10_000.0, 10.0, 5.0, -2.0, target)
+    assert az == pytest.approx(45.0, abs=6e-5) and el == pytest.approx(-75.0, abs=6e-5)
+    assert rng == pytest.approx(10_200.0, abs=0.01)

@@ -55,6 +55,13 @@ def _at_impl(x, i):
     return lambda x, i: x
 
 
+@njit(inline="always")
+def _at9(a0, a1, a2, a3, a4, a5, a6, a7, a8, i):
+    """Element i of a rotation given as 9 flat arrays (or scalars), as a 9-tuple."""
+    return (_at(a0, i), _at(a1, i), _at(a2, i), _at(a3, i), _at(a4, i), _at(a5, i), _at(a6, i), _at(a7, i),
+            _at(a8, i))
+
+
 _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
@@ -115,12 +122,9 @@ try:
                    b0, b1, b2, b3, b4, b5, b6, b7, b8, skew, o0, o1, o2, o3, o4, o5, o6, o7, o8):
         k = int(kind)
         for i in range(n):
-            Rm = (_at(m0, i), _at(m1, i), _at(m2, i), _at(m3, i), _at(m4, i), _at(m5, i), _at(m6, i), _at(m7, i),
-                  _at(m8, i))
-            Rf = (_at(f0, i), _at(f1, i), _at(f2, i), _at(f3, i), _at(f4, i), _at(f5, i), _at(f6, i), _at(f7, i),
-                  _at(f8, i))
-            Rb = (_at(b0, i), _at(b1, i), _at(b2, i), _at(b3, i), _at(b4, i), _at(b5, i), _at(b6, i), _at(b7, i),
-                  _at(b8, i))
+            Rm = _at9(m0, m1, m2, m3, m4, m5, m6, m7, m8, i)
+            Rf = _at9(f0, f1, f2, f3, f4, f5, f6, f7, f8, i)
+            Rb = _at9(b0, b1, b2, b3, b4, b5, b6, b7, b8, i)
             R = _r_body_cam(k, _at(g1, i), _at(g2, i), _at(g3, i), Rm, Rf, Rb, _at(skew, i))
             o0[i], o1[i], o2[i], o3[i], o4[i], o5[i], o6[i], o7[i], o8[i] = R
 
@@ -128,8 +132,7 @@ try:
     def flat_target(n, r0, r1, r2, r3, r4, r5, r6, r7, r8, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2,
                     lat, lon, h, t, st):
         for i in range(n):
-            R = (_at(r0, i), _at(r1, i), _at(r2, i), _at(r3, i), _at(r4, i), _at(r5, i), _at(r6, i),
-                 _at(r7, i), _at(r8, i))
+            R = _at9(r0, r1, r2, r3, r4, r5, r6, r7, r8, i)
             lat[i], lon[i], h[i], t[i], st[i] = _flat_target(R, _at(ox, i), _at(oy, i), _at(oz, i), _at(nx, i),
                                                              _at(ny, i), _at(nz, i), _at(H, i), _at(xn, i),
                                                              _at(yn, i), a, b, e2, ep2)
@@ -174,8 +177,7 @@ try:
     def pose_frame(n, lat, lon, h, yaw, pitch, roll, r0, r1, r2, r3, r4, r5, r6, r7, r8, lx, ly, lz, a, e2,
                    o0, o1, o2, o3, o4, o5, o6, o7, o8, ox, oy, oz):
         for i in range(n):
-            Rbc = (_at(r0, i), _at(r1, i), _at(r2, i), _at(r3, i), _at(r4, i), _at(r5, i), _at(r6, i),
-                   _at(r7, i), _at(r8, i))
+            Rbc = _at9(r0, r1, r2, r3, r4, r5, r6, r7, r8, i)
             R, ox[i], oy[i], oz[i] = _pose_frame(_at(lat, i), _at(lon, i), _at(h, i), _at(yaw, i), _at(pitch, i),
                                                  _at(roll, i), Rbc, _at(lx, i), _at(ly, i), _at(lz, i), a, e2)
             o0[i], o1[i], o2[i], o3[i], o4[i], o5[i], o6[i], o7[i], o8[i] = R
@@ -183,15 +185,13 @@ try:
     @njit(**_JIT)
     def ray_direction(n, r0, r1, r2, r3, r4, r5, r6, r7, r8, xn, yn, dx, dy, dz):
         for i in range(n):
-            R = (_at(r0, i), _at(r1, i), _at(r2, i), _at(r3, i), _at(r4, i), _at(r5, i), _at(r6, i),
-                 _at(r7, i), _at(r8, i))
+            R = _at9(r0, r1, r2, r3, r4, r5, r6, r7, r8, i)
             dx[i], dy[i], dz[i] = _ray_direction(R, _at(xn, i), _at(yn, i))
 
     @njit(**_JIT)
     def project_point(n, r0, r1, r2, r3, r4, r5, r6, r7, r8, ox, oy, oz, px, py, pz, xn, yn, depth):
         for i in range(n):
-            R = (_at(r0, i), _at(r1, i), _at(r2, i), _at(r3, i), _at(r4, i), _at(r5, i), _at(r6, i),
-                 _at(r7, i), _at(r8, i))
+            R = _at9(r0, r1, r2, r3, r4, r5, r6, r7, r8, i)
             xn[i], yn[i], depth[i] = _project_point(R, _at(ox, i), _at(oy, i), _at(oz, i),
                                                     _at(px, i), _at(py, i), _at(pz, i))
 

@@ -62,6 +62,22 @@ class AzElGimbal(Gimbal):
     name: ClassVar[str] = "az-el"
     angle_names: ClassVar[tuple[str, ...]] = ("azimuth", "elevation")
 
+    @staticmethod
+    def pointing(lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike, yaw_deg: ArrayLike, pitch_deg: ArrayLike,
+                 roll_deg: ArrayLike, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Turret angles that put ECEF point(s) ``p_ecef`` (..., 3) on the boresight of a perfect
+        turret at the INS point (no lever arm or misalignment): (azimuth deg, elevation deg,
+        slant range m). The inverse of the boresight formula above; cueing a turret to a coordinate."""
+        from ..geodesy import R_ecef_ned, geodetic_to_ecef
+        from ..rotation import R_ned_body
+
+        p0 = np.stack(geodetic_to_ecef(lat_deg, lon_deg, h_m), -1)
+        los_ned = np.einsum("...ji,...j->...i", R_ecef_ned(lat_deg, lon_deg), np.asarray(p_ecef) - p0)
+        los_body = np.einsum("...ji,...j->...i", R_ned_body(yaw_deg, pitch_deg, roll_deg), los_ned)
+        rng = np.linalg.norm(los_body, axis=-1)
+        return (np.degrees(np.arctan2(los_body[..., 1], los_body[..., 0])),
+                -np.degrees(np.arcsin(los_body[..., 2] / rng)), rng)
+
 
 @dataclass(frozen=True)
 class RollPitchGimbal(Gimbal):
