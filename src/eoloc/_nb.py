@@ -85,7 +85,7 @@ try:
     # the M4 march: its helpers compiled with the kernels' twins in their globals
     _gm = dict(vars(M))
     _gm.update({name: _g[name] for name in (*_KERNELS, "_pick", "_floor_index")})
-    for _name in ("_band_fast", "_knot", "_knot_length", "_hermite", "_grid_point", "_surface_gap", "_walk_cells",
+    for _name in ("_band_fast", "_knot", "_knot_length", "_hermite", "_surface_gap", "_walk_cells",
                   "_coarse_clear", "_polish", "march_ray"):
         _f = getattr(M, _name)
         _gm[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _gm, _name, _f.__defaults__))

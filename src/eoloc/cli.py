@@ -15,7 +15,7 @@ from rich.table import Table as RichTable
 from . import __version__
 from .footprint import write_footprints_geojson
 from .io.config import ConfigError, load_config
-from .io.export import fix_rows, write_csv, write_geojson
+from .io.export import fix_rows, plain_value, write_csv, write_geojson
 from .io.table import TableError
 from .io.telemetry import read_detections, read_telemetry
 from .pipeline import RANGE_FROM_FILES, locate_tables
@@ -331,14 +331,9 @@ def footprint_rows(sensor, tel, surface, edge_samples: int, chunk: int = 64):
             prints += footprints(sensor, telemetry_pose(tel, idx), surface, edge_samples=edge_samples)
             bar.advance(task, idx.size)
     c = tel.columns
-    rows = [{"line": int(tel.line[i]), "time_s": _plain(c["time_s"][i]), "frame": _plain(c["frame"][i])}
+    rows = [{"line": int(tel.line[i]), "time_s": plain_value(c["time_s"][i]), "frame": plain_value(c["frame"][i])}
             for i in range(len(tel))]
     return rows, prints
-
-
-def _plain(x):
-    x = x.item() if isinstance(x, np.generic) else x
-    return None if isinstance(x, float) and np.isnan(x) else x
 
 
 ACCURACY_HELP = """Accuracy budget by Monte Carlo: perturb every input by its error law, locate with the

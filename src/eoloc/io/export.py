@@ -22,14 +22,15 @@ def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None) -> list[
     flat = {k: np.ravel(getattr(fixes, k)) for k in FIX_COLUMNS}
     rows = []
     for i in range(n):
-        row = {k: _plain(v[i]) for k, v in extra.items()}
-        row.update({k: _plain(flat[k][i]) for k in FIX_COLUMNS[:-1]})
+        row = {k: plain_value(v[i]) for k, v in extra.items()}
+        row.update({k: plain_value(flat[k][i]) for k in FIX_COLUMNS[:-1]})
         row["status"] = Status(int(flat["status"][i])).name
         rows.append(row)
     return rows
 
 
-def _plain(v):
+def plain_value(v):
+    """A numpy scalar as a plain Python value; NaN as None (an empty cell / JSON null)."""
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, float) and math.isnan(v):
