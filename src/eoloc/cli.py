@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table as RichTable
 
 from . import __version__
@@ -40,7 +41,7 @@ err_console = Console(stderr=True)
 
 
 def _fail(message: str) -> None:
-    err_console.print(f"[bold red]error:[/] {message}")
+    err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
     sys.exit(2)
 
 
@@ -65,6 +66,9 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--
   (heights taken as EGM96 and converted with the bundled geoid unless --vertical says otherwise).
   Writes fixes.csv and fixes.geojson into --out. Bad lines are reported (file:line) and skipped;
   every good record is kept.
+  --covariance adds each fix's first-order uncertainty from the config's [accuracy.budget]:
+  sigma east/north/up, CEP50/CE90, LE90, the error ellipse, and a nonlinearity figure (> 0.1:
+  the linearisation does not hold there, e.g. a ray grazing a ridge; use eoloc accuracy).
 
 \b
 ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitch 5 --roll -2
@@ -106,20 +110,32 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
 @click.option("--geoid", type=click.Path(dir_okay=False), default=None,
               help="Geoid grid for --vertical (default: the bundled EGM96 15').")
 @click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
+@click.option("--covariance", is_flag=True,
+              help="Add each fix's first-order uncertainty from the config's [accuracy.budget].")
 def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
            gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance, dem_paths, vertical, geoid,
-           dem_crs) -> None:
+           dem_crs, covariance) -> None:
+    budget = None
+    if covariance:
+        if config_path is None:
+            _fail("--covariance needs --config FILE with an [accuracy.budget] section (the error sources)")
+        from .io.config import error_budget
+
+        try:
+            budget = error_budget(load_config(config_path), config_path)
+        except ConfigError as exc:
+            _fail(str(exc))
     dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     if telemetry is None:
         _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
-                    sensor_roll, pixel, as_json, dem)
+                    sensor_roll, pixel, as_json, dem, budget)
         return
     if lat is not None or lon is not None:
         _fail("give either a TELEMETRY file or --lat/--lon for one observation, not both")
     if target_height is not None and height is not None:
         _fail("in file mode --height and --target-height mean the same; give one")
     stop_height = target_height if target_height is not None else height
-    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem)
+    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget)
 
 
 def _open_dem(paths, vertical, geoid, dem_crs):
@@ -152,7 +168,7 @@ def _load_sensor(config_path) -> SensorModel:
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
-                sensor_roll, pixel, as_json, dem=None) -> None:
+                sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
     if lat is None or lon is None or height is None:
         _fail("one observation needs --lat, --lon and --height (aircraft, ellipsoidal m), or give a TELEMETRY file")
     rng, stop_h = _stop_rule(range_opt, target_height, dem)
@@ -174,11 +190,16 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
             _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
                   f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
         angles = (*gimbal_angles, sensor_roll)
+    from .accuracy.covariance import covariance_columns, locate_with_covariance
     from .locate import locate_dem, locate_ellipsoid, locate_range
 
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
     pixels = None if pixel is None else (pixel[0], pixel[1])
-    if dem is not None:
+    stop = {"dem": dem} if dem is not None else {"range_m": rng} if rng is not None else {"height_m": stop_h}
+    cov = None
+    if budget is not None:
+        f, cov = locate_with_covariance(sensor, pose, budget, pixels, **stop)
+    elif dem is not None:
         f = locate_dem(sensor, pose, dem, pixels)
     elif rng is not None:
         f = locate_range(sensor, pose, rng, pixels)
@@ -187,6 +208,8 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
     status = Status(int(f.status))
     out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
            "status": status.name}
+    if cov is not None:
+        out.update({k: _num(v[0]) for k, v in covariance_columns(cov, f.ok).items()})
     if as_json:
         click.echo(json.dumps(out))
         return
@@ -195,8 +218,22 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
         table.add_column(k + {"lat": " (deg)", "lon": " (deg)", "h": " (m, ellipsoidal)", "range": " (m)"}.get(k, ""))
     table.add_row(*(_cell(k, out[k]) for k in ("lat", "lon", "h", "range", "status")))
     Console().print(table)
+    if cov is not None and status == Status.OK:
+        _print_uncertainty(out)
     if status != Status.OK:
         err_console.print(f"[yellow]{status.name}[/]: {status.explanation}")
+
+
+def _print_uncertainty(u: dict) -> None:
+    Console().print(f"1σ east {u['sigma_e_m']:.3g} m, north {u['sigma_n_m']:.3g} m, up {u['sigma_u_m']:.3g} m; "
+                    f"CEP50 {u['cep50_m']:.3g} m, CE90 {u['ce90_m']:.3g} m, LE90 {u['le90_m']:.3g} m; "
+                    f"ellipse {u['ellipse_major_m']:.3g} × {u['ellipse_minor_m']:.3g} m at "
+                    f"{u['ellipse_azimuth_deg']:.1f}°")
+    nl = u["nonlinearity"]
+    if nl is None or nl > 0.1:
+        err_console.print("[yellow]warning:[/] the first-order uncertainty does not hold for this fix (nonlinearity "
+                          f"{nl if nl is not None else 'inf'}): a ray near grazing or near an edge; run "
+                          "eoloc accuracy for a Monte Carlo of it")
 
 
 def _num(x) -> float | None:
@@ -213,7 +250,7 @@ def _cell(key: str, v) -> str:
 
 
 def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance,
-                  dem=None) -> None:
+                  dem=None, budget=None) -> None:
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
     rng, stop_h = _stop_rule(range_opt, stop_height, dem)
@@ -229,10 +266,19 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
         _fail(f"telemetry file {telemetry!r} has no usable record")
     with err_console.status("locating..."):
         located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, dem=dem,
-                                time_tolerance_s=time_tolerance)
+                                time_tolerance_s=time_tolerance, budget=budget)
     issues += located.issues
     _report_issues(issues)
-    rows = fix_rows(located.fixes, located.extra)
+    after = None
+    if located.covariance is not None:
+        from .accuracy.covariance import covariance_columns
+
+        after = covariance_columns(located.covariance, located.fixes.ok)
+        loose = np.flatnonzero(located.fixes.ok & ~(after["nonlinearity"] <= 0.1))
+        if loose.size:
+            err_console.print(f"[yellow]warning:[/] {loose.size} fixes have a nonlinearity > 0.1 (column "
+                              "nonlinearity): their first-order uncertainty is not to be trusted")
+    rows = fix_rows(located.fixes, located.extra, after)
     out = Path(out_dir)
     csv_path = write_csv(out / "fixes.csv", rows)
     geo_path = write_geojson(out / "fixes.geojson", rows)
@@ -242,7 +288,7 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
 
 def _report_issues(issues, limit: int = 15) -> None:
     for issue in issues[:limit]:
-        err_console.print(f"[yellow]warning:[/] {issue}", highlight=False)
+        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
     if len(issues) > limit:
         err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
 

@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 import pyproj
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table as RichTable
 
-from .io.config import load_config
+from .accuracy.covariance import covariance_columns
+from .io.config import error_budget, load_config
 from .io.export import fix_rows, write_csv, write_geojson
 from .io.telemetry import read_detections, read_telemetry
 from .locate import locate_range
@@ -70,17 +72,19 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     console.print(f"\n[bold]Demo flight[/] ([Z15]-like: 1140 m, 50 mm lens, az-el turret, [Z15] telemetry noise): "
                   f"{len(tel)} telemetry records, {len(det)} detections of {len(truth)} surveyed targets")
     for issue in tel.issues + det.issues:
-        console.print(f"[yellow]input issue (kept going):[/] {issue}", highlight=False)
+        console.print(f"[yellow]input issue (kept going):[/] {escape(str(issue))}", highlight=False)
 
     # M1: the turret tracks T1, so the image centre + laser range is T1
-    m1 = locate_tables(sensor, tel, None, range_m=RANGE_FROM_FILES)
+    # with each fix's first-order uncertainty from the config's [accuracy.budget]
+    budget = error_budget(load_config(data / "camera.toml"), data / "camera.toml")
+    m1 = locate_tables(sensor, tel, None, range_m=RANGE_FROM_FILES, budget=budget)
     t1 = truth["T1"]
     err1 = _horizontal_m(m1.fixes.lat_deg, m1.fixes.lon_deg, t1[0], t1[1])
     err1 = np.where(m1.fixes.ok, err1, np.nan)
     # M3: every detection on the ellipsoid at the targets' known ground height
     m3 = locate_tables(sensor, tel, det, height_m=t1[2])
     for issue in m3.issues:
-        console.print(f"[yellow]input issue (kept going):[/] {issue}", highlight=False)
+        console.print(f"[yellow]input issue (kept going):[/] {escape(str(issue))}", highlight=False)
     ids = np.asarray(m3.extra["target_id"], dtype=object)
     tlat = np.array([truth.get(i, (np.nan,) * 3)[0] for i in ids])
     tlon = np.array([truth.get(i, (np.nan,) * 3)[1] for i in ids])
@@ -91,11 +95,18 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     console.print("status counts  M1: " + str(m1.fixes.status_counts()) + "   M3: " + str(m3.fixes.status_counts()))
     console.print("[dim]Errors come from the telemetry noise the flight was given ([Z15] Table 1 sigmas); "
                   "[Z15] reports CEP 28.7 m single-frame for the same budget.[/]")
+    cov1 = covariance_columns(m1.covariance, m1.fixes.ok)
+    ok1 = np.isfinite(err1)
+    inside = int(np.sum(err1[ok1] <= cov1["ce90_m"][ok1]))
+    console.print(f"Honest uncertainty (eoloc locate --covariance): predicted CEP50 per fix "
+                  f"{np.nanmedian(cov1['cep50_m']):.1f} m (median), observed median error {np.nanmedian(err1):.1f} m; "
+                  f"{inside} of {int(ok1.sum())} true errors inside their own CE90 (expect ~90 %).")
 
     written = []
     for name, located, err in (("fixes_range", m1, err1), ("fixes_ellipsoid", m3, err3)):
         extra = dict(located.extra, error_vs_truth_m=err)
-        rows = fix_rows(located.fixes, extra)
+        after = covariance_columns(located.covariance, located.fixes.ok) if located.covariance is not None else None
+        rows = fix_rows(located.fixes, extra, after)
         written += [write_csv(out_dir / f"{name}.csv", rows), write_geojson(out_dir / f"{name}.geojson", rows)]
     console.print("wrote " + ", ".join(str(p) for p in written))
     run_mountain_demo(out_dir, console=console, data=data / "mountain")

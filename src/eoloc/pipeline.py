@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .accuracy.budget import ErrorBudget
+from .accuracy.covariance import FixCovariance, locate_with_covariance
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
 from .locate import locate_dem, locate_ellipsoid, locate_range
@@ -25,17 +27,19 @@ class Located:
     fixes: Fixes
     extra: dict[str, np.ndarray]
     issues: list[Issue] = field(default_factory=list)
+    covariance: FixCovariance | None = None
 
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
                   range_m: float | str | None = None, height_m: float | None = None, dem=None,
-                  time_tolerance_s: float = 0.02) -> Located:
+                  time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
     Stop rule (exactly one): ``height_m`` (M3, ellipsoidal metres), ``dem`` (M4, a
     :class:`eoloc.DEM`) or ``range_m`` (M1): a number for all, or ``"files"`` to take each
     detection's ``range_m`` column (without detections: the telemetry's boresight range). A
-    telemetry range is never applied along another pixel's ray.
+    telemetry range is never applied along another pixel's ray. With an error ``budget`` every
+    fix also gets its first-order covariance (:func:`eoloc.accuracy.locate_with_covariance`).
     """
     if sum(x is not None for x in (range_m, height_m, dem)) != 1:
         raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
@@ -61,9 +65,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     has_pose = record >= 0
     pose = telemetry_pose(tel, np.where(has_pose, record, 0))
     if dem is not None:
-        fixes = locate_dem(sensor, pose, dem, (u, v))
+        stop = {"dem": dem}
     elif height_m is not None:
-        fixes = locate_ellipsoid(sensor, pose, height_m, (u, v))
+        stop = {"height_m": height_m}
     else:
         rng = np.asarray(file_range if range_m == RANGE_FROM_FILES else np.full(u.shape, float(range_m)))
         if range_m == RANGE_FROM_FILES:
@@ -71,7 +75,16 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
             for j in np.flatnonzero(~np.isfinite(rng) & has_pose):
                 issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
                                                          "a constant --range R, or use --height H"))
-        fixes = locate_range(sensor, pose, rng, (u, v))
+        stop = {"range_m": rng}
+    cov = None
+    if budget is not None:
+        fixes, cov = locate_with_covariance(sensor, pose, budget, (u, v), **stop)
+    elif dem is not None:
+        fixes = locate_dem(sensor, pose, dem, (u, v))
+    elif height_m is not None:
+        fixes = locate_ellipsoid(sensor, pose, height_m, (u, v))
+    else:
+        fixes = locate_range(sensor, pose, stop["range_m"], (u, v))
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
-    return Located(fixes, extra, issues)
+    return Located(fixes, extra, issues, cov)

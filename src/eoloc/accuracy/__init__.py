@@ -1,7 +1,10 @@
-"""Accuracy analysis: error budgets, Monte Carlo through the same kernels, CEP, sensitivities."""
+"""Accuracy analysis: error budgets, Monte Carlo through the same kernels, CEP, sensitivities,
+first-order covariance of every fix."""
 
+from . import scenarios
 from .budget import SOURCES, ErrorBudget, ErrorSource
-from .cep import cep_bivariate, cep_empirical, drms, error_ellipse, prob_within
+from .cep import cep_bivariate, cep_empirical, cep_zero_mean, drms, error_ellipse, prob_within
+from .covariance import FixCovariance, covariance_columns, locate_with_covariance
 from .montecarlo import MonteCarloResult, Scenario, Sensitivity, TargetStats, monte_carlo, sensitivity, truth_fixes
 from .scenarios import SCENARIOS, q_dem, q_ellipsoid, s13
 
@@ -10,19 +13,24 @@ __all__ = [
     "SOURCES",
     "ErrorBudget",
     "ErrorSource",
+    "FixCovariance",
     "MonteCarloResult",
     "Scenario",
     "Sensitivity",
     "TargetStats",
     "cep_bivariate",
     "cep_empirical",
+    "cep_zero_mean",
+    "covariance_columns",
     "drms",
     "error_ellipse",
+    "locate_with_covariance",
     "monte_carlo",
     "prob_within",
     "q_dem",
     "q_ellipsoid",
     "s13",
+    "scenarios",
     "sensitivity",
     "truth_fixes",
 ]

@@ -68,47 +68,66 @@ class Scenario:
 
 def perturbed_fixes(scn: Scenario, d: dict[str, np.ndarray], n: int) -> Fixes:
     """Fixes (n, K) of the scenario's K targets with the errors ``d`` (name -> (n,) draws) applied."""
+    stop_value = {"range": scn.range_m, "height": scn.height_m, "dem": scn.dem}[scn.stop]
+    return chain_fixes(scn.sensor, scn.pose, scn.pixels[:, 0], scn.pixels[:, 1], scn.stop, stop_value, d, n,
+                       velocity_ned_mps=scn.velocity_ned_mps)
+
+
+def chain_fixes(sensor: SensorModel, pose: Pose, u, v, stop: str, stop_value, d: dict[str, np.ndarray], n: int,
+                *, velocity_ned_mps=(0.0, 0.0, 0.0)) -> Fixes:
+    """The geolocation chain with input errors ``d`` (source name -> (n,) values) added.
+
+    pose fields, pixels (u, v) and the stop value (range m, height m, or a DEM) broadcast to the
+    targets' shape T; the result has shape (n, *T): row i holds every target with error row i.
+    This is the one place the error sources of :data:`SOURCES` enter the chain (Monte Carlo and
+    first-order covariance both go through it).
+    """
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    shapes = [np.shape(x) for x in (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg,
+                                     pose.roll_deg, *pose.gimbal_deg, u, v)]
+    if stop != "dem":
+        shapes.append(np.shape(stop_value))
+    lead = (n,) + (1,) * len(np.broadcast_shapes(*shapes))
 
     def z(name: str):
         x = d.get(name)
-        return 0.0 if x is None else np.asarray(x, dtype=np.float64).reshape(n, 1)
+        return 0.0 if x is None else np.asarray(x, dtype=np.float64).reshape(lead)
 
-    p = scn.pose
-    sensor = scn.sensor
-    lat = p.lat_deg + z("lat_deg")
-    lon = p.lon_deg + z("lon_deg")
-    h = p.h_m + z("h_m")
+    lat = pose.lat_deg + z("lat_deg")
+    lon = pose.lon_deg + z("lon_deg")
+    h = pose.h_m + z("h_m")
     dt = z("time_s")
-    if np.any(np.asarray(scn.velocity_ned_mps) != 0.0) and not np.isscalar(dt):
-        m_lat, m_lon = _metres_per_degree(float(p.lat_deg), float(p.h_m), sensor.ellipsoid)
-        vn, ve, vd = scn.velocity_ned_mps
-        lat = lat + vn * dt / m_lat
-        lon = lon + ve * dt / m_lon
-        h = h - vd * dt
-    g = list(p.gimbal_deg)
+    vel = np.asarray(velocity_ned_mps, dtype=np.float64)
+    if np.any(vel != 0.0) and not np.isscalar(dt):
+        m_lat, m_lon = _metres_per_degree(pose.lat_deg, pose.h_m, sensor.ellipsoid)
+        lat = lat + vel[..., 0] * dt / m_lat
+        lon = lon + vel[..., 1] * dt / m_lon
+        h = h - vel[..., 2] * dt
+    g = list(pose.gimbal_deg)
     if sensor.gimbal.kind == 2:  # fixed mount: the tuple holds the sensor roll only
         g = [(g[0] if g else 0.0) + z("sensor_roll_deg")]
     else:
         g = g + [0.0] * (3 - len(g))
         g = [g[0] + z("gimbal1_deg"), g[1] + z("gimbal2_deg"), g[2] + z("sensor_roll_deg")]
-    pose = Pose(lat, lon, h, p.yaw_deg + z("yaw_deg") + z("vibration_yaw_deg"),
-                p.pitch_deg + z("pitch_deg") + z("vibration_pitch_deg"),
-                p.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
-    mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), n)
-    bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), n)
-    frame = sensor.camera_frame(pose, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
+    perturbed = Pose(lat, lon, h, pose.yaw_deg + z("yaw_deg") + z("vibration_yaw_deg"),
+                     pose.pitch_deg + z("pitch_deg") + z("vibration_pitch_deg"),
+                     pose.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
+    mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), lead)
+    bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), lead)
+    frame = sensor.camera_frame(perturbed, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
                                 gimbal_skew_deg=z("gimbal_skew_deg"))
-    u = scn.pixels[:, 0][None, :] + z("u_px")
-    v = scn.pixels[:, 1][None, :] + z("v_px")
-    xn, yn = sensor.camera.pixel_to_normalized(u, v, focal_error_px=z("focal_px"),
+    xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
                                                principal_point_error_px=(z("cx_px"), z("cy_px")))
     rays = sensor.rays_from(frame, xn, yn)
     terrain = z("terrain_m")
-    if scn.stop == "range":
-        return stop_at_range(rays, scn.range_m + z("range_m"), sensor=sensor)
-    if scn.stop == "height":
-        return stop_at_ellipsoid(rays, scn.height_m + terrain, sensor=sensor)
-    return _stop_on_shifted_dem(rays, scn.dem, terrain, sensor)
+    if stop == "range":
+        return stop_at_range(rays, stop_value + z("range_m"), sensor=sensor)
+    if stop == "height":
+        return stop_at_ellipsoid(rays, stop_value + terrain, sensor=sensor)
+    if stop == "dem":
+        return _stop_on_shifted_dem(rays, stop_value, terrain, sensor)
+    raise ValueError(f"stop must be 'range', 'height' or 'dem', got {stop!r}")
 
 
 def _stop_on_shifted_dem(rays: Rays, dem: DEM, shift, sensor: SensorModel) -> Fixes:
@@ -125,18 +144,19 @@ def _stop_on_shifted_dem(rays: Rays, dem: DEM, shift, sensor: SensorModel) -> Fi
     return replace(f, h_m=f.h_m + s)
 
 
-def _angles(nominal, d, prefix, axes, n):
+def _angles(nominal, d, prefix, axes, lead):
     names = [f"{prefix}_{a}_deg" for a in axes]
     if not any(k in d for k in names):
         return None
-    out = np.broadcast_to(np.asarray(nominal, dtype=np.float64), (n, 1, 3)).copy()
+    out = np.broadcast_to(np.asarray(nominal, dtype=np.float64), (*lead, 3)).copy()
     for i, k in enumerate(names):
         if k in d:
-            out[:, 0, i] += d[k]
+            out[..., i] += np.reshape(d[k], lead)
     return out
 
 
-def _metres_per_degree(lat_deg: float, h: float, ell) -> tuple[float, float]:
+def _metres_per_degree(lat_deg, h, ell):
+    """Metres per degree of latitude and of longitude at (lat_deg, h) (arrays broadcast)."""
     s = np.sin(np.radians(lat_deg))
     w = np.sqrt(1.0 - ell.e2 * s * s)
     m = ell.a * (1.0 - ell.e2) / w**3

@@ -126,10 +126,11 @@ class PoseConfig(_Strict):
 
 
 class AccuracyConfig(_Strict):
-    """[accuracy]: the nominal observation and its error budget (eoloc accuracy CONFIG)."""
+    """[accuracy]: the error budget (per-fix covariance: eoloc locate --covariance) and, for Monte
+    Carlo (eoloc accuracy CONFIG), the nominal observation: pose and stop rule."""
 
-    pose: PoseConfig
-    stop: Literal["range", "height", "dem"]
+    pose: PoseConfig | None = None
+    stop: Literal["range", "height", "dem"] | None = None
     range_m: float | None = Field(None, gt=0)
     height_m: float | None = None
     dem: list[str] | None = None
@@ -142,7 +143,7 @@ class AccuracyConfig(_Strict):
 
     @model_validator(mode="after")
     def _stop_value(self) -> AccuracyConfig:
-        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem}[self.stop]
+        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem, None: 0}[self.stop]
         if need is None:
             key = {"range": "range_m", "height": "height_m", "dem": "dem"}[self.stop]
             raise ValueError(f"stop = {self.stop!r} needs {key}")
@@ -181,6 +182,10 @@ def accuracy_scenario(cfg: Config, path: str | Path):
     if a is None:
         raise ConfigError(f"config file {str(path)!r} has no [accuracy] section (pose, stop rule, budget); "
                           "see the README, or use --scenario for a built-in one")
+    missing = [k for k in ("pose", "stop") if getattr(a, k) is None]
+    if missing:
+        raise ConfigError(f"config file {str(path)!r}: [accuracy] needs {' and '.join(missing)} for a Monte Carlo "
+                          "run (the nominal observation); see the README")
     p = a.pose
     dem = None
     if a.stop == "dem":
@@ -189,6 +194,16 @@ def accuracy_scenario(cfg: Config, path: str | Path):
                     Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
                     ErrorBudget.from_mapping(a.budget), stop=a.stop, range_m=a.range_m, height_m=a.height_m, dem=dem,
                     pixels=None if a.pixels is None else a.pixels, velocity_ned_mps=a.velocity_ned_mps)
+
+
+def error_budget(cfg: Config, path: str | Path):
+    """The config's [accuracy.budget] as an ErrorBudget (for per-fix covariance)."""
+    from ..accuracy.budget import ErrorBudget
+
+    if cfg.accuracy is None:
+        raise ConfigError(f"config file {str(path)!r} has no [accuracy.budget] section: list the error sources, "
+                          "e.g. yaw_deg = {normal = 0.02}; see the README")
+    return ErrorBudget.from_mapping(cfg.accuracy.budget)
 
 
 def load_config(path: str | Path) -> Config:

@@ -15,9 +15,12 @@ from ..result import Fixes, Status
 FIX_COLUMNS = ("lat_deg", "lon_deg", "h_m", "range_m", "status")
 
 
-def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None) -> list[dict]:
-    """One dict per target: the ``extra`` columns first (ids, times, pixels), then the fix."""
+def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
+             after: Mapping[str, Sequence] | None = None) -> list[dict]:
+    """One dict per target: the ``extra`` columns first (ids, times, pixels), then the fix, then
+    the ``after`` columns (e.g. its uncertainty)."""
     extra = dict(extra or {})
+    after = dict(after or {})
     n = len(fixes)
     flat = {k: np.ravel(getattr(fixes, k)) for k in FIX_COLUMNS}
     rows = []
@@ -25,6 +28,7 @@ def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None) -> list[
         row = {k: plain_value(v[i]) for k, v in extra.items()}
         row.update({k: plain_value(flat[k][i]) for k in FIX_COLUMNS[:-1]})
         row["status"] = Status(int(flat["status"][i])).name
+        row.update({k: plain_value(v[i]) for k, v in after.items()})
         rows.append(row)
     return rows
 
