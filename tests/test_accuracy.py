@@ -21,7 +21,7 @@ from eoloc.accuracy import (
     s13,
     sensitivity,
 )
-from eoloc.accuracy.montecarlo import chunk_sizes, run_chunk
+from eoloc.accuracy.montecarlo import chunk_sizes
 from eoloc.accuracy.scenarios import Q_SOURCE_ELLIPSOID
 
 
@@ -108,11 +108,11 @@ def test_seeded_and_chunk_placement_independent():
     a = monte_carlo(scn, 30_000, seed=9, chunk=7000)
     b = monte_carlo(scn, 30_000, seed=9, chunk=7000)
 
-    def reversed_runner(scn, seeds, sizes, truth):
-        done = {i: run_chunk(scn, seeds[i], sizes[i], truth) for i in reversed(range(len(sizes)))}
-        return [done[i] for i in range(len(sizes))]
+    def reversed_mapper(fn, args_list, on_done=None):
+        done = {i: fn(*args_list[i]) for i in reversed(range(len(args_list)))}
+        return [done[i] for i in range(len(args_list))]
 
-    c = monte_carlo(scn, 30_000, seed=9, chunk=7000, chunk_runner=reversed_runner)
+    c = monte_carlo(scn, 30_000, seed=9, chunk=7000, mapper=reversed_mapper)
     assert a.stats == b.stats == c.stats
     assert monte_carlo(scn, 30_000, seed=10, chunk=7000).stats != a.stats
     assert chunk_sizes(30_000, 7000) == [7000, 7000, 7000, 7000, 2000]

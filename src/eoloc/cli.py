@@ -390,9 +390,14 @@ eoloc accuracy CONFIG.toml            the config's [accuracy] section (pose, sto
 eoloc accuracy --scenario s13         built-in: s13 ([S13] Table 1), q-ellipsoid, q-dem ([Q] Table 1)
   Prints per target: sigma of lat/lon/h, bias and sigma east/north/up (m), CEP50 (empirical and
   parametric bivariate normal), CE90, LE90, DRMS (a radial RMS, not a CEP); then the sensitivity
-  of each source alone (mu = sigma_out / sigma_in, as [S13] defines it). Writes accuracy.csv and
-  sensitivity.csv into --out. Seeded: the same --seed gives the same figures.
+  of each source alone (mu = sigma_out / sigma_in, as [S13] defines it). Writes accuracy.csv,
+  sensitivity.csv and scatter_target<k>.png (error cloud, CEP circles, mean, 95 % ellipse) into
+  --out. Seeded: the same --seed gives the same figures, also on a cluster (--dask ADDRESS, or
+  --dask local:N for N local worker processes).
 """
+
+DASK_HELP = ("Run on dask.distributed: a scheduler address (tcp://host:8786), or local[:N] for a local "
+             "cluster of N worker processes. Same seed, same figures.")
 
 
 @main.command(help=ACCURACY_HELP)
@@ -406,37 +411,24 @@ eoloc accuracy --scenario s13         built-in: s13 ([S13] Table 1), q-ellipsoid
               help="Also run each source alone.")
 @click.option("--sensitivity-samples", type=click.IntRange(min=2), default=100_000, show_default=True,
               help="Samples per source for the sensitivity table.")
+@click.option("--plots/--no-plots", default=True, show_default=True, help="Write the error scatter plots (PNG).")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS", help=DASK_HELP)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
-              help="Folder for accuracy.csv and sensitivity.csv.")
-def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samples, out_dir) -> None:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    from .accuracy import SCENARIOS, monte_carlo
+              help="Folder for accuracy.csv, sensitivity.csv and the plots.")
+def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samples, plots, dask_address,
+             out_dir) -> None:
+    from .accuracy import monte_carlo
     from .accuracy import sensitivity as run_sensitivity
-    from .io.config import accuracy_scenario
 
-    if (config_path is None) == (scenario is None):
-        _fail("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")
-    if scenario is not None:
-        scn = SCENARIOS[scenario]()
-        n = samples or (1_000_000 if scenario == "s13" else 5000)
-        seed = 0 if seed is None else seed
-    else:
-        try:
-            cfg = load_config(config_path)
-            scn = accuracy_scenario(cfg, config_path)
-        except ConfigError as exc:
-            _fail(str(exc))
-        n = samples or cfg.accuracy.samples
-        seed = cfg.accuracy.seed if seed is None else seed
+    scn, n, seed = _scenario_from(config_path, scenario, samples, seed)
     total = n + (len(scn.budget) * sensitivity_samples if sensitivity else 0)
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     try:
-        with Progress(*columns, console=err_console, transient=True) as bar:
+        with _mapper(dask_address) as mapper, _progress() as bar:
             task = bar.add_task("Monte Carlo", total=total)
-            result = monte_carlo(scn, n, seed=seed, progress=lambda k: bar.advance(task, k))
-            rows_s = run_sensitivity(scn, sensitivity_samples, seed=seed,
-                                     progress=lambda k: bar.advance(task, k)) if sensitivity else []
+            result = monte_carlo(scn, n, seed=seed, progress=lambda k: bar.advance(task, k), keep_samples=plots,
+                                 mapper=mapper)
+            rows_s = run_sensitivity(scn, sensitivity_samples, seed=seed, progress=lambda k: bar.advance(task, k),
+                                     mapper=mapper) if sensitivity else []
     except ValueError as exc:
         _fail(str(exc))
     console = Console()
@@ -476,7 +468,119 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
                        f"{r.sigma_horizontal_m:.3g}")
         console.print(t2)
         written.append(write_csv(out / "sensitivity.csv", [vars(r) for r in rows_s]))
+    if plots:
+        from .accuracy.plots import plot_scatter
+
+        for k in range(min(scn.n_targets, 8)):
+            written.append(plot_scatter(result, out / f"scatter_target{k}.png", target=k))
     console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+
+
+def _scenario_from(config_path, scenario, samples, seed, default_n=None):
+    """(scenario, samples, seed) from a config's [accuracy] section or a built-in scenario."""
+    from .accuracy import SCENARIOS
+    from .io.config import accuracy_scenario
+
+    if (config_path is None) == (scenario is None):
+        _fail("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")
+    if scenario is not None:
+        n = samples or default_n or (1_000_000 if scenario == "s13" else 5000)
+        return SCENARIOS[scenario](), n, (0 if seed is None else seed)
+    try:
+        cfg = load_config(config_path)
+        scn = accuracy_scenario(cfg, config_path)
+    except ConfigError as exc:
+        _fail(str(exc))
+    return scn, samples or default_n or cfg.accuracy.samples, (cfg.accuracy.seed if seed is None else seed)
+
+
+def _mapper(address):
+    """A context giving the mapper for --dask ADDRESS (None: compute here)."""
+    import contextlib
+
+    if address is None:
+        return contextlib.nullcontext(None)
+    from .accuracy.runners import dask_mapper
+
+    return dask_mapper(address)
+
+
+def _progress():
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                    console=err_console, transient=True)
+
+
+SWEEP_HELP = """Accuracy against the pointing angle and the terrain relief, ellipsoid vs DEM ([Q] Fig. 10).
+
+
+eoloc sweep --scenario q-ellipsoid                       [Q]: gimbal roll 10-82 deg, relief sigma 10-100 m
+eoloc sweep CONFIG.toml --angle gimbal2 --angles 20:80:10 --terrain-sigmas 10,50
+  For every angle and relief sigma, two Monte Carlo runs: on the ellipsoid at the scenario's
+  height with the relief as a terrain-height error, and by M4 on a synthetic relief of that
+  sigma around the target. Needs a scenario that stops on the ellipsoid (stop = "height").
+  Writes sweep.csv (CEP50 empirical and bivariate normal, CE90, DRMS, sigmas, slant range,
+  oblique angle, failed samples) and sweep.png into --out.
+"""
+
+
+def _float_list(text: str) -> list[float]:
+    """'10,25,50' or 'start:stop:step' (stop included) -> floats."""
+    try:
+        if ":" in text:
+            a, b, c = (float(x) for x in text.split(":"))
+            if c <= 0:
+                raise ValueError
+            return [float(x) for x in np.arange(a, b + 0.5 * c, c)]
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise click.BadParameter(f"give numbers like 10,25,50 or start:stop:step (step > 0), got {text!r}") from None
+
+
+@main.command(help=SWEEP_HELP)
+@click.argument("config_path", required=False, type=click.Path(dir_okay=False))
+@click.option("--scenario", type=click.Choice(["q-ellipsoid"]), default=None, help="A built-in scenario.")
+@click.option("--angle", type=click.Choice(["gimbal1", "gimbal2"]), default="gimbal1", show_default=True,
+              help="Which gimbal angle to sweep (gimbal1: azimuth / frame roll; gimbal2: elevation / frame pitch).")
+@click.option("--angles", default="10:82:8", show_default=True, help="Angles (deg): a,b,c or start:stop:step.")
+@click.option("--terrain-sigmas", default="10,25,50,75,100", show_default=True, help="Relief sigmas (m).")
+@click.option("--samples", "-n", type=click.IntRange(min=2), default=None,
+              help="Monte Carlo samples per point (default 5000, as [Q]).")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the config's, else 0).")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS", help=DASK_HELP)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
+              help="Folder for sweep.csv and sweep.png.")
+def sweep(config_path, scenario, angle, angles, terrain_sigmas, samples, seed, dask_address, out_dir) -> None:
+    from .accuracy.plots import plot_sweep
+    from .accuracy.sweep import terrain_sweep
+
+    angle_list, sigma_list = _float_list(angles), _float_list(terrain_sigmas)
+    scn, n, seed = _scenario_from(config_path, scenario, samples, seed, default_n=5000)
+    methods = ("ellipsoid", "dem")
+    try:
+        with _mapper(dask_address) as mapper, _progress() as bar:
+            task = bar.add_task("sweep points", total=len(angle_list) * len(sigma_list) * len(methods))
+            points = terrain_sweep(scn, angle_list, sigma_list, angle=angle, n=n, seed=seed, methods=methods,
+                                   mapper=mapper, progress=lambda k: bar.advance(task, k))
+    except ValueError as exc:
+        _fail(str(exc))
+    table = RichTable(title=f"{scn.name}: CEP50 (m), {n:,} samples per point; ellipsoid / DEM")
+    table.add_column(f"{angle} (deg)", justify="right")
+    for s in sigma_list:
+        table.add_column(f"relief σ {s:g} m", justify="right")
+    cep = {(p.method, p.angle_deg, p.terrain_sigma_m): p.cep50_m for p in points}
+    for a in angle_list:
+        table.add_row(f"{a:g}", *(f"{cep[('ellipsoid', a, s)]:.4g} / {cep[('dem', a, s)]:.4g}" for s in sigma_list))
+    Console().print(table)
+    for p in points:
+        if p.note:
+            err_console.print(f"[yellow]warning:[/] {p.method} {angle} {p.angle_deg:g}° σ {p.terrain_sigma_m:g} m: "
+                              f"{escape(p.note)}")
+    out = Path(out_dir)
+    csv_path = write_csv(out / "sweep.csv", [vars(p) for p in points])
+    png = plot_sweep(points, out / "sweep.png", title=f"{scn.name}: CEP50 against {angle}, {n:,} samples per point")
+    Console().print(f"wrote [bold]{csv_path}[/] and [bold]{png}[/]")
 
 
 @main.command(help="Run the bundled example: a short flight over static targets, located by laser range "

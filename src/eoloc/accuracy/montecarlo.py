@@ -23,6 +23,7 @@ from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
 from .cep import cep_bivariate, cep_empirical, drms, error_ellipse
+from .runners import Mapper, local_map
 
 DEFAULT_CHUNK = 200_000
 
@@ -260,11 +261,11 @@ def run_chunk(scn: Scenario, seed_seq: np.random.SeedSequence, size: int, truth:
 
 
 def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CHUNK, keep_samples: bool = False,
-                progress: Callable[[int], None] | None = None, chunk_runner=None) -> MonteCarloResult:
+                progress: Callable[[int], None] | None = None, mapper: Mapper | None = None) -> MonteCarloResult:
     """Monte Carlo of ``n`` samples of the scenario; ``progress(k)`` is called after each chunk of k.
 
-    ``chunk_runner(scn, seed_seqs, sizes, truth)`` may compute the chunks elsewhere (e.g. Dask) and
-    must return the list of ``run_chunk`` outputs in order; the statistics are then identical.
+    ``mapper`` computes the chunks (default: here, in order; :class:`eoloc.accuracy.DaskMapper`
+    on a cluster); the statistics are identical wherever the chunks run.
     """
     if n < 2:
         raise ValueError(f"Monte Carlo needs n >= 2 samples, got {n}")
@@ -275,14 +276,9 @@ def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CH
                          f"({', '.join(Status(int(truth.status[i])).name for i in bad)}); check the pose and pixels")
     sizes = chunk_sizes(n, chunk)
     seeds = np.random.SeedSequence(seed).spawn(len(sizes))
-    if chunk_runner is None:
-        parts = []
-        for s, size in zip(seeds, sizes, strict=True):
-            parts.append(run_chunk(scn, s, size, truth))
-            if progress is not None:
-                progress(size)
-    else:
-        parts = chunk_runner(scn, seeds, sizes, truth)
+    done = None if progress is None else (lambda i: progress(sizes[i]))
+    parts = (mapper or local_map)(run_chunk, [(scn, s, size, truth) for s, size in zip(seeds, sizes, strict=True)],
+                                  done)
     enu = np.concatenate([q[0] for q in parts])
     dllh = np.concatenate([q[1] for q in parts])
     status = np.concatenate([q[2] for q in parts])
@@ -318,11 +314,12 @@ class Sensitivity:
 
 
 def sensitivity(scn: Scenario, n: int, *, seed: int = 0, target: int = 0, chunk: int = DEFAULT_CHUNK,
-                progress: Callable[[int], None] | None = None) -> list[Sensitivity]:
+                progress: Callable[[int], None] | None = None, mapper: Mapper | None = None) -> list[Sensitivity]:
     """Each error source of the budget alone: its sensitivity coefficients for target ``target``."""
     rows = []
     for src in scn.budget:
-        r = monte_carlo(scn.with_budget(scn.budget.only(src.name)), n, seed=seed, chunk=chunk, progress=progress)
+        r = monte_carlo(scn.with_budget(scn.budget.only(src.name)), n, seed=seed, chunk=chunk, progress=progress,
+                        mapper=mapper)
         st = r.stats[target]
         s_in = src.sigma
         k = 1.0 / s_in if s_in > 0 else float("nan")

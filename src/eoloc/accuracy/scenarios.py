@@ -57,24 +57,29 @@ def q_ellipsoid() -> Scenario:
                     description=q_ellipsoid.__doc__)
 
 
-def q_terrain(seed: int = 62) -> DEM:
-    """A synthetic DEM around [Q]'s target: smooth random relief with mean 5 083 m and sigma 62.47 m
-    (Gaussian-filtered noise, 3" posts, correlation length ~1 km), seeded."""
+def relief_dem(lat_deg: float, lon_deg: float, mean_m: float, sigma_m: float, *, seed: int = 62,
+               half_deg: float = 0.25, step_deg: float = 3.0 / 3600.0, correlation_posts: float = 12.0) -> DEM:
+    """A synthetic DEM centred on (lat_deg, lon_deg): smooth random relief (Gaussian-filtered white
+    noise, correlation ~``correlation_posts`` posts, ~1 km at 3") rescaled to exactly ``mean_m``
+    and ``sigma_m`` (ellipsoidal m) over the grid. The same seed gives the same shape for every
+    sigma, so sweeps over the relief compare like with like."""
     from scipy.ndimage import gaussian_filter
 
-    scn = q_ellipsoid()
+    n = round(2 * half_deg / step_deg) + 1
+    rng = np.random.default_rng(seed)
+    z = gaussian_filter(rng.normal(size=(n, n)), sigma=correlation_posts, mode="wrap")
+    z = mean_m + (z - z.mean()) / z.std() * sigma_m
+    return DEM.from_array(z[::-1], lat0=lat_deg + half_deg, lon0=lon_deg - half_deg, dlat=-step_deg, dlon=step_deg,
+                          source=f"synthetic relief mean {mean_m:g} m sigma {sigma_m:g} m, seed {seed}")
+
+
+def q_terrain(seed: int = 62) -> DEM:
+    """A synthetic DEM around [Q]'s target: relief with mean 5 083 m and sigma 62.47 m (3" posts,
+    correlation length ~1 km), seeded (:func:`relief_dem`)."""
     from .montecarlo import truth_fixes
 
-    t = truth_fixes(scn)
-    lat0, lon0 = float(t.lat_deg[0]), float(t.lon_deg[0])
-    step = 3.0 / 3600.0
-    half = 0.25
-    n = round(2 * half / step) + 1
-    rng = np.random.default_rng(seed)
-    z = gaussian_filter(rng.normal(size=(n, n)), sigma=12.0, mode="wrap")
-    z = Q_TERRAIN_MEAN_M + (z - z.mean()) / z.std() * Q_TERRAIN_SIGMA_M
-    return DEM.from_array(z[::-1], lat0=lat0 + half, lon0=lon0 - half, dlat=-step, dlon=step,
-                          source=f"synthetic relief sigma {Q_TERRAIN_SIGMA_M} m, seed {seed}")
+    t = truth_fixes(q_ellipsoid())
+    return relief_dem(float(t.lat_deg[0]), float(t.lon_deg[0]), Q_TERRAIN_MEAN_M, Q_TERRAIN_SIGMA_M, seed=seed)
 
 
 def q_dem(seed: int = 62) -> Scenario:

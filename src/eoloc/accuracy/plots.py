@@ -1,0 +1,107 @@
+"""Pictures of an accuracy analysis (matplotlib, written straight to PNG; no GUI backend needed).
+
+- :func:`plot_scatter`: the east/north error cloud of one target with its CEP circles around the
+  true point (empirical and bivariate-normal), the mean (systematic part) and the 2-sigma ellipse
+  about it (random part) - [Z15] Fig. 7.
+- :func:`plot_sweep`: CEP against the gimbal angle, one curve per relief sigma, ellipsoid vs DEM
+  side by side - [Q] Fig. 10.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .cep import error_ellipse
+from .montecarlo import MonteCarloResult
+from .sweep import SweepPoint
+
+
+def _figure(width: float, height: float):
+    from matplotlib.figure import Figure  # a bare Figure: no pyplot state, no display needed
+
+    return Figure(figsize=(width, height), dpi=110, layout="constrained")
+
+
+def _circle(ax, r: float, centre=(0.0, 0.0), **kw) -> None:
+    t = np.linspace(0.0, 2.0 * np.pi, 361)
+    ax.plot(centre[0] + r * np.cos(t), centre[1] + r * np.sin(t), **kw)
+
+
+def _ellipse(ax, cov: np.ndarray, centre, p: float, **kw) -> None:
+    a, b, az = error_ellipse(cov, p)
+    t = np.linspace(0.0, 2.0 * np.pi, 361)
+    th = np.radians(az)  # azimuth from north, clockwise: major axis direction (east, north) = (sin, cos)
+    major, minor = np.array([np.sin(th), np.cos(th)]), np.array([np.cos(th), -np.sin(th)])
+    pts = centre[:, None] + a * np.cos(t) * major[:, None] + b * np.sin(t) * minor[:, None]
+    ax.plot(pts[0], pts[1], **kw)
+
+
+def plot_scatter(result: MonteCarloResult, path: str | Path, *, target: int = 0, max_points: int = 20_000) -> Path:
+    """PNG of target ``target``'s horizontal errors (needs ``monte_carlo(..., keep_samples=True)``)."""
+    if result.enu is None:
+        raise ValueError("the scatter plot needs the samples: run monte_carlo(..., keep_samples=True)")
+    st = result.stats[target]
+    e = result.enu[:, target, 0]
+    n = result.enu[:, target, 1]
+    ok = np.isfinite(e) & np.isfinite(n)
+    e, n = e[ok], n[ok]
+    step = max(1, e.size // max_points)
+    fig = _figure(6.4, 6.0)
+    ax = fig.add_subplot()
+    ax.scatter(e[::step], n[::step], s=3, alpha=0.35, color="tab:blue", linewidths=0,
+               label=f"{e[::step].size:,} of {e.size:,} samples")
+    ax.plot([0], [0], marker="+", color="black", markersize=14, mew=2, ls="none", label="true point")
+    mean = np.array(st.bias_enu[:2])
+    ax.plot(*mean, marker="x", color="tab:red", markersize=10, mew=2, ls="none",
+            label=f"mean (systematic) {np.hypot(*mean):.3g} m")
+    _circle(ax, st.cep50, color="tab:green", lw=2, label=f"CEP50 empirical {st.cep50:.3g} m")
+    _circle(ax, st.cep50_parametric, color="tab:orange", lw=1.5, ls="--",
+            label=f"CEP50 bivariate normal {st.cep50_parametric:.3g} m")
+    _circle(ax, st.ce90, color="tab:purple", lw=1, ls=":", label=f"CE90 {st.ce90:.3g} m")
+    _ellipse(ax, np.cov(e, n), mean, 0.95, color="tab:red", lw=1,
+             label=f"95 % ellipse (random: σe {st.sigma_enu[0]:.3g}, σn {st.sigma_enu[1]:.3g} m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("east error (m)")
+    ax.set_ylabel("north error (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
+    ax.set_title(f"{result.scenario.name}, target {target}: {result.n:,} samples, seed {result.seed}", fontsize=10)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def plot_sweep(points: Sequence[SweepPoint], path: str | Path, *, metric: str = "cep50_m", title: str = "") -> Path:
+    """PNG of ``metric`` (a SweepPoint field, default the empirical CEP50) against the angle: one
+    panel per method, one curve per relief sigma, a common logarithmic axis."""
+    methods = [m for m in ("ellipsoid", "dem") if any(p.method == m for p in points)]
+    sigmas = sorted({p.terrain_sigma_m for p in points})
+    fig = _figure(5.0 * len(methods) + 1.0, 4.6)
+    axes = fig.subplots(1, len(methods), sharey=True, squeeze=False)[0]
+    from matplotlib import colormaps
+
+    cmap = colormaps["viridis"]
+    label = {"cep50_m": "CEP50 (m)", "drms_m": "DRMS (m)", "ce90_m": "CE90 (m)", "sigma_h_m": "σ h (m)"}.get(metric,
+                                                                                                          metric)
+    for ax, m in zip(axes, methods, strict=True):
+        for i, s in enumerate(sigmas):
+            pts = sorted((p for p in points if p.method == m and p.terrain_sigma_m == s), key=lambda p: p.angle_deg)
+            ax.plot([p.angle_deg for p in pts], [getattr(p, metric) for p in pts], marker="o", ms=3,
+                    color=cmap(i / max(1, len(sigmas) - 1)), label=f"relief σ {s:g} m")
+        ax.set_yscale("log")
+        ax.set_xlabel("gimbal angle (deg)")
+        ax.set_title({"ellipsoid": "ellipsoid at the mean height (relief as error)",
+                      "dem": "DEM (M4 on the relief)"}[m], fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    axes[0].set_ylabel(label)
+    axes[-1].legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
