@@ -22,7 +22,7 @@ from ..result import Fixes, Status
 from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
-from .cep import cep_bivariate, cep_empirical, drms, error_ellipse
+from .cep import cep_bivariate, drms, error_ellipse
 from .runners import Mapper, local_map
 
 DEFAULT_CHUNK = 200_000
@@ -116,19 +116,22 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, stop: str, stop_value, d:
                      pose.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
     mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), lead)
     bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), lead)
+    terrain = z("terrain_m")
     frame = sensor.camera_frame(perturbed, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
                                 gimbal_skew_deg=z("gimbal_skew_deg"))
     xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
                                                principal_point_error_px=(z("cx_px"), z("cy_px")))
     rays = sensor.rays_from(frame, xn, yn)
-    terrain = z("terrain_m")
     if stop == "range":
-        return stop_at_range(rays, stop_value + z("range_m"), sensor=sensor)
-    if stop == "height":
-        return stop_at_ellipsoid(rays, stop_value + terrain, sensor=sensor)
-    if stop == "dem":
-        return _stop_on_shifted_dem(rays, stop_value, terrain, sensor)
-    raise ValueError(f"stop must be 'range', 'height' or 'dem', got {stop!r}")
+        f = stop_at_range(rays, stop_value + z("range_m"), sensor=sensor)
+    elif stop == "height":
+        f = stop_at_ellipsoid(rays, stop_value + terrain, sensor=sensor)
+    elif stop == "dem":
+        f = _stop_on_shifted_dem(rays, stop_value, terrain, sensor)
+    else:
+        raise ValueError(f"stop must be 'range', 'height' or 'dem', got {stop!r}")
+    shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies
+    return Fixes(*(np.broadcast_to(x, shape) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
 
 
 def _stop_on_shifted_dem(rays: Rays, dem: DEM, shift, sensor: SensorModel) -> Fixes:
@@ -197,26 +200,81 @@ class TargetStats:
     ellipse: tuple[float, float, float]
 
     @classmethod
-    def from_samples(cls, truth, enu: np.ndarray, dlat: np.ndarray, dlon: np.ndarray, dh: np.ndarray,
-                     n_failed: int) -> TargetStats:
-        e, n_, u = enu[:, 0], enu[:, 1], enu[:, 2]
-        if e.size < 2:
+    def from_summary(cls, truth, s: ChunkSummary, k: int) -> TargetStats:
+        """Statistics of target k from a (combined) chunk summary."""
+        count = int(s.count[k])
+        n_failed = int(s.n - count)
+        if count < 2:
             nan = float("nan")
-            return cls(int(e.size), n_failed, truth, (nan,) * 3, (nan,) * 3, nan, nan, nan, nan, nan, nan, nan,
+            return cls(count, n_failed, truth, (nan,) * 3, (nan,) * 3, nan, nan, nan, nan, nan, nan, nan,
                        nan, nan, (nan,) * 3)
-        bias = tuple(float(x) for x in enu.mean(axis=0))
-        sig = tuple(float(x) for x in enu.std(axis=0, ddof=1))
-        cov = np.cov(e, n_)
-        rho = float(cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1])) if cov[0, 0] > 0 and cov[1, 1] > 0 else 0.0
+        mean = s.mean[k]
+        cov = s.m2[k] / (count - 1)  # (e, n, u, dlat, dlon, dh), n - 1 in the denominators
+        sd = np.sqrt(np.maximum(np.diagonal(cov), 0.0))
+        bias = tuple(float(x) for x in mean[:3])
+        sig = tuple(float(x) for x in sd[:3])
+        rho = float(cov[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else 0.0
         rho = min(max(rho, -1.0), 1.0)  # one error source alone: perfectly correlated, up to rounding
+        radius = np.concatenate(s.radius[k])
         return cls(
-            n=int(e.size), n_failed=n_failed, truth=truth, bias_enu=bias, sigma_enu=sig, rho_en=rho,
-            sigma_lat_deg=float(np.std(dlat, ddof=1)), sigma_lon_deg=float(np.std(dlon, ddof=1)),
-            sigma_h_m=float(np.std(dh, ddof=1)),
-            cep50=cep_empirical(e, n_), cep50_parametric=cep_bivariate(bias[0], bias[1], sig[0], sig[1], rho),
-            ce90=cep_empirical(e, n_, 0.9), le90=float(np.quantile(np.abs(u), 0.9)), drms=drms(sig[0], sig[1]),
-            ellipse=error_ellipse(cov),
+            n=count, n_failed=n_failed, truth=truth, bias_enu=bias, sigma_enu=sig, rho_en=rho,
+            sigma_lat_deg=float(sd[3]), sigma_lon_deg=float(sd[4]), sigma_h_m=float(sd[5]),
+            cep50=float(np.quantile(radius, 0.5)),
+            cep50_parametric=cep_bivariate(bias[0], bias[1], sig[0], sig[1], rho),
+            ce90=float(np.quantile(radius, 0.9)), le90=float(np.quantile(np.concatenate(s.abs_up[k]), 0.9)),
+            drms=drms(sig[0], sig[1]), ellipse=error_ellipse(cov[:2, :2]),
         )
+
+
+@dataclass
+class ChunkSummary:
+    """What a chunk of samples contributes to the statistics, per target k (mergeable exactly in
+    chunk order, so a run gives the same figures wherever its chunks were computed; and only
+    16 bytes per sample travel from a worker instead of the samples).
+
+    n: samples; count[k]: located ones; mean[k] / m2[k]: mean and co-moment matrix (sum of
+    outer products of deviations) of (east, north, up m, dlat, dlon deg, dh m); radius[k] /
+    abs_up[k]: lists of arrays of the horizontal radius and |up| (for the quantiles).
+    """
+
+    n: int
+    count: np.ndarray
+    mean: np.ndarray
+    m2: np.ndarray
+    radius: list[list[np.ndarray]]
+    abs_up: list[list[np.ndarray]]
+
+    @classmethod
+    def of(cls, enu: np.ndarray, dllh: np.ndarray, status: np.ndarray) -> ChunkSummary:
+        """From samples enu / dllh (n, K, 3) and status (n, K)."""
+        n, K = status.shape
+        count = np.zeros(K, dtype=np.int64)
+        mean = np.zeros((K, 6))
+        m2 = np.zeros((K, 6, 6))
+        radius, abs_up = [], []
+        for k in range(K):
+            ok = status[:, k] == Status.OK
+            x = np.concatenate([enu[ok, k], dllh[ok, k]], axis=1)
+            count[k] = x.shape[0]
+            if count[k]:
+                mean[k] = x.mean(axis=0)
+                dev = x - mean[k]
+                m2[k] = dev.T @ dev
+            radius.append([np.hypot(x[:, 0], x[:, 1])])
+            abs_up.append([np.abs(x[:, 2])])
+        return cls(n, count, mean, m2, radius, abs_up)
+
+    def merge(self, other: ChunkSummary) -> ChunkSummary:
+        """Pairwise combination (Chan, Golub & LeVeque): exact up to rounding, no cancellation."""
+        count = self.count + other.count
+        with np.errstate(invalid="ignore", divide="ignore"):
+            wb = np.where(count > 0, other.count / count, 0.0)
+        delta = other.mean - self.mean
+        mean = self.mean + delta * wb[:, None]
+        m2 = self.m2 + other.m2 + np.einsum("ki,kj->kij", delta, delta) * (self.count * wb)[:, None, None]
+        return ChunkSummary(self.n + other.n, count, mean, m2,
+                            [a + b for a, b in zip(self.radius, other.radius, strict=True)],
+                            [a + b for a, b in zip(self.abs_up, other.abs_up, strict=True)])
 
 
 @dataclass
@@ -244,8 +302,9 @@ def chunk_sizes(n: int, chunk: int) -> list[int]:
     return [min(chunk, n - i) for i in range(0, n, chunk)]
 
 
-def run_chunk(scn: Scenario, seed_seq: np.random.SeedSequence, size: int, truth: Fixes):
-    """Draw and locate one chunk -> (enu (size, K, 3), dllh (size, K, 3), status (size, K))."""
+def run_chunk(scn: Scenario, seed_seq: np.random.SeedSequence, size: int, truth: Fixes, keep_samples: bool = False):
+    """Draw and locate one chunk -> (ChunkSummary, samples): samples = (enu (size, K, 3) m,
+    dllh (size, K, 3) deg/deg/m, status (size, K)) when ``keep_samples``, else None."""
     rng = np.random.default_rng(seed_seq)
     d = scn.budget.draw(rng, size)
     f = perturbed_fixes(scn, d, size)
@@ -257,7 +316,8 @@ def run_chunk(scn: Scenario, seed_seq: np.random.SeedSequence, size: int, truth:
                                         ell=scn.sensor.ellipsoid)
     dlon = (lon - truth.lon_deg + 180.0) % 360.0 - 180.0
     dllh = np.stack([lat - truth.lat_deg, dlon, h - truth.h_m], -1)
-    return enu, dllh, np.broadcast_to(f.status, (size, scn.n_targets))
+    status = np.broadcast_to(f.status, (size, scn.n_targets))
+    return ChunkSummary.of(enu, dllh, status), ((enu, dllh, np.array(status)) if keep_samples else None)
 
 
 def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CHUNK, keep_samples: bool = False,
@@ -265,7 +325,9 @@ def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CH
     """Monte Carlo of ``n`` samples of the scenario; ``progress(k)`` is called after each chunk of k.
 
     ``mapper`` computes the chunks (default: here, in order; :class:`eoloc.accuracy.DaskMapper`
-    on a cluster); the statistics are identical wherever the chunks run.
+    on a cluster); the statistics are identical wherever the chunks run: chunk i draws from the
+    i-th child of ``SeedSequence(seed)`` and the chunk summaries are merged in chunk order.
+    ``keep_samples`` also returns every sample (memory: 56 bytes per sample and target).
     """
     if n < 2:
         raise ValueError(f"Monte Carlo needs n >= 2 samples, got {n}")
@@ -277,19 +339,17 @@ def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CH
     sizes = chunk_sizes(n, chunk)
     seeds = np.random.SeedSequence(seed).spawn(len(sizes))
     done = None if progress is None else (lambda i: progress(sizes[i]))
-    parts = (mapper or local_map)(run_chunk, [(scn, s, size, truth) for s, size in zip(seeds, sizes, strict=True)],
-                                  done)
-    enu = np.concatenate([q[0] for q in parts])
-    dllh = np.concatenate([q[1] for q in parts])
-    status = np.concatenate([q[2] for q in parts])
-    stats = []
-    for k in range(scn.n_targets):
-        ok = status[:, k] == Status.OK
-        t = (float(truth.lat_deg[k]), float(truth.lon_deg[k]), float(truth.h_m[k]))
-        stats.append(TargetStats.from_samples(t, enu[ok, k], dllh[ok, k, 0], dllh[ok, k, 1], dllh[ok, k, 2],
-                                              int((~ok).sum())))
+    parts = (mapper or local_map)(run_chunk, [(scn, s, size, truth, keep_samples)
+                                              for s, size in zip(seeds, sizes, strict=True)], done)
+    total = parts[0][0]
+    for summary, _ in parts[1:]:
+        total = total.merge(summary)
+    stats = [TargetStats.from_summary((float(truth.lat_deg[k]), float(truth.lon_deg[k]), float(truth.h_m[k])),
+                                      total, k) for k in range(scn.n_targets)]
     if keep_samples:
-        return MonteCarloResult(scn, n, seed, stats, enu, dllh, status)
+        enu, dllh, status = (np.concatenate([q[1][i] for q in parts]) for i in range(3))
+        ok = (status == Status.OK)[..., None]
+        return MonteCarloResult(scn, n, seed, stats, np.where(ok, enu, np.nan), np.where(ok, dllh, np.nan), status)
     return MonteCarloResult(scn, n, seed, stats)
 
 
