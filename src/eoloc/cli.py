@@ -66,6 +66,10 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--
   (heights taken as EGM96 and converted with the bundled geoid unless --vertical says otherwise).
   Writes fixes.csv and fixes.geojson into --out. Bad lines are reported (file:line) and skipped;
   every good record is kept.
+  --interpolate: each detection's pose is interpolated to its time_s (position by a spline in
+  ECEF, attitude by slerp, gimbal angles unwrapped) instead of the nearest record; --time-offset
+  S is the telemetry clock minus the video clock; detections in a gap longer than --max-gap are
+  reported and get NO_TELEMETRY, never a bridged pose.
   --covariance adds each fix's first-order uncertainty from the config's [accuracy.budget]:
   sigma east/north/up, CEP50/CE90, LE90, the error ellipse, and a nonlinearity figure (> 0.1:
   the linearisation does not hold there, e.g. a ray grazing a ridge; use eoloc accuracy).
@@ -112,9 +116,14 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
 @click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
 @click.option("--covariance", is_flag=True,
               help="Add each fix's first-order uncertainty from the config's [accuracy.budget].")
+@click.option("--interpolate", is_flag=True, help="File mode: interpolate the pose to each detection's time.")
+@click.option("--max-gap", type=float, default=0.5, show_default=True,
+              help="With --interpolate: longest telemetry gap (s) to interpolate across.")
+@click.option("--time-offset", type=float, default=0.0, show_default=True,
+              help="With --interpolate: telemetry clock minus video clock (s).")
 def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
            gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance, dem_paths, vertical, geoid,
-           dem_crs, covariance) -> None:
+           dem_crs, covariance, interpolate, max_gap, time_offset) -> None:
     budget = None
     if covariance:
         if config_path is None:
@@ -135,7 +144,10 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
     if target_height is not None and height is not None:
         _fail("in file mode --height and --target-height mean the same; give one")
     stop_height = target_height if target_height is not None else height
-    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget)
+    if interpolate and detections is None:
+        _fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
+    _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget,
+                  dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset))
 
 
 def _open_dem(paths, vertical, geoid, dem_crs):
@@ -250,7 +262,7 @@ def _cell(key: str, v) -> str:
 
 
 def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance,
-                  dem=None, budget=None) -> None:
+                  dem=None, budget=None, interp=None) -> None:
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
     rng, stop_h = _stop_rule(range_opt, stop_height, dem)
@@ -265,8 +277,11 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
         _report_issues(issues)
         _fail(f"telemetry file {telemetry!r} has no usable record")
     with err_console.status("locating..."):
-        located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, dem=dem,
-                                time_tolerance_s=time_tolerance, budget=budget)
+        try:
+            located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, dem=dem,
+                                    time_tolerance_s=time_tolerance, budget=budget, **(interp or {}))
+        except ValueError as exc:
+            _fail(str(exc))
     issues += located.issues
     _report_issues(issues)
     after = None

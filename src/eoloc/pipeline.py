@@ -16,6 +16,7 @@ from .io.telemetry import match_detections, telemetry_pose
 from .locate import locate_dem, locate_ellipsoid, locate_range
 from .result import Fixes, Status, with_status
 from .sensor import SensorModel
+from .sequence.interp import interpolate_poses
 
 RANGE_FROM_FILES = "files"
 
@@ -32,7 +33,8 @@ class Located:
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
                   range_m: float | str | None = None, height_m: float | None = None, dem=None,
-                  time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None) -> Located:
+                  time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None, interpolate: bool = False,
+                  max_gap_s: float = 0.5, time_offset_s: float = 0.0) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
     Stop rule (exactly one): ``height_m`` (M3, ellipsoidal metres), ``dem`` (M4, a
@@ -40,6 +42,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     detection's ``range_m`` column (without detections: the telemetry's boresight range). A
     telemetry range is never applied along another pixel's ray. With an error ``budget`` every
     fix also gets its first-order covariance (:func:`eoloc.accuracy.locate_with_covariance`).
+    ``interpolate``: each detection's pose is interpolated to its time (+ ``time_offset_s``,
+    telemetry minus video clock) instead of taken from the nearest record; detections in a gap
+    longer than ``max_gap_s`` or outside the telemetry get NO_TELEMETRY and an issue.
     """
     if sum(x is not None for x in (range_m, height_m, dem)) != 1:
         raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
@@ -54,16 +59,20 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
         file_range = tel.columns["range_m"]
         range_source = (tel.path, tel.line)
     else:
-        matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
-        issues += matched.issues
-        record = matched.record
+        if interpolate:
+            record, pose, more = _interpolated(tel, det, max_gap_s, time_offset_s)
+        else:
+            matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
+            record, more = matched.record, matched.issues
+        issues += more
         u, v = det.columns["u_px"], det.columns["v_px"]
         extra = {"line": det.line, "time_s": det.columns["time_s"], "frame": det.columns["frame"],
                  "target_id": det.columns["target_id"], "u_px": u, "v_px": v}
         file_range = det.columns["range_m"]
         range_source = (det.path, det.line)
     has_pose = record >= 0
-    pose = telemetry_pose(tel, np.where(has_pose, record, 0))
+    if not (interpolate and det is not None):
+        pose = telemetry_pose(tel, np.where(has_pose, record, 0))
     if dem is not None:
         stop = {"dem": dem}
     elif height_m is not None:
@@ -88,3 +97,28 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
     return Located(fixes, extra, issues, cov)
+
+
+def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float):
+    """(record index of the telemetry record before each detection or -1, interpolated poses, issues)."""
+    tt, td = tel.columns["time_s"], det.columns["time_s"]
+    if not (np.isfinite(tt).any() and np.isfinite(td).any()):
+        raise ValueError("pose interpolation needs time_s in both the telemetry and the detections "
+                         "(frame numbers alone give no time to interpolate at)")
+    ip = interpolate_poses(tt, telemetry_pose(tel), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
+    good = np.flatnonzero(np.isfinite(tt))
+    order = good[np.argsort(tt[good], kind="stable")]
+    q = td + time_offset_s
+    before = order[np.clip(np.searchsorted(tt[order], q, side="right") - 1, 0, order.size - 1)]
+    record = np.where(ip.ok, before, -1)
+    issues = []
+    t0, t1 = float(tt[order[0]]), float(tt[order[-1]])
+    for j in np.flatnonzero(~ip.ok):
+        if ip.reason[j] == ip.IN_GAP:
+            g = next(g for g in ip.gaps if g.t_before <= q[j] <= g.t_after)
+            msg = (f"time {td[j]:g} s falls in a {g.length_s:.3g} s telemetry gap between lines "
+                   f"{int(tel.line[g.before])} and {int(tel.line[g.after])} (longer than --max-gap {max_gap_s:g} s)")
+        else:
+            msg = f"time {td[j]:g} s is outside the telemetry ({t0:g} to {t1:g} s, offset {time_offset_s:g} s)"
+        issues.append(Issue(det.path, int(det.line[j]), msg))
+    return record, ip.pose, issues
