@@ -134,15 +134,18 @@ def test_linearisation_breaks_on_a_grazed_ridge_and_says_so():
 
 @settings(max_examples=60, deadline=None)
 @given(st.floats(0.1, 100.0), st.floats(0.1, 100.0), st.floats(-0.99, 0.99))
-def test_vectorised_ellipse_and_cep_match_the_scalar_exact_ones(sx, sy, rho):
+def test_vectorised_ellipse_and_cep_match_eigh_and_the_exact_cep(sx, sy, rho):
     cov2 = np.array([[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]])
     full = np.zeros((3, 3))
     full[:2, :2] = cov2
     from eoloc.accuracy.covariance import FixCovariance
 
     c = FixCovariance(full[None], np.zeros((1, 3, 0)), (), np.zeros(0), np.zeros(1), np.zeros(1), np.zeros(1))
-    a, b, az = error_ellipse(cov2)
+    lam, vec = np.linalg.eigh(cov2)  # independent reference: numpy's eigen-decomposition
+    a, b = np.sqrt(lam[1]), np.sqrt(lam[0])
+    az = np.degrees(np.arctan2(vec[0, 1], vec[1, 1])) % 180.0
     e = c.ellipse()[0]
+    assert error_ellipse(cov2) == pytest.approx(tuple(e), rel=1e-12, abs=1e-12)
     np.testing.assert_allclose(e[:2], [a, b], rtol=1e-9, atol=1e-12)
     if a - b > 1e-6 * a:  # the azimuth of a circle is arbitrary
         assert min(abs(e[2] - az), 180 - abs(e[2] - az)) < 1e-6

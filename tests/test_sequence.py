@@ -67,6 +67,7 @@ def test_gap_outside_and_time_offset():
     assert r.gaps[0].length_s == pytest.approx(2.1)
     assert r.ok.tolist() == [True, False, True, False, False]
     assert r.reason.tolist() == [0, r.IN_GAP, 0, r.OUTSIDE, r.OUTSIDE]
+    assert r.record.tolist() == [10, -1, 30, -1, -1] and r.span_s == (0.0, pytest.approx(5.9))
     assert np.isnan(r.pose.lat_deg[1]) and np.isnan(r.pose.yaw_deg[3])
     shifted = interpolate_poses(t, pose, [1.05], time_offset_s=0.3)  # telemetry clock = video + 0.3 s
     assert shifted.pose.yaw_deg[0] == pytest.approx(13.5, abs=1e-6)

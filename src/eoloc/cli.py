@@ -19,7 +19,7 @@ from .io.config import ConfigError, load_config
 from .io.export import fix_rows, plain_value, write_csv, write_geojson
 from .io.table import TableError
 from .io.telemetry import read_detections, read_telemetry
-from .pipeline import RANGE_FROM_FILES, locate_tables
+from .pipeline import RANGE_FROM_FILES, locate_by_rule, locate_tables
 from .result import Status
 from .sensor import Camera, Pose, SensorModel, gimbal_from_name
 
@@ -202,21 +202,11 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
             _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
                   f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
         angles = (*gimbal_angles, sensor_roll)
-    from .accuracy.covariance import covariance_columns, locate_with_covariance
-    from .locate import locate_dem, locate_ellipsoid, locate_range
+    from .accuracy.covariance import covariance_columns
 
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
     pixels = None if pixel is None else (pixel[0], pixel[1])
-    stop = {"dem": dem} if dem is not None else {"range_m": rng} if rng is not None else {"height_m": stop_h}
-    cov = None
-    if budget is not None:
-        f, cov = locate_with_covariance(sensor, pose, budget, pixels, **stop)
-    elif dem is not None:
-        f = locate_dem(sensor, pose, dem, pixels)
-    elif rng is not None:
-        f = locate_range(sensor, pose, rng, pixels)
-    else:
-        f = locate_ellipsoid(sensor, pose, stop_h, pixels)
+    f, cov = locate_by_rule(sensor, pose, pixels, range_m=rng, height_m=stop_h, dem=dem, budget=budget)
     status = Status(int(f.status))
     out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
            "status": status.name}

@@ -10,12 +10,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accuracy.budget import ErrorBudget
-from .accuracy.covariance import FixCovariance, locate_with_covariance
+from .accuracy.covariance import FixCovariance, locate_with_covariance, stop_rule
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
 from .locate import locate_dem, locate_ellipsoid, locate_range
 from .result import Fixes, Status, with_status
-from .sensor import SensorModel
+from .sensor import Pose, SensorModel
 from .sequence.interp import interpolate_poses
 
 RANGE_FROM_FILES = "files"
@@ -46,8 +46,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     telemetry minus video clock) instead of taken from the nearest record; detections in a gap
     longer than ``max_gap_s`` or outside the telemetry get NO_TELEMETRY and an issue.
     """
-    if sum(x is not None for x in (range_m, height_m, dem)) != 1:
-        raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
+    stop_rule(range_m, height_m, dem)
     issues: list[Issue] = []
     cx, cy = sensor.camera.centre_px
     if det is None:
@@ -73,46 +72,41 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     has_pose = record >= 0
     if not (interpolate and det is not None):
         pose = telemetry_pose(tel, np.where(has_pose, record, 0))
-    if dem is not None:
-        stop = {"dem": dem}
-    elif height_m is not None:
-        stop = {"height_m": height_m}
-    else:
-        rng = np.asarray(file_range if range_m == RANGE_FROM_FILES else np.full(u.shape, float(range_m)))
-        if range_m == RANGE_FROM_FILES:
+    if range_m is not None:
+        from_files = range_m == RANGE_FROM_FILES
+        range_m = np.asarray(file_range) if from_files else np.full(u.shape, float(range_m))
+        if from_files:
             path, lines = range_source
-            for j in np.flatnonzero(~np.isfinite(rng) & has_pose):
+            for j in np.flatnonzero(~np.isfinite(range_m) & has_pose):
                 issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
                                                          "a constant --range R, or use --height H"))
-        stop = {"range_m": rng}
-    cov = None
-    if budget is not None:
-        fixes, cov = locate_with_covariance(sensor, pose, budget, (u, v), **stop)
-    elif dem is not None:
-        fixes = locate_dem(sensor, pose, dem, (u, v))
-    elif height_m is not None:
-        fixes = locate_ellipsoid(sensor, pose, height_m, (u, v))
-    else:
-        fixes = locate_range(sensor, pose, stop["range_m"], (u, v))
+    fixes, cov = locate_by_rule(sensor, pose, (u, v), range_m=range_m, height_m=height_m, dem=dem, budget=budget)
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
     return Located(fixes, extra, issues, cov)
 
 
+def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, *, range_m=None, height_m=None, dem=None,
+                   budget: ErrorBudget | None = None) -> tuple[Fixes, FixCovariance | None]:
+    """Fixes by the one stop rule given (M1 range_m, M3 height_m, M4 dem) and, with an error
+    ``budget``, their first-order covariance (else None)."""
+    if budget is not None:
+        return locate_with_covariance(sensor, pose, budget, pixels, range_m=range_m, height_m=height_m, dem=dem)
+    stop, value = stop_rule(range_m, height_m, dem)
+    fn = {"range": locate_range, "height": locate_ellipsoid, "dem": locate_dem}[stop]
+    return fn(sensor, pose, value, pixels), None
+
+
 def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float):
-    """(record index of the telemetry record before each detection or -1, interpolated poses, issues)."""
+    """(index of the telemetry record at or before each detection or -1, interpolated poses, issues)."""
     tt, td = tel.columns["time_s"], det.columns["time_s"]
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
         raise ValueError("pose interpolation needs time_s in both the telemetry and the detections "
                          "(frame numbers alone give no time to interpolate at)")
     ip = interpolate_poses(tt, telemetry_pose(tel), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
-    good = np.flatnonzero(np.isfinite(tt))
-    order = good[np.argsort(tt[good], kind="stable")]
     q = td + time_offset_s
-    before = order[np.clip(np.searchsorted(tt[order], q, side="right") - 1, 0, order.size - 1)]
-    record = np.where(ip.ok, before, -1)
     issues = []
-    t0, t1 = float(tt[order[0]]), float(tt[order[-1]])
+    t0, t1 = ip.span_s
     for j in np.flatnonzero(~ip.ok):
         if ip.reason[j] == ip.IN_GAP:
             g = next(g for g in ip.gaps if g.t_before <= q[j] <= g.t_after)
@@ -121,4 +115,4 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
         else:
             msg = f"time {td[j]:g} s is outside the telemetry ({t0:g} to {t1:g} s, offset {time_offset_s:g} s)"
         issues.append(Issue(det.path, int(det.line[j]), msg))
-    return record, ip.pose, issues
+    return ip.record, ip.pose, issues

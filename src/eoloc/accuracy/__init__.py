@@ -3,7 +3,7 @@ first-order covariance of every fix."""
 
 from . import scenarios
 from .budget import SOURCES, ErrorBudget, ErrorSource
-from .cep import cep_bivariate, cep_empirical, cep_zero_mean, drms, error_ellipse, prob_within
+from .cep import cep_bivariate, cep_empirical, cep_zero_mean, drms, error_ellipse, error_ellipses, prob_within
 from .covariance import FixCovariance, covariance_columns, locate_with_covariance
 from .montecarlo import MonteCarloResult, Scenario, Sensitivity, TargetStats, monte_carlo, sensitivity, truth_fixes
 from .runners import DaskMapper, dask_mapper, local_map
@@ -29,6 +29,7 @@ __all__ = [
     "dask_mapper",
     "drms",
     "error_ellipse",
+    "error_ellipses",
     "local_map",
     "locate_with_covariance",
     "monte_carlo",

@@ -81,16 +81,25 @@ def drms(sigma_x: float, sigma_y: float) -> float:
     return math.hypot(sigma_x, sigma_y)
 
 
-def error_ellipse(cov: ArrayLike, p: float | None = None) -> tuple[float, float, float]:
-    """(semi-major, semi-minor, azimuth of the major axis in degrees clockwise from north) of the
-    ellipse holding probability p of a 2-D normal with covariance ``cov`` [[ee, en], [en, nn]]
-    (default: the 1-sigma ellipse, p = 1 - e^-0.5 = 39.3 %)."""
+def error_ellipses(cov: ArrayLike, p: float | None = None) -> np.ndarray:
+    """(..., 3): semi-major, semi-minor and azimuth of the major axis (degrees clockwise from north,
+    in [0, 180)) of the ellipses holding probability p of 2-D normals with covariances ``cov``
+    (..., 2, 2) [[ee, en], [en, nn]] (default: the 1-sigma ellipse, p = 1 - e^-0.5 = 39.3 %).
+    Closed-form eigen-decomposition of the symmetric 2 x 2 matrices; NaN in, NaN out."""
     cov = np.asarray(cov, dtype=np.float64)
-    lam, vec = np.linalg.eigh(cov)
+    ee, nn, en = cov[..., 0, 0], cov[..., 1, 1], cov[..., 0, 1]
+    mid = 0.5 * (ee + nn)
+    rad = np.hypot(0.5 * (ee - nn), en)
     k = 1.0 if p is None else math.sqrt(stats.chi2.ppf(p, 2))
-    major = vec[:, 1]
-    return (k * math.sqrt(max(lam[1], 0.0)), k * math.sqrt(max(lam[0], 0.0)),
-            math.degrees(math.atan2(major[0], major[1])) % 180.0)
+    from_east = np.degrees(0.5 * np.arctan2(2.0 * en, ee - nn))  # direction of the major axis
+    return np.stack([k * np.sqrt(mid + rad), k * np.sqrt(np.maximum(mid - rad, 0.0)), (90.0 - from_east) % 180.0],
+                    -1)
+
+
+def error_ellipse(cov: ArrayLike, p: float | None = None) -> tuple[float, float, float]:
+    """One 2 x 2 covariance's ellipse as (semi-major, semi-minor, azimuth deg): see :func:`error_ellipses`."""
+    a, b, az = error_ellipses(cov, p)
+    return float(a), float(b), float(az)
 
 
 _RATIO_MIN = 0.05  # below it CEP(1, r) has an r^2 log r term that a spline does not follow; solved exactly

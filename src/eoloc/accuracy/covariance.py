@@ -29,7 +29,7 @@ from ..result import Fixes, Status
 from ..sensor.model import Pose, SensorModel, _split_pixels
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
-from .cep import cep_zero_mean
+from .cep import cep_zero_mean, error_ellipses
 from .montecarlo import _metres_per_degree, chain_fixes
 
 DEFAULT_REL_STEP = 1e-2
@@ -95,14 +95,7 @@ class FixCovariance:
     def ellipse(self, p: float | None = None) -> np.ndarray:
         """(*T, 3): semi-major, semi-minor (m) and azimuth of the major axis (deg from north) of the
         horizontal error ellipse holding probability p (default: 1 sigma)."""
-        from scipy import stats
-
-        ee, nn, en = self.cov_enu[..., 0, 0], self.cov_enu[..., 1, 1], self.cov_enu[..., 0, 1]
-        mid = 0.5 * (ee + nn)
-        rad = np.hypot(0.5 * (ee - nn), en)
-        k = 1.0 if p is None else np.sqrt(stats.chi2.ppf(p, 2))
-        az = np.degrees(0.5 * np.arctan2(2.0 * en, ee - nn))  # from east; major-axis direction
-        return np.stack([k * np.sqrt(mid + rad), k * np.sqrt(np.maximum(mid - rad, 0.0)), (90.0 - az) % 180.0], -1)
+        return error_ellipses(self.cov_enu[..., :2, :2], p)
 
     def cep(self, p: float = 0.5) -> np.ndarray:
         """(*T,) radius (m) around the fix holding probability p of the zero-mean horizontal normal:
@@ -122,14 +115,15 @@ class FixCovariance:
         return self.nonlinearity <= tol
 
 
-def _stop_rule(range_m, height_m, dem) -> tuple[str, object]:
+def stop_rule(range_m, height_m, dem) -> tuple[str, object]:
+    """The one stop rule given, as ("range" | "height" | "dem", its value); ValueError otherwise."""
     given = [(k, v) for k, v in (("range", range_m), ("height", height_m), ("dem", dem)) if v is not None]
     if len(given) != 1:
         raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
     stop, value = given[0]
     if stop == "dem" and not isinstance(value, DEM):
         raise TypeError(f"dem must be an eoloc.DEM (see eoloc.open_dem), got {type(value).__name__}")
-    return stop, (value if stop == "dem" else np.asarray(value, dtype=np.float64))
+    return stop, value
 
 
 def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget, pixels: ArrayLike | None = None, *,
@@ -141,7 +135,8 @@ def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget,
     velocity_ned_mps (m/s) is used by a ``time_s`` source. The fixes are those of
     :func:`eoloc.locate_range` / ``locate_ellipsoid`` / ``locate_dem`` for the same inputs.
     """
-    stop, value = _stop_rule(range_m, height_m, dem)
+    stop, value = stop_rule(range_m, height_m, dem)
+    value = value if stop == "dem" else np.asarray(value, dtype=np.float64)
     if not rel_step > 0:
         raise ValueError(f"rel_step must be > 0, got {rel_step!r}")
     u, v = _split_pixels(pixels, sensor.camera)
@@ -198,7 +193,7 @@ def covariance_columns(cov: FixCovariance, ok: ArrayLike | None = None) -> dict[
     s = cov.sigma_enu
     cols = {"sigma_e_m": s[..., 0], "sigma_n_m": s[..., 1], "sigma_u_m": s[..., 2], "rho_en": cov.rho_en,
             "cep50_m": cov.cep(0.5), "ce90_m": cov.cep(0.9), "le90_m": cov.le90, "ellipse_major_m": e[..., 0],
-            "ellipse_minor_m": e[..., 1], "ellipse_azimuth_deg": e[..., 2], "nonlinearity": cov.nonlinearity}
+            "ellipse_minor_m": e[..., 1], "ellipse_azimuth_deg": e[..., 2]}
     keep = np.isfinite(s[..., 0]) if ok is None else np.isfinite(s[..., 0]) & np.asarray(ok, dtype=bool)
     out = {k: np.ravel(np.where(keep, v, np.nan)) for k, v in cols.items()}
     out["nonlinearity"] = np.ravel(np.where(ok if ok is not None else True, cov.nonlinearity, np.nan))

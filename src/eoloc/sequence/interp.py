@@ -48,11 +48,14 @@ class Gap:
 @dataclass(frozen=True)
 class InterpolatedPoses:
     """Poses at the query times (NaN where ``ok`` is False), the reason per query (0 ok, 1 outside
-    the records, 2 in a gap), and the gaps found among the records."""
+    the records, 2 in a gap), the input index of the record at or before each query (-1 where
+    not ok), the time span of the usable records (s, telemetry clock), and the gaps among them."""
 
     pose: Pose
     ok: np.ndarray
     reason: np.ndarray
+    record: np.ndarray
+    span_s: tuple[float, float]
     gaps: list[Gap]
 
     OUTSIDE = 1
@@ -109,4 +112,5 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
     nan = np.float64("nan")
     out = [np.where(ok, x, nan) for x in (lat_q, lon_q, h_q, yaw_q, pitch_q, roll_q, *g_q)]
     reason = np.where(ok, 0, np.where(in_gap, InterpolatedPoses.IN_GAP, InterpolatedPoses.OUTSIDE)).astype(np.int8)
-    return InterpolatedPoses(Pose(*out[:6], tuple(out[6:])), ok, reason, gaps)
+    record = np.where(ok, order[seg], -1)
+    return InterpolatedPoses(Pose(*out[:6], tuple(out[6:])), ok, reason, record, (float(ts[0]), float(ts[-1])), gaps)
