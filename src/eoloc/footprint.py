@@ -19,7 +19,6 @@ one visible from the anchor's direction (documented limitation).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -200,10 +199,9 @@ def write_footprints_geojson(path: str | Path, prints: list[Footprint], properti
                       "centre_lat_deg": _none(fp.centre[0]), "centre_lon_deg": _none(fp.centre[1]),
                       "centre_h_m": _none(fp.centre[2])})
         features.append({"type": "Feature", "geometry": fp.geojson_geometry(), "properties": props})
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n", encoding="utf-8")
-    return path
+    from .io.export import write_feature_collection
+
+    return write_feature_collection(path, features)
 
 
 def _none(x: float) -> float | None:

@@ -71,8 +71,13 @@ def write_geojson(path: str | Path, rows: list[dict]) -> Path:
         ok = row.get("status") == "OK"
         geom = {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"], row["h_m"]]} if ok else None
         features.append({"type": "Feature", "geometry": geom, "properties": props})
+    return write_feature_collection(path, features, indent=1)
+
+
+def write_feature_collection(path: str | Path, features: list[dict], indent: int | None = None) -> Path:
+    """Write GeoJSON features as a FeatureCollection (creating the folder)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1) + "\n",
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=indent) + "\n",
                     encoding="utf-8")
     return path

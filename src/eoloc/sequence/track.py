@@ -1,0 +1,266 @@
+"""M7 - moving targets: constant-velocity Kalman tracks in a local ENU frame ([Z15] §4.5).
+
+State per track: x = (east, north, v_east, v_north) in metres and m/s, in the ENU frame at
+``origin``; the fix's height is carried along (ground targets move on the terrain). Motion: nearly
+constant velocity driven by white acceleration of spectral density ``accel_psd`` (m^2/s^3), the
+discretised Q of Bar-Shalom's "continuous white noise acceleration" model. Measurement: each fix's
+east/north with its covariance (the per-fix covariance of the error budget, else an isotropic
+``meas_sigma_m``). Update in Joseph form, P = (I - KH) P (I - KH)^T + K R K^T, which stays
+symmetric and positive definite in floating point where the short form does not.
+
+Detections with target ids go to their own track. Without ids (``associate=True``) each frame's
+fixes are assigned to the predicted tracks by global nearest neighbour (Hungarian algorithm,
+scipy ``linear_sum_assignment``) on the Mahalanobis distance, inside a chi-square gate of
+probability ``gate_prob``; an unassigned fix starts a tentative track, confirmed after
+``confirm_hits`` updates; a track not updated for ``max_coast_s`` ends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+from .. import geodesy
+from ..result import Fixes
+
+H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """accel_psd: white-acceleration spectral density (m^2/s^3; ~ (typical accel)^2 x manoeuvre time;
+    0.1 follows vehicles cruising on roads, raise it for manoeuvring targets);
+    meas_sigma_m: fix sigma per horizontal axis when no covariance is given; init_speed_sigma_mps:
+    prior sigma of each velocity component at a track's start; gate_prob: association gate;
+    confirm_hits: updates before a tentative track is confirmed; max_coast_s: time without an
+    update after which a track ends."""
+
+    accel_psd: float = 0.1
+    meas_sigma_m: float = 10.0
+    init_speed_sigma_mps: float = 30.0
+    gate_prob: float = 0.999
+    confirm_hits: int = 3
+    max_coast_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("accel_psd", "meas_sigma_m", "init_speed_sigma_mps", "max_coast_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TrackerConfig.{name} must be > 0, got {getattr(self, name)!r}")
+        if not 0 < self.gate_prob < 1:
+            raise ValueError(f"TrackerConfig.gate_prob must be in (0, 1), got {self.gate_prob!r}")
+
+
+@dataclass
+class Track:
+    """One target's filtered history. Arrays per update: time_s, state (n, 4) ENU m and m/s,
+    cov (n, 4, 4), up_m (n,) the fixes' up, detection (n,) index of the fix used."""
+
+    track_id: str
+    time_s: list[float] = field(default_factory=list)
+    state: list[np.ndarray] = field(default_factory=list)
+    cov: list[np.ndarray] = field(default_factory=list)
+    up_m: list[float] = field(default_factory=list)
+    detection: list[int] = field(default_factory=list)
+    confirmed: bool = False
+
+    @property
+    def speed_mps(self) -> np.ndarray:
+        s = np.asarray(self.state)
+        return np.hypot(s[:, 2], s[:, 3])
+
+    @property
+    def heading_deg(self) -> np.ndarray:
+        """Course over ground, degrees clockwise from north."""
+        s = np.asarray(self.state)
+        return np.degrees(np.arctan2(s[:, 2], s[:, 3])) % 360.0
+
+    @property
+    def speed_sigma_mps(self) -> np.ndarray:
+        """1-sigma of the speed (first order, from the velocity covariance)."""
+        s, P = np.asarray(self.state), np.asarray(self.cov)
+        v = s[:, 2:]
+        sp = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        g = v / sp[:, None]
+        return np.sqrt(np.einsum("ni,nij,nj->n", g, P[:, 2:, 2:], g))
+
+
+@dataclass(frozen=True)
+class TrackSet:
+    """Tracks (confirmed only unless asked) and, per input fix, the track it went to ("" none)."""
+
+    tracks: list[Track]
+    assigned: np.ndarray
+    origin: tuple[float, float, float]
+
+    def geodetic(self, track: Track) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Filtered positions of a track as (lat deg, lon deg, h m)."""
+        s = np.asarray(track.state)
+        enu = np.c_[s[:, 0], s[:, 1], np.asarray(track.up_m)]
+        p = geodesy.enu_to_ecef(enu, *self.origin)
+        return geodesy.ecef_to_geodetic(p[:, 0], p[:, 1], p[:, 2])
+
+
+def cv_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Transition F and process noise Q of the constant-velocity model over dt seconds."""
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt
+    q3, q2, q1 = q * dt**3 / 3.0, q * dt**2 / 2.0, q * dt
+    Q = np.array([[q3, 0, q2, 0], [0, q3, 0, q2], [q2, 0, q1, 0], [0, q2, 0, q1]])
+    return F, Q
+
+
+def joseph_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kalman update of state x (4,), covariance P (4, 4) with position fix z (2,), covariance R."""
+    S = H @ P @ H.T + R
+    K = np.linalg.solve(S, H @ P).T  # P H^T S^-1 (S and P symmetric)
+    x = x + K @ (z - H @ x)
+    IKH = np.eye(4) - K @ H
+    P = IKH @ P @ IKH.T + K @ R @ K.T
+    return x, 0.5 * (P + P.T)
+
+
+class _Live:
+    __slots__ = ("P", "hits", "t", "track", "x")
+
+    def __init__(self, track: Track, x, P, t):
+        self.track, self.x, self.P, self.t, self.hits = track, x, P, t, 1
+
+
+def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = None, target_id: ArrayLike | None = None,
+                *, associate: bool | None = None, config: TrackerConfig | None = None,
+                origin: tuple[float, float, float] | None = None, include_tentative: bool = False,
+                progress=None) -> TrackSet:
+    """Track N fixes (1-D ``fixes``; ``time_s`` (N,) seconds; ``cov_enu`` (N, 3, 3) m^2 or None;
+    ``target_id`` (N,) or None). ``associate`` defaults to True when no ids are given. Fixes whose
+    status is not OK are left out (assigned ""). ``progress(done, total)`` is called per frame."""
+    cfg = config or TrackerConfig()
+    t = np.asarray(time_s, dtype=np.float64).ravel()
+    n = t.size
+    if np.size(fixes.status) != n:
+        raise ValueError(f"time_s has {n} entries but there are {np.size(fixes.status)} fixes")
+    if associate is None:
+        associate = target_id is None
+    if not associate and target_id is None:
+        raise ValueError("without target ids the fixes must be associated (associate=True)")
+    ok = np.ravel(fixes.ok) & np.isfinite(t)
+    if origin is None:
+        if not ok.any():
+            raise ValueError("no fix with status OK to track")
+        i = int(np.flatnonzero(ok)[0])
+        origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
+    p = np.stack([np.ravel(a) for a in np.broadcast_arrays(*geodesy.geodetic_to_ecef(
+        fixes.lat_deg, fixes.lon_deg, fixes.h_m))], -1)
+    z = geodesy.ecef_to_enu(p, *origin)
+    if cov_enu is None:
+        R = np.broadcast_to(cfg.meas_sigma_m**2 * np.eye(2), (n, 2, 2))
+    else:
+        R = np.asarray(cov_enu, dtype=np.float64).reshape(n, 3, 3)[:, :2, :2]
+        ok &= np.all(np.isfinite(R), (-1, -2))
+    ids = None if target_id is None else np.asarray(target_id).ravel().astype(str)
+    gate = chi2.ppf(cfg.gate_prob, 2)
+    assigned = np.full(n, "", dtype=object)
+    live: dict[str, _Live] = {}
+    done: list[Track] = []
+    counter = 0
+    frames = np.unique(t[ok])
+    for fi, tk in enumerate(frames):
+        here = np.flatnonzero(ok & (t == tk))
+        for key in [k for k, lv in live.items() if tk - lv.t > cfg.max_coast_s]:  # ended
+            done.append(live.pop(key).track)
+        pred = {}
+        for key, lv in live.items():
+            F, Q = cv_model(tk - lv.t, cfg.accel_psd)
+            pred[key] = (F @ lv.x, F @ lv.P @ F.T + Q)
+        if associate:
+            pairs, fresh = _associate(here, z, R, pred, gate)
+        else:
+            pairs = [(ids[j], j) for j in here if ids[j] in live]
+            fresh = [j for j in here if ids[j] not in live]
+            if len({ids[j] for j in here}) != here.size:
+                raise ValueError(f"target id repeated within the frame at t = {tk:g} s")
+        for key, j in pairs:
+            lv = live[key]
+            lv.x, lv.P = joseph_update(*pred[key], z[j, :2], R[j])
+            lv.t, lv.hits = tk, lv.hits + 1
+            lv.track.confirmed |= lv.hits >= cfg.confirm_hits
+            _record(lv, j, z)
+            assigned[j] = key
+        for j in fresh:
+            if associate:
+                counter += 1
+                key = f"T{counter}"
+            else:
+                key = ids[j]
+            x0 = np.array([z[j, 0], z[j, 1], 0.0, 0.0])
+            P0 = np.zeros((4, 4))
+            P0[:2, :2] = R[j]
+            P0[2, 2] = P0[3, 3] = cfg.init_speed_sigma_mps**2
+            lv = _Live(Track(key, confirmed=cfg.confirm_hits <= 1), x0, P0, tk)
+            live[key] = lv
+            _record(lv, j, z)
+            assigned[j] = key
+        if progress is not None:
+            progress(fi + 1, frames.size)
+    done.extend(lv.track for lv in live.values())
+    keep = [tr for tr in done if tr.confirmed or include_tentative]
+    kept = {tr.track_id for tr in keep}
+    assigned = np.array([a if a in kept else "" for a in assigned], dtype=object)
+    return TrackSet(sorted(keep, key=lambda tr: tr.time_s[0]), assigned, tuple(origin))
+
+
+def _record(lv: _Live, j: int, z: np.ndarray) -> None:
+    tr = lv.track
+    tr.time_s.append(float(lv.t))
+    tr.state.append(lv.x.copy())
+    tr.cov.append(lv.P.copy())
+    tr.up_m.append(float(z[j, 2]))
+    tr.detection.append(int(j))
+
+
+def _associate(here: np.ndarray, z: np.ndarray, R: np.ndarray, pred: dict, gate: float):
+    """Global nearest neighbour inside the gate: [(track key, fix index)], [unassigned fixes]."""
+    keys = list(pred)
+    if not keys or here.size == 0:
+        return [], list(here)
+    cost = np.full((len(keys), here.size), np.inf)
+    for a, key in enumerate(keys):
+        x, P = pred[key]
+        S = H @ P @ H.T + R[here]  # (m, 2, 2)
+        r = z[here, :2] - (H @ x)[None]
+        d2 = np.einsum("mi,mi->m", r, np.linalg.solve(S, r[..., None])[..., 0])
+        cost[a] = np.where(d2 <= gate, d2 + np.log(np.linalg.det(S)), np.inf)
+    big = 1e12
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, big))
+    pairs = [(keys[r], int(here[c])) for r, c in zip(rows, cols, strict=True) if np.isfinite(cost[r, c])]
+    used = {j for _, j in pairs}
+    return pairs, [int(j) for j in here if j not in used]
+
+
+def track_features(ts: TrackSet) -> list[dict]:
+    """GeoJSON features: one LineString per track (lon, lat, h) with the time of every vertex in
+    ``coordTimes`` (seconds, the convention of togeojson/GPX converters), the final speed and
+    heading with their sigma, and the mean speed."""
+    out = []
+    for tr in ts.tracks:
+        lat, lon, h = ts.geodetic(tr)
+        speed, sig, hdg = tr.speed_mps, tr.speed_sigma_mps, tr.heading_deg
+        coords = [[float(a), float(b), float(c)] for a, b, c in zip(lon, lat, h, strict=True)]
+        geom = {"type": "LineString", "coordinates": coords} if len(coords) > 1 else \
+            {"type": "Point", "coordinates": coords[0]}
+        dur = tr.time_s[-1] - tr.time_s[0]
+        props = {"track_id": tr.track_id, "start_s": tr.time_s[0], "end_s": tr.time_s[-1], "updates": len(tr.time_s),
+                 "speed_mps": round(float(speed[-1]), 3), "speed_sigma_mps": round(float(sig[-1]), 3),
+                 "heading_deg": round(float(hdg[-1]), 2),
+                 "mean_speed_mps": round(float(_path_length(tr) / dur), 3) if dur > 0 else None,
+                 "coordTimes": [round(t, 4) for t in tr.time_s]}
+        out.append({"type": "Feature", "geometry": geom, "properties": props})
+    return out
+
+
+def _path_length(tr: Track) -> float:
+    s = np.asarray(tr.state)
+    return float(np.sum(np.hypot(np.diff(s[:, 0]), np.diff(s[:, 1]))))
