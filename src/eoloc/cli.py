@@ -119,8 +119,9 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
 @click.option("--interpolate", is_flag=True, help="File mode: interpolate the pose to each detection's time.")
 @click.option("--max-gap", type=float, default=0.5, show_default=True,
               help="With --interpolate: longest telemetry gap (s) to interpolate across.")
-@click.option("--time-offset", type=float, default=0.0, show_default=True,
-              help="With --interpolate: telemetry clock minus video clock (s).")
+@click.option("--time-offset", type=float, default=None,
+              help="With --interpolate: telemetry clock minus video clock (s); default: the config's "
+                   "[telemetry] time_offset_s, else 0.")
 def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
            gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance, dem_paths, vertical, geoid,
            dem_crs, covariance, interpolate, max_gap, time_offset) -> None:
@@ -173,10 +174,31 @@ def _stop_rule(range_opt, target_height, dem=None) -> tuple[float | str | None, 
 
 
 def _load_sensor(config_path) -> SensorModel:
+    return _load_config(config_path).sensor()
+
+
+def _load_config(config_path):
     try:
-        return load_config(config_path).sensor()
+        return load_config(config_path)
     except ConfigError as exc:
         _fail(str(exc))
+
+
+def _read_inputs(telemetry, detections, cfg, reader=read_detections):
+    """Telemetry (the config's heading bias removed) and the second file, with their issues reported;
+    fails when the telemetry has no usable record."""
+    from .io.telemetry import with_heading_bias
+
+    try:
+        tel = with_heading_bias(read_telemetry(telemetry), cfg.telemetry.heading_bias_deg)
+        det = reader(detections) if detections else None
+    except TableError as exc:
+        _fail(str(exc))
+    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
+    if len(tel) == 0:
+        _report_issues(issues)
+        _fail(f"telemetry file {telemetry!r} has no usable record")
+    return tel, det, issues
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
@@ -256,22 +278,9 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
     rng, stop_h = _stop_rule(range_opt, stop_height, dem)
-    sensor = _load_sensor(config_path)
-    try:
-        tel = read_telemetry(telemetry)
-        det = read_detections(detections) if detections else None
-    except TableError as exc:
-        _fail(str(exc))
-    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
-    if len(tel) == 0:
-        _report_issues(issues)
-        _fail(f"telemetry file {telemetry!r} has no usable record")
-    with err_console.status("locating..."):
-        try:
-            located = locate_tables(sensor, tel, det, range_m=rng, height_m=stop_h, dem=dem,
-                                    time_tolerance_s=time_tolerance, budget=budget, **(interp or {}))
-        except ValueError as exc:
-            _fail(str(exc))
+    cfg = _load_config(config_path)
+    tel, det, issues = _read_inputs(telemetry, detections, cfg)
+    located = _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp)
     issues += located.issues
     _report_issues(issues)
     after = None
@@ -289,6 +298,19 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     geo_path = write_geojson(out / "fixes.geojson", rows)
     _summary(rows, located.fixes.status_counts())
     Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
+
+
+def _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp):
+    """locate_tables with the config's sensor and time offset (unless --time-offset was given)."""
+    interp = dict(interp or {})
+    if interp.get("time_offset_s") is None:
+        interp["time_offset_s"] = cfg.telemetry.time_offset_s
+    with err_console.status("locating..."):
+        try:
+            return locate_tables(cfg.sensor(), tel, det, range_m=rng, height_m=stop_h, dem=dem,
+                                 time_tolerance_s=time_tolerance, budget=budget, **interp)
+        except ValueError as exc:
+            _fail(str(exc))
 
 
 def _report_issues(issues, limit: int = 15) -> None:
@@ -342,14 +364,10 @@ def footprint(telemetry, config_path, height, dem_paths, vertical, geoid, dem_cr
     if (height is None) == (not dem_paths):
         _fail("choose the ground: --height H (ellipsoidal metres) or --dem FILE")
     surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
-    sensor = _load_sensor(config_path)
-    try:
-        tel = read_telemetry(telemetry)
-    except TableError as exc:
-        _fail(str(exc))
-    _report_issues(list(tel.issues))
-    if len(tel) == 0:
-        _fail(f"telemetry file {telemetry!r} has no usable record")
+    cfg = _load_config(config_path)
+    sensor = cfg.sensor()
+    tel, _, issues = _read_inputs(telemetry, None, cfg)
+    _report_issues(issues)
     rows, prints = footprint_rows(sensor, tel, surface, edge_samples)
     out = Path(out_dir)
     geo = write_footprints_geojson(out / "footprints.geojson", prints, rows)
@@ -597,6 +615,8 @@ def demo(out_dir) -> None:
 
     run_demo(Path(out_dir), console=Console(), data=resources.files("eoloc") / "data" / "demo")
 
+
+from . import cli_sequence  # noqa: E402, F401  (registers track, triangulate, calibrate)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

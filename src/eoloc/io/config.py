@@ -19,6 +19,10 @@
     mount_misalignment_deg = [0.0, 0.0, 0.0]      # gimbal base vs INS, about body x, y, z
     boresight_misalignment_deg = [0.0, 0.0, 0.0]  # optical axis vs gimbal, about camera x, y, z
     lever_arm_m = [0.0, 0.0, 0.0]                 # camera from INS reference, body FRD metres
+
+    [telemetry]              # optional corrections of the GPS/INS records (eoloc calibrate writes them)
+    heading_bias_deg = 0.0   # INS heading minus true heading: subtracted from every yaw read
+    time_offset_s = 0.0      # telemetry clock minus video clock (default of --time-offset)
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import tomllib
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_from_name
@@ -115,6 +120,11 @@ class InstallationConfig(_Strict):
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+class TelemetryConfig(_Strict):
+    heading_bias_deg: float = 0.0
+    time_offset_s: float = 0.0
+
+
 class PoseConfig(_Strict):
     lat_deg: float = Field(ge=-90, le=90)
     lon_deg: float
@@ -157,6 +167,7 @@ class Config(_Strict):
     camera: CameraConfig
     gimbal: GimbalConfig = GimbalConfig()
     installation: InstallationConfig = InstallationConfig()
+    telemetry: TelemetryConfig = TelemetryConfig()
     accuracy: AccuracyConfig | None = None
 
     def sensor(self) -> SensorModel:
@@ -224,3 +235,30 @@ def load_config(path: str | Path) -> Config:
     except ValueError as exc:
         raise ConfigError(f"config file {str(path)!r} is invalid: {exc}") from None
     return cfg
+
+
+def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresight_misalignment_deg=None,
+                      heading_bias_deg: float | None = None, time_offset_s: float | None = None) -> None:
+    """Write calibrated installation values into a config file, keeping its comments and layout
+    (tomlkit); the file is validated before it is replaced. None leaves a value as it is."""
+    import tomlkit
+
+    path = Path(path)
+    doc = tomlkit.parse(path.read_text(encoding="utf-8"))
+    updates = {("installation", "mount_misalignment_deg"): mount_misalignment_deg,
+               ("installation", "boresight_misalignment_deg"): boresight_misalignment_deg,
+               ("telemetry", "heading_bias_deg"): heading_bias_deg, ("telemetry", "time_offset_s"): time_offset_s}
+    for (section, key), value in updates.items():
+        if value is None:
+            continue
+        if section not in doc:
+            doc[section] = tomlkit.table()
+        doc[section][key] = [round(float(v), 6) for v in value] if np.ndim(value) else round(float(value), 6)
+    text = tomlkit.dumps(doc)
+    try:
+        Config.model_validate(tomllib.loads(text)).sensor()
+    except (ValidationError, ValueError) as exc:
+        raise ConfigError(f"the calibrated config would not validate, {str(path)!r} left unchanged: {exc}") from None
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)

@@ -11,7 +11,7 @@ Detections, one row per target seen in an image:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +42,34 @@ DETECTION_COLUMNS = [
     Column("v_px", ("v", "row", "y_px"), unit="px"),
     Column("range_m", ("slant_range_m",), required=False, lo=0, hi=1e7, unit="m"),
 ]
+
+
+GCP_COLUMNS = [
+    Column("time_s", required=False, unit="s"),
+    Column("frame", required=False, lo=0),
+    Column("gcp_id", ("id", "gcp", "name"), text=True),
+    Column("u_px", ("u", "col", "x_px"), unit="px"),
+    Column("v_px", ("v", "row", "y_px"), unit="px"),
+    Column("lat_deg", ("lat", "latitude"), lo=-90, hi=90, unit="deg"),
+    Column("lon_deg", ("lon", "longitude"), lo=-180, hi=360, unit="deg"),
+    Column("h_m", ("height_m", "hae_m"), lo=-12_000, hi=100_000, unit="m"),
+]
+
+
+def read_gcps(path: str | Path) -> Table:
+    """Read GCP observations: time_s or frame, gcp_id, u_px, v_px (where the GCP is in that image)
+    and the GCP's surveyed lat_deg, lon_deg, h_m (ellipsoidal)."""
+    t = read_table(path, GCP_COLUMNS, what="GCP observations", key=("time_s", "frame"))
+    for name in ("time_s", "frame"):
+        t.columns.setdefault(name, np.full(len(t), np.nan))
+    return t
+
+
+def with_heading_bias(t: Table, heading_bias_deg: float) -> Table:
+    """The telemetry with a calibrated INS heading bias removed from every yaw (true = measured - bias)."""
+    if heading_bias_deg == 0.0:
+        return t
+    return replace(t, columns={**t.columns, "yaw_deg": t.columns["yaw_deg"] - heading_bias_deg})
 
 
 def read_telemetry(path: str | Path) -> Table:

@@ -255,7 +255,8 @@ def gcp_flight(true_sensor: SensorModel, n: int = 20, *, noise: TelemetryNoise |
         b = 360.0 * i / n + rng.uniform(-5, 5)
         target_px = rng.uniform([0.05 * cam.width, 0.05 * cam.height], [0.95 * cam.width, 0.95 * cam.height])
         fl = synthetic_flight(true_sensor, centre=centre, targets_px=target_px[None], bearing_deg=b,
-                              heading_deg=b + 90.0 * rng.choice([-1, 1]), ground_range_m=rng.uniform(400, 2000),
+                              heading_deg=(b + 90.0 * rng.choice([-1, 1])) % 360.0,
+                              ground_range_m=rng.uniform(400, 2000),
                               height_agl_m=rng.uniform(600, 1500), roll_deg=rng.uniform(-max_roll_deg, max_roll_deg),
                               pitch_deg=rng.uniform(-5, 10), speed_mps=speed_mps, duration_s=1.0 + 0.5 / rate_hz,
                               fps=rate_hz, noise=noise, seed=ss)

@@ -243,7 +243,7 @@ def _associate(here: np.ndarray, z: np.ndarray, R: np.ndarray, pred: dict, gate:
 def track_features(ts: TrackSet) -> list[dict]:
     """GeoJSON features: one LineString per track (lon, lat, h) with the time of every vertex in
     ``coordTimes`` (seconds, the convention of togeojson/GPX converters), the final speed and
-    heading with their sigma, and the mean speed."""
+    heading with their sigma."""
     out = []
     for tr in ts.tracks:
         lat, lon, h = ts.geodetic(tr)
@@ -251,16 +251,10 @@ def track_features(ts: TrackSet) -> list[dict]:
         coords = [[float(a), float(b), float(c)] for a, b, c in zip(lon, lat, h, strict=True)]
         geom = {"type": "LineString", "coordinates": coords} if len(coords) > 1 else \
             {"type": "Point", "coordinates": coords[0]}
-        dur = tr.time_s[-1] - tr.time_s[0]
         props = {"track_id": tr.track_id, "start_s": tr.time_s[0], "end_s": tr.time_s[-1], "updates": len(tr.time_s),
                  "speed_mps": round(float(speed[-1]), 3), "speed_sigma_mps": round(float(sig[-1]), 3),
                  "heading_deg": round(float(hdg[-1]), 2),
-                 "mean_speed_mps": round(float(_path_length(tr) / dur), 3) if dur > 0 else None,
                  "coordTimes": [round(t, 4) for t in tr.time_s]}
         out.append({"type": "Feature", "geometry": geom, "properties": props})
     return out
 
-
-def _path_length(tr: Track) -> float:
-    s = np.asarray(tr.state)
-    return float(np.sum(np.hypot(np.diff(s[:, 0]), np.diff(s[:, 1]))))

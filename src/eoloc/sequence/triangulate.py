@@ -25,7 +25,9 @@ from ..sensor.model import Rays
 class Triangulation:
     """p_ecef (3,) m; lat/lon (deg), h (m, ellipsoidal); cov_enu (3, 3) m^2 at the point;
     residuals_m (N,) perpendicular distance of each ray from the point; max_angle_deg between
-    any two rays; warning: "" or why the geometry is weak."""
+    any two rays; warning: "" or why the geometry is weak; s0: a-posteriori sigma factor, the
+    RMS of the residuals in units of their declared sigma (NaN for 2 rays: no redundancy; s0 >> 1
+    means the rays disagree more than sigma_rad allows)."""
 
     p_ecef: np.ndarray
     lat_deg: float
@@ -35,6 +37,7 @@ class Triangulation:
     residuals_m: np.ndarray
     max_angle_deg: float
     warning: str = ""
+    s0: float = float("nan")
 
     @property
     def sigma_enu(self) -> np.ndarray:
@@ -75,6 +78,8 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
     R = geodesy.R_ecef_enu(lat, lon)
     cov_enu = R.T @ cov_ecef @ R
     resid = np.linalg.norm(np.einsum("nij,nj->ni", P, p - o), axis=1)
+    dof = 2 * o.shape[0] - 3
+    s0 = float(np.sqrt(np.sum(w * resid**2) / dof)) if dof > 1 else float("nan")
     angle = _max_angle_deg(d)
     warning = ""
     behind = np.einsum("ni,ni->n", p - o, d) <= 0
@@ -84,4 +89,4 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
         depth = float(np.sqrt(np.linalg.eigvalsh(cov_ecef)[-1]))
         warning = (f"baseline too short for the range: the rays meet at {angle:.2f}° (< {min_angle_deg:g}°), "
                    f"depth uncertain by {depth:.3g} m (1 sigma); fly a longer baseline or use a range/DEM stop")
-    return Triangulation(p, lat, lon, h, cov_enu, resid, angle, warning)
+    return Triangulation(p, lat, lon, h, cov_enu, resid, angle, warning, s0)
