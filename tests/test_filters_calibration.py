@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from eoloc import AzElGimbal, Camera, Fixes, SensorModel, Status, geodesy, locate_ellipsoid
 from eoloc.accuracy import locate_with_covariance
@@ -31,11 +33,12 @@ def _example(name):
 # -- RLS ---------------------------------------------------------------------------------------------
 
 
-def test_rls_is_the_weighted_mean_and_its_covariance():
+@settings(max_examples=25, deadline=None)
+@given(st.integers(2, 60), st.floats(0.8, 1.0), st.integers(0, 2**31))
+def test_rls_is_the_weighted_mean_and_its_covariance(n, lam, seed):
     """lam = 1 with per-fix covariances: the estimate is the information-weighted mean, and its
     covariance (sum R^-1)^-1; with forgetting, the covariance is A^-1 B A^-1 (checked by brute force)."""
-    rng = np.random.default_rng(0)
-    n = 40
+    rng = np.random.default_rng(seed)
     truth_enu = np.array([30.0, -20.0, 0.0])
     sig = rng.uniform(2.0, 9.0, (n, 3))
     R = np.stack([np.diag(s**2) for s in sig])
@@ -50,7 +53,6 @@ def test_rls_is_the_weighted_mean_and_its_covariance():
     want = want_cov @ np.einsum("nij,nj->i", W, z)
     np.testing.assert_allclose(est.enu_m[-1], want, atol=1e-6)
     np.testing.assert_allclose(est.cov_enu, want_cov, rtol=1e-6)
-    lam = 0.9
     est = rls_static(fixes, R, origin=origin, forgetting=lam, correlated_fraction=0.0)
     w = lam ** np.arange(n - 1, -1, -1)
     A = np.einsum("n,nij->ij", w, W)
