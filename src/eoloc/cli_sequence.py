@@ -187,7 +187,7 @@ def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path
                          forgetting=forgetting, window=window)
         s = np.sqrt(np.diagonal(est.cov_enu))
         ok_f = np.flatnonzero(f.ok)
-        single = np.sqrt(np.nanmedian(est.sigma_m[ok_f[0], 0] ** 2 + est.sigma_m[ok_f[0], 1] ** 2))
+        single = np.hypot(est.sigma_m[ok_f[0], 0], est.sigma_m[ok_f[0], 1])  # the first fix's own sigma
         conv = int(est.converged_frame)
         rows.append({"target_id": tid, "frames": int(sel.size), "used": int(est.n_used),
                      "lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m),
@@ -195,22 +195,29 @@ def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path
                      "cep50_m": float(est.cep50_m), "first_fix_sigma_h_m": float(single),
                      "scatter_ratio": float(est.scatter_ratio),
                      "converged_at_s": float(t[sel][conv]) if conv >= 0 else None, "status": "OK"})
-    csv_path = write_csv(out / "static_targets.csv", rows)
-    geo = write_geojson(out / "static_targets.geojson", rows)
-    table = RichTable(title="static targets: recursive least squares over all frames")
-    for c in ("target", "fixes", "lat, lon (°)", "h (m)", "CEP50 (m)", "scatter", "converged"):
-        table.add_column(c, justify="right")
-    for r in rows:
+    def cells(r):
         if r["status"] != "OK":
-            table.add_row(r["target_id"], f"0/{r['frames']}", "", "", "", "", "no fix")
-            continue
+            return [r["target_id"], f"0/{r['frames']}", "", "", "", "", "no fix"]
         conv = "no" if r["converged_at_s"] is None else f"{r['converged_at_s']:g} s"
-        table.add_row(r["target_id"], f"{r['used']}/{r['frames']}", f"{r['lat_deg']:.6f}, {r['lon_deg']:.6f}",
-                      f"{r['h_m']:.1f}", f"{r['cep50_m']:.1f}", f"{r['scatter_ratio']:.2f}", conv)
-    Console().print(table)
+        return [r["target_id"], f"{r['used']}/{r['frames']}", f"{r['lat_deg']:.6f}, {r['lon_deg']:.6f}",
+                f"{r['h_m']:.1f}", f"{r['cep50_m']:.1f}", f"{r['scatter_ratio']:.2f}", conv]
+
+    _emit(out, "static_targets", rows, "static targets: recursive least squares over all frames",
+          ("target", "fixes", "lat, lon (°)", "h (m)", "CEP50 (m)", "scatter", "converged"), cells)
     Console().print("scatter: the frames' scatter against their declared sigma (1 = independent errors that "
                     "average away; near 0 = a common bias that no number of frames removes)")
-    Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo}[/]")
+
+
+def _emit(out: Path, stem: str, rows: list[dict], title: str, columns: tuple[str, ...], cells) -> None:
+    """Write rows as <stem>.csv and <stem>.geojson and print them as a table (``cells(row)`` -> strings)."""
+    paths = write_csv(out / f"{stem}.csv", rows), write_geojson(out / f"{stem}.geojson", rows)
+    table = RichTable(title=title)
+    for c in columns:
+        table.add_column(c, justify="right")
+    for r in rows:
+        table.add_row(*cells(r))
+    Console().print(table)
+    Console().print(f"wrote [bold]{paths[0]}[/] and [bold]{paths[1]}[/]")
 
 
 TRIANGULATE_HELP = """Multi-view triangulation (M8): each target seen from two or more poses, located
@@ -268,24 +275,18 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
                      "sigma_n_m": s[1], "sigma_u_m": s[2], "s0": r.s0,
                      "rms_residual_m": float(np.sqrt(np.mean(r.residuals_m**2))),
                      "max_angle_deg": r.max_angle_deg, "status": "OK", "warning": r.warning})
-    out = Path(out_dir)
-    csv_path = write_csv(out / "triangulated.csv", rows)
-    geo = write_geojson(out / "triangulated.geojson", rows)
-    table = RichTable(title="triangulated targets (M8)")
-    for c in ("target", "rays", "lat (°)", "lon (°)", "h (m)", "σ e/n/u (m)", "angle (°)"):
-        table.add_column(c, justify="right")
-    for r in rows:
-        if r["status"] == "OK":
-            table.add_row(r["target_id"], str(r["rays"]), f"{r['lat_deg']:.7f}", f"{r['lon_deg']:.7f}",
-                          f"{r['h_m']:.1f}", f"{r['sigma_e_m']:.1f}/{r['sigma_n_m']:.1f}/{r['sigma_u_m']:.1f}",
-                          f"{r['max_angle_deg']:.1f}")
-        else:
-            table.add_row(r["target_id"], str(r["rays"]), "", "", "", "", "")
-    Console().print(table)
+
+    def cells(r):
+        if r["status"] != "OK":
+            return [r["target_id"], str(r["rays"]), "", "", "", "", ""]
+        return [r["target_id"], str(r["rays"]), f"{r['lat_deg']:.7f}", f"{r['lon_deg']:.7f}", f"{r['h_m']:.1f}",
+                f"{r['sigma_e_m']:.1f}/{r['sigma_n_m']:.1f}/{r['sigma_u_m']:.1f}", f"{r['max_angle_deg']:.1f}"]
+
+    _emit(Path(out_dir), "triangulated", rows, "triangulated targets (M8)",
+          ("target", "rays", "lat (°)", "lon (°)", "h (m)", "σ e/n/u (m)", "angle (°)"), cells)
     for r in rows:
         if r.get("warning"):
             err_console.print(f"[yellow]warning:[/] target {escape(r['target_id'])}: {escape(r['warning'])}")
-    Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo}[/]")
 
 
 CALIBRATE_HELP = """Boresight / mounting calibration from ground control points seen in frames.

@@ -264,7 +264,7 @@ def gcp_flight(true_sensor: SensorModel, n: int = 20, *, noise: TelemetryNoise |
         t0 = 100.0 * i
         pm = fl.pose_measured
         tel_t.append(t0 + fl.time_s)
-        tel_p.append(dataclasses_replace_yaw(pm, heading_bias_deg))
+        tel_p.append(_add_yaw(pm, heading_bias_deg))
         obs_t.append(t0 + fl.time_s[k] - time_offset_s)
         px.append(fl.pixels_measured[k, 0])
         lat, lon, h = geodesy.ecef_to_geodetic(*fl.target_ecef[k, 0])
@@ -275,7 +275,7 @@ def gcp_flight(true_sensor: SensorModel, n: int = 20, *, noise: TelemetryNoise |
                      _concat(obs_p), _concat(true_p))
 
 
-def dataclasses_replace_yaw(pose: Pose, bias_deg: float) -> Pose:
+def _add_yaw(pose: Pose, bias_deg: float) -> Pose:
     """The pose with ``bias_deg`` added to its yaw (a heading bias of the INS)."""
     from dataclasses import replace
 
