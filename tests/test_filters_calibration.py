@@ -137,8 +137,7 @@ def moving_scene(seed, bias=INS_BIAS, duration_s=6.0):
     fixes, cov = locate_with_covariance(sensor, fl.frame_pose(), budget, fl.pixels, height_m=fl.ground_h_m,
                                         check_linearity=False)
     f, k = fixes.status.shape
-    flat = Fixes(*(np.ravel(a) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m, fixes.status)))
-    return fl, flat, cov.cov_enu.reshape(-1, 3, 3), np.repeat(fl.time_s, k), np.tile(np.arange(k), f)
+    return fl, fixes.flat(), cov.cov_enu.reshape(-1, 3, 3), np.repeat(fl.time_s, k), np.tile(np.arange(k), f)
 
 
 @pytest.mark.parametrize("associate", [False, True])
@@ -175,8 +174,7 @@ def test_heading_bias_turns_the_aircraft_motion_into_target_speed_error():
     from eoloc.sequence.simulate import per_frame
 
     f2 = locate_ellipsoid(sensor, per_frame(pose), fl.ground_h_m, fl.pixels)
-    flat = Fixes(*(np.ravel(a) for a in (f2.lat_deg, f2.lon_deg, f2.h_m, f2.range_m, f2.status)))
-    biased = track_fixes(t, flat, cov, ids.astype(str))
+    biased = track_fixes(t, f2.flat(), cov, ids.astype(str))
     for a, b in zip(base.tracks, biased.tracks, strict=True):
         j = ids[a.detection[0]]
         rel = np.hypot(*(np.array([np.sin(np.radians(350.2)), np.cos(np.radians(350.2))]) * 50.0
@@ -259,9 +257,7 @@ def test_calibration_flags_an_outlier_and_rejects_too_few_observations():
     c = calibrate(nominal, px, g.gcp_llh, pose=g.obs_pose, pixel_sigma_px=0.5, robust=True)
     assert any(w.startswith("observation 7:") for w in c.warnings)
     assert np.all(np.abs(c.values - [0.3, 0.2, 0.5]) < 0.02)
-    from eoloc.sequence.simulate import _take
-
     with pytest.raises(ValueError, match="equations for 3 parameters"):
-        calibrate(nominal, px[:1], g.gcp_llh[:1], pose=_take(g.obs_pose, [0]))
+        calibrate(nominal, px[:1], g.gcp_llh[:1], pose=g.obs_pose.take([0]))
     with pytest.raises(ValueError, match="telemetry"):
         calibrate(nominal, px, g.gcp_llh, pose=g.obs_pose, estimate=("time",))

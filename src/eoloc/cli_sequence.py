@@ -178,8 +178,7 @@ def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path
     for tid in sorted(set(ids.tolist())):
         sel = np.flatnonzero(ids == tid)
         sel = sel[np.argsort(t[sel], kind="stable")]
-        f = Fixes(*(np.ravel(a)[sel] for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m,
-                                               fixes.status)))
+        f = fixes.flat(sel)
         if not f.ok.any():
             rows.append({"target_id": tid, "frames": int(sel.size), "used": 0, "status": "NO_FIX"})
             continue
@@ -247,7 +246,6 @@ eoloc triangulate TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml [--ray-sigma
               help="Output folder.")
 def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, time_tolerance, out_dir) -> None:
     from .io.telemetry import match_detections, telemetry_pose
-    from .sensor.model import Rays
     from .sequence.triangulate import triangulate as tri
 
     cfg = _load_config(config_path)
@@ -264,9 +262,7 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
         sel = np.flatnonzero((ids == tid) & has)
         row = {"target_id": tid, "rays": int(sel.size)}
         try:
-            r = tri(Rays(*(np.asarray(a)[sel] for a in (rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz)),
-                         np.broadcast_to(rays.invalid, rays.shape)[sel]),
-                    np.radians(ray_sigma_deg), min_angle_deg=min_angle)
+            r = tri(rays.take(sel), np.radians(ray_sigma_deg), min_angle_deg=min_angle)
         except ValueError as exc:
             rows.append({**row, "status": "TOO_FEW_RAYS", "warning": str(exc)})
             continue

@@ -117,8 +117,6 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
 def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
     """RLS per static target over all frames (M6) and range-free triangulation (M8), against truth."""
     from .io.telemetry import match_detections, telemetry_pose
-    from .result import Fixes
-    from .sensor.model import Rays
     from .sequence import rls_static, triangulate
 
     t1 = next(iter(truth.values()))
@@ -132,13 +130,11 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
         table.add_column(c, justify="right")
     for tid, (lat, lon, _h) in truth.items():
         sel = np.flatnonzero(ids == tid)
-        f = Fixes(*(np.ravel(a)[sel] for a in (m3.fixes.lat_deg, m3.fixes.lon_deg, m3.fixes.h_m, m3.fixes.range_m,
-                                               m3.fixes.status)))
+        f = m3.fixes.flat(sel)
         est = rls_static(f, m3.covariance.cov_enu[sel])
         single = np.nanmedian(np.where(f.ok, _horizontal_m(f.lat_deg, f.lon_deg, lat, lon), np.nan))
         good = sel[matched.record[sel] >= 0]
-        tri = triangulate(Rays(*(np.asarray(a)[good] for a in (rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz))),
-                          np.radians(1.0))
+        tri = triangulate(rays.take(good), np.radians(1.0))
         table.add_row(tid, str(int(est.n_used)), f"{single:.1f}",
                       f"{float(_horizontal_m(est.lat_deg, est.lon_deg, lat, lon)):.1f}", f"{float(est.cep50_m):.1f}",
                       f"{float(_horizontal_m(tri.lat_deg, tri.lon_deg, lat, lon)):.1f}")

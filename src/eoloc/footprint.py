@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 import pyproj
-from numpy.typing import ArrayLike
 
 from .locate import locate_dem, locate_ellipsoid
 from .result import Fixes, Status
@@ -94,10 +93,10 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
     ``surface``: a constant ellipsoidal height (m, M3) or a :class:`eoloc.DEM` (M4).
     """
     n = _n_frames(pose)
-    frames = _take(pose, np.arange(n))
+    frames = pose.take(np.arange(n))
     border = border_pixels(sensor.camera, edge_samples)
     S = border.shape[0]
-    fb = _stop(sensor, _take(frames, np.repeat(np.arange(n), S)), np.tile(border, (n, 1)), surface)
+    fb = _stop(sensor, frames.take(np.repeat(np.arange(n), S)), np.tile(border, (n, 1)), surface)
     ok_b = (fb.status == Status.OK).reshape(n, S)
     centre_px = np.array(sensor.camera.centre_px)
     fc = _stop(sensor, frames, np.tile(centre_px, (n, 1)), surface)
@@ -117,7 +116,7 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
     seg_f = np.concatenate([f_miss, f_tr])
     seg_a = np.concatenate([anchor[f_miss], a_tr]).reshape(-1, 2)
     seg_b = np.concatenate([border[i_miss], b_tr]).reshape(-1, 2)
-    hit, px, why = _bisect(sensor, _take(frames, seg_f), seg_a, seg_b, surface)
+    hit, px, why = _bisect(sensor, frames.take(seg_f), seg_a, seg_b, surface)
     n_miss = f_miss.size
     clip_at = {(int(f), int(i)): k for k, (f, i) in enumerate(zip(f_miss, i_miss, strict=True))}
     trans_at = {(int(f), int(i)): n_miss + k for k, (f, i) in enumerate(zip(f_tr, i_tr, strict=True))}
@@ -177,14 +176,6 @@ def _n_frames(pose: Pose) -> int:
     if len(shape) > 1:
         raise ValueError(f"footprints takes one pose or a 1-D array of poses (one per frame), got shape {shape}")
     return int(shape[0]) if shape else 1
-
-
-def _take(pose: Pose, idx: np.ndarray) -> Pose:
-    def pick(x: ArrayLike) -> np.ndarray:
-        x = np.asarray(x)
-        return x[()] if x.ndim == 0 else x[idx]
-    return Pose(pick(pose.lat_deg), pick(pose.lon_deg), pick(pose.h_m), pick(pose.yaw_deg), pick(pose.pitch_deg),
-                pick(pose.roll_deg), tuple(pick(g) for g in pose.gimbal_deg))
 
 
 def write_footprints_geojson(path: str | Path, prints: list[Footprint], properties: list[dict] | None = None) -> Path:

@@ -65,6 +65,11 @@ class Fixes:
 
         return np.stack(np.broadcast_arrays(*geodetic_to_ecef(self.lat_deg, self.lon_deg, self.h_m)), -1)
 
+    def flat(self, index=slice(None)) -> Fixes:
+        """The fixes as one flat batch (broadcast, raveled), optionally only those at ``index``."""
+        arrays = np.broadcast_arrays(self.lat_deg, self.lon_deg, self.h_m, self.range_m, self.status)
+        return Fixes(*(np.ravel(a)[index] for a in arrays))
+
     def status_counts(self) -> dict[str, int]:
         """How many targets ended with each status (only those that occur)."""
         codes, counts = np.unique(np.asarray(self.status).ravel(), return_counts=True)

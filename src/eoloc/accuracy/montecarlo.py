@@ -295,7 +295,7 @@ class MonteCarloResult:
 def truth_fixes(scn: Scenario) -> Fixes:
     """The error-free fixes of the scenario's targets (shape (K,))."""
     f = perturbed_fixes(scn, {}, 1)
-    return Fixes(*(np.ravel(x) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
+    return f.flat()
 
 
 def chunk_sizes(n: int, chunk: int) -> list[int]:

@@ -54,6 +54,14 @@ class Pose:
             g = (g,) if np.ndim(g) == 0 else tuple(g)  # a bare number, or an array of angle rows
         object.__setattr__(self, "gimbal_deg", tuple(_f64(a) for a in g))
 
+    def take(self, index) -> Pose:
+        """The poses at ``index`` (fields that are scalars stay scalars: they broadcast)."""
+        def pick(x: np.ndarray) -> np.ndarray:
+            return x[()] if x.ndim == 0 else x[index]
+
+        return Pose(pick(self.lat_deg), pick(self.lon_deg), pick(self.h_m), pick(self.yaw_deg), pick(self.pitch_deg),
+                    pick(self.roll_deg), tuple(pick(g) for g in self.gimbal_deg))
+
     def invalid(self) -> np.ndarray:
         """True where the pose cannot be used: NaN/inf anywhere, |lat| > 90°."""
         fields = (self.lat_deg, self.lon_deg, self.h_m, self.yaw_deg, self.pitch_deg, self.roll_deg, *self.gimbal_deg)
@@ -87,6 +95,13 @@ class Rays:
     @property
     def shape(self) -> tuple[int, ...]:
         return np.shape(self.dx)
+
+    def take(self, index) -> Rays:
+        """The rays at ``index`` of the flattened batch."""
+        def pick(x) -> np.ndarray:
+            return np.broadcast_to(x, self.shape).reshape(-1)[index]
+
+        return Rays(*(pick(a) for a in (self.ox, self.oy, self.oz, self.dx, self.dy, self.dz, self.invalid)))
 
 
 @dataclass(frozen=True)

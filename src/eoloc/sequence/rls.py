@@ -92,8 +92,8 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     if st.ndim not in (1, 2):
         raise ValueError(f"fixes must have shape (frames,) or (frames, targets), got {st.shape}")
     if single:
-        fixes = Fixes(*(np.asarray(a)[:, None] for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m,
-                                                         fixes.status)))
+        fixes = Fixes(*(a[:, None] for a in np.broadcast_arrays(fixes.lat_deg, fixes.lon_deg, fixes.h_m,
+                                                                 fixes.range_m, fixes.status)))
         if cov_enu is not None:
             cov_enu = np.asarray(cov_enu)[:, None]
     f_n, k_n = fixes.status.shape

@@ -228,11 +228,6 @@ class GCPFlight:
     true_pose: Pose
 
 
-def _take(pose: Pose, idx) -> Pose:
-    return Pose(*(np.asarray(a)[idx] for a in (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg,
-                                               pose.roll_deg)), tuple(np.asarray(g)[idx] for g in pose.gimbal_deg))
-
-
 def _concat(poses: list[Pose]) -> Pose:
     cat = [np.concatenate([np.ravel(getattr(p, k)) for p in poses])
            for k in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg")]
@@ -269,8 +264,8 @@ def gcp_flight(true_sensor: SensorModel, n: int = 20, *, noise: TelemetryNoise |
         px.append(fl.pixels_measured[k, 0])
         lat, lon, h = geodesy.ecef_to_geodetic(*fl.target_ecef[k, 0])
         llh.append((float(lat), float(lon), float(h)))
-        obs_p.append(_take(tel_p[-1], [k]))
-        true_p.append(_take(fl.pose_true, [k]))
+        obs_p.append(tel_p[-1].take([k]))
+        true_p.append(fl.pose_true.take([k]))
     return GCPFlight(np.concatenate(tel_t), _concat(tel_p), np.array(obs_t), np.array(px), np.array(llh),
                      _concat(obs_p), _concat(true_p))
 

@@ -152,9 +152,7 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
             raise ValueError("no fix with status OK to track")
         i = int(np.flatnonzero(ok)[0])
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
-    p = np.stack([np.ravel(a) for a in np.broadcast_arrays(*geodesy.geodetic_to_ecef(
-        fixes.lat_deg, fixes.lon_deg, fixes.h_m))], -1)
-    z = geodesy.ecef_to_enu(p, *origin)
+    z = geodesy.ecef_to_enu(fixes.flat().p_ecef(), *origin)
     if cov_enu is None:
         R = np.broadcast_to(cfg.meas_sigma_m**2 * np.eye(2), (n, 2, 2))
     else:
@@ -166,9 +164,10 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
     live: dict[str, _Live] = {}
     done: list[Track] = []
     counter = 0
-    frames = np.unique(t[ok])
-    for fi, tk in enumerate(frames):
-        here = np.flatnonzero(ok & (t == tk))
+    good = np.flatnonzero(ok)
+    good = good[np.argsort(t[good], kind="stable")]
+    frames, starts = np.unique(t[good], return_index=True)
+    for fi, (tk, here) in enumerate(zip(frames, np.split(good, starts[1:]), strict=True)):
         for key in [k for k, lv in live.items() if tk - lv.t > cfg.max_coast_s]:  # ended
             done.append(live.pop(key).track)
         pred = {}
