@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,7 +20,13 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench examples
 
-test: $(STAMP) lint
+# The map test drives a real headless Chromium: Debian's chromium + chromium-driver, installed here when missing.
+browser:
+	@command -v chromedriver >/dev/null || { apt-get install -y -q chromium chromium-driver >/dev/null 2>&1 || \
+	  { apt-get update -q >/dev/null && apt-get install -y -q chromium chromium-driver >/dev/null; }; } || \
+	  { echo "install Debian's chromium and chromium-driver (as root) for the map test"; exit 1; }
+
+test: $(STAMP) lint browser
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)

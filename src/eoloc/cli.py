@@ -40,6 +40,24 @@ Units and conventions (the same everywhere in eoloc):
 err_console = Console(stderr=True)
 
 
+def dem_options(dem_help: str):
+    """--dem (repeatable), --vertical, --geoid and --dem-crs: the same DEM options on every command."""
+    opts = [
+        click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help=dem_help),
+        click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96",
+                     show_default=True, help="Vertical datum of the DEM heights (converted to ellipsoidal)."),
+        click.option("--geoid", type=click.Path(dir_okay=False), default=None, help="Geoid grid for --vertical."),
+        click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326."),
+    ]
+
+    def apply(fn):
+        for o in reversed(opts):
+            fn = o(fn)
+        return fn
+
+    return apply
+
+
 def _fail(message: str) -> None:
     err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
     sys.exit(2)
@@ -350,12 +368,7 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--height H | --dem FILE...) 
 @click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
               help="Camera/gimbal/installation TOML.")
 @click.option("--height", type=float, help="Ground: this ellipsoidal height (m).")
-@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False),
-              help="Ground: DEM file(s); repeat for several tiles.")
-@click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96", show_default=True,
-              help="Vertical datum of the DEM heights (converted to ellipsoidal).")
-@click.option("--geoid", type=click.Path(dir_okay=False), default=None, help="Geoid grid for --vertical.")
-@click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
+@dem_options("Ground: DEM file(s); repeat for several tiles.")
 @click.option("--edge-samples", type=click.IntRange(1, 1000), default=16, show_default=True,
               help="Points per image side.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
@@ -616,7 +629,7 @@ def demo(out_dir) -> None:
     run_demo(Path(out_dir), console=Console(), data=resources.files("eoloc") / "data" / "demo")
 
 
-from . import cli_sequence  # noqa: E402, F401  (registers track, triangulate, calibrate)
+from . import cli_sequence, cli_video  # noqa: E402, F401  (register track, triangulate, calibrate, klv, map)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

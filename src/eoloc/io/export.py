@@ -63,15 +63,20 @@ def _fmt(key: str, v):
     return v
 
 
-def write_geojson(path: str | Path, rows: list[dict]) -> Path:
-    """GeoJSON FeatureCollection (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
+def fix_features(rows: list[dict]) -> list[dict]:
+    """GeoJSON Point features of fix rows (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
     features = []
     for row in rows:
         props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
         ok = row.get("status") == "OK"
         geom = {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"], row["h_m"]]} if ok else None
         features.append({"type": "Feature", "geometry": geom, "properties": props})
-    return write_feature_collection(path, features, indent=1)
+    return features
+
+
+def write_geojson(path: str | Path, rows: list[dict]) -> Path:
+    """GeoJSON FeatureCollection of fix rows; failed fixes have a null geometry."""
+    return write_feature_collection(path, fix_features(rows), indent=1)
 
 
 def write_feature_collection(path: str | Path, features: list[dict], indent: int | None = None) -> Path:

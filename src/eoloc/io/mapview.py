@@ -1,0 +1,166 @@
+"""A self-contained HTML map (folium / Leaflet): aircraft track, frame footprints, targets with
+their CEP circles, tracks, and optionally a hillshade of the DEM underneath.
+
+"Self-contained" means it opens from a USB stick in a ground station with no network: Leaflet
+1.9.4 (BSD-2-Clause, ``eoloc/data/leaflet``) is inlined instead of folium's CDN links, its few
+images are data URIs, targets are vector circles (no marker images), and there are no web tiles
+unless ``tiles=`` asks for them. Every layer is a GeoJSON feature list, the same that goes to
+.geojson and KML. SVG paths carry CSS classes (``eoloc-target``, ``eoloc-cep``,
+``eoloc-footprint``, ``eoloc-aircraft``, ``eoloc-track``) so a browser test can count them.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from importlib import resources
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+_COLOURS = {"aircraft": "#1f77b4", "footprints": "#ff9900", "encoder footprints": "#888888", "targets": "#d62728",
+            "tracks": "#9467bd", "truth": "#2ca02c"}
+
+
+def _inline_leaflet():
+    import folium
+
+    class OfflineMap(folium.Map):  # no CDN links: Leaflet goes inline below
+        default_js: ClassVar[list] = []
+        default_css: ClassVar[list] = []
+
+    base = resources.files("eoloc") / "data" / "leaflet"
+    js = (base / "leaflet.js").read_text(encoding="utf-8")
+    css = (base / "leaflet.css").read_text(encoding="utf-8")
+    return OfflineMap, js, css
+
+
+def _hillshade_png(dem) -> tuple[str, list[list[float]]]:
+    """The DEM as a hillshaded PNG data URL and its [[south, west], [north, east]] bounds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.colors import LightSource
+
+    g = dem.grid
+    z = np.asarray(g.z, dtype=np.float64)
+    z = np.where(np.isfinite(z), z, np.nanmin(z))
+    step = max(1, int(np.ceil(max(z.shape) / 1200)))  # keep the page small
+    z = z[::step, ::step]
+    shade = LightSource(azdeg=315, altdeg=45).hillshade(z, vert_exag=2.0, dx=1.0, dy=1.0)
+    rgba = (np.dstack([shade] * 3 + [np.full_like(shade, 0.8)]) * 255).astype(np.uint8)
+    if g.dlat > 0:  # the PNG's first row must be the north edge
+        rgba = rgba[::-1]
+    buf = io.BytesIO()
+    import matplotlib.image as mpimg
+
+    mpimg.imsave(buf, rgba, format="png")
+    lat = [g.lat0, g.lat0 + g.dlat * (g.z.shape[0] - 1)]
+    lon = [g.lon0, g.lon0 + g.dlon * (g.z.shape[1] - 1)]
+    bounds = [[min(lat), min(lon)], [max(lat), max(lon)]]
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode(), bounds
+
+
+def _latlon(coords) -> list[list[float]]:
+    return [[float(c[1]), float(c[0])] for c in coords]
+
+
+def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprints: list[dict] | None = None,
+              targets: list[dict] | None = None, tracks: list[dict] | None = None, truth: list[dict] | None = None,
+              encoder_footprints: list[dict] | None = None, dem=None, tiles: str | None = None,
+              title: str = "eoloc") -> Path:
+    """Write the map. Each layer is a list of GeoJSON features: aircraft (LineString), footprints
+    and encoder_footprints (Polygon), targets (Point, with optional ``cep50_m`` drawn as a circle
+    in metres), tracks (LineString/Point), truth (Point). ``tiles``: a folium tile name (e.g.
+    "OpenStreetMap") when the viewer is online; by default none, and the DEM's hillshade if given."""
+    import folium
+
+    OfflineMap, js, css = _inline_leaflet()
+    points = [c for layer in (aircraft, footprints, targets, tracks, truth, encoder_footprints) for f in layer or ()
+              if f.get("geometry") for c in _coords(f["geometry"])]
+    if not points:
+        raise ValueError("write_map: nothing to draw (no feature has a geometry)")
+    lat = np.array([p[1] for p in points])
+    lon = np.array([p[0] for p in points])
+    m = OfflineMap(location=[float(lat.mean()), float(lon.mean())], tiles=tiles, control_scale=True,
+                   prefer_canvas=False)
+    m.get_root().header.add_child(folium.Element(f"<style>{css}</style>\n<script>{js}</script>"))
+    m.get_root().html.add_child(folium.Element(
+        f'<div id="eoloc-title" style="position:fixed;top:8px;left:50px;z-index:1000;background:white;'
+        f'padding:4px 8px;font:14px sans-serif;border-radius:4px">{_escape(title)}</div>'))
+    if dem is not None:
+        url, bounds = _hillshade_png(dem)
+        folium.raster_layers.ImageOverlay(url, bounds=bounds, name="terrain (hillshade)", opacity=0.9).add_to(m)
+
+    def group(name: str):  # the encoder's outlines start hidden: a layer to compare with, not to read first
+        return folium.FeatureGroup(name=name, show=name != "encoder footprints").add_to(m)
+
+    if aircraft:
+        g = group("aircraft")
+        for f in aircraft:
+            if f.get("geometry"):
+                folium.PolyLine(_latlon(f["geometry"]["coordinates"]), color=_COLOURS["aircraft"], weight=3,
+                                class_name="eoloc-aircraft", tooltip="aircraft").add_to(g)
+    for name, layer, cls in (("footprints", footprints, "eoloc-footprint"),
+                             ("encoder footprints", encoder_footprints, "eoloc-encoder-footprint")):
+        if layer:
+            g = group(name)
+            for f in layer:
+                geom = f.get("geometry")
+                if geom and geom["type"] == "Polygon":
+                    props = f.get("properties") or {}
+                    folium.Polygon(_latlon(geom["coordinates"][0]), color=_COLOURS[name], weight=1, fill=True,
+                                   fill_opacity=0.08, class_name=cls,
+                                   tooltip=f"{name}: frame {props.get('frame', '')}").add_to(g)
+    if tracks:
+        g = group("tracks")
+        for f in tracks:
+            geom = f.get("geometry")
+            if geom and geom["type"] == "LineString":
+                folium.PolyLine(_latlon(geom["coordinates"]), color=_COLOURS["tracks"], weight=3,
+                                class_name="eoloc-track",
+                                tooltip=f"track {(f.get('properties') or {}).get('track_id', '')}").add_to(g)
+    for name, layer, cls in (("targets", targets, "eoloc-target"), ("truth", truth, "eoloc-truth")):
+        if not layer:
+            continue
+        g = group(name)
+        for f in layer:
+            geom = f.get("geometry")
+            if not geom:
+                continue
+            props = f.get("properties") or {}
+            lon_t, lat_t = geom["coordinates"][:2]
+            cep = props.get("cep50_m")
+            if isinstance(cep, (int, float)) and np.isfinite(cep) and cep > 0:
+                folium.Circle([lat_t, lon_t], radius=float(cep), color=_COLOURS[name], weight=1, fill=True,
+                              fill_opacity=0.1, class_name="eoloc-cep", tooltip=f"CEP50 {cep:.1f} m").add_to(g)
+            label = " ".join(f"{k}={_short(v)}" for k, v in props.items() if k in
+                             ("target_id", "frame", "time_s", "h_m", "status", "cep50_m", "ce90_m", "le90_m"))
+            folium.CircleMarker([lat_t, lon_t], radius=4, color=_COLOURS[name], weight=2, fill=True, fill_opacity=0.9,
+                                class_name=cls, tooltip=label or name).add_to(g)
+    folium.LayerControl(collapsed=False).add_to(m)
+    m.fit_bounds([[float(lat.min()), float(lon.min())], [float(lat.max()), float(lon.max())]])
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    m.save(str(path))
+    return path
+
+
+def _coords(geom: dict):
+    t, c = geom["type"], geom["coordinates"]
+    if t == "Point":
+        return [c]
+    if t == "LineString":
+        return c
+    if t == "Polygon":
+        return c[0]
+    return []
+
+
+def _short(v) -> str:
+    return f"{v:.1f}" if isinstance(v, float) else str(v)
+
+
+def _escape(s: str) -> str:
+    return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")

@@ -1,0 +1,120 @@
+"""The MISB ST 0601 sensor model: every packet is a pose + a field of view, and pixels are rays.
+
+ST 0601 carries no camera matrix, only the horizontal and vertical fields of view (tags 16, 17)
+spanning the whole image, so the image geometry of a packet is a pinhole with
+tan(HFOV/2) = (W/2)/fx. The frame centre is the boresight (normalised (0, 0)); the corners are the
+outer image corners, normalised (±tan(HFOV/2), ±tan(VFOV/2)) in ST 0601's order 1 upper-left,
+2 upper-right, 3 lower-right, 4 lower-left. Everything is vectorised over packets: pose fields
+(F,), per-packet points (F, K).
+
+Pure math: the tables come from :mod:`eoloc.io.klv`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .locate import stop_at_dem, stop_at_ellipsoid, stop_at_range
+from .result import Fixes, Status, with_status
+from .sensor.camera import Camera
+from .sensor.gimbal import AzElGimbal
+from .sensor.model import Pose, Rays, SensorModel
+
+# ST 0601 corner order in units of the half-FOV tangents (x right, y down in the image)
+CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+def misb_sensor(mount_misalignment_deg=(0.0, 0.0, 0.0), boresight_misalignment_deg=(0.0, 0.0, 0.0),
+                lever_arm_m=(0.0, 0.0, 0.0)) -> SensorModel:
+    """An az-el turret with sensor roll, as ST 0601 describes it (tags 18, 19, 20).
+
+    The camera is a placeholder: rays are built from per-packet normalised coordinates, so the
+    intrinsics never enter. Installation terms are zero unless a calibration gives them.
+    """
+    return SensorModel(Camera(2, 2, 1.0, 1.0, 0.5, 0.5), AzElGimbal(), mount_misalignment_deg,
+                       boresight_misalignment_deg, lever_arm_m)
+
+
+def packet_pose(tel) -> Pose:
+    """Poses (F,) of telemetry rows read from KLV (columns of :func:`eoloc.io.klv.klv_telemetry`)."""
+    c = tel.columns
+    return Pose(c["lat_deg"], c["lon_deg"], c["h_m"], c["yaw_deg"], c["pitch_deg"], c["roll_deg"],
+                (c["gimbal1_deg"], c["gimbal2_deg"], np.nan_to_num(c["sensor_roll_deg"], nan=0.0)))
+
+
+def _half_tangents(hfov_deg: ArrayLike, vfov_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    hfov, vfov = np.asarray(hfov_deg, dtype=np.float64), np.asarray(vfov_deg, dtype=np.float64)
+    bad = ~((hfov > 0) & (hfov < 180) & (vfov > 0) & (vfov < 180))
+    with np.errstate(invalid="ignore"):
+        tx, ty = np.tan(np.radians(hfov) / 2.0), np.tan(np.radians(vfov) / 2.0)
+    return np.where(bad, np.nan, tx), np.where(bad, np.nan, ty)
+
+
+def pixels_to_normalized(u: ArrayLike, v: ArrayLike, width: ArrayLike, height: ArrayLike, hfov_deg: ArrayLike,
+                         vfov_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (eoloc convention: centre of the top-left pixel at (0, 0)) of a W x H image whose
+    fields of view span its outer edges -> normalised image coordinates (x right, y down)."""
+    tx, ty = _half_tangents(hfov_deg, vfov_deg)
+    w, h = np.asarray(width, dtype=np.float64), np.asarray(height, dtype=np.float64)
+    return ((np.asarray(u) - (w - 1) / 2.0) * tx / (w / 2.0), (np.asarray(v) - (h - 1) / 2.0) * ty / (h / 2.0))
+
+
+def packet_rays(sensor: SensorModel, pose: Pose, xn: ArrayLike, yn: ArrayLike) -> Rays:
+    """Rays of normalised points (F, K) from the poses (F,) (one row of points per packet)."""
+    frame = sensor.camera_frame(pose.take((slice(None), None)) if np.ndim(pose.lat_deg) else pose)
+    rays = sensor.rays_from(frame, xn, yn)
+    bad = ~(np.isfinite(xn) & np.isfinite(yn))
+    return Rays(rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz, rays.invalid | bad)
+
+
+@dataclass(frozen=True)
+class FrameGeometry:
+    """eoloc's frame centre (F,) and corners (F, 4) for each packet, and the surface used."""
+
+    centre: Fixes
+    corners: Fixes
+    surface: str
+
+
+def stop_on(rays: Rays, surface, sensor: SensorModel) -> Fixes:
+    """Stop rays (…, K) on ``surface``: a DEM, or ellipsoidal heights (m) broadcasting as (F, 1)."""
+    if hasattr(surface, "grid"):
+        return stop_at_dem(rays, surface, sensor=sensor)
+    h = np.asarray(surface, dtype=np.float64)
+    fixes = stop_at_ellipsoid(rays, np.nan_to_num(h[..., None] if h.ndim else h), sensor=sensor)
+    return with_status(fixes, np.broadcast_to(~np.isfinite(h[..., None] if h.ndim else h), fixes.shape),
+                       Status.INVALID_INPUT)
+
+
+def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_deg: ArrayLike, surface,
+                   *, range_m: ArrayLike | None = None) -> FrameGeometry:
+    """Frame centre and the four corners of each packet on ``surface`` (a DEM, or an ellipsoidal
+    height per packet such as the encoder's own frame-centre elevation). With ``range_m`` the
+    centre is placed at that slant range along the boresight instead (M1, laser)."""
+    tx, ty = _half_tangents(hfov_deg, vfov_deg)
+    zero = np.zeros_like(tx)[..., None]
+    centre_rays = packet_rays(sensor, pose, zero, zero)
+    if range_m is not None:
+        centre = stop_at_range(centre_rays, np.asarray(range_m, dtype=np.float64)[..., None], sensor=sensor)
+    else:
+        centre = stop_on(centre_rays, surface, sensor)
+    corner_rays = packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None])
+    corners = stop_on(corner_rays, surface, sensor)
+    kind = "DEM" if hasattr(surface, "grid") else "ellipsoid at the frame-centre elevation"
+    return FrameGeometry(centre.flat(), corners, kind)
+
+
+def horizontal_distance_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> np.ndarray:
+    """Geodesic distance on WGS-84 (m) between points (pyproj.Geod; NaN where an input is NaN)."""
+    from pyproj import Geod
+
+    a = [np.asarray(x, dtype=np.float64) for x in np.broadcast_arrays(lat1, lon1, lat2, lon2)]
+    ok = np.all([np.isfinite(x) for x in a], axis=0)
+    out = np.full(a[0].shape, np.nan)
+    if ok.any():
+        _, _, d = Geod(ellps="WGS84").inv(a[1][ok], a[0][ok], a[3][ok], a[2][ok])
+        out[ok] = d
+    return out

@@ -1,0 +1,185 @@
+"""The KLV job: ST 0601 telemetry + ST 0903 detections -> frame checks, footprints and target fixes.
+
+In memory only (tables in, arrays and GeoJSON features out); :mod:`eoloc.io.klv` reads the
+stream and the CLI writes the files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .accuracy.budget import ErrorBudget
+from .accuracy.covariance import covariance_columns
+from .io.table import Table
+from .misb import FrameGeometry, frame_geometry, horizontal_distance_m, misb_sensor, packet_pose
+from .pipeline import locate_by_rule
+from .result import Fixes, Status
+from .sensor.camera import Camera
+from .sensor.model import SensorModel
+
+
+@dataclass(frozen=True)
+class FrameCheck:
+    """eoloc's frame centre and corners against the encoder's, per packet (metres, NaN where
+    either side has no point)."""
+
+    geometry: FrameGeometry
+    centre_m: np.ndarray  # (F,) horizontal distance, ours vs the encoder's frame centre
+    corners_m: np.ndarray  # (F, 4)
+    range_m: np.ndarray  # (F,) our slant range to the centre minus tag 21's
+
+    def stats(self) -> list[tuple[str, int, float, float, float]]:
+        """(what, n, median, p90, max) for the centre, each corner and |slant range difference|."""
+        rows = [("frame centre", self.centre_m)] + [(f"corner {k + 1}", self.corners_m[:, k]) for k in range(4)]
+        rows.append(("slant range (|ours - tag 21|)", np.abs(self.range_m)))
+        out = []
+        for name, d in rows:
+            d = d[np.isfinite(d)]
+            out.append((name, int(d.size), *(
+                (float(np.median(d)), float(np.percentile(d, 90)), float(d.max())) if d.size else (np.nan,) * 3)))
+        return out
+
+
+def check_frames(tel: Table, surface=None, *, sensor: SensorModel | None = None) -> FrameCheck:
+    """Recompute every packet's frame centre and corners and compare them with the encoder's.
+
+    surface: a DEM, or None for the ellipsoid at the encoder's own frame-centre elevation (tag 78,
+    or tag 25 + geoid) of each packet; the encoder's choice of terrain then cancels out and what
+    is left is the pointing model (rotation order, angle conventions, FOV).
+    """
+    c = tel.columns
+    sensor = sensor or misb_sensor()
+    geom = frame_geometry(sensor, packet_pose(tel), c["hfov_deg"], c["vfov_deg"],
+                          c["fc_h_m"] if surface is None else surface)
+    centre = horizontal_distance_m(geom.centre.lat_deg, geom.centre.lon_deg, c["fc_lat_deg"], c["fc_lon_deg"])
+    corners = np.stack([horizontal_distance_m(geom.corners.lat_deg[:, k], geom.corners.lon_deg[:, k],
+                                              c[f"corner{k + 1}_lat_deg"], c[f"corner{k + 1}_lon_deg"])
+                        for k in range(4)], -1)
+    with np.errstate(invalid="ignore"):
+        rng = np.where(c["range_m"] > 0, geom.centre.range_m - c["range_m"], np.nan)
+    return FrameCheck(geom, centre, corners, rng)
+
+
+def footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int = 1) -> list[dict]:
+    """Frame footprints as GeoJSON polygons: eoloc's (``geom``) or, with geom None, the encoder's
+    corner tags. Frames with a missing corner get a null geometry."""
+    c = tel.columns
+    feats = []
+    for i in range(0, len(tel), max(every, 1)):
+        if geom is None:
+            lat = np.array([c[f"corner{k + 1}_lat_deg"][i] for k in range(4)])
+            lon = np.array([c[f"corner{k + 1}_lon_deg"][i] for k in range(4)])
+            h = np.full(4, c["fc_h_m"][i])
+        else:
+            lat, lon, h = geom.corners.lat_deg[i], geom.corners.lon_deg[i], geom.corners.h_m[i]
+        ok = bool(np.all(np.isfinite(lat) & np.isfinite(lon)))
+        ring = [[float(a), float(b), float(z) if np.isfinite(z) else 0.0] for a, b, z in zip(lon, lat, h, strict=True)]
+        geometry = {"type": "Polygon", "coordinates": [ring + ring[:1]]} if ok else None
+        feats.append({"type": "Feature", "geometry": geometry,
+                      "properties": {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}})
+    return feats
+
+
+def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, every: int = 1,
+                           edge_samples: int = 8) -> list[dict]:
+    """Frame footprints on a DEM (image border traced and clipped at the DEM's edge or the horizon,
+    :func:`eoloc.footprint.footprints`), one batched call per distinct field of view."""
+    from .footprint import footprints
+
+    base = sensor or misb_sensor()
+    c = tel.columns
+    rows = np.arange(0, len(tel), max(every, 1))
+    feats: dict[int, dict] = {}
+    groups: dict[tuple[float, float], list[int]] = {}
+    for i in rows:
+        groups.setdefault((float(c["hfov_deg"][i]), float(c["vfov_deg"][i])), []).append(int(i))
+    pose_all = packet_pose(tel)
+    for (hf, vf), idx in groups.items():
+        geometry: list = [None] * len(idx)
+        if 0 < hf < 180 and 0 < vf < 180:
+            sensor_g = SensorModel(Camera.from_hfov(hf, 1000, 1000, vfov_deg=vf), base.gimbal,
+                                   base.mount_misalignment_deg, base.boresight_misalignment_deg, base.lever_arm_m)
+            geometry = [fp.geojson_geometry() for fp in footprints(sensor_g, pose_all.take(np.asarray(idx)), dem,
+                                                                   edge_samples=edge_samples)]
+        for i, g in zip(idx, geometry, strict=True):
+            feats[i] = {"type": "Feature", "geometry": g,
+                        "properties": {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}}
+    return [feats[i] for i in rows]
+
+
+def aircraft_feature(tel: Table) -> dict:
+    """The aircraft path as one GeoJSON LineString (lon, lat, ellipsoidal h) with coordTimes."""
+    c = tel.columns
+    ok = np.isfinite(c["lat_deg"]) & np.isfinite(c["lon_deg"]) & np.isfinite(c["h_m"])
+    coords = [[float(a), float(b), float(z)] for a, b, z in zip(c["lon_deg"][ok], c["lat_deg"][ok], c["h_m"][ok],
+                                                                strict=True)]
+    geom = {"type": "LineString", "coordinates": coords} if len(coords) > 1 else None
+    return {"type": "Feature", "geometry": geom,
+            "properties": {"what": "aircraft", "coordTimes": [_finite(t) for t in c["time_s"][ok]]}}
+
+
+@dataclass(frozen=True)
+class VMTIFixes:
+    """Located VMTI detections: fixes (N,), per-target columns, covariance columns (or {})."""
+
+    fixes: Fixes
+    extra: dict[str, np.ndarray]
+    uncertainty: dict[str, np.ndarray]
+
+
+def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
+                base: SensorModel | None = None) -> VMTIFixes:
+    """Geolocate VMTI detections with their own packet's pose and field of view.
+
+    surface: a DEM, or None for the ellipsoid at the packet's frame-centre elevation. The image
+    geometry of a detection is a pinhole over the VMTI frame size with the VMTI set's FOV (tags
+    11, 12) or else the packet's (tags 16, 17). With an error ``budget`` each fix gets its
+    first-order covariance; fixes are computed per distinct (size, FOV) group, one batched call each.
+    """
+    base = base or misb_sensor()
+    n = len(det)
+    row = np.searchsorted(tel.line, det.columns["frame"].astype(np.int64))
+    row = np.clip(row, 0, max(len(tel) - 1, 0))
+    found = (len(tel) > 0) & (tel.line[row] == det.columns["frame"].astype(np.int64)) if n else np.zeros(0, bool)
+    d, c = det.columns, tel.columns
+    hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
+    vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])
+    w, h = d["frame_width"], d["frame_height"]
+    lat, lon, hh, rng = (np.full(n, np.nan) for _ in range(4))
+    status = np.full(n, int(Status.NO_TELEMETRY), dtype=np.int8)
+    unc: dict[str, np.ndarray] = {}
+    pose_all = packet_pose(tel).take(row) if n else None
+    groups = {}
+    usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
+        (vfov > 0) & (vfov < 180)
+    status[found & ~usable] = int(Status.INVALID_INPUT)
+    for i in np.flatnonzero(usable):
+        groups.setdefault((float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])), []).append(i)
+    for (hf, vf, wi, hi), idx in groups.items():
+        idx = np.asarray(idx)
+        cam = Camera.from_hfov(hf, wi, hi, vfov_deg=vf)
+        sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
+                             base.lever_arm_m)
+        pose = pose_all.take(idx)
+        stop = {"dem": surface} if surface is not None else {"height_m": np.nan_to_num(c["fc_h_m"][row[idx]])}
+        fixes, cov = locate_by_rule(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), budget=budget, **stop)
+        st = np.asarray(fixes.status).copy()
+        if surface is None:
+            st[~np.isfinite(c["fc_h_m"][row[idx]])] = int(Status.INVALID_INPUT)
+        ok = st == Status.OK
+        lat[idx], lon[idx], hh[idx], rng[idx] = (np.where(ok, x, np.nan) for x in
+                                                 (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m))
+        status[idx] = st
+        if cov is not None:
+            for k, v in covariance_columns(cov, ok).items():
+                unc.setdefault(k, np.full(n, np.nan))[idx] = v
+    extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
+             "u_px": d["u_px"], "v_px": d["v_px"]}
+    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc)
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
