@@ -167,3 +167,10 @@ def test_use_backend_restores_the_previous_backend():
         with eoloc.use_backend(inner):
             assert eoloc.get_backend() == inner
         assert eoloc.get_backend() == outer
+
+
+def test_horizontal_distance_known_values_and_nan():
+    """One degree of longitude on the equator is a·π/180 = 111 319.4908 m; NaN in, NaN out (no crash)."""
+    d = geodesy.horizontal_distance_m([0.0, np.nan, 0.0], [0.0, 0.0, 10.0], [0.0, 1.0, 0.0], [1.0, 0.0, 10.0])
+    assert d[0] == pytest.approx(6378137.0 * np.pi / 180.0, abs=1e-3)
+    assert np.isnan(d[1]) and d[2] == 0.0

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from pymap3d.los import lookAtSpheroid
 from scipy.spatial.transform import Rotation
 
+from eoloc.geodesy import horizontal_distance_m
 from eoloc.io.klv import (
     UAS_KEY,
     decode_klv_bytes,
@@ -25,7 +26,7 @@ from eoloc.io.klv import (
     read_klv,
     vmti_detections,
 )
-from eoloc.misb import frame_geometry, horizontal_distance_m, misb_sensor, packet_pose
+from eoloc.misb import frame_geometry, misb_sensor, packet_pose
 from eoloc.sensor import Camera, Pose, SensorModel
 from eoloc.terrain.geoid import default_geoid
 from eoloc.video import check_frames, locate_vmti

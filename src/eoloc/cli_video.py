@@ -200,15 +200,16 @@ def _write_klv(path: Path, stream, tel, v) -> Path:
             first[frame] = j
     ce = v.uncertainty.get("ce90_m", np.full(len(f), np.nan))
     le = v.uncertainty.get("le90_m", np.full(len(f), np.nan))
-    hae = np.isfinite(tel.columns["fc_h_m"]) & ~np.isfinite(tel.columns["fc_h_msl_m"])
+    hae = tel.columns["target_elevation_hae"] > 0  # the datum the reader gives tag 42 in each packet
     from .terrain.geoid import default_geoid
 
+    geoid = default_geoid()
     out = bytearray()
     for i, p in enumerate(stream.packets):
         raw = p.uas.packet.raw
         j = first.get(p.index)
         if j is not None:
-            h = float(f.h_m[j]) if hae[i] else float(f.h_m[j] - default_geoid().undulation(f.lat_deg[j], f.lon_deg[j]))
+            h = float(f.h_m[j]) if hae[i] else float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))
             raw = with_target_location(raw, float(f.lat_deg[j]), float(f.lon_deg[j]), h, ce90_m=ce[j], le90_m=le[j])
         out += raw
     path.parent.mkdir(parents=True, exist_ok=True)

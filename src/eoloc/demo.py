@@ -6,12 +6,12 @@ import csv
 from pathlib import Path
 
 import numpy as np
-import pyproj
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
 
 from .accuracy.covariance import covariance_columns
+from .geodesy import horizontal_distance_m
 from .io.config import error_budget, load_config
 from .io.export import fix_rows, write_csv, write_geojson
 from .io.telemetry import read_detections, read_telemetry
@@ -20,20 +20,13 @@ from .pipeline import RANGE_FROM_FILES, locate_tables
 from .sensor import AzElGimbal, Camera, Pose, SensorModel
 
 S13_EXPECTED = (42.02058646, 125.03195512, 419.58)
-_GEOD = pyproj.Geod(ellps="WGS84")
-
-
-def _horizontal_m(lat1, lon1, lat2, lon2) -> np.ndarray:
-    lat1, lon1, lat2, lon2 = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (lat1, lon1, lat2, lon2)))
-    _, _, d = _GEOD.inv(lon1, lat1, lon2, lat2)
-    return np.asarray(d)
 
 
 def s13_check(console: Console) -> float:
     """[S13] Table 2 -> Table 3: the convention check every eoloc build must pass. Returns metres."""
     sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), AzElGimbal())
     f = locate_range(sensor, Pose(42.0, 125.0, 10_000.0, 10.0, 5.0, -2.0, (45.0, -75.0)), 10_200.0)
-    d = float(_horizontal_m(f.lat_deg, f.lon_deg, S13_EXPECTED[0], S13_EXPECTED[1]))
+    d = float(horizontal_distance_m(f.lat_deg, f.lon_deg, S13_EXPECTED[0], S13_EXPECTED[1]))
     dh = float(f.h_m) - S13_EXPECTED[2]
     console.print(
         f"[bold][S13] reference case[/] (aircraft 125°E 42°N 10 000 m, yaw 10 pitch 5 roll -2, az 45 el -75, "
@@ -79,7 +72,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     budget = error_budget(load_config(data / "camera.toml"), data / "camera.toml")
     m1 = locate_tables(sensor, tel, None, range_m=RANGE_FROM_FILES, budget=budget)
     t1 = truth["T1"]
-    err1 = _horizontal_m(m1.fixes.lat_deg, m1.fixes.lon_deg, t1[0], t1[1])
+    err1 = horizontal_distance_m(m1.fixes.lat_deg, m1.fixes.lon_deg, t1[0], t1[1])
     err1 = np.where(m1.fixes.ok, err1, np.nan)
     # M3: every detection on the ellipsoid at the targets' known ground height
     m3 = locate_tables(sensor, tel, det, height_m=t1[2])
@@ -88,7 +81,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     ids = np.asarray(m3.extra["target_id"], dtype=object)
     tlat = np.array([truth.get(i, (np.nan,) * 3)[0] for i in ids])
     tlon = np.array([truth.get(i, (np.nan,) * 3)[1] for i in ids])
-    err3 = np.where(m3.fixes.ok, _horizontal_m(m3.fixes.lat_deg, m3.fixes.lon_deg, tlat, tlon), np.nan)
+    err3 = np.where(m3.fixes.ok, horizontal_distance_m(m3.fixes.lat_deg, m3.fixes.lon_deg, tlat, tlon), np.nan)
 
     console.print(_error_table("M1 laser range, image centre (= T1)", np.full(err1.shape, "T1", dtype=object), err1))
     console.print(_error_table("M3 ellipsoid at h = 600 m, every detection", ids, err3))
@@ -133,12 +126,13 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
         sel = np.flatnonzero(ids == tid)
         f = m3.fixes.flat(sel)
         est = rls_static(f, m3.covariance.cov_enu[sel])
-        single = np.nanmedian(np.where(f.ok, _horizontal_m(f.lat_deg, f.lon_deg, lat, lon), np.nan))
+        single = np.nanmedian(np.where(f.ok, horizontal_distance_m(f.lat_deg, f.lon_deg, lat, lon), np.nan))
         good = sel[matched.record[sel] >= 0]
         tri = triangulate(rays.take(good), np.radians(1.0))
         table.add_row(tid, str(int(est.n_used)), f"{single:.1f}",
-                      f"{float(_horizontal_m(est.lat_deg, est.lon_deg, lat, lon)):.1f}", f"{float(est.cep50_m):.1f}",
-                      f"{float(_horizontal_m(tri.lat_deg, tri.lon_deg, lat, lon)):.1f}")
+                      f"{float(horizontal_distance_m(est.lat_deg, est.lon_deg, lat, lon)):.1f}",
+                      f"{float(est.cep50_m):.1f}",
+                      f"{float(horizontal_distance_m(tri.lat_deg, tri.lon_deg, lat, lon)):.1f}")
     console.print(table)
     console.print("[dim]The demo's telemetry errors are independent from frame to frame, so recursive least squares "
                   "over the frames (eoloc track --static) removes most of them, and its own covariance says by how "
@@ -173,7 +167,7 @@ def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     errors = {}
     for name, located in (("dem", m4), ("flat", m3)):
         f = located.fixes
-        errors[name] = np.where(f.ok, _horizontal_m(f.lat_deg, f.lon_deg, t[:, 0], t[:, 1]), np.nan)
+        errors[name] = np.where(f.ok, horizontal_distance_m(f.lat_deg, f.lon_deg, t[:, 0], t[:, 1]), np.nan)
     known = np.isfinite(t[:, 0])
     console.print(_error_table("M4 on the DEM", ids[known], errors["dem"][known]))
     console.print(_error_table(f"M3 on the ellipsoid at the DEM's mean height {flat_h:.0f} m (no terrain model)",
@@ -202,8 +196,6 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """The mountain flight as a MISB ST 0601 stream with ST 0903 targets (flight.klv, one packet
     corrupted on purpose): decoded, checked against the encoder's frame centres, targets located on
     the DEM and compared with the survey, and written as CSV, GeoJSON, KML, CoT and an HTML map."""
-    import csv
-
     from .accuracy.budget import ErrorBudget
     from .cli_video import klv_job
     from .terrain import open_dem
@@ -218,7 +210,7 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
         names = {r["vmti_target_id"]: r["target_id"] for r in csv.DictReader(fh)}
     ids = np.array([names.get(str(i), str(i)) for i in v.extra["target_id"]], dtype=object)
     t = np.array([truth.get(i, (np.nan,) * 3) for i in ids])
-    err = np.where(v.fixes.ok, _horizontal_m(v.fixes.lat_deg, v.fixes.lon_deg, t[:, 0], t[:, 1]), np.nan)
+    err = np.where(v.fixes.ok, horizontal_distance_m(v.fixes.lat_deg, v.fixes.lon_deg, t[:, 0], t[:, 1]), np.nan)
     known = np.isfinite(t[:, 0])
     console.print(_error_table("VMTI targets from the KLV stream, located on the DEM, against the survey",
                                ids[known], err[known]))

@@ -158,3 +158,16 @@ def geodetic_to_ned(lat, lon, h, lat0, lon0, h0, *, degrees: bool = True, ell: E
     """NED offsets (..., 3) in metres of geodetic points from the origin (lat0, lon0, h0)."""
     p = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat, lon, h, degrees=degrees, ell=ell)), -1)
     return ecef_to_ned(p, lat0, lon0, h0, degrees=degrees, ell=ell)
+
+
+def horizontal_distance_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> np.ndarray:
+    """Geodesic distance on WGS-84 (m) between points (pyproj.Geod; NaN where an input is NaN)."""
+    from pyproj import Geod
+
+    a = [np.asarray(x, dtype=np.float64) for x in np.broadcast_arrays(lat1, lon1, lat2, lon2)]
+    ok = np.all([np.isfinite(x) for x in a], axis=0)
+    out = np.full(a[0].shape, np.nan)
+    if ok.any():
+        _, _, d = Geod(ellps="WGS84").inv(a[1][ok], a[0][ok], a[3][ok], a[2][ok])
+        out[ok] = d
+    return out

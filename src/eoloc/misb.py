@@ -22,6 +22,7 @@ from .result import Fixes, Status, with_status
 from .sensor.camera import Camera
 from .sensor.gimbal import AzElGimbal
 from .sensor.model import Pose, Rays, SensorModel
+from .terrain import DEM
 
 # ST 0601 corner order in units of the half-FOV tangents (x right, y down in the image)
 CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
@@ -53,15 +54,6 @@ def _half_tangents(hfov_deg: ArrayLike, vfov_deg: ArrayLike) -> tuple[np.ndarray
     return np.where(bad, np.nan, tx), np.where(bad, np.nan, ty)
 
 
-def pixels_to_normalized(u: ArrayLike, v: ArrayLike, width: ArrayLike, height: ArrayLike, hfov_deg: ArrayLike,
-                         vfov_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (eoloc convention: centre of the top-left pixel at (0, 0)) of a W x H image whose
-    fields of view span its outer edges -> normalised image coordinates (x right, y down)."""
-    tx, ty = _half_tangents(hfov_deg, vfov_deg)
-    w, h = np.asarray(width, dtype=np.float64), np.asarray(height, dtype=np.float64)
-    return ((np.asarray(u) - (w - 1) / 2.0) * tx / (w / 2.0), (np.asarray(v) - (h - 1) / 2.0) * ty / (h / 2.0))
-
-
 def packet_rays(sensor: SensorModel, pose: Pose, xn: ArrayLike, yn: ArrayLike) -> Rays:
     """Rays of normalised points (F, K) from the poses (F,) (one row of points per packet)."""
     frame = sensor.camera_frame(pose.take((slice(None), None)) if np.ndim(pose.lat_deg) else pose)
@@ -81,12 +73,12 @@ class FrameGeometry:
 
 def stop_on(rays: Rays, surface, sensor: SensorModel) -> Fixes:
     """Stop rays (…, K) on ``surface``: a DEM, or ellipsoidal heights (m) broadcasting as (F, 1)."""
-    if hasattr(surface, "grid"):
+    if isinstance(surface, DEM):
         return stop_at_dem(rays, surface, sensor=sensor)
     h = np.asarray(surface, dtype=np.float64)
-    fixes = stop_at_ellipsoid(rays, np.nan_to_num(h[..., None] if h.ndim else h), sensor=sensor)
-    return with_status(fixes, np.broadcast_to(~np.isfinite(h[..., None] if h.ndim else h), fixes.shape),
-                       Status.INVALID_INPUT)
+    h = h[..., None] if h.ndim else h  # one height per packet, for all its points
+    fixes = stop_at_ellipsoid(rays, np.nan_to_num(h), sensor=sensor)
+    return with_status(fixes, np.broadcast_to(~np.isfinite(h), fixes.shape), Status.INVALID_INPUT)
 
 
 def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_deg: ArrayLike, surface,
@@ -103,18 +95,5 @@ def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_de
         centre = stop_on(centre_rays, surface, sensor)
     corner_rays = packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None])
     corners = stop_on(corner_rays, surface, sensor)
-    kind = "DEM" if hasattr(surface, "grid") else "ellipsoid at the frame-centre elevation"
+    kind = "DEM" if isinstance(surface, DEM) else "ellipsoid at the frame-centre elevation"
     return FrameGeometry(centre.flat(), corners, kind)
-
-
-def horizontal_distance_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> np.ndarray:
-    """Geodesic distance on WGS-84 (m) between points (pyproj.Geod; NaN where an input is NaN)."""
-    from pyproj import Geod
-
-    a = [np.asarray(x, dtype=np.float64) for x in np.broadcast_arrays(lat1, lon1, lat2, lon2)]
-    ok = np.all([np.isfinite(x) for x in a], axis=0)
-    out = np.full(a[0].shape, np.nan)
-    if ok.any():
-        _, _, d = Geod(ellps="WGS84").inv(a[1][ok], a[0][ok], a[3][ok], a[2][ok])
-        out[ok] = d
-    return out

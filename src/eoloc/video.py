@@ -12,8 +12,9 @@ import numpy as np
 
 from .accuracy.budget import ErrorBudget
 from .accuracy.covariance import covariance_columns
+from .geodesy import horizontal_distance_m
 from .io.table import Table
-from .misb import FrameGeometry, frame_geometry, horizontal_distance_m, misb_sensor, packet_pose
+from .misb import FrameGeometry, frame_geometry, misb_sensor, packet_pose
 from .pipeline import locate_by_rule
 from .result import Fixes, Status
 from .sensor.camera import Camera
@@ -140,9 +141,9 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     """
     base = base or misb_sensor()
     n = len(det)
-    row = np.searchsorted(tel.line, det.columns["frame"].astype(np.int64))
-    row = np.clip(row, 0, max(len(tel) - 1, 0))
-    found = (len(tel) > 0) & (tel.line[row] == det.columns["frame"].astype(np.int64)) if n else np.zeros(0, bool)
+    frames = det.columns["frame"].astype(np.int64)
+    row = np.clip(np.searchsorted(tel.line, frames), 0, max(len(tel) - 1, 0))  # tel.line: packet numbers, ascending
+    found = tel.line[row] == frames if len(tel) else np.zeros(n, bool)
     d, c = det.columns, tel.columns
     hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
     vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])

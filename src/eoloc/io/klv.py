@@ -312,7 +312,8 @@ def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = Tru
     laser, 0 computed, NaN unknown), hfov_deg, vfov_deg, fc_lat_deg, fc_lon_deg, fc_h_m (frame
     centre), corner{1-4}_lat_deg/_lon_deg (1 upper-left, 2 upper-right, 3 lower-right, 4
     lower-left), target_lat_deg, target_lon_deg, target_h_m, target_ce90_m, target_le90_m,
-    pts_s, h_msl_m and fc_h_msl_m (as sent). ``line`` holds the packet numbers.
+    target_elevation_hae (1 where tag 42 is HAE, 0 MSL), pts_s, h_msl_m and fc_h_msl_m (as
+    sent). ``line`` holds the packet numbers.
     """
     from ..terrain.geoid import default_geoid
 
@@ -343,7 +344,8 @@ def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = Tru
     n_fc = geoid.undulation(fc_lat, fc_lon) if n else np.zeros(0)
     fc_h = np.where(np.isfinite(v[78]), v[78], v[25] + n_fc)
     # tag 42's datum follows the frame-centre height in use (ST 0601.19 §8.42.1): HAE once 78 is sent
-    target_h = np.where(seen(78), v[42], v[42] + geoid.undulation(v[40], v[41]) if n else v[42])
+    target_hae = seen(78)
+    target_h = np.where(target_hae, v[42], v[42] + geoid.undulation(v[40], v[41])) if n else v[42]
     flags = v[47]
     measured = np.where(np.isfinite(flags), (np.nan_to_num(flags).astype(np.int64) & SLANT_RANGE_MEASURED) > 0,
                         np.nan)
@@ -356,6 +358,7 @@ def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = Tru
         "range_m": v[21], "range_measured": measured.astype(np.float64), "hfov_deg": v[16], "vfov_deg": v[17],
         "fc_lat_deg": fc_lat, "fc_lon_deg": fc_lon, "fc_h_m": fc_h, "fc_h_msl_m": v[25],
         "target_lat_deg": v[40], "target_lon_deg": v[41], "target_h_m": target_h,
+        "target_elevation_hae": target_hae.astype(np.float64),
         "target_ce90_m": v[45], "target_le90_m": v[46],
     }
     for k in range(4):
