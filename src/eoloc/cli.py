@@ -140,9 +140,12 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
 @click.option("--time-offset", type=float, default=None,
               help="With --interpolate: telemetry clock minus video clock (s); default: the config's "
                    "[telemetry] time_offset_s, else 0.")
+@click.option("--compensate", "compensate_path", type=click.Path(dir_okay=False), default=None, metavar="MODEL",
+              help="File mode: add a learned error correction (eoloc compensate train) to every fix inside the "
+                   "model's trained range and report it per fix (default: the config's [compensation] model).")
 def locate(telemetry, detections, config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
            gimbal_angles, sensor_roll, pixel, as_json, out_dir, time_tolerance, dem_paths, vertical, geoid,
-           dem_crs, covariance, interpolate, max_gap, time_offset) -> None:
+           dem_crs, covariance, interpolate, max_gap, time_offset, compensate_path) -> None:
     budget = None
     if covariance:
         if config_path is None:
@@ -166,7 +169,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
     if interpolate and detections is None:
         _fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget,
-                  dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset))
+                  dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset), compensate_path)
 
 
 def _open_dem(paths, vertical, geoid, dem_crs):
@@ -292,13 +295,19 @@ def _cell(key: str, v) -> str:
 
 
 def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance,
-                  dem=None, budget=None, interp=None) -> None:
+                  dem=None, budget=None, interp=None, compensate_path=None) -> None:
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
     rng, stop_h = _stop_rule(range_opt, stop_height, dem)
     cfg = _load_config(config_path)
+    from .io.config import compensation_model
+
+    try:
+        model = compensation_model(cfg, config_path, compensate_path)
+    except ConfigError as exc:
+        _fail(str(exc))
     tel, det, issues = _read_inputs(telemetry, detections, cfg)
-    located = _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp)
+    located = _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp, model)
     issues += located.issues
     _report_issues(issues)
     after = None
@@ -310,6 +319,16 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
         if loose.size:
             err_console.print(f"[yellow]warning:[/] {loose.size} fixes have a nonlinearity > 0.1 (column "
                               "nonlinearity): their first-order uncertainty is not to be trusted")
+    if located.compensation is not None:
+        comp = located.compensation
+        after = {**(after or {}), **comp}
+        applied = comp["comp_applied"] & located.fixes.ok.ravel()
+        flagged = located.fixes.ok.ravel() & ~comp["comp_applied"]
+        shift = np.hypot(comp["comp_e_m"], comp["comp_n_m"])[applied]
+        Console().print(f"compensation: {int(applied.sum())} fixes corrected"
+                        + (f" (median shift {np.median(shift):.1f} m, max {shift.max():.1f} m)" if shift.size else "")
+                        + f"; {int(flagged.sum())} outside the model's trained range left as located (column "
+                          "comp_flag says why)")
     rows = fix_rows(located.fixes, located.extra, after)
     out = Path(out_dir)
     csv_path = write_csv(out / "fixes.csv", rows)
@@ -318,7 +337,7 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
 
 
-def _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp):
+def _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp, compensation=None):
     """locate_tables with the config's sensor and time offset (unless --time-offset was given)."""
     interp = dict(interp or {})
     if interp.get("time_offset_s") is None:
@@ -326,7 +345,8 @@ def _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp):
     with err_console.status("locating..."):
         try:
             return locate_tables(cfg.sensor(), tel, det, range_m=rng, height_m=stop_h, dem=dem,
-                                 time_tolerance_s=time_tolerance, budget=budget, **interp)
+                                 time_tolerance_s=time_tolerance, budget=budget, compensation=compensation,
+                                 **interp)
         except ValueError as exc:
             _fail(str(exc))
 
@@ -629,7 +649,7 @@ def demo(out_dir) -> None:
     run_demo(Path(out_dir), console=Console(), data=resources.files("eoloc") / "data" / "demo")
 
 
-from . import cli_sequence, cli_video  # noqa: E402, F401  (register track, triangulate, calibrate, klv, map)
+from . import cli_compensate, cli_sequence, cli_video  # noqa: E402, F401  (register the other commands)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

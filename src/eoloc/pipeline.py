@@ -29,12 +29,13 @@ class Located:
     extra: dict[str, np.ndarray]
     issues: list[Issue] = field(default_factory=list)
     covariance: FixCovariance | None = None
+    compensation: dict[str, np.ndarray] | None = None
 
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
                   range_m: float | str | None = None, height_m: float | None = None, dem=None,
                   time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None, interpolate: bool = False,
-                  max_gap_s: float = 0.5, time_offset_s: float = 0.0) -> Located:
+                  max_gap_s: float = 0.5, time_offset_s: float = 0.0, compensation=None) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
     Stop rule (exactly one): ``height_m`` (M3, ellipsoidal metres), ``dem`` (M4, a
@@ -45,6 +46,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     ``interpolate``: each detection's pose is interpolated to its time (+ ``time_offset_s``,
     telemetry minus video clock) instead of taken from the nearest record; detections in a gap
     longer than ``max_gap_s`` or outside the telemetry get NO_TELEMETRY and an issue.
+    ``compensation``: a :class:`eoloc.accuracy.compensation.CompensationModel` whose predicted
+    correction is added to every fix inside its trained range (the others are flagged); its
+    per-fix columns come back in ``Located.compensation``.
     """
     stop_rule(range_m, height_m, dem)
     issues: list[Issue] = []
@@ -82,8 +86,13 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
                                                          "a constant --range R, or use --height H"))
     fixes, cov = locate_by_rule(sensor, pose, (u, v), range_m=range_m, height_m=height_m, dem=dem, budget=budget)
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
+    comp = None
+    if compensation is not None:
+        from .accuracy.compensation import compensate
+
+        fixes, comp = compensate(compensation, sensor, pose, fixes, (u, v), dem=dem)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
-    return Located(fixes, extra, issues, cov)
+    return Located(fixes, extra, issues, cov, comp)
 
 
 def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, *, range_m=None, height_m=None, dem=None,

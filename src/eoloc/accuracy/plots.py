@@ -105,3 +105,42 @@ def plot_sweep(points: Sequence[SweepPoint], path: str | Path, *, metric: str = 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     return path
+
+
+def plot_compensation(oblique_deg: np.ndarray, before_en: np.ndarray, after_en: dict[str, np.ndarray], rows,
+                      path: str | Path, *, title: str = "location error against oblique angle") -> Path:
+    """PNG of [P] Fig. 1 with and without compensation: each fix's horizontal error against its
+    oblique angle (left), and CEP50 by oblique band before and after (right, log scale). ``rows``:
+    :func:`eoloc.accuracy.compensation.band_table` rows."""
+    fig = _figure(11.0, 4.4)
+    ax, bx = fig.subplots(1, 2)
+    ob = np.ravel(oblique_deg)
+    r0 = np.hypot(*np.asarray(before_en).reshape(-1, 2).T)
+    ax.scatter(ob, r0, s=4, c="0.6", label="located", rasterized=True)
+    colours = ("tab:blue", "tab:green", "tab:orange", "tab:purple")
+    for (name, e), c in zip(after_en.items(), colours, strict=False):
+        ax.scatter(ob, np.hypot(*np.asarray(e).reshape(-1, 2).T), s=4, c=c, label=f"compensated ({name})",
+                   rasterized=True)
+    ax.set_yscale("log")
+    ax.set_xlabel("oblique angle (deg from the vertical)")
+    ax.set_ylabel("horizontal error (m)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8, markerscale=3)
+    bands = [r for r in rows if not r.summary]
+    x = np.arange(len(bands))
+    width = 0.8 / (1 + len(after_en))
+    bx.bar(x - 0.4 + width / 2, [r.cep_before_m for r in bands], width, color="0.6", label="located")
+    for k, (name, c) in enumerate(zip(after_en, colours, strict=False)):
+        bx.bar(x - 0.4 + width * (k + 1.5), [r.cep_after_m[name] for r in bands], width, color=c,
+               label=f"compensated ({name})")
+    bx.set_xticks(x, [f"{r.lo_deg:.0f}–{r.hi_deg:.0f}°\nn={r.n}" for r in bands], fontsize=8)
+    bx.set_yscale("log")
+    bx.set_ylabel("CEP50 (m)")
+    bx.set_xlabel("oblique band")
+    bx.grid(True, axis="y", which="both", alpha=0.3)
+    bx.legend(fontsize=8)
+    fig.suptitle(title)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path

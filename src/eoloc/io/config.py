@@ -23,6 +23,10 @@
     [telemetry]              # optional corrections of the GPS/INS records (eoloc calibrate writes them)
     heading_bias_deg = 0.0   # INS heading minus true heading: subtracted from every yaw read
     time_offset_s = 0.0      # telemetry clock minus video clock (default of --time-offset)
+
+    [compensation]           # optional: learned error compensation (eoloc compensate train writes the model)
+    model = "compensation.json"   # relative to this file; applied by eoloc locate (or --compensate MODEL)
+    features = ["oblique", "azimuth", "height", "bearing"]   # optional: the feature set it must have
 """
 
 from __future__ import annotations
@@ -125,6 +129,11 @@ class TelemetryConfig(_Strict):
     time_offset_s: float = 0.0
 
 
+class CompensationConfig(_Strict):
+    model: str
+    features: tuple[str, ...] | None = None
+
+
 class PoseConfig(_Strict):
     lat_deg: float = Field(ge=-90, le=90)
     lon_deg: float
@@ -169,6 +178,7 @@ class Config(_Strict):
     installation: InstallationConfig = InstallationConfig()
     telemetry: TelemetryConfig = TelemetryConfig()
     accuracy: AccuracyConfig | None = None
+    compensation: CompensationConfig | None = None
 
     def sensor(self) -> SensorModel:
         """The SensorModel this configuration describes."""
@@ -215,6 +225,22 @@ def error_budget(cfg: Config, path: str | Path):
         raise ConfigError(f"config file {str(path)!r} has no [accuracy.budget] section: list the error sources, "
                           "e.g. yaw_deg = {normal = 0.02}; see the README")
     return ErrorBudget.from_mapping(cfg.accuracy.budget)
+
+
+def compensation_model(cfg: Config, path: str | Path, override: str | Path | None = None):
+    """The compensation model of ``--compensate`` (``override``) or of the config's [compensation]
+    (its path relative to the config file), checked against the config's feature set; None if
+    neither names one."""
+    from ..accuracy.compensation import CompensationModel, ModelFileError
+
+    c = cfg.compensation
+    if override is None and c is None:
+        return None
+    model_path = Path(override) if override is not None else Path(path).parent / c.model
+    try:
+        return CompensationModel.load(model_path, features=None if c is None else c.features)
+    except ModelFileError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def load_config(path: str | Path) -> Config:

@@ -56,6 +56,35 @@ GCP_COLUMNS = [
 ]
 
 
+#: Calibration observations (compensation training): one row per sighting of a surveyed point,
+#: with the pose as the telemetry reported it, the pixel, and the point's surveyed position.
+OBSERVATION_COLUMNS = [
+    Column("flight", ("flight_id", "sortie"), required=False, text=True),
+    Column("time_s", required=False, unit="s"),
+    *TELEMETRY_COLUMNS[2:10],
+    Column("sensor_roll_deg", (), required=False, lo=-360, hi=360, unit="deg"),
+    Column("u_px", ("u", "col", "x_px"), unit="px"),
+    Column("v_px", ("v", "row", "y_px"), unit="px"),
+    Column("gcp_id", ("gcp",), required=False, text=True),
+    Column("gcp_lat_deg", ("true_lat_deg",), lo=-90, hi=90, unit="deg"),
+    Column("gcp_lon_deg", ("true_lon_deg",), lo=-180, hi=360, unit="deg"),
+    Column("gcp_h_m", ("true_h_m",), lo=-12_000, hi=100_000, unit="m"),
+]
+
+
+def read_observations(path: str | Path) -> Table:
+    """Read calibration observations: flight (id; held out together in cross-validation), pose
+    (lat_deg, lon_deg, h_m ellipsoidal, yaw/pitch/roll_deg, gimbal1/2_deg, optional
+    sensor_roll_deg), u_px, v_px and the surveyed gcp_lat_deg, gcp_lon_deg, gcp_h_m (ellipsoidal).
+    Without a flight column every row counts as one flight."""
+    t = read_table(path, OBSERVATION_COLUMNS, what="calibration observations", key=("u_px", "v_px"))
+    t.columns.setdefault("flight", np.full(len(t), Path(path).stem, dtype=object))
+    t.columns.setdefault("sensor_roll_deg", np.zeros(len(t)))
+    for name in ("gimbal1_deg", "gimbal2_deg", "time_s"):
+        t.columns.setdefault(name, np.full(len(t), np.nan))
+    return t
+
+
 def read_gcps(path: str | Path) -> Table:
     """Read GCP observations: time_s or frame, gcp_id, u_px, v_px (where the GCP is in that image)
     and the GCP's surveyed lat_deg, lon_deg, h_m (ellipsoidal)."""

@@ -1,0 +1,291 @@
+"""`eoloc compensate simulate|train|evaluate`: learned error compensation at large oblique angles ([P])."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+from rich.console import Console
+from rich.table import Table as RichTable
+
+from .cli import _fail, _load_config, _open_dem, _report_issues, dem_options, err_console, main
+from .io.table import TableError
+
+COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles ([P], SPEC §4.3).
+
+\b
+  eoloc compensate simulate --config CAMERA.toml --out cal/     synthetic calibration flights
+  eoloc compensate train cal/train.csv --config CAMERA.toml --dem cal/dem.tif --vertical ellipsoid -o model.json
+  eoloc compensate evaluate model.json cal/test.csv --config CAMERA.toml --dem cal/dem.tif --vertical ellipsoid
+  eoloc locate TEL.csv DET.csv --config CAMERA.toml --dem DEM.tif --compensate model.json
+
+\b
+Observations CSV (one row per sighting of a surveyed point; `eoloc compensate simulate` writes one):
+  flight            flight id: cross-validation holds whole flights out
+  time_s            optional
+  lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, gimbal1_deg, gimbal2_deg[, sensor_roll_deg]
+                    the pose as the telemetry reported it (same conventions as `eoloc locate`)
+  u_px, v_px        where the point is in the image
+  gcp_id            optional
+  gcp_lat_deg, gcp_lon_deg, gcp_h_m   the point's surveyed WGS-84 position (ellipsoidal m)
+
+Each observation is located with the stop rule you use in operation (--dem, --target-height;
+default: each point's own surveyed height), its error (fix minus truth) is learned from the
+features oblique angle, look azimuth, height above target (and, by default, the look bearing
+relative to the heading), and the model predicts it for new fixes.
+"""
+
+BANDS_HELP = "Oblique-angle band edges for the tables (deg)."
+
+
+def _bands(text: str) -> tuple[float, ...]:
+    try:
+        edges = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        _fail(f"--bands takes comma-separated degrees, e.g. 0,30,45,60,70,90; got {text!r}")
+    if len(edges) < 2 or any(b <= a for a, b in itertools.pairwise(edges)):
+        _fail(f"--bands must be at least two increasing angles, got {text!r}")
+    return edges
+
+
+@main.group(help=COMPENSATE_HELP)
+def compensate() -> None:
+    pass
+
+
+@compensate.command("simulate", help="Write synthetic calibration flights (train.csv, test.csv) and the "
+                                     "ground-station DEM they are located on (dem.tif, ellipsoidal heights).")
+@click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
+              help="Camera/gimbal TOML (the nominal sensor; az-el turret).")
+@click.option("--flights", type=click.IntRange(1, 200), default=8, show_default=True, help="Training flights.")
+@click.option("--test-flights", type=click.IntRange(0, 200), default=4, show_default=True,
+              help="Independent flights for evaluate.")
+@click.option("--looks", type=click.IntRange(10, 100_000), default=400, show_default=True,
+              help="Observations per flight.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-cal", show_default=True)
+def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
+    from .accuracy.calflight import InstallationErrors, calibration_flights
+
+    sensor = _load_config(config_path).sensor()
+    try:
+        tr = calibration_flights(sensor, n_flights=flights, looks_per_flight=looks, seed=seed)
+        te = (calibration_flights(sensor, n_flights=test_flights, looks_per_flight=looks, seed=seed + 1000,
+                                  first_flight=flights) if test_flights else None)
+    except ValueError as exc:
+        _fail(str(exc))
+    out = Path(out_dir)
+    written = [_write_obs(out / "train.csv", tr.columns)]
+    if te is not None:
+        written.append(_write_obs(out / "test.csv", te.columns))
+    written.append(tr.dem.write_geotiff(out / "dem.tif"))
+    e = InstallationErrors()
+    Console().print(f"{len(tr)} training observations on {flights} flights"
+                    + (f", {len(te)} test observations on {test_flights} flights" if te is not None else "")
+                    + f". Installation errors: gimbal bias {e.gimbal_bias_deg}°, mount {e.mount_misalignment_deg}°, "
+                      f"boresight {e.boresight_misalignment_deg}°, heading bias {e.heading_bias_deg}°, time offset "
+                      f"{e.time_offset_s} s, DEM bias {e.dem_bias_m} m.")
+    Console().print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+
+
+def _write_obs(path: Path, cols: dict[str, np.ndarray]) -> Path:
+    from .io.export import plain_value, write_csv
+
+    names = list(cols)
+    rows = [{k: plain_value(cols[k][i]) for k in names} for i in range(cols["u_px"].size)]
+    return write_csv(path, rows)
+
+
+def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, dem_crs):
+    """(sensor, observations table, Observed) with the issues of the file reported."""
+    from .accuracy.compensation import locate_observations
+    from .io.telemetry import read_observations
+
+    sensor = _load_config(config_path).sensor()
+    try:
+        t = read_observations(obs_path)
+    except TableError as exc:
+        _fail(str(exc))
+    _report_issues(t.issues)
+    if len(t) == 0:
+        _fail(f"{obs_path}: no usable observation")
+    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+    if dem is not None and target_height is not None:
+        _fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
+    with err_console.status(f"locating {len(t)} observations..."):
+        obs = locate_observations(sensor, t.columns, dem=dem, height_m=target_height)
+    bad = np.flatnonzero(~obs.fixes.ok)
+    if bad.size:
+        err_console.print(f"[yellow]warning:[/] {bad.size} observations could not be located "
+                          f"({obs.fixes.status_counts()}), e.g. line {int(t.line[bad[0]])}; they are left out")
+    return sensor, t, obs, dem
+
+
+def stop_options(fn):
+    fn = dem_options("Stop rule M4: the DEM the fixes are located on (as in operation).")(fn)
+    fn = click.option("--target-height", type=float, default=None,
+                      help="Stop rule M3: this ellipsoidal height for every point (default: each point's own "
+                           "surveyed height).")(fn)
+    return click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
+                        help="Camera/gimbal/installation TOML.")(fn)
+
+
+def print_bands(rows, title: str) -> None:
+    t = RichTable(title=title, caption="CEP50 in metres; Δ: change against 'located'")
+    t.add_column("oblique")
+    t.add_column("n", justify="right")
+    t.add_column("located", justify="right")
+    names = list(rows[0].cep_after_m) if rows else []
+    for n in names:
+        t.add_column(n, justify="right")
+        t.add_column("Δ", justify="right")
+    for r in rows:
+        cells = [("> " if r.summary else "") + (f"{r.lo_deg:.0f}°" if r.summary else f"{r.lo_deg:.0f}–{r.hi_deg:.0f}°"),
+                 str(r.n), f"{r.cep_before_m:.2f}"]
+        for n in names:
+            cells += [f"{r.cep_after_m[n]:.2f}", f"{-100 * r.reduction(n):+.0f}%"]
+        t.add_row(*cells)
+    Console().print(t)
+
+
+@compensate.command("train", help="Fit a compensation model to calibration observations; print its "
+                                  "cross-validated CEP by oblique band (whole flights held out, then whole "
+                                  "bands held out) against a gradient-boosted tree ensemble, and write the model "
+                                  "(versioned JSON) and a PNG.")
+@click.argument("observations", type=click.Path(dir_okay=False))
+@stop_options
+@click.option("--features", "feature_set", type=click.Choice(["p", "p+bearing"]), default="p+bearing",
+              show_default=True, help="p: [P]'s oblique, azimuth, height; p+bearing adds the look bearing "
+                                      "relative to the heading (body-fixed errors need it).")
+@click.option("--up", is_flag=True, help="Also predict the vertical error.")
+@click.option("--per-bin", type=click.IntRange(1), default=None,
+              help="[P]'s sample selection: at most N observations per height x oblique x direction cell.")
+@click.option("--height-bins", default="0,1500,2500,3500,6000", show_default=True,
+              help="With --per-bin: height-above-target bin edges (m).")
+@click.option("--bands", default="0,30,45,60,70,90", show_default=True, help=BANDS_HELP)
+@click.option("--compare/--no-compare", default=True, show_default=True,
+              help="Cross-validate the other families too (trees, the other feature set).")
+@click.option("-o", "--model", "model_path", type=click.Path(dir_okay=False), default="compensation.json",
+              show_default=True, help="Model file to write.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
+              help="Folder for the PNG and the cross-validation CSV.")
+def train(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, feature_set, up, per_bin,
+          height_bins, bands, compare, model_path, out_dir) -> None:
+    from .accuracy import compensation as C
+    from .accuracy.plots import plot_compensation
+
+    edges = _bands(bands)
+    _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
+    keep = np.flatnonzero(obs.fixes.ok)
+    if per_bin is not None:
+        sel, counts = C.select_bins(obs.features.take(keep), height_edges=[float(x) for x in height_bins.split(",")],
+                                    oblique_edges=edges, per_cell=per_bin)
+        Console().print(f"sample selection: {sel.size} of {keep.size} observations, at most {per_bin} per cell; "
+                        f"{int((counts == 0).sum())} of {counts.size} height × oblique × direction cells are empty")
+        keep = keep[sel]
+    f, e, g = obs.features.take(keep), obs.errors_enu[keep], obs.groups[keep]
+    sets = ("p", "p+bearing") if compare else (feature_set,)
+    with err_console.status("cross-validating..."):
+        try:
+            cv_f = C.cross_validate(f, e, g, by="flight", feature_sets=sets, trees=compare, oblique_edges=edges)
+            cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
+            model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
+                          info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
+        except ValueError as exc:
+            _fail(str(exc))
+    n_flights = len(np.unique(g))
+    print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
+    print_bands(cv_b.table(edges), "held-out oblique bands (each band predicted by a model that never saw it)")
+    out = Path(out_dir)
+    png = plot_compensation(cv_f.oblique_deg, cv_f.before_en, {k: v for k, v in cv_f.after_en.items()
+                                                               if k == feature_set},
+                            cv_f.table(edges), out / "compensation_cv.png",
+                            title="held-out flights: location error against oblique angle, before and after")
+    csv_path = _write_table(out / "compensation_cv.csv", cv_f.table(edges) + cv_b.table(edges),
+                            ["flight"] * len(cv_f.table(edges)) + ["band"] * len(cv_b.table(edges)))
+    info = {"cv_by_flight": _table_dict(cv_f.table(edges)), "cv_by_band": _table_dict(cv_b.table(edges))}
+    model = dataclasses.replace(model, info={**model.info, **info})
+    path = model.save(model_path)
+    Console().print(f"model: physical, features {feature_set}, ridge {model.ridge:g}, "
+                    f"{model.info['n_samples']} samples, "
+                    f"oblique {model.oblique_range[0]:.1f}–{model.oblique_range[1]:.1f}°, height "
+                    f"{model.height_range[0]:.0f}–{model.height_range[1]:.0f} m")
+    Console().print(f"wrote [bold]{path}[/], [bold]{png}[/] and [bold]{csv_path}[/]")
+
+
+def _stop_label(dem_paths, target_height) -> str:
+    if dem_paths:
+        return "dem: " + ", ".join(str(p) for p in dem_paths)
+    return f"height {target_height} m" if target_height is not None else "each point's surveyed height"
+
+
+def _table_dict(rows) -> list[dict]:
+    return [{"lo_deg": r.lo_deg, "hi_deg": r.hi_deg, "n": r.n, "cep_before_m": round(r.cep_before_m, 3),
+             "cep_after_m": {k: round(v, 3) for k, v in r.cep_after_m.items()}} for r in rows]
+
+
+def _write_table(path: Path, rows, kinds) -> Path:
+    from .io.export import write_csv
+
+    out = []
+    for kind, r in zip(kinds, rows, strict=True):
+        row = {"held_out": kind, "lo_deg": r.lo_deg, "hi_deg": r.hi_deg, "n": r.n, "cep_before_m": r.cep_before_m}
+        row.update({f"cep_after_{k}_m": v for k, v in r.cep_after_m.items()})
+        out.append(row)
+    return write_csv(path, out)
+
+
+@compensate.command("evaluate", help="Apply a model to observations it was not trained on: CEP by oblique band "
+                                     "before and after, a PNG, and the per-fix corrections and flags (CSV).")
+@click.argument("model_path", type=click.Path(dir_okay=False))
+@click.argument("observations", type=click.Path(dir_okay=False))
+@stop_options
+@click.option("--bands", default="0,30,45,60,70,90", show_default=True, help=BANDS_HELP)
+@click.option("--json", "as_json", is_flag=True, help="Also print the band table as JSON.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
+              help="Folder for the PNG and the per-fix CSV.")
+def evaluate(model_path, observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, bands,
+             as_json, out_dir) -> None:
+    from .accuracy import compensation as C
+    from .accuracy.plots import plot_compensation
+
+    edges = _bands(bands)
+    try:
+        model = C.CompensationModel.load(model_path)
+    except C.ModelFileError as exc:
+        _fail(str(exc))
+    _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
+    pred = model.predict(obs.features)
+    e0 = obs.errors_enu[:, :2]
+    e1 = e0 + pred.correction_enu[:, :2]
+    ok = obs.fixes.ok & pred.applied
+    rows = C.band_table(np.where(ok, obs.features.oblique_deg, np.nan), e0, {"compensated": e1}, edges)
+    print_bands(rows, f"{observations}: CEP50 by oblique band, before and after {model_path}")
+    flagged = obs.fixes.ok & ~pred.applied
+    if flagged.any():
+        reasons = pred.reasons(obs.features, model)
+        first = int(np.flatnonzero(flagged)[0])
+        err_console.print(f"[yellow]{int(flagged.sum())} fixes outside the trained range were not corrected[/] "
+                          f"(left out of the table), e.g. line {int(table.line[first])}: {reasons[first]}")
+    out = Path(out_dir)
+    png = plot_compensation(obs.features.oblique_deg[ok], e0[ok], {"compensated": e1[ok]}, rows,
+                            out / "compensation.png",
+                            title=f"{Path(observations).name}: location error against oblique angle")
+    from .io.export import plain_value, write_csv
+
+    reasons = pred.reasons(obs.features, model)
+    fx = [{"line": int(table.line[i]), "flight": table.columns["flight"][i],
+           **{k: plain_value(v[i]) for k, v in obs.features.columns().items()},
+           "err_e_m": plain_value(e0[i, 0]), "err_n_m": plain_value(e0[i, 1]),
+           "comp_e_m": plain_value(pred.correction_enu[i, 0]), "comp_n_m": plain_value(pred.correction_enu[i, 1]),
+           "after_e_m": plain_value(e1[i, 0]), "after_n_m": plain_value(e1[i, 1]),
+           "comp_applied": bool(pred.applied[i]),
+           "comp_flag": reasons[i]} for i in range(len(table))]
+    csv_path = write_csv(out / "compensation_fixes.csv", fx)
+    if as_json:
+        click.echo(json.dumps(_table_dict(rows)))
+    Console().print(f"wrote [bold]{png}[/] and [bold]{csv_path}[/]")
