@@ -649,7 +649,7 @@ def demo(out_dir) -> None:
     run_demo(Path(out_dir), console=Console(), data=resources.files("eoloc") / "data" / "demo")
 
 
-from . import cli_compensate, cli_sequence, cli_video  # noqa: E402, F401  (register the other commands)
+from . import cli_compensate, cli_rectify, cli_sequence, cli_video  # noqa: E402, F401  (register the other commands)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
