@@ -8,6 +8,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 
 import bench_accuracy
+import bench_compensation
 import bench_geodesy
 import bench_locate
 import bench_terrain
@@ -17,5 +18,5 @@ if __name__ == "__main__":
     print(f"Machine: {machine()}\n")
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
-                 + bench_accuracy.main(1_000_000)):
+                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000)):
         print(line, flush=True)

@@ -46,7 +46,8 @@ def dem_options(dem_help: str):
         click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help=dem_help),
         click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96",
                      show_default=True, help="Vertical datum of the DEM heights (converted to ellipsoidal)."),
-        click.option("--geoid", type=click.Path(dir_okay=False), default=None, help="Geoid grid for --vertical."),
+        click.option("--geoid", type=click.Path(dir_okay=False), default=None,
+                     help="Geoid grid for --vertical (default: the bundled EGM96 15')."),
         click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326."),
     ]
 
@@ -125,13 +126,7 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
               help="File mode: folder for fixes.csv and fixes.geojson.")
 @click.option("--time-tolerance", type=float, default=0.02, show_default=True,
               help="File mode: max |Δt| (s) pairing a detection with a telemetry record.")
-@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False),
-              help="Stop rule M4: DEM file(s); repeat for several tiles.")
-@click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96", show_default=True,
-              help="Vertical datum of the DEM heights (converted to ellipsoidal).")
-@click.option("--geoid", type=click.Path(dir_okay=False), default=None,
-              help="Geoid grid for --vertical (default: the bundled EGM96 15').")
-@click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326.")
+@dem_options("Stop rule M4: DEM file(s); repeat for several tiles.")
 @click.option("--covariance", is_flag=True,
               help="Add each fix's first-order uncertainty from the config's [accuracy.budget].")
 @click.option("--interpolate", is_flag=True, help="File mode: interpolate the pose to each detection's time.")

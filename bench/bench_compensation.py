@@ -1,0 +1,97 @@
+"""Learned compensation ([P]) in real time, and orthorectification (M5).
+
+Per-target cost of applying a compensation model (features from the pose chain + prediction +
+range flags) next to the fix itself, with a gradient-boosted tree ensemble (scikit-learn
+HistGradientBoostingRegressor, the peer family) predicting the same errors in the same run.
+Orthorectification: one 1280 x 720 frame onto a DEM at its native GSD, with rasterio's
+``reproject`` warping the same frame by its own ground-control-point grid (GDAL's GCP
+polynomial warp, the usual tool; no terrain, no occlusion) as the peer.
+
+    python bench/bench_compensation.py [--n 1000000]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from _common import best_time, row, script
+from eoloc import AzElGimbal, Camera, Pose, SensorModel, locate_ellipsoid
+from eoloc.accuracy import compensation as C
+from eoloc.accuracy.calflight import calibration_flights
+
+
+def main(n: int) -> list[str]:
+    sensor = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
+    tr = calibration_flights(sensor, n_flights=8, looks_per_flight=400, seed=0)
+    obs = C.locate_observations(sensor, tr.columns, dem=tr.dem)
+    model = C.fit(obs.features, obs.errors_enu, groups=obs.groups)
+    rng = np.random.default_rng(1)
+    pose = Pose(35.1 + rng.uniform(-0.1, 0.1, n), 112.7, 400.0 + rng.uniform(1000, 4500, n), rng.uniform(0, 360, n),
+                1.0, 0.0, (rng.uniform(-180, 180, n), rng.uniform(-88, -15, n)))
+    fixes = locate_ellipsoid(sensor, pose, 400.0)
+    t_fix = best_time(lambda: locate_ellipsoid(sensor, pose, 400.0), repeat=3)
+    t_feat = best_time(lambda: C.error_features(sensor, pose, fixes), repeat=3)
+    feats = C.error_features(sensor, pose, fixes)
+    t_pred = best_time(lambda: model.predict(feats), repeat=3)
+    t_all = best_time(lambda: C.compensate(model, sensor, pose, fixes), repeat=3)
+
+    from sklearn.ensemble import HistGradientBoostingRegressor
+
+    def tree_x(f):
+        az, br = np.radians(f.azimuth_deg), np.radians(f.bearing_deg)
+        return np.c_[f.oblique_deg, f.height_m, np.cos(az), np.sin(az), np.cos(br), np.sin(br)]
+
+    regs = [HistGradientBoostingRegressor(max_iter=300, random_state=0).fit(tree_x(obs.features), obs.errors_enu[:, c])
+            for c in range(2)]
+    X = tree_x(feats)
+    t_tree = best_time(lambda: [r.predict(X) for r in regs], repeat=3)
+    ns = 1e9 / n
+    lines = [
+        row(f"compensation predict + flags, {n:.0e} fixes", f"{t_pred * ns:.0f} ns/fix",
+            f"trees predict {t_tree * ns:.0f} ns/fix", t_pred / t_tree),
+        row(f"features + predict + corrected fix (compensate), {n:.0e}", f"{t_all * ns:.0f} ns/fix",
+            f"the fix itself (M3) {t_fix * ns:.0f} ns/fix", t_all / t_fix),
+        row("  of which features (rays again, NED, heights)", f"{t_feat * ns:.0f} ns/fix", "", None),
+    ]
+    lines.append(_ortho_row())
+    return lines
+
+
+def _ortho_row() -> str:
+    import warnings
+
+    import rasterio
+    from rasterio.control import GroundControlPoint
+    from rasterio.errors import NotGeoreferencedWarning
+    from rasterio.warp import Resampling, reproject
+
+    from eoloc import rectify as R
+
+    sensor = SensorModel(Camera.from_hfov(30.0, 1280, 720), AzElGimbal())
+    tr = calibration_flights(sensor, n_flights=1, looks_per_flight=10, seed=0)
+    pose = Pose(35.09, 112.7, 2400.0, 10.0, 1.0, -2.0, (5.0, -50.0))
+    img = np.random.default_rng(0).integers(0, 255, (720, 1280), dtype=np.uint8)
+    t_o = best_time(lambda: R.orthorectify(img, sensor, pose, tr.dem), repeat=3)
+    o = R.orthorectify(img, sensor, pose, tr.dem)
+    grid = R.ground_grid(sensor, pose, tr.dem, step_px=80)
+    f = grid.fixes.flat()
+    gcps = [GroundControlPoint(row=float(v), col=float(u), x=float(x), y=float(y))
+            for u, v, x, y, ok in zip(grid.u_px.ravel(), grid.v_px.ravel(), f.lon_deg, f.lat_deg, f.ok, strict=True)
+            if ok]
+    dst = np.zeros(o.shape, np.uint8)
+
+    def peer():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            reproject(img, dst, gcps=gcps, src_crs="EPSG:4326", dst_crs=rasterio.crs.CRS.from_wkt(o.crs.to_wkt()),
+                      dst_transform=o.transform, resampling=Resampling.bilinear)
+
+    t_p = best_time(peer, repeat=3)
+    cells = o.shape[0] * o.shape[1]
+    return row(f"orthorectify 1280x720 on a DEM, {cells / 1e6:.1f} M cells (+occlusion)",
+               f"{t_o:.2f} s ({cells / t_o / 1e6:.1f} M cells/s)", f"GDAL GCP warp, no terrain {t_p:.2f} s",
+               t_o / t_p)
+
+
+if __name__ == "__main__":
+    script(main, __doc__)
