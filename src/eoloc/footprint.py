@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
-from .locate import locate_dem, locate_ellipsoid
+from .locate import locate_on
 from .result import Fixes, Status
 from .sensor.model import Pose, SensorModel
 from .terrain.dem import DEM
@@ -164,10 +164,7 @@ def _bisect(sensor: SensorModel, pose: Pose, a: np.ndarray, b: np.ndarray,
 
 
 def _stop(sensor: SensorModel, pose: Pose, pixels: np.ndarray, surface) -> Fixes:
-    uv = (pixels[..., 0], pixels[..., 1])
-    if isinstance(surface, DEM):
-        return locate_dem(sensor, pose, surface, uv)
-    return locate_ellipsoid(sensor, pose, float(surface), uv)
+    return locate_on(sensor, pose, surface, (pixels[..., 0], pixels[..., 1]))
 
 
 def _n_frames(pose: Pose) -> int:

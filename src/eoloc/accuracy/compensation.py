@@ -239,11 +239,7 @@ class CompensationModel:
         return "bearing" if self.bearing else "azimuth"
 
     def _cells(self, f: ErrorFeatures) -> tuple[np.ndarray, np.ndarray]:
-        ob = np.ravel(f.oblique_deg)
-        d = np.ravel(f.bearing_deg if self.bearing else f.azimuth_deg)
-        i = np.clip(np.searchsorted(self.oblique_edges, ob, side="right") - 1, 0, len(self.oblique_edges) - 2)
-        j = np.clip((np.nan_to_num(d) // self.sector_deg).astype(int), 0, self.coverage.shape[1] - 1)
-        return i, j
+        return _cells(f, self.bearing, self.oblique_edges, self.sector_deg)
 
     def flags(self, f: ErrorFeatures) -> np.ndarray:
         """Per-fix flag bitmask (0: inside the trained range, corrected)."""
@@ -362,6 +358,16 @@ def compensate(model: CompensationModel, sensor: SensorModel, pose: Pose, fixes:
 # -- training -----------------------------------------------------------------------------------
 
 
+def _cells(f: ErrorFeatures, bearing: bool, edges, sector_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(oblique band, direction sector) of each fix; the direction is the bearing when the model
+    uses it (the errors it learns turn with the airframe), else the azimuth."""
+    ob = np.ravel(f.oblique_deg)
+    d = np.ravel(f.bearing_deg if bearing else f.azimuth_deg)
+    i = np.clip(np.searchsorted(edges, ob, side="right") - 1, 0, len(edges) - 2)
+    j = np.clip((np.nan_to_num(d) // sector_deg).astype(int), 0, round(360.0 / sector_deg) - 1)
+    return i, j
+
+
 def _valid(f: ErrorFeatures, e: np.ndarray) -> np.ndarray:
     cols = (f.oblique_deg, f.azimuth_deg, f.height_m, e[..., 0], e[..., 1], e[..., 2])
     return np.all([np.isfinite(np.ravel(c)) for c in cols], axis=0)
@@ -399,16 +405,14 @@ def fit(features: ErrorFeatures, errors_enu: ArrayLike, *, feature_set: str = "p
         ridge = RIDGES[-1] if mean[-1] <= mean[best] + se else RIDGES[best]
     coef = _ridge(X, Y, ridge)
     edges = tuple(float(x) for x in oblique_edges)
-    probe = CompensationModel(feats, OUTPUTS[: Y.shape[1]], coef, float(ridge), (0.0, 0.0), (0.0, 0.0), edges,
-                              float(sector_deg), np.zeros((len(edges) - 1, round(360 / sector_deg)), int))
-    i, j = probe._cells(f)
-    cov = np.zeros_like(probe.coverage)
+    i, j = _cells(f, bearing, edges, sector_deg)
+    cov = np.zeros((len(edges) - 1, round(360.0 / sector_deg)), dtype=np.int64)
     np.add.at(cov, (i, j), 1)
     lo = float(f.oblique_deg.min())
     lo = 0.0 if lo < 2.0 else lo  # trained down to near nadir: nadir itself is inside
     meta = {"trained": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), "n_samples": int(X.shape[0]),
             "n_flights": None if g is None else len(np.unique(g)), **(info or {})}
-    return CompensationModel(feats, probe.outputs, coef, float(ridge),
+    return CompensationModel(feats, OUTPUTS[: Y.shape[1]], coef, float(ridge),
                              (lo, float(f.oblique_deg.max())),
                              (float(f.height_m.min()), float(f.height_m.max())), edges, float(sector_deg), cov,
                              int(min_cell), meta)
