@@ -266,8 +266,8 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
     rows = C.band_table(np.where(ok, obs.features.oblique_deg, np.nan), e0, {"compensated": e1}, edges)
     print_bands(rows, f"{observations}: CEP50 by oblique band, before and after {model_path}")
     flagged = obs.fixes.ok & ~pred.applied
+    reasons = pred.reasons(obs.features, model)
     if flagged.any():
-        reasons = pred.reasons(obs.features, model)
         first = int(np.flatnonzero(flagged)[0])
         err_console.print(f"[yellow]{int(flagged.sum())} fixes outside the trained range were not corrected[/] "
                           f"(left out of the table), e.g. line {int(table.line[first])}: {reasons[first]}")
@@ -277,7 +277,6 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
                             title=f"{Path(observations).name}: location error against oblique angle")
     from .io.export import plain_value, write_csv
 
-    reasons = pred.reasons(obs.features, model)
     fx = [{"line": int(table.line[i]), "flight": table.columns["flight"][i],
            **{k: plain_value(v[i]) for k, v in obs.features.columns().items()},
            "err_e_m": plain_value(e0[i, 0]), "err_n_m": plain_value(e0[i, 1]),
