@@ -32,11 +32,12 @@ def machine() -> str:
 
 
 def row(work: str, figure: str, peer: str, ratio: float | None) -> str:
-    r = "" if ratio is None else f"{ratio:.1f}x"
+    """One table row; ``ratio`` is the peer's time over eoloc's (above 1: eoloc is faster)."""
+    r = "" if ratio is None else (f"{ratio:.1f}x" if ratio >= 1 else f"{ratio:.2g}x")
     return f"| {work} | {figure} | {peer} | {r} |"
 
 
-HEADER = "| work | eoloc | peer (same run) | eoloc / peer |\n|---|---|---|---|"
+HEADER = "| work | eoloc | peer (same run) | peer time / eoloc time |\n|---|---|---|---|"
 
 
 def script(main: Callable[[int], list[str]], doc: str | None) -> None:

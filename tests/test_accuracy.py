@@ -118,6 +118,18 @@ def test_seeded_and_chunk_placement_independent():
     assert chunk_sizes(30_000, 7000) == [7000, 7000, 7000, 7000, 2000]
 
 
+@pytest.mark.parametrize("law, value", [("normal", 0.02), ("normal", 8e-8), ("uniform", 0.0015), ("uniform", 3.0)])
+def test_draws_are_numpys_normal_and_uniform_bit_for_bit(law, value):
+    """Draws scaled in place are numpy's own rng.normal(0, sigma) / rng.uniform(-max, max), number
+    for number: a seed gives the samples it always gave."""
+    got = ErrorSource("yaw_deg", law, value).draw(np.random.default_rng(5), 50_000)
+    rng = np.random.default_rng(5)
+    ref = rng.normal(0.0, value, 50_000) if law == "normal" else rng.uniform(-value, value, 50_000)
+    np.testing.assert_array_equal(got, ref)
+    if law == "uniform":
+        assert np.all(np.abs(got) <= value)
+
+
 def test_budget_errors_name_the_fix():
     with pytest.raises(ValueError, match="unknown error source 'yaw'"):
         ErrorSource("yaw", "normal", 0.1)

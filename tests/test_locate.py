@@ -316,6 +316,10 @@ def test_single_call_agrees_with_array_path(backend):
 
 
 def test_backends_agree_to_1e8_m():
+    """numba and numpy differ only in the last bits of sin, cos and atan2. Along a range that stays
+    below 1e-8 m; where a ray meets a surface, a last-bit shift of the camera (1e-9 m at 6 000 km
+    from the centre) moves the hit by that shift / sin(grazing angle), which is the geometry's own
+    conditioning, so there the bound is 1e-8 m x 1 / sin(grazing)."""
     if len(eoloc.available_backends()) < 2:
         pytest.skip("numba not installed: one backend only")
     rng = np.random.default_rng(8)
@@ -326,12 +330,20 @@ def test_backends_agree_to_1e8_m():
     out = {}
     for b in ("numba", "numpy"):
         with eoloc.use_backend(b):
-            out[b] = (eoloc.locate_ellipsoid(AZEL, pose, 250.0).p_ecef(),
-                      eoloc.locate_range(AZEL, pose, rng.uniform(100, 5000, n) * 0 + 3000.0).p_ecef())
-    for a, b in zip(out["numba"], out["numpy"], strict=True):
-        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
-        ok = ~np.isnan(a)
-        assert np.max(np.abs(a[ok] - b[ok])) < 1e-8
+            out[b] = (eoloc.locate_ellipsoid(AZEL, pose, 250.0), eoloc.locate_range(AZEL, pose, 3000.0),
+                      AZEL.rays(pose).dir_ecef)
+    (ell_a, rng_a, dir_a), (ell_b, rng_b, _) = out["numba"], out["numpy"]
+    lat, lon = np.radians(ell_b.lat_deg), np.radians(ell_b.lon_deg)
+    up = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], -1)
+    sin_grazing = np.abs(np.sum(up * dir_a, -1))  # cameras below 250 m meet the surface from below
+    gaps = []
+    for a, b, scale in ((ell_a, ell_b, 1.0 / sin_grazing), (rng_a, rng_b, 1.0)):
+        np.testing.assert_array_equal(a.status, b.status)
+        ok = a.ok
+        d = np.max(np.abs(a.p_ecef() - b.p_ecef()), axis=-1)[ok]
+        assert np.all(d <= 1e-8 * np.broadcast_to(scale, a.shape)[ok])
+        gaps.append(d)
+    assert np.quantile(gaps[0], 0.99) < 1e-8  # on the ellipsoid too, nearly all within 1e-8 m outright
 
 
 def test_rays_are_unit_and_start_at_the_camera(backend):

@@ -1,10 +1,11 @@
 """Backend selection and the one dispatcher every public function goes through.
 
-``numba`` (compiled loops) or ``numpy`` (chunked array code, the reference path); both run the
-same kernels from :mod:`eoloc._kernels` and agree to 1e-8 m (tested). ``auto``, the default,
-picks per kernel and size: numba, except that large batches of the atan2-heavy kernels go to
-numpy where numpy has AVX-512 SIMD math (its vector atan2 is ~10x numba's scalar libm call;
-measured in bench/RESULTS.md). Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
+``numba`` (compiled, vectorised loops) or ``numpy`` (chunked array code, the reference path); both
+run the same kernels from :mod:`eoloc._kernels`. They differ only in the last bits of sine, cosine
+and atan2 (numba evaluates them by the fdlibm polynomials of ``_kernels``, numpy by its own
+ufuncs), so results agree to 1e-8 m, times the geometry's own amplification of a last-bit change
+(1/sin of the grazing angle for a ray meeting a surface; tested). ``auto``, the default, is numba
+where it is installed. Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
 """
 
 from __future__ import annotations
@@ -33,29 +34,6 @@ def available_backends() -> tuple[str, ...]:
 def get_backend() -> str:
     """The backend in force for scalar and small work: 'numba' or 'numpy'."""
     return _state["resolved"] or _resolve()
-
-
-# Kernels whose cost is dominated by atan2: numpy's SIMD version beats a scalar libm call.
-_SIMD_KERNELS = frozenset({"ecef_to_geodetic", "stop_at_ellipsoid"})
-_SIMD_MIN = 4 * 16384  # below this, numba's lower per-call overhead wins
-
-
-@functools.cache
-def _numpy_has_simd_math() -> bool:
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-    except ImportError:  # pragma: no cover - older numpy layout
-        return False
-    return bool(features.get("AVX512_SKX"))
-
-
-def backend_for(name: str, n: int) -> str:
-    """The backend that runs kernel ``name`` on ``n`` elements under the current setting."""
-    chosen = get_backend()
-    if (_state["name"] == "auto" and chosen == "numba" and name in _SIMD_KERNELS and n >= _SIMD_MIN
-            and _numpy_has_simd_math()):
-        return "numpy"
-    return chosen
 
 
 def _resolve() -> str:
@@ -96,19 +74,17 @@ def use_backend(name: str) -> Iterator[None]:
 
 # The numba drivers take a rotation as 9 flat arguments; the numpy kernels take it as one 9-tuple.
 _NUMPY_FLAT = {
-    "pose_frame": lambda *a: _kernels.pose_frame(*a[:6], a[6:15], *a[15:]),
+    "camera_frame": lambda *a: _kernels.camera_frame(int(a[0]), *a[1:4], a[4:13], a[13:22], a[22:31], *a[31:]),
     "ray_direction": lambda *a: _kernels.ray_direction(a[:9], *a[9:]),
     "project_point": lambda *a: _kernels.project_point(a[:9], *a[9:]),
     "flat_target": lambda *a: _kernels.flat_target(a[:9], *a[9:]),
-    "r_body_cam": lambda *a: _kernels.r_body_cam(int(a[0]), a[1], a[2], a[3], a[4:13], a[13:22], a[22:31], a[31]),
 }
 
 
 # Outputs of each kernel as the drivers see them (rotations flattened); the last of a stop rule
 # is its int8 status.
-N_OUT = {"geodetic_to_ecef": 3, "ecef_to_geodetic": 3, "pose_frame": 12, "ray_direction": 3,
-         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5,
-         "r_body_cam": 9}
+N_OUT = {"geodetic_to_ecef": 3, "ecef_to_geodetic": 3, "camera_frame": 12, "ray_direction": 3,
+         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5}
 STATUS_OUT = frozenset({"stop_at_range", "stop_at_ellipsoid", "flat_target"})
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
 
@@ -129,7 +105,7 @@ def run(name: str, *args):
     outs = [np.empty(n) for _ in range(N_OUT[name])]
     if name in STATUS_OUT:
         outs[-1] = np.empty(n, dtype=np.int8)
-    if backend_for(name, n) == "numba":
+    if get_backend() == "numba":
         from . import _nb
 
         getattr(_nb, name)(n, *flat_in, *outs)

@@ -38,6 +38,7 @@ from ._kernels import (
     _bowring,
     _finite,
     _pick,
+    atan2,
     cell_first_root,
     ecef_to_geodetic,
     grid_height,
@@ -190,8 +191,8 @@ def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_n
     y = oy + t * dy
     z = oz + t * dz
     sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
-    fr = (np.arctan2(sl, cl) / _D2R - lat0) / dlat
-    fc = (np.arctan2(y, x) / _D2R - lon0) / dlon
+    fr = (atan2(sl, cl) / _D2R - lat0) / dlat
+    fc = (atan2(y, x) / _D2R - lon0) / dlon
     turn = 360.0 / abs(dlon)
     fc = fc - turn * np.floor((fc - fc_near) / turn + 0.5)
     inv_p = 1.0 / p if p > 0.0 else 0.0

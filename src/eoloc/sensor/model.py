@@ -184,11 +184,10 @@ class SensorModel:
         g1, g2, g3 = self.gimbal.angles(pose.gimbal_deg)
         R_mount = self._R_mount9 if mount_misalignment_deg is None else _rot9(mount_misalignment_deg)
         R_bore = self._R_bore9 if boresight_misalignment_deg is None else _rot9(boresight_misalignment_deg)
-        Rbc = run("r_body_cam", self.gimbal.kind, g1, g2, g3, *R_mount, *self.gimbal.R_fixed9, *R_bore,
-                  np.radians(_f64(gimbal_skew_deg)))
-        out = run("pose_frame", np.radians(pose.lat_deg), np.radians(pose.lon_deg), pose.h_m,
+        out = run("camera_frame", self.gimbal.kind, g1, g2, g3, *R_mount, *self.gimbal.R_fixed9, *R_bore,
+                  np.radians(_f64(gimbal_skew_deg)), np.radians(pose.lat_deg), np.radians(pose.lon_deg), pose.h_m,
                   np.radians(pose.yaw_deg), np.radians(pose.pitch_deg), np.radians(pose.roll_deg),
-                  *Rbc, *self.lever_arm_m, self.ellipsoid.a, self.ellipsoid.e2)
+                  *self.lever_arm_m, self.ellipsoid.a, self.ellipsoid.e2)
         invalid = pose.invalid()
         return CameraFrame(out[:9], out[9], out[10], out[11], invalid)
 
