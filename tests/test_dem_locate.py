@@ -179,7 +179,7 @@ def test_statuses_never_a_plausible_wrong_point(backend):
         # above the horizon
         "sky": (Pose(0.3, 6.6, 3000.0, 0, 0, 0, (0.0, 10.0)), Status.NO_INTERSECTION),
         # camera 100 m below the highest (non-void) post
-        "underground": (Pose(top_lat, top_lon, top_h - 100.0, 0, 0, 0, (0.0, -90.0)), Status.INVALID_INPUT),
+        "underground": (Pose(top_lat, top_lon, top_h - 100.0, 0, 0, 0, (0.0, -90.0)), Status.BELOW_SURFACE),
         "nan": (Pose(np.nan, 6.6, 3000.0, 0, 0, 0, (0.0, -90.0)), Status.INVALID_INPUT),
     }
     for name, (pose, expected) in cases.items():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pyproj
 import pytest
@@ -79,7 +81,10 @@ def test_every_stop_rule_sees_undistorted_rays(backend):
     lens = BrownConrady(-0.2, 0.05)
     cam = Camera.from_hfov(60.0, 1280, 960)
     dist = SensorModel(cam.with_distortion(lens))
-    plain = SensorModel(cam)
+    # the same pinhole on a larger sensor: the ideal pixels of the distorted corners fall outside
+    # the 1280 x 960 frame, which would make them OUT_OF_IMAGE
+    w, h = cam.width, cam.height
+    plain = SensorModel(dataclasses.replace(cam, width=3 * w, height=3 * h, cx=cam.cx + w, cy=cam.cy + h))
     pose = Pose(40.0, -105.0, 2000.0, 30.0, 1.0, -2.0, (20.0, -50.0))
     u, v = _pixels(200, 4, cam)
     xu, yu = dist.camera.pixel_to_normalized(u, v)

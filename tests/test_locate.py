@@ -268,15 +268,17 @@ def test_above_horizon_and_pointing_up_give_no_intersection(backend):
     f = eoloc.locate_ellipsoid(AZEL, pose, 0.0)
     assert f.status.tolist() == [Status.OK] + [Status.NO_INTERSECTION] * 4
     assert np.isnan(f.lat_deg[1:]).all() and np.isnan(f.h_m[1:]).all() and np.isnan(f.range_m[1:]).all()
-    # straight up from below a 12 km surface is a hit from inside, straight up from above is not
-    assert eoloc.locate_ellipsoid(AZEL, Pose(45.0, 7.0, 10_000.0, 0, 0, 0, (0.0, 90.0)), 12_000.0).status == 0
+    # straight up from above the surface misses; from below it, see the next test
     assert eoloc.locate_ellipsoid(AZEL, Pose(45.0, 7.0, 10_000.0, 0, 0, 0, (0.0, 90.0)), 0.0).status == 1
 
 
-def test_below_the_surface_looking_up_hits_from_inside(backend):
-    # a camera 100 m below a 500 m plateau surface, looking up: the first crossing is in front
-    f = eoloc.locate_ellipsoid(AZEL, Pose(0.0, 0.0, 400.0, 0, 0, 0, (0.0, 45.0)), 500.0)
-    assert f.status == Status.OK and f.range_m == pytest.approx(100 * np.sqrt(2), rel=1e-4)
+def test_camera_on_or_below_the_surface_is_below_surface_never_a_point(backend):
+    # M3's validity domain: the camera must be above the target surface. A camera under it
+    # (looking up or down) or on it is BELOW_SURFACE with NaN coordinates, not a hit "from inside"
+    for h_cam, el in ((400.0, 45.0), (400.0, -45.0), (500.0, -45.0), (10_000.0, 90.0)):
+        ht = 12_000.0 if h_cam == 10_000.0 else 500.0
+        f = eoloc.locate_ellipsoid(AZEL, Pose(0.0, 0.0, h_cam, 0, 0, 0, (0.0, el)), ht)
+        assert f.status == Status.BELOW_SURFACE and np.isnan(f.lat_deg) and np.isnan(f.range_m)
 
 
 def test_nan_and_bad_inputs_are_flagged_not_located(backend):

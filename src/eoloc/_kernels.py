@@ -26,8 +26,10 @@ NO_INTERSECTION = 1
 OUT_OF_COVERAGE = 2
 DEM_VOID = 3
 INVALID_INPUT = 4
+BELOW_SURFACE = 6
+OUT_OF_IMAGE = 7
+UNDECIDED = -1  # internal: the fast M3 path could not certify its answer; the exact path decides
 
-_NEWTON_STEPS = 1  # ray-ellipsoid height refinement: one step takes the < 2 cm start to < 1 µm
 
 
 def _pick(cond, a, b):
@@ -376,6 +378,41 @@ def undistort(kind, dp, xd, yd):
     return xd, yd
 
 
+# A pixel is located only inside the image: from the outer edge of the edge pixels (-0.5 and
+# width - 0.5) out to this margin, and only where the lens model maps it to one ray.
+IMAGE_MARGIN_PX = 0.5
+
+
+def pixel_in_image(u, v, width, height):
+    """True where pixel (u, v) lies in a width x height image, IMAGE_MARGIN_PX beyond its outer edges included."""
+    m = 0.5 + IMAGE_MARGIN_PX
+    return (u >= -m) & (u <= width - 1.0 + m) & (v >= -m) & (v <= height - 1.0 + m)
+
+
+def undistort_ok(kind, dp, xd, yd, x, y):
+    """True where ideal (x, y) is THE undistortion of distorted (xd, yd): the model maps it back
+    (to 1e-9) on the branch where the model is one-to-one (Brown-Conrady: positive Jacobian, so
+    past the fold of a barrel lens a pixel is not inverted), and the ratio model's 1 + D > 0."""
+    if kind == DIST_BROWN:
+        k1 = dp[0]
+        k2 = dp[1]
+        p1 = dp[2]
+        p2 = dp[3]
+        k3 = dp[4]
+        fx, fy = distort_brown(x, y, k1, k2, p1, p2, k3)
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        jxx = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+        jxy = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+        jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+        back = np.abs(fx - xd) + np.abs(fy - yd) <= 1e-9 * (1.0 + np.abs(xd) + np.abs(yd))
+        return back & (jxx * jyy - jxy * jxy > 0.0) & (jxx > 0.0)
+    if kind == DIST_RATIO:
+        return 1.0 + distortion_ratio(np.sqrt(xd * xd + yd * yd), dp) > 0.0
+    return (x - x) == 0.0
+
+
 def distort(kind, dp, x, y):
     """Ideal normalised image coordinates -> distorted ones, for distortion model ``kind``."""
     if kind == DIST_BROWN:
@@ -393,9 +430,32 @@ def distort(kind, dp, x, y):
 # ---------------------------------------------------------------- stop rules
 
 
+# Validity domain shared by the stop rules (README "Validity domains"): outside it the input is
+# INVALID_INPUT, never a point. Beyond these magnitudes squares and products in the kernels lose
+# the precision a millimetre needs, and no airborne sensor is there.
+MAX_ORIGIN_M = 1.0e8  # |camera origin| (ECEF m): 100 000 km from the Earth's centre
+MAX_RANGE_M = 1.0e7  # M1 slant range (m)
+MIN_HEIGHT_M = -1.0e5  # M3 target surface height (m, ellipsoidal): -100 km ...
+MAX_HEIGHT_M = 1.0e7  # ... +10 000 km
+UNIT_TOL = 1.0e-6  # a ray direction must be a unit vector to this (a zero or overflowed one is not)
+_EXACT_TOL_M = 1.0e-6  # M3: an OK point is this close to the surface (the contract says < 1 mm) ...
+SURFACE_TOL_M = 1.0e-4  # ... but at an exact tangent, where Newton steps crawl: then this close
+_EXACT_STEPS = 60  # exact M3: Newton steps from the left (4 suffice but at a near-tangent double root)
+_PAD_REL = 2.0e-6  # the inflated ellipsoid (a+H, b+H) is within 1.42e-6 |H| of the surface of
+# geodetic height H (measured against pyproj from -20 km to +2000 km): padded by this, it bounds it
+
+
+def ray_valid(ox, oy, oz, dx, dy, dz):
+    """True where a ray is usable: finite, a unit direction, an origin within MAX_ORIGIN_M."""
+    dd = dx * dx + dy * dy + dz * dz
+    oo = ox * ox + oy * oy + oz * oz
+    return _finite(oo + dd) & (np.abs(dd - 1.0) <= UNIT_TOL) & (oo <= MAX_ORIGIN_M * MAX_ORIGIN_M)
+
+
 def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
-    """M1: the point at slant range ``rng`` (m) along the ray -> (lat, lon, h, range, status)."""
-    valid = _finite(ox + oy + oz + dx + dy + dz + rng) & (rng > 0.0)
+    """M1: the point at slant range ``rng`` (m, 0 < rng <= MAX_RANGE_M) along the ray
+    -> (lat, lon, h, range, status)."""
+    valid = ray_valid(ox, oy, oz, dx, dy, dz) & (rng > 0.0) & (rng <= MAX_RANGE_M)
     r = _pick(valid, rng, np.nan)
     lat, lon, h = ecef_to_geodetic(ox + r * dx, oy + r * dy, oz + r * dz, a, b, e2, ep2)
     return lat, lon, h, r, _pick(valid, OK, INVALID_INPUT)
@@ -403,7 +463,7 @@ def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
 
 def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     """Both ray parameters (t1 <= t2, NaN if none) where the ray meets the inflated ellipsoid
-    (a + ht, b + ht): within ~2 cm of the surface of geodetic height ht at 10 km."""
+    (a + ht, b + ht): within 1.42e-6 |ht| of the surface of geodetic height ht."""
     A = a + ht
     B = b + ht
     ia = 1.0 / (A * A)
@@ -416,28 +476,114 @@ def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     return (-qb - sq) / qa, (-qb + sq) / qa
 
 
-def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
-    """M3: first point along the ray whose geodetic height is ``ht`` (m) -> (lat, lon, h, range, status).
+def inflated_inside(ox, oy, oz, ht, a, b):
+    """True where the point is strictly inside the inflated ellipsoid (a + ht, b + ht)."""
+    A = a + ht
+    B = b + ht
+    return (ox * ox + oy * oy) / (A * A) + oz * oz / (B * B) < 1.0
 
-    Starts from the ray's intersection with the inflated ellipsoid (a + ht, b + ht), which is not
-    the constant-height surface (cm-level off at 10 km), then Newton-refines along the ray with
-    d h / d t = up . d (the gradient of geodetic height is the unit ellipsoid normal).
-    A ray that misses, or whose intersections are all behind the origin, gives NaN and
-    NO_INTERSECTION; never the nearest point on the ray.
+
+def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2):
+    """(geodetic height of (x, y, z), its derivative along the unit direction d = up . d, sin lat,
+    cos lat): the gradient of geodetic height is the unit ellipsoid normal."""
+    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    cl_p = _pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
+    return h, cl_p * (x * dx + y * dy) + sl * dz, sl, cl
+
+
+def _m3_domain(ox, oy, oz, dx, dy, dz, ht):
+    return ray_valid(ox, oy, oz, dx, dy, dz) & _finite(ht) & (ht >= MIN_HEIGHT_M) & (ht <= MAX_HEIGHT_M)
+
+
+def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
+    """M3, the certified fast path -> (lat, lon, h, range, status), status UNDECIDED where it
+    cannot prove its answer (then :func:`ellipsoid_exact` decides).
+
+    Geodetic height along a straight line, g(t) = h(o + t d) - ht, is convex (the signed distance
+    to a convex body; normals do not cross within 6 000 km of the surface). So a crossing where g
+    falls (g'(t) < 0) is the first one, and the camera is above the surface. The inflated
+    ellipsoids (a + H, b + H) at H = ht -/+ pad enclose the surface: the camera inside the inner
+    one is certainly below it; a ray that never enters the outer one certainly misses. Otherwise
+    Newton steps from the outer ellipsoid's entry point and the answer is certified when the point
+    is within 1 µm of the surface and g clearly falls there.
     """
-    valid = _finite(ox + oy + oz + dx + dy + dz + ht)
-    t1, t2 = inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b)
-    t = _pick(t1 > 0.0, t1, _pick(t2 > 0.0, t2, np.nan))
-    for _ in range(_NEWTON_STEPS):
-        x = ox + t * dx
-        y = oy + t * dy
-        sl, cl, p, h = _bowring(x, y, oz + t * dz, a, b, e2, ep2, 1)
-        cl_p = _pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
-        t = t - (h - ht) / (cl_p * (x * dx + y * dy) + sl * dz)
-    t = _pick(t > 0.0, t, np.nan)
-    lat, lon, h = ecef_to_geodetic(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2)
-    hit = t == t
-    return lat, lon, h, t, _pick(valid, _pick(hit, OK, NO_INTERSECTION), INVALID_INPUT)
+    valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
+    pad = 1.0e-3 + _PAD_REL * np.abs(ht)
+    o1, o2 = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
+    below = inflated_inside(ox, oy, oz, ht - pad, a, b)
+    miss = (o1 != o1) | (o2 < 0.0)  # never enters the outer ellipsoid ahead (or is wholly past it)
+    t = _pick(o1 > 0.0, o1, np.nan)
+    for _ in range(2):
+        h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+        t = t - (h - ht) / s
+    x = ox + t * dx
+    y = oy + t * dy
+    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+    hit = (t > 0.0) & (np.abs(h - ht) <= _EXACT_TOL_M) & (s <= -UNIT_TOL)
+    st = _pick(hit, OK, _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED)))
+    st = _pick(valid, st, INVALID_INPUT)
+    ok = st == OK
+    return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
+            _pick(ok, t, np.nan), st)
+
+
+def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
+    """M3, the exact path -> (lat, lon, h, range, status): Newton steps on the convex g(t) from
+    the left (from the camera, or from where the ray enters the outer inflated ellipsoid), which
+    never overshoot the first crossing: a step lands at or before it. The walk ends at the surface
+    (OK, within SURFACE_TOL_M) or where g stops falling with the ray still above it (a true miss,
+    near-tangent rays included). The camera on or below the surface: BELOW_SURFACE."""
+    valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
+    h0, s0, sl, cl = _height_slope(ox, oy, oz, dx, dy, dz, a, b, e2, ep2)
+    pad = 1.0e-3 + _PAD_REL * np.abs(ht)
+    o1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
+    t = _pick(o1 > 0.0, o1, 0.0)
+    state = _pick(h0 - ht <= 0.0, BELOW_SURFACE, UNDECIDED)
+    h = h0
+    for _ in range(_EXACT_STEPS):
+        h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+        g = h - ht
+        state = _pick(state == UNDECIDED, _pick(g <= _EXACT_TOL_M, OK, _pick(s >= 0.0, NO_INTERSECTION, UNDECIDED)),
+                      state)
+        t = _pick(state == UNDECIDED, t - g / s, t)
+    # still falling after every step: a (near-)double root, decided by the height reached
+    h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+    state = _pick(state == UNDECIDED, _pick(h - ht <= SURFACE_TOL_M, OK, NO_INTERSECTION), state)
+    state = _pick(valid, state, INVALID_INPUT)
+    ok = state == OK
+    t = _pick(ok & (s < 0.0), t - (h - ht) / s, t)  # one last step from the left onto the surface
+    x = ox + t * dx
+    y = oy + t * dy
+    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+    return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
+            _pick(ok, t, np.nan), state)
+
+
+def stop_at_ellipsoid_scalar(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
+    """M3 for one ray: :func:`ellipsoid_fast`, and :func:`ellipsoid_exact` where it is undecided.
+    (The numba backend compiles this under the name ``stop_at_ellipsoid``.)"""
+    lat, lon, h, t, st = ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)
+    if st == UNDECIDED:
+        return ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)
+    return lat, lon, h, t, st
+
+
+def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
+    """M3: first point along the ray whose geodetic height is ``ht`` (m) -> (lat, lon, h, range,
+    status), on arrays: :func:`ellipsoid_fast` everywhere, :func:`ellipsoid_exact` on the few rays
+    it leaves undecided (near-tangent rays, a camera within centimetres of the surface, surfaces
+    far above the Earth). A point is returned only on the surface to SURFACE_TOL_M and only at the
+    first crossing; a camera on or below the surface gets BELOW_SURFACE, a ray that does not
+    reach it NO_INTERSECTION; never the nearest point on the ray or the far crossing."""
+    args = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (ox, oy, oz, dx, dy, dz, ht)))
+    out = [np.array(v) for v in ellipsoid_fast(*args, a, b, e2, ep2)]
+    out[4] = out[4].astype(np.int8)
+    todo = np.flatnonzero(out[4] == UNDECIDED)
+    if todo.size:
+        sub = [np.ravel(v)[todo] for v in args]
+        for o, v in zip(out, ellipsoid_exact(*sub, a, b, e2, ep2), strict=True):
+            o.reshape(-1)[todo] = v
+    return tuple(o[()] if o.ndim == 0 else o for o in out)
 
 
 def flat_plane(R_ecef_cam, ox, oy, oz, xn0, yn0, rng0, a, b, e2, ep2):
@@ -468,9 +614,12 @@ def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
     """
     dx, dy, dz = ray_direction(R_ecef_cam, xn, yn)
     c = dx * nx + dy * ny + dz * nz
-    away = c <= 0.0
-    lat, lon, h, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, _pick(away, np.nan, H / c), a, b, e2, ep2)
-    return lat, lon, h, t, _pick(away & _finite(H), NO_INTERSECTION, st)
+    rng = H / c
+    away = (c <= 0.0) | (rng > MAX_RANGE_M)  # pointing at or above the plane's horizon
+    lat, lon, h, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, _pick(away, np.nan, rng), a, b, e2, ep2)
+    known = _finite(H) & (st != OK)
+    st = _pick(known & away, NO_INTERSECTION, st)
+    return lat, lon, h, t, _pick(known & (H <= 0.0), BELOW_SURFACE, st)
 
 
 # ---------------------------------------------------------------- whole chain, one call

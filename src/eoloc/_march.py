@@ -18,7 +18,7 @@ The algorithm, per ray (see README "M4"):
 
 Statuses: a cell outside the grid on the way: OUT_OF_COVERAGE; a cell with a void corner on the
 way: DEM_VOID (nothing is known of the ground there, so no later hit can be called the first);
-camera below the terrain: INVALID_INPUT; no crossing in the band: NO_INTERSECTION.
+camera on or below the terrain: BELOW_SURFACE; no crossing in the band: NO_INTERSECTION.
 
 ``march_ray`` is scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins;
 ``march_numpy`` runs the same cell solver over all rays at once, stepping every ray in lockstep
@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._kernels import (
+    BELOW_SURFACE,
     DEM_VOID,
     INVALID_INPUT,
     NO_INTERSECTION,
@@ -43,6 +44,7 @@ from ._kernels import (
     ecef_to_geodetic,
     grid_height,
     inflated_roots,
+    ray_valid,
     stop_at_ellipsoid,
 )
 
@@ -100,10 +102,12 @@ def _surface_gap(ox, oy, oz, dx, dy, dz, t, z, a, b, e2, ep2, lat0, lon0, dlat, 
     return h - hz
 
 
-def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b):
+def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
     """Grid walk from a to b (fractional row/col, linear): (status, s) of the first crossing.
 
-    status -1: none in this step; OK: crossing at s in [0, 1]; OUT_OF_COVERAGE / DEM_VOID.
+    status -1: none in this step; OK: crossing at s in [0, 1]; OUT_OF_COVERAGE / DEM_VOID. A cell
+    off the grid or with a void corner stops the walk only where the ray is at or below ``hmax``
+    (the DEM's highest post), as in the numpy march, whose band ends there.
     """
     nr = z.shape[0]
     nc = z.shape[1]
@@ -121,19 +125,22 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b):
     s_lo = 0.0
     while True:
         s_hi = min(next_r, next_c, 1.0)
+        low = min(h_a + dh * s_lo, h_a + dh * s_hi)  # the ray's lowest point in this cell
         if r < 0 or r > nr - 2 or c < 0 or c > nc - 2:
-            return OUT_OF_COVERAGE, s_lo
-        z00 = z[r, c]
-        z01 = z[r, c + 1]
-        z10 = z[r + 1, c]
-        z11 = z[r + 1, c + 1]
-        if not (z00 == z00 and z01 == z01 and z10 == z10 and z11 == z11):  # a void corner
-            return DEM_VOID, s_lo
-        top = max(max(z00, z01), max(z10, z11))
-        if min(h_a + dh * s_lo, h_a + dh * s_hi) <= top:  # else the ray is above every corner here
-            s = cell_first_root(h_a, dh, fr_a - r, dfr, fc_a - c, dfc, z00, z01, z10, z11, s_lo, s_hi)
-            if s == s:
-                return OK, s
+            if low <= hmax:
+                return OUT_OF_COVERAGE, s_lo
+        else:
+            z00 = z[r, c]
+            z01 = z[r, c + 1]
+            z10 = z[r + 1, c]
+            z11 = z[r + 1, c + 1]
+            if not (z00 == z00 and z01 == z01 and z10 == z10 and z11 == z11):  # a void corner
+                if low <= hmax:
+                    return DEM_VOID, s_lo
+            elif low <= max(max(z00, z01), max(z10, z11)):  # else the ray is above every corner here
+                s = cell_first_root(h_a, dh, fr_a - r, dfr, fc_a - c, dfc, z00, z01, z10, z11, s_lo, s_hi)
+                if s == s:
+                    return OK, s
         if s_hi >= 1.0:
             return -1, 1.0
         if next_r < next_c:
@@ -145,15 +152,23 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b):
         s_lo = s_hi
 
 
-def _coarse_clear(bmax, fr_a, fc_a, fr_b, fc_b, h_low):
-    """True when every block under the step's bounding box is lower than h_low."""
+def _coarse_clear(bmax, nr_cells, nc_cells, fr_a, fc_a, fr_b, fc_b, h_low):
+    """True when the step's bounding box lies on the grid (``nr_cells`` x ``nc_cells`` cells) and
+    every block under it is lower than h_low."""
     nbr = bmax.shape[0]
     nbc = bmax.shape[1]
-    r0 = int(np.floor(min(fr_a, fr_b))) // BLOCK
-    r1 = int(np.floor(max(fr_a, fr_b))) // BLOCK
-    c0 = int(np.floor(min(fc_a, fc_b))) // BLOCK
-    c1 = int(np.floor(max(fc_a, fc_b))) // BLOCK
-    if r0 < 0 or c0 < 0 or r1 >= nbr or c1 >= nbc:
+    lo_r = min(fr_a, fr_b)
+    hi_r = max(fr_a, fr_b)
+    lo_c = min(fc_a, fc_b)
+    hi_c = max(fc_a, fc_b)
+    # off the grid (the last block reaches past the last post): the cells must be walked
+    if not (lo_r >= 0.0 and lo_c >= 0.0 and hi_r <= nr_cells and hi_c <= nc_cells):
+        return False
+    r0 = int(np.floor(lo_r)) // BLOCK
+    r1 = int(np.floor(hi_r)) // BLOCK
+    c0 = int(np.floor(lo_c)) // BLOCK
+    c1 = int(np.floor(hi_c)) // BLOCK
+    if r1 >= nbr or c1 >= nbc:
         return False
     for i in range(r0, r1 + 1):
         for j in range(c0, c1 + 1):
@@ -233,15 +248,15 @@ def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hma
     Hermite interpolation between them, so a coarse or fine step costs a few multiplications
     instead of an exact geodetic conversion; the hit is then polished on exact coordinates.
     """
-    if not _finite(ox + oy + oz + dx + dy + dz):
+    if not ray_valid(ox, oy, oz, dx, dy, dz):
         return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
     t_start, t_end, inside = _band_fast(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b)
     if not t_start == t_start:
         return np.nan, np.nan, np.nan, np.nan, NO_INTERSECTION
     if inside:
         gap = _surface_gap(ox, oy, oz, dx, dy, dz, 0.0, z, a, b, e2, ep2, lat0, lon0, dlat, dlon)
-        if gap < 0.0:
-            return np.nan, np.nan, np.nan, np.nan, INVALID_INPUT
+        if gap <= 0.0:
+            return np.nan, np.nan, np.nan, np.nan, BELOW_SURFACE
     if not t_end == t_end:
         t_end = t_start + 2.0e6  # never leaves the band (grazing from inside): bounded by coverage
     t = t_start
@@ -258,13 +273,14 @@ def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hma
             length = _knot_length(k0[6])
             k1 = _knot(ox, oy, oz, dx, dy, dz, tk + length, a, b, e2, ep2, lat0, lon0, dlat, dlon, k0[1])
         fr_b, fc_b, h_b = _hermite(t_b, tk, length, k0, k1)
-        if not _coarse_clear(bmax, fr_a, fc_a, fr_b, fc_b, min(h_a, h_b) - margin):
+        if not _coarse_clear(bmax, z.shape[0] - 1.0, z.shape[1] - 1.0, fr_a, fc_a, fr_b, fc_b,
+                             min(h_a, h_b) - margin):
             tf = t
             fr_f, fc_f, h_f = fr_a, fc_a, h_a
             while tf < t_b:
                 tf_b = min(tf + fine, t_b)
                 fr_g, fc_g, h_g = _hermite(tf_b, tk, length, k0, k1)
-                status, s = _walk_cells(z, fr_f, fc_f, h_f, fr_g, fc_g, h_g)
+                status, s = _walk_cells(z, fr_f, fc_f, h_f, fr_g, fc_g, h_g, hmax)
                 if status == OK:
                     return _polish(ox, oy, oz, dx, dy, dz, tf + s * (tf_b - tf), (h_g - h_f) / (tf_b - tf), z,
                                    a, b, e2, ep2, lat0, lon0, dlat, dlon)
@@ -305,11 +321,12 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
     tt = np.full(n, np.nan)
     st = np.full(n, NO_INTERSECTION, dtype=np.int8)
     with np.errstate(all="ignore"):
-        valid = _finite(ox + oy + oz + dx + dy + dz)
+        valid = ray_valid(ox, oy, oz, dx, dy, dz)
         t0, t_end, h_cam = _band(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b, e2, ep2)
         gap0 = _surface_gap(ox, oy, oz, dx, dy, dz, 0.0, z, a, b, e2, ep2, lat0, lon0, dlat, dlon)
-        under = (h_cam <= hmax) & (gap0 < 0.0)
-        st[~valid | under] = INVALID_INPUT
+        under = (h_cam <= hmax) & (gap0 <= 0.0)
+        st[under] = BELOW_SURFACE
+        st[~valid] = INVALID_INPUT
         active = valid & ~under & np.isfinite(t0)
         t_end = np.where(np.isfinite(t_end), t_end, t0 + 2.0e6)
         t = np.where(active, t0, 0.0)

@@ -67,10 +67,11 @@ def _at9(a0, a1, a2, a3, a4, a5, a6, a7, a8, i):
 _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
-    "pose_frame", "ray_direction", "project_point", "stop_at_range", "stop_at_ellipsoid",
+    "pose_frame", "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_inside", "_height_slope",
+    "_m3_domain", "ellipsoid_fast", "ellipsoid_exact",
     "r_body_cam", "camera_frame", "_tuple9", "params_camera_frame", "locate_one", "grid_height", "inflated_roots",
     "cell_first_root", "distort_brown", "undistort_brown", "ppoly_eval", "distortion_ratio", "undistort", "distort",
-    "flat_plane", "flat_target",
+    "flat_plane", "flat_target", "pixel_in_image", "undistort_ok",
 )
 
 # Marked always-inline for LLVM (``forceinline``): numba compiles each function into a library of
@@ -81,7 +82,8 @@ _KERNELS = (
 _INLINE = frozenset({
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body", "r_ecef_ned",
     "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic", "pose_frame",
-    "ray_direction", "project_point", "stop_at_range", "inflated_roots", "stop_at_ellipsoid", "flat_target",
+    "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_roots", "inflated_inside",
+    "_height_slope", "_m3_domain", "ellipsoid_fast", "flat_target",
     "r_body_cam", "camera_frame",
 })
 
@@ -123,6 +125,9 @@ try:
         _f = getattr(K, _name)
         _opts = {"forceinline": True} if _name in _INLINE else {}
         _g[_name] = njit(**_opts, **_JIT)(pytypes.FunctionType(_f.__code__, _g, _name, _f.__defaults__))
+    # one ray at a time: the fast path, and the exact one where it is undecided (a branch)
+    _g["stop_at_ellipsoid"] = njit(**_JIT)(
+        pytypes.FunctionType(K.stop_at_ellipsoid_scalar.__code__, _g, "stop_at_ellipsoid"))
     # the M4 march: its helpers compiled with the kernels' twins in their globals
     _gm = dict(vars(M))
     _gm.update({name: _g[name] for name in (*_KERNELS, "_pick", "_floor_index", "sincos", "atan2")})
@@ -150,11 +155,14 @@ try:
     _ray_direction = _g["ray_direction"]
     _project_point = _g["project_point"]
     _stop_range = _g["stop_at_range"]
-    _stop_ellipsoid = _g["stop_at_ellipsoid"]
+    _ellipsoid_fast = _g["ellipsoid_fast"]
+    _ellipsoid_exact = _g["ellipsoid_exact"]
 
     _flat_plane = _g["flat_plane"]
     _flat_target = _g["flat_target"]
     _undistort = _g["undistort"]
+    _undistort_ok = _g["undistort_ok"]
+    _pixel_in_image = _g["pixel_in_image"]
     _camera_frame = _g["camera_frame"]
     _params_camera_frame = _g["params_camera_frame"]
     _finite = _g["_finite"]
@@ -182,9 +190,11 @@ try:
                                                              _at(yn, i), a, b, e2, ep2)
 
     @njit(**_JIT)
-    def flat_frame(params, dist_kind, dist_params, pose, main_px, main_range, u, v, lat, lon, h, t, st):
+    def flat_frame(params, dist_kind, dist_params, width, height, pose, main_px, main_range, u, v, lat, lon, h, t,
+                   st):
         """M2 for one frame in one call: pose = (lat, lon, h, yaw, pitch, roll, g1, g2, g3) in
-        radians/metres; main_px = (u0, v0); pixels u, v distorted; outputs in radians/metres."""
+        radians/metres; main_px = (u0, v0); pixels u, v distorted (OUT_OF_IMAGE outside the
+        width x height image); outputs in radians/metres."""
         fx = params[K.P_FX]
         fy = params[K.P_FY]
         cx = params[K.P_CX]
@@ -199,8 +209,14 @@ try:
         nx, ny, nz, H = _flat_plane(R, ox, oy, oz, xn0, yn0, main_range, a, b, e2, ep2)
         bad = not (np.abs(pose[0]) <= 0.5 * np.pi and _finite(pose.sum()))
         for i in range(u.size):
-            xn, yn = _undistort(dist_kind, dist_params, (u[i] - cx) / fx, (v[i] - cy) / fy)
+            xd = (u[i] - cx) / fx
+            yd = (v[i] - cy) / fy
+            xn, yn = _undistort(dist_kind, dist_params, xd, yd)
             lat[i], lon[i], h[i], t[i], st[i] = _flat_target(R, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2)
+            if _finite(u[i] + v[i]) and not (_pixel_in_image(u[i], v[i], width, height)
+                                             and _undistort_ok(dist_kind, dist_params, xd, yd, xn, yn)):
+                lat[i] = lon[i] = h[i] = t[i] = np.nan
+                st[i] = K.OUT_OF_IMAGE
             if bad:
                 lat[i] = lon[i] = h[i] = t[i] = np.nan
                 st[i] = K.INVALID_INPUT
@@ -236,9 +252,13 @@ try:
 
     @_driver
     def stop_at_ellipsoid(n, ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2, lat, lon, h, t, st):
-        for i in range(n):
-            lat[i], lon[i], h[i], t[i], st[i] = _stop_ellipsoid(_at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i),
+        for i in range(n):  # vectorised: the certified fast path
+            lat[i], lon[i], h[i], t[i], st[i] = _ellipsoid_fast(_at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i),
                                                                 _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2, ep2)
+        for i in range(n):  # the few rays it left undecided
+            if st[i] == K.UNDECIDED:
+                lat[i], lon[i], h[i], t[i], st[i] = _ellipsoid_exact(
+                    _at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2, ep2)
 
 finally:
     numba.config.CACHE_DIR = _saved_cache_dir

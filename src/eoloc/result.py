@@ -17,6 +17,9 @@ class Status(IntEnum):
     DEM_VOID = 3  # ray meets a no-data cell of the terrain model
     INVALID_INPUT = 4  # NaN/inf or out-of-range input (angle, range, pixel, pose)
     NO_TELEMETRY = 5  # a detection with no pose at its time/frame
+    BELOW_SURFACE = 6  # the camera is on or below the surface the rule stops at (a height, a plane)
+    OUT_OF_IMAGE = 7  # the pixel lies outside the image, or where the lens model cannot be inverted
+    DEGENERATE = 8  # multi-view: the rays do not determine a point (near-parallel, or it is behind a camera)
 
     @property
     def explanation(self) -> str:
@@ -30,6 +33,9 @@ _EXPLAIN = {
     Status.DEM_VOID: "the ray meets a void (no-data) in the terrain model",
     Status.INVALID_INPUT: "an input is NaN, infinite or out of range",
     Status.NO_TELEMETRY: "no telemetry record matches the detection's time or frame",
+    Status.BELOW_SURFACE: "the camera is on or below the target surface (check the target height)",
+    Status.OUT_OF_IMAGE: "the pixel is outside the image (or where the lens model cannot be inverted)",
+    Status.DEGENERATE: "the rays do not determine a point (near-parallel, or it lies behind a camera)",
 }
 
 

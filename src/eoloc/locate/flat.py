@@ -42,9 +42,10 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     with np.errstate(all="ignore"):
         nx, ny, nz, H = _kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
                                             np.asarray(main_range_m, dtype=np.float64), *ell)
-    xn, yn = sensor.normalized(pixels)
+    u, v = _split_pixels(pixels, sensor.camera)
+    xn, yn = sensor.camera.pixel_to_normalized(u, v)
     out = run("flat_target", *frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
-    return to_fixes(out, frame.invalid)
+    return to_fixes(out, frame.invalid, sensor.camera.outside(u, v, xn, yn))
 
 
 def _one_frame(pose: Pose, main_range_m, main_pixel) -> bool:
@@ -68,7 +69,7 @@ def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixe
     out = [np.empty(u.size) for _ in range(4)] + [np.empty(u.size, dtype=np.int8)]
     dist = cam.distortion
     _nb.flat_frame(sensor._params, 0 if dist is None else dist.kind, _NO_DIST if dist is None else dist.packed,
-                   pose9, main, main_range_m, u, v, *out)
+                   float(cam.width), float(cam.height), pose9, main, main_range_m, u, v, *out)
     return to_fixes([o.reshape(shape) for o in out], False)
 
 

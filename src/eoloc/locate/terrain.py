@@ -48,7 +48,7 @@ def stop_at_dem(rays: Rays, dem: DEM, *, method: str = "march", eps_h: float = 1
             out = _march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
     else:
         raise ValueError(f"unknown DEM method {method!r}; use 'march' (default) or 'descent'")
-    return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid)
+    return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid, rays.out_of_image)
 
 
 def locate_dem(sensor: SensorModel, pose: Pose, dem: DEM, pixels=None, *, method: str = "march",

@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .. import _kernels
 from .distortion import Distortion
 
 
@@ -120,6 +121,20 @@ class Camera:
         if self.distortion is not None:
             xn, yn = self.distortion.undistort(xn, yn)
         return xn, yn
+
+    def outside(self, u: ArrayLike, v: ArrayLike, xn: ArrayLike, yn: ArrayLike) -> np.ndarray:
+        """True where finite pixels (u, v) are not to be located: outside the image (beyond
+        ``IMAGE_MARGIN_PX`` = 0.5 px past the outer edges of the edge pixels) or where the lens
+        model does not map them to one ray (their undistortion ``(xn, yn)`` from
+        :meth:`pixel_to_normalized` is not the inverse, e.g. past the fold of a barrel lens)."""
+        u = np.asarray(u, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        with np.errstate(all="ignore"):
+            usable = _kernels.pixel_in_image(u, v, float(self.width), float(self.height))
+            if self.distortion is not None:
+                usable = usable & _kernels.undistort_ok(self.distortion.kind, self.distortion.packed, (u - self.cx) / self.fx,
+                                                        (v - self.cy) / self.fy, np.asarray(xn), np.asarray(yn))
+            return np.isfinite(u + v) & ~usable
 
     def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Ideal normalised image coordinates to (distorted) pixels."""

@@ -81,6 +81,7 @@ class Rays:
     dy: np.ndarray
     dz: np.ndarray
     invalid: np.ndarray = field(default_factory=lambda: np.bool_(False))
+    out_of_image: np.ndarray = field(default_factory=lambda: np.bool_(False))
 
     @property
     def origin_ecef(self) -> np.ndarray:
@@ -101,7 +102,8 @@ class Rays:
         def pick(x) -> np.ndarray:
             return np.broadcast_to(x, self.shape).reshape(-1)[index]
 
-        return Rays(*(pick(a) for a in (self.ox, self.oy, self.oz, self.dx, self.dy, self.dz, self.invalid)))
+        return Rays(*(pick(a) for a in (self.ox, self.oy, self.oz, self.dx, self.dy, self.dz, self.invalid,
+                                         self.out_of_image)))
 
 
 @dataclass(frozen=True)
@@ -191,12 +193,15 @@ class SensorModel:
         invalid = pose.invalid()
         return CameraFrame(out[:9], out[9], out[10], out[11], invalid)
 
-    def rays_from(self, frame: CameraFrame, xn: ArrayLike, yn: ArrayLike) -> Rays:
-        """Rays of normalised, undistorted image points (xn, yn) from camera frame(s) ``frame``."""
+    def rays_from(self, frame: CameraFrame, xn: ArrayLike, yn: ArrayLike, out_of_image: ArrayLike = False) -> Rays:
+        """Rays of normalised, undistorted image points (xn, yn) from camera frame(s) ``frame``
+        (``out_of_image``: where the pixels are not to be located, see :meth:`Camera.outside`;
+        Monte Carlo leaves it False: a perturbed pixel may stray past the edge)."""
         dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
         shape = dx.shape
         return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
-                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape))
+                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape),
+                    np.broadcast_to(out_of_image, shape))
 
     def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
@@ -204,8 +209,12 @@ class SensorModel:
         return self.camera.pixel_to_normalized(u, v)
 
     def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
-        """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point)."""
-        return self.rays_from(self.camera_frame(pose), *self.normalized(pixels))
+        """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point).
+        Pixels outside the image (see :meth:`Camera.outside`) are marked ``out_of_image``: every
+        stop rule gives them OUT_OF_IMAGE."""
+        u, v = _split_pixels(pixels, self.camera)
+        xn, yn = self.camera.pixel_to_normalized(u, v)
+        return self.rays_from(self.camera_frame(pose), xn, yn, self.camera.outside(u, v, xn, yn))
 
     def ground_to_image(self, pose: Pose, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Project ECEF points (..., 3) into the image: pixels (u, v); NaN where the point is behind
