@@ -476,17 +476,10 @@ def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     return (-qb - sq) / qa, (-qb + sq) / qa
 
 
-def inflated_inside(ox, oy, oz, ht, a, b):
-    """True where the point is strictly inside the inflated ellipsoid (a + ht, b + ht)."""
-    A = a + ht
-    B = b + ht
-    return (ox * ox + oy * oy) / (A * A) + oz * oz / (B * B) < 1.0
-
-
-def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2):
+def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2, steps):
     """(geodetic height of (x, y, z), its derivative along the unit direction d = up . d, sin lat,
-    cos lat): the gradient of geodetic height is the unit ellipsoid normal."""
-    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    cos lat) by ``steps`` Bowring steps: the gradient of geodetic height is the unit ellipsoid normal."""
+    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, steps)
     cl_p = _pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
     return h, cl_p * (x * dx + y * dy) + sl * dz, sl, cl
 
@@ -503,26 +496,36 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     to a convex body; normals do not cross within 6 000 km of the surface). So a crossing where g
     falls (g'(t) < 0) is the first one, and the camera is above the surface. The inflated
     ellipsoids (a + H, b + H) at H = ht -/+ pad enclose the surface: the camera inside the inner
-    one is certainly below it; a ray that never enters the outer one certainly misses. Otherwise
-    Newton steps from the outer ellipsoid's entry point and the answer is certified when the point
-    is within 1 µm of the surface and g clearly falls there.
+    one is certainly below it; a ray that never enters the outer one ahead certainly misses.
+    Otherwise one Newton step from [Q]'s inflated-ellipsoid root, and the answer is certified
+    when the point is within 1 µm of the surface and g clearly falls there.
     """
     valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
     pad = 1.0e-3 + _PAD_REL * np.abs(ht)
-    o1, o2 = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
-    below = inflated_inside(ox, oy, oz, ht - pad, a, b)
-    miss = (o1 != o1) | (o2 < 0.0)  # never enters the outer ellipsoid ahead (or is wholly past it)
-    t = _pick(o1 > 0.0, o1, np.nan)
-    for _ in range(2):
-        h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
-        t = t - (h - ht) / s
+    # the outer ellipsoid: no real root, or both behind the camera (sum < 0, product > 0)
+    A = a + ht + pad
+    B = b + ht + pad
+    ia = 1.0 / (A * A)
+    ib = 1.0 / (B * B)
+    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
+    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
+    qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
+    miss = (qb * qb - qa * qc < 0.0) | ((qb > 0.0) & (qc > 0.0))
+    # the inner one: the camera inside it
+    A = a + ht - pad
+    B = b + ht - pad
+    below = (ox * ox + oy * oy) / (A * A) + oz * oz / (B * B) < 1.0
+    t1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b)
+    t = _pick(t1 > 0.0, t1, np.nan)
+    h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 1)
+    t = t - (h - ht) / s
     x = ox + t * dx
     y = oy + t * dy
-    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
-    hit = (t > 0.0) & (np.abs(h - ht) <= _EXACT_TOL_M) & (s <= -UNIT_TOL)
-    st = _pick(hit, OK, _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED)))
-    st = _pick(valid, st, INVALID_INPUT)
-    ok = st == OK
+    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
+    # by convexity g(0) >= g(t) - t g'(t): the last term proves the camera is above the surface
+    ok = valid & (np.abs(h - ht) <= _EXACT_TOL_M) & (s <= -UNIT_TOL) & (t * s < -2.0 * _EXACT_TOL_M)
+    st = _pick(ok, OK, _pick(valid, _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED)),
+                             INVALID_INPUT))
     return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
             _pick(ok, t, np.nan), st)
 
@@ -534,27 +537,27 @@ def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     (OK, within SURFACE_TOL_M) or where g stops falling with the ray still above it (a true miss,
     near-tangent rays included). The camera on or below the surface: BELOW_SURFACE."""
     valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
-    h0, s0, sl, cl = _height_slope(ox, oy, oz, dx, dy, dz, a, b, e2, ep2)
+    h0, s0, sl, cl = _height_slope(ox, oy, oz, dx, dy, dz, a, b, e2, ep2, 2)
     pad = 1.0e-3 + _PAD_REL * np.abs(ht)
     o1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
     t = _pick(o1 > 0.0, o1, 0.0)
-    state = _pick(h0 - ht <= 0.0, BELOW_SURFACE, UNDECIDED)
+    state = _pick(h0 - ht <= _EXACT_TOL_M, BELOW_SURFACE, UNDECIDED)  # on (to 1 µm) or below
     h = h0
     for _ in range(_EXACT_STEPS):
-        h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+        h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
         g = h - ht
         state = _pick(state == UNDECIDED, _pick(g <= _EXACT_TOL_M, OK, _pick(s >= 0.0, NO_INTERSECTION, UNDECIDED)),
                       state)
         t = _pick(state == UNDECIDED, t - g / s, t)
     # still falling after every step: a (near-)double root, decided by the height reached
-    h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+    h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
     state = _pick(state == UNDECIDED, _pick(h - ht <= SURFACE_TOL_M, OK, NO_INTERSECTION), state)
     state = _pick(valid, state, INVALID_INPUT)
     ok = state == OK
     t = _pick(ok & (s < 0.0), t - (h - ht) / s, t)  # one last step from the left onto the surface
     x = ox + t * dx
     y = oy + t * dy
-    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2)
+    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
     return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
             _pick(ok, t, np.nan), state)
 
@@ -575,12 +578,12 @@ def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     far above the Earth). A point is returned only on the surface to SURFACE_TOL_M and only at the
     first crossing; a camera on or below the surface gets BELOW_SURFACE, a ray that does not
     reach it NO_INTERSECTION; never the nearest point on the ray or the far crossing."""
-    args = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (ox, oy, oz, dx, dy, dz, ht)))
-    out = [np.array(v) for v in ellipsoid_fast(*args, a, b, e2, ep2)]
+    out = [np.asarray(v) for v in ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)]
     out[4] = out[4].astype(np.int8)
     todo = np.flatnonzero(out[4] == UNDECIDED)
     if todo.size:
-        sub = [np.ravel(v)[todo] for v in args]
+        shape = out[4].shape
+        sub = [np.broadcast_to(v, shape).reshape(-1)[todo] for v in (ox, oy, oz, dx, dy, dz, ht)]
         for o, v in zip(out, ellipsoid_exact(*sub, a, b, e2, ep2), strict=True):
             o.reshape(-1)[todo] = v
     return tuple(o[()] if o.ndim == 0 else o for o in out)

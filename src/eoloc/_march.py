@@ -315,6 +315,7 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
     step touches (at most 3 x 3 around its ends) is solved with the same cell kernel.
     """
     n = ox.size
+    nr, nc = z.shape
     lat = np.full(n, np.nan)
     lon = np.full(n, np.nan)
     h = np.full(n, np.nan)
@@ -331,7 +332,6 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
         t_end = np.where(np.isfinite(t_end), t_end, t0 + 2.0e6)
         t = np.where(active, t0, 0.0)
         pa = _grid_point(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2, lat0, lon0, dlat, dlon)
-        nr, nc = z.shape
         while active.any():
             idx = np.flatnonzero(active)
             tb = np.minimum(t[idx] + fine, t_end[idx])
@@ -341,29 +341,31 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
             best = np.full(idx.size, np.nan)
             blocked = np.zeros(idx.size, dtype=np.int8)  # first obstacle: OUT_OF_COVERAGE / DEM_VOID
             blocked_s = np.full(idx.size, np.inf)
-            r_lo = np.floor(np.minimum(fa, fb)).astype(np.int64)
-            c_lo = np.floor(np.minimum(ca, cb)).astype(np.int64)
-            span_r = np.floor(np.maximum(fa, fb)).astype(np.int64) - r_lo
-            span_c = np.floor(np.maximum(ca, cb)).astype(np.int64) - c_lo
+            # where the step leaves the grid (or 0 if it starts off it): the first obstacle
+            g_in, g_out = _box_interval(fa, ca, fb, cb, 0.0, nr - 1.0, 0.0, nc - 1.0)
+            off = np.where((g_in > 0.0) | (g_in > g_out), 0.0, np.where(g_out < 1.0, g_out, np.inf))
+            blocked = np.where(np.isfinite(off), OUT_OF_COVERAGE, blocked).astype(np.int8)
+            blocked_s = off
+            # the grid cells the step touches (clamped to the grid, so a step near a pole, whose
+            # columns may span thousands of cells, stays cheap)
+            r_lo = np.clip(np.floor(np.minimum(fa, fb)), 0, nr - 2).astype(np.int64)
+            c_lo = np.clip(np.floor(np.minimum(ca, cb)), 0, nc - 2).astype(np.int64)
+            span_r = np.clip(np.floor(np.maximum(fa, fb)), 0, nr - 2).astype(np.int64) - r_lo
+            span_c = np.clip(np.floor(np.maximum(ca, cb)), 0, nc - 2).astype(np.int64) - c_lo
             for kr in range(int(span_r.max(initial=0)) + 1):
                 for kc in range(int(span_c.max(initial=0)) + 1):
-                    r = r_lo + kr
-                    c = c_lo + kc
+                    r = np.minimum(r_lo + kr, nr - 2)  # past a ray's own span: not used
+                    c = np.minimum(c_lo + kc, nc - 2)
                     use = (kr <= span_r) & (kc <= span_c)
-                    s_in, s_out = _cell_interval(fa, ca, fb, cb, r, c)
+                    s_in, s_out = _box_interval(fa, ca, fb, cb, r, r + 1.0, c, c + 1.0)
                     use &= s_in <= s_out
-                    outside = (r < 0) | (r > nr - 2) | (c < 0) | (c > nc - 2)
-                    rr = np.clip(r, 0, nr - 2)
-                    cc = np.clip(c, 0, nc - 2)
-                    z00, z01, z10, z11 = z[rr, cc], z[rr, cc + 1], z[rr + 1, cc], z[rr + 1, cc + 1]
-                    void = np.isnan(z00 + z01 + z10 + z11) & ~outside
+                    z00, z01, z10, z11 = z[r, c], z[r, c + 1], z[r + 1, c], z[r + 1, c + 1]
+                    void = np.isnan(z00 + z01 + z10 + z11)
                     s = cell_first_root(ha, hb - ha, fa - r, fb - fa, ca - c, cb - ca, z00, z01, z10, z11, s_in, s_out)
-                    s = np.where(use & ~outside & ~void, s, np.nan)
-                    best = np.fmin(best, s)
-                    for code, mask in ((OUT_OF_COVERAGE, outside), (DEM_VOID, void)):
-                        first = use & mask & (s_in < blocked_s)
-                        blocked = np.where(first, code, blocked)
-                        blocked_s = np.where(first, s_in, blocked_s)
+                    best = np.fmin(best, np.where(use & ~void, s, np.nan))
+                    first = use & void & (s_in < blocked_s)
+                    blocked = np.where(first, DEM_VOID, blocked)
+                    blocked_s = np.where(first, s_in, blocked_s)
             hit = np.isfinite(best) & ~(blocked_s <= best)  # a void or the edge at the same place wins
             stop = (blocked > 0) & ~hit
             hit_idx = idx[hit]
@@ -382,17 +384,19 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
     return lat, lon, h, tt, st
 
 
-def _cell_interval(fa, ca, fb, cb, r, c):
-    """The s-interval (within [0, 1]) where the straight step from a to b lies in cell (r, c)."""
+def _box_interval(fa, ca, fb, cb, r0, r1, c0, c1):
+    """The s-interval (within [0, 1]) where the straight step from a to b lies in the box of
+    fractional rows [r0, r1] and columns [c0, c1] (empty when s_in > s_out)."""
     s_in = np.zeros(fa.shape)
     s_out = np.ones(fa.shape)
-    for p0, p1, k in ((fa, fb, r), (ca, cb, c)):
+    for p0, p1, lo_k, hi_k in ((fa, fb, r0, r1), (ca, cb, c0, c1)):
         d = p1 - p0
         with np.errstate(divide="ignore", invalid="ignore"):
-            s_a = (k - p0) / d
-            s_b = (k + 1 - p0) / d
-        lo = np.where(d != 0, np.minimum(s_a, s_b), np.where((p0 >= k) & (p0 <= k + 1), -np.inf, np.inf))
-        hi = np.where(d != 0, np.maximum(s_a, s_b), np.where((p0 >= k) & (p0 <= k + 1), np.inf, -np.inf))
+            s_a = (lo_k - p0) / d
+            s_b = (hi_k - p0) / d
+        inside = (p0 >= lo_k) & (p0 <= hi_k)
+        lo = np.where(d != 0, np.minimum(s_a, s_b), np.where(inside, -np.inf, np.inf))
+        hi = np.where(d != 0, np.maximum(s_a, s_b), np.where(inside, np.inf, -np.inf))
         s_in = np.maximum(s_in, lo)
         s_out = np.minimum(s_out, hi)
     return s_in, s_out

@@ -67,7 +67,7 @@ def _at9(a0, a1, a2, a3, a4, a5, a6, a7, a8, i):
 _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
-    "pose_frame", "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_inside", "_height_slope",
+    "pose_frame", "ray_direction", "project_point", "ray_valid", "stop_at_range", "_height_slope",
     "_m3_domain", "ellipsoid_fast", "ellipsoid_exact",
     "r_body_cam", "camera_frame", "_tuple9", "params_camera_frame", "locate_one", "grid_height", "inflated_roots",
     "cell_first_root", "distort_brown", "undistort_brown", "ppoly_eval", "distortion_ratio", "undistort", "distort",
@@ -82,7 +82,7 @@ _KERNELS = (
 _INLINE = frozenset({
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body", "r_ecef_ned",
     "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic", "pose_frame",
-    "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_roots", "inflated_inside",
+    "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_roots",
     "_height_slope", "_m3_domain", "ellipsoid_fast", "flat_target",
     "r_body_cam", "camera_frame",
 })
