@@ -1,8 +1,9 @@
 """An independent oracle for eoloc's stop rules. It shares no code with eoloc.
 
 Rays come from the conventions the README states. scipy's ``Rotation`` builds the attitude and
-gimbal rotations, pyproj does WGS-84 geodetic -> ECEF and pymap3d ECEF -> geodetic; the NED axes, the gimbal axes and the
-pixel model are written out here. Then every answer eoloc gives is checked against the truth:
+gimbal rotations, pyproj does WGS-84 geodetic -> ECEF and pymap3d ECEF -> geodetic; the NED
+axes, the gimbal axes and the pixel model are written out here. Then every answer eoloc gives
+is checked against the truth:
 
 - OK: the point is on the ray, in front of the camera, at the range eoloc reports, and on the
   rule's surface: the range (M1), the height (M3, < 1 mm), the plane (M2) or the bilinear DEM
@@ -358,7 +359,8 @@ def check_on_dem(rep, fix, o, d, grid: Grid, domain_bad, outside):
         zt, on, void = grid.sample(lat, lon)
         bad = np.zeros(n, bool)
         bad[idx] = ~(np.abs(h - zt) <= M4_TOL_M)
-        rep.fail("M4 OK point off the DEM surface", bad, lambda i: float(h[np.searchsorted(idx, i)] - zt[np.searchsorted(idx, i)]))
+        gap = h - zt
+        rep.fail("M4 OK point off the DEM surface", bad, lambda i: float(gap[np.searchsorted(idx, i)]))
         # dense search before the hit: never under the terrain, never off the grid or over a void below hmax
         step = grid.cell_m / 4.0
         idx = idx[np.argsort(t[idx])]  # batches of rays of similar length
@@ -578,7 +580,8 @@ class Runner:
                 p1 = eoloc.Pose(*(c[k][i] for k in ("lat", "lon", "h", "yaw", "pitch", "roll")),
                                 tuple(g[i] for g in _gimbal_tuple(c, kind)))
                 sl = slice(20 * i, 20 * i + 20)
-                self._each_backend("M2 one frame", lambda p1=p1, i=i: eoloc.locate_flat(sensor, p1, r0[i], (u[i], v[i])),
+                self._each_backend("M2 one frame",
+                                   lambda p1=p1, i=i: eoloc.locate_flat(sensor, p1, r0[i], (u[i], v[i])),
                                    lambda rep, f, sl=sl: check_flat(rep, f, o[sl], d[sl], np.repeat(o0[i:i + 1], 20, 0),
                                                                     np.repeat(d0[i:i + 1], 20, 0), rep0[sl], bad[sl],
                                                                     out[sl]))
@@ -611,6 +614,61 @@ class Runner:
         sensor, pose = _sensor(eoloc, "az-el"), _pose(eoloc, c, "az-el")
         self._each_backend("M4", lambda: eoloc.locate_dem(sensor, pose, dem, (c["u"], c["v"])),
                            lambda rep, f: check_on_dem(rep, f, o, d, grid, bad, out))
+
+    def multiview(self, rng, n: int, triangulate) -> None:
+        """Targets seen by 2-5 exact rays: sane geometry, near-parallel rays (cameras a few metres
+        apart at 20-200 km), a ray pointing away from the target, NaN rays. ``triangulate`` is
+        eoloc's; the oracle knows the target, so an OK point must be it."""
+        eoloc = self.eoloc
+        rep = self._report("multi-view")
+        for _ in range(n):
+            k = int(rng.integers(2, 6))
+            lat, lon = rng.uniform(-80.0, 80.0), rng.uniform(-180.0, 180.0)
+            target = to_ecef(lat, lon, rng.uniform(-100.0, 4000.0))
+            R = r_ecef_ned(lat, lon)
+            kind = rng.integers(0, 5)
+            dist = rng.uniform(1_000.0, 50_000.0, k)
+            if kind == 1:  # near-parallel: all cameras within a few metres of each other, far away
+                dist = np.full(k, rng.uniform(20_000.0, 200_000.0))
+            az = rng.uniform(0.0, 2 * np.pi, k)
+            el = rng.uniform(5.0, 80.0, k) * D2R
+            if kind == 1:
+                az, el = np.full(k, az[0]), np.full(k, el[0])
+            off_ned = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)], -1) * dist[:, None]
+            o = target + off_ned @ R.T
+            if kind == 1:
+                o = o + rng.normal(0.0, rng.choice([0.1, 1.0, 10.0]), (k, 3))
+            d = target - o
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            if kind == 2:  # one ray pointing away
+                d[0] = -d[0]
+            if kind == 3:
+                d[rng.integers(k)] = np.nan
+            rays_ = eoloc.Rays(o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2])
+            usable = np.isfinite(d).all(1)
+            cos = np.clip(d[usable] @ d[usable].T, -1.0, 1.0)
+            angle = np.degrees(np.arccos(cos.min())) if usable.sum() >= 2 else 0.0
+            for be in self.backends:
+                with eoloc.use_backend(be):
+                    try:
+                        r = triangulate(rays_)
+                    except ValueError:
+                        rep.add_statuses([DEGENERATE])
+                        rep.fail("refused with enough rays", np.array([usable.sum() >= 2]))
+                        continue
+                st = int(r.status)
+                rep.add_statuses([st])
+                finite = np.isfinite([r.lat_deg, r.lon_deg, r.h_m]).any()
+                rep.fail("non-OK with finite coordinates", np.array([st != OK and finite]))
+                if st == OK:
+                    p = to_ecef(r.lat_deg, r.lon_deg, r.h_m)
+                    err = float(np.linalg.norm(p - target))
+                    rep.fail("multi-view OK point is not the target", np.array([err > 1e-4 + 1e-9 * dist.max()]),
+                             lambda i, e=err: e)
+                    rep.fail("multi-view OK with degenerate geometry", np.array([kind == 2 or angle < 0.01]))
+                else:
+                    rep.fail("DEGENERATE for well-conditioned rays in front",
+                             np.array([kind in (0, 4) and angle > 0.02]))
 
     def lines(self) -> list[str]:
         return [rep.line() for rep in self.reports.values()]

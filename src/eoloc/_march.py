@@ -37,7 +37,6 @@ from ._kernels import (
     OK,
     OUT_OF_COVERAGE,
     _bowring,
-    _finite,
     _pick,
     atan2,
     cell_first_root,

@@ -262,6 +262,9 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
         except ValueError as exc:
             rows.append({**row, "status": "TOO_FEW_RAYS", "warning": str(exc)})
             continue
+        if not r.ok:
+            rows.append({**row, "max_angle_deg": r.max_angle_deg, "status": r.status.name, "warning": r.warning})
+            continue
         s = r.sigma_enu * max(1.0, r.s0)
         rows.append({**row, "lat_deg": r.lat_deg, "lon_deg": r.lon_deg, "h_m": r.h_m, "sigma_e_m": s[0],
                      "sigma_n_m": s[1], "sigma_u_m": s[2], "s0": r.s0,

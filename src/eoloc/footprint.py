@@ -122,6 +122,7 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
     trans_at = {(int(f), int(i)): n_miss + k for k, (f, i) in enumerate(zip(f_tr, i_tr, strict=True))}
     lat_b, lon_b, h_b = (np.reshape(x, (n, S)) for x in (fb.lat_deg, fb.lon_deg, fb.h_m))
     invalid = np.reshape(fb.status == Status.INVALID_INPUT, (n, S)).all(axis=1)
+    below = np.reshape(fb.status == Status.BELOW_SURFACE, (n, S)).all(axis=1)  # the camera under the surface
     out = []
     for f in range(n):
         rows = []  # (lat, lon, h, u, v, clipped, clip_status)
@@ -135,7 +136,8 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
                 k = trans_at[(f, i)]
                 rows.append((hit.lat_deg[k], hit.lon_deg[k], hit.h_m[k], *px[k], True, why[k]))
         cols = list(zip(*rows, strict=True)) if rows else [()] * 7
-        status = Status.INVALID_INPUT if invalid[f] else (Status.OK if rows else Status.NO_INTERSECTION)
+        status = (Status.INVALID_INPUT if invalid[f] else Status.BELOW_SURFACE if below[f]
+                  else Status.OK if rows else Status.NO_INTERSECTION)
         out.append(Footprint(*(np.asarray(c, dtype=np.float64) for c in cols[:5]), np.asarray(cols[5], dtype=bool),
                              np.asarray(cols[6], dtype=np.int8), status,
                              (float(np.ravel(fc.lat_deg)[f]), float(np.ravel(fc.lon_deg)[f]),

@@ -132,7 +132,8 @@ class Camera:
         with np.errstate(all="ignore"):
             usable = _kernels.pixel_in_image(u, v, float(self.width), float(self.height))
             if self.distortion is not None:
-                usable = usable & _kernels.undistort_ok(self.distortion.kind, self.distortion.packed, (u - self.cx) / self.fx,
+                d = self.distortion
+                usable = usable & _kernels.undistort_ok(d.kind, d.packed, (u - self.cx) / self.fx,
                                                         (v - self.cy) / self.fy, np.asarray(xn), np.asarray(yn))
             return np.isfinite(u + v) & ~usable
 

@@ -8,6 +8,10 @@ cov = (sum W_i)^-1: exact for small, independent, isotropic angular errors. Two 
 ranges come from the previous solution). When the rays are nearly parallel the depth is poorly
 determined: the result carries the largest angle between the rays and the 1-sigma depth, and a
 warning when the geometry is weak (angle below ``min_angle_deg``).
+
+Validity domain: the rays must converge in front of every camera, at an angle of at least
+``DEGENERATE_ANGLE_DEG`` (0.01°) between some two of them. Otherwise the status is DEGENERATE,
+the point and its covariance are NaN (no output file carries it) and the warning says why.
 """
 
 from __future__ import annotations
@@ -18,7 +22,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
+from ..result import Status
 from ..sensor.model import Rays
+
+DEGENERATE_ANGLE_DEG = 0.01  # rays closer to parallel than this do not determine a point
 
 
 @dataclass(frozen=True)
@@ -38,6 +45,11 @@ class Triangulation:
     max_angle_deg: float
     warning: str = ""
     s0: float = float("nan")
+    status: Status = Status.OK
+
+    @property
+    def ok(self) -> bool:
+        return self.status == Status.OK
 
     @property
     def sigma_enu(self) -> np.ndarray:
@@ -66,14 +78,19 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     P = np.eye(3) - d[:, :, None] * d[:, None, :]  # projectors onto each ray's normal plane
     w = np.ones(o.shape[0])
+    # Least squares on the stacked rows sqrt(w_i) P_i (condition ~ 1/angle), not on the normal
+    # matrix sum w_i P_i (condition ~ 1/angle^2: centimetres for near-parallel rays), and for the
+    # offset from the last solution (first: the cameras' mean) rather than for ECEF coordinates.
+    p = o.mean(axis=0)
     for _ in range(3):  # unweighted, then ranges from the last solution
-        A = np.einsum("n,nij->ij", w, P)
-        b = np.einsum("n,nij,nj->i", w, P, o)
-        p = np.linalg.solve(A, b)
+        sw = np.sqrt(w)
+        M = (sw[:, None, None] * P).reshape(-1, 3)
+        rhs = (sw[:, None] * np.einsum("nij,nj->ni", P, o - p)).reshape(-1)
+        p = p + np.linalg.lstsq(M, rhs, rcond=None)[0]  # exactly parallel rays: singular, still an answer
         rng = np.maximum(np.einsum("ni,ni->n", p - o, d), 1e-9)
         w = 1.0 / (rng * sig) ** 2
     A = np.einsum("n,nij->ij", w, P)
-    cov_ecef = np.linalg.inv(A)
+    cov_ecef = np.linalg.pinv(A)
     lat, lon, h = (float(x) for x in geodesy.ecef_to_geodetic(*p))
     R = geodesy.R_ecef_enu(lat, lon)
     cov_enu = R.T @ cov_ecef @ R
@@ -82,11 +99,21 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
     s0 = float(np.sqrt(np.sum(w * resid**2) / dof)) if dof > 1 else float("nan")
     angle = _max_angle_deg(d)
     warning = ""
-    behind = np.einsum("ni,ni->n", p - o, d) <= 0
+    behind = ~(np.einsum("ni,ni->n", p - o, d) > 0)
+    status = Status.OK
     if behind.any():
         warning = f"the point lies behind {int(behind.sum())} of the cameras: the rays do not converge"
+        status = Status.DEGENERATE
+    elif not angle >= DEGENERATE_ANGLE_DEG:
+        warning = (f"the rays are parallel to within {angle:.2g}° (< {DEGENERATE_ANGLE_DEG:g}°): they do not "
+                   "determine a point; fly a longer baseline or use a range/DEM stop")
+        status = Status.DEGENERATE
     elif angle < min_angle_deg:
         depth = float(np.sqrt(np.linalg.eigvalsh(cov_ecef)[-1]))
         warning = (f"baseline too short for the range: the rays meet at {angle:.2f}° (< {min_angle_deg:g}°), "
                    f"depth uncertain by {depth:.3g} m (1 sigma); fly a longer baseline or use a range/DEM stop")
-    return Triangulation(p, lat, lon, h, cov_enu, resid, angle, warning, s0)
+    if status != Status.OK:
+        nan = float("nan")
+        return Triangulation(np.full(3, nan), nan, nan, nan, np.full((3, 3), nan), resid, angle, warning, nan,
+                             status)
+    return Triangulation(p, lat, lon, h, cov_enu, resid, angle, warning, s0, status)
