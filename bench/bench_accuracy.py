@@ -73,7 +73,7 @@ def main(n: int) -> list[str]:
     lines.append(row(f"Monte Carlo, DEM chain ([Q] with a 3\" DEM, M4), n={k:,}",
                      f"{t_dem:.3f} s ({k / t_dem / 1e6:.2f} M samples/s)", "", None))
     px = np.stack(np.meshgrid(np.linspace(0, 999, 10), np.linspace(0, 999, 5)), -1).reshape(-1, 2)
-    t_cov = best_time(lambda: locate_with_covariance(qd.sensor, qd.pose, qd.budget, px, dem=qd.dem), repeat=5)
+    t_cov = best_time(lambda: locate_with_covariance(qd.sensor, qd.pose, qd.budget, px, qd.rule), repeat=5)
     t_mc5k = best_time(lambda: monte_carlo(replace(qd, pixels=px), 5000, seed=0), repeat=1)
     lines.append(row("First-order covariance, one 50-target frame on the DEM ([Q] budget, with the linearity check)",
                      f"{t_cov * 1e3:.2f} ms", f"Monte Carlo n=5,000 of the same frame {t_mc5k * 1e3:.0f} ms",

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 import eoloc
 import oracle_lib as O
-from eoloc.sequence.triangulate import triangulate
+from eoloc.rules.multiview import triangulate
 
 TILE = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"
 CHUNK = 20_000

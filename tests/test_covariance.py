@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, Status, geodesy, locate_dem, locate_range
+import eoloc
+from eoloc import DEM, AzElGimbal, Camera, OnDEM, Pose, SensorModel, Status, geodesy, locate_range
 from eoloc.accuracy import (
     ErrorBudget,
     ErrorSource,
@@ -22,16 +23,12 @@ from eoloc.accuracy import (
 )
 
 
-def _stop_kwargs(scn: Scenario) -> dict:
-    return {"range": {"range_m": scn.range_m}, "height": {"height_m": scn.height_m}, "dem": {"dem": scn.dem}}[scn.stop]
-
-
 @pytest.mark.parametrize("name, n", [("s13", 100_000), ("q-ellipsoid", 100_000), ("q-dem", 40_000)])
 def test_covariance_matches_monte_carlo(name, n):
     """SPEC/issue: first-order sigma within 10 % of Monte Carlo for the seeds' scenarios. Measured
     < 0.5 %; asserted at 3 % (the MC sigma's own sampling error at n = 4e4 is ~0.4 %)."""
     scn = scenarios.SCENARIOS[name]()
-    fixes, cov = locate_with_covariance(scn.sensor, scn.pose, scn.budget, scn.pixels, **_stop_kwargs(scn))
+    fixes, cov = locate_with_covariance(scn.sensor, scn.pose, scn.budget, scn.pixels, scn.rule)
     st_ = monte_carlo(scn, n, seed=11).stats[0]
     assert fixes.status[0] == Status.OK
     np.testing.assert_allclose(cov.sigma_enu[0], st_.sigma_enu, rtol=0.03)
@@ -111,7 +108,7 @@ def _ridge_scene(clearance_m: float):
 
     dem = DEM.from_function(f, (6.9, 44.95, 7.1, 45.25), 1.0 / 3600.0, source="ridge")
     budget = ErrorBudget((ErrorSource("pitch_deg", "normal", 0.02), ErrorSource("yaw_deg", "normal", 0.02)))
-    return Scenario("ridge", sensor, pose, budget, stop="dem", dem=dem)
+    return Scenario("ridge", sensor, pose, budget, OnDEM(dem))
 
 
 def test_linearisation_breaks_on_a_grazed_ridge_and_says_so():
@@ -119,14 +116,14 @@ def test_linearisation_breaks_on_a_grazed_ridge_and_says_so():
     0.02 deg moves the ray ~3 m at the crest): half the samples stop on the ridge, km away; the
     first-order sigma is badly wrong and the nonlinearity figure flags it."""
     far = _ridge_scene(200.0)
-    fx, cov = locate_with_covariance(far.sensor, far.pose, far.budget, dem=far.dem)
+    fx, cov = locate_with_covariance(far.sensor, far.pose, far.budget, rule=far.rule)
     mc = monte_carlo(far, 20_000, seed=3).stats[0]
     assert cov.linear()[()] and float(cov.nonlinearity) < 1e-3
     np.testing.assert_allclose(cov.sigma_enu[:2], mc.sigma_enu[:2], rtol=0.02)
-    assert float(fx.range_m) == pytest.approx(float(locate_dem(far.sensor, far.pose, far.dem).range_m), abs=1e-6)
+    assert float(fx.range_m) == pytest.approx(float(eoloc.locate(far.sensor, far.pose, far.rule).range_m), abs=1e-6)
 
     near = _ridge_scene(2.0)
-    _, cov = locate_with_covariance(near.sensor, near.pose, near.budget, dem=near.dem)
+    _, cov = locate_with_covariance(near.sensor, near.pose, near.budget, rule=near.rule)
     mc = monte_carlo(near, 20_000, seed=3).stats[0]
     assert float(cov.nonlinearity) > 1.0 and not cov.linear()[()]
     assert mc.sigma_enu[1] > 10.0 * float(cov.sigma_enu[1])

@@ -272,7 +272,7 @@ def test_vmti_targets_locate_back_to_known_points():
         dec = klv_telemetry(decode_klv_bytes(pkt)).columns  # truth from the angles as transmitted
         pose_t = Pose(dec["lat_deg"][0], dec["lon_deg"][0], dec["h_m"][0], dec["yaw_deg"][0], dec["pitch_deg"][0],
                       dec["roll_deg"][0], (dec["gimbal1_deg"][0], dec["gimbal2_deg"][0], 0.0))
-        from eoloc.locate import locate_ellipsoid
+        from eoloc.rules import locate_ellipsoid
 
         cam_t = Camera.from_hfov(dec["hfov_deg"][0], W, H, vfov_deg=dec["vfov_deg"][0])  # the FOV as transmitted
         f = locate_ellipsoid(SensorModel(cam_t), pose_t, dec["fc_h_m"][0], (pixels[:, 0], pixels[:, 1]))

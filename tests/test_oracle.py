@@ -11,7 +11,7 @@ import numpy as np
 
 import eoloc
 import oracle_lib as O
-from eoloc.sequence.triangulate import triangulate
+from eoloc.rules.multiview import triangulate
 
 TILE = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"
 

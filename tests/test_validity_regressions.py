@@ -16,7 +16,7 @@ from click.testing import CliRunner
 import eoloc
 from eoloc import AzElGimbal, BrownConrady, Camera, Pose, Rays, SensorModel, Status
 from eoloc.cli import main
-from eoloc.sequence.triangulate import DEGENERATE_ANGLE_DEG, triangulate
+from eoloc.rules.multiview import DEGENERATE_ANGLE_DEG, triangulate
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
 ECEF = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)

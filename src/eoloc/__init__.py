@@ -15,7 +15,15 @@ Conventions (one per concept, everywhere in the library):
 
 from ._backend import available_backends, get_backend, set_backend, use_backend
 from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
-from .locate import (
+from .result import Fixes, Status
+from .rules import (
+    AtHeight,
+    AtRange,
+    FlatGround,
+    MultiView,
+    OnDEM,
+    StopRule,
+    locate,
     locate_dem,
     locate_ellipsoid,
     locate_flat,
@@ -24,7 +32,6 @@ from .locate import (
     stop_at_ellipsoid,
     stop_at_range,
 )
-from .result import Fixes, Status
 from .sensor import AzElGimbal, Camera, FixedMount, Pose, Rays, RollPitchGimbal, SensorModel
 from .sensor.distortion import BrownConrady, DistortionRatio
 from .terrain import DEM, open_dem
@@ -34,6 +41,8 @@ __version__ = "0.1.0"
 __all__ = [
     "DEM",
     "WGS84",
+    "AtHeight",
+    "AtRange",
     "AzElGimbal",
     "BrownConrady",
     "Camera",
@@ -41,16 +50,21 @@ __all__ = [
     "Ellipsoid",
     "FixedMount",
     "Fixes",
+    "FlatGround",
+    "MultiView",
+    "OnDEM",
     "Pose",
     "Rays",
     "RollPitchGimbal",
     "SensorModel",
     "Status",
+    "StopRule",
     "__version__",
     "available_backends",
     "ecef_to_geodetic",
     "geodetic_to_ecef",
     "get_backend",
+    "locate",
     "locate_dem",
     "locate_ellipsoid",
     "locate_flat",

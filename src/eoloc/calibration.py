@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from . import geodesy
-from .locate import locate_ellipsoid
+from .rules import locate_ellipsoid
 from .sensor.model import Pose, SensorModel
 from .sequence.interp import interpolate_poses
 

@@ -21,6 +21,7 @@ from .io.table import TableError
 from .io.telemetry import read_detections, read_telemetry
 from .pipeline import RANGE_FROM_FILES, locate_by_rule, locate_tables
 from .result import Status
+from .rules import StopRule, rule_from_options
 from .sensor import Camera, Pose, SensorModel, gimbal_from_name
 
 CONVENTIONS = """
@@ -177,16 +178,20 @@ def _open_dem(paths, vertical, geoid, dem_crs):
         _fail(str(exc))
 
 
-def _stop_rule(range_opt, target_height, dem=None) -> tuple[float | str | None, float | None]:
+def _stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
+    """The command line's stop rule, parsed once into a rule object (or RANGE_FROM_FILES: M1 with
+    each target's range_m column)."""
     if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
         _fail("choose one stop rule: --range [R] (laser slant range), --target-height H (ellipsoidal metres) "
               "or --dem FILE (terrain)")
-    if range_opt not in (None, RANGE_FROM_FILES):
+    if range_opt == RANGE_FROM_FILES:
+        return RANGE_FROM_FILES
+    if range_opt is not None:
         try:
             range_opt = float(range_opt)
         except ValueError:
             _fail(f"--range takes metres or nothing (then range_m from the files), got {range_opt!r}")
-    return range_opt, target_height
+    return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
 
 
 def _load_sensor(config_path) -> SensorModel:
@@ -221,8 +226,8 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
                 sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
     if lat is None or lon is None or height is None:
         _fail("one observation needs --lat, --lon and --height (aircraft, ellipsoidal m), or give a TELEMETRY file")
-    rng, stop_h = _stop_rule(range_opt, target_height, dem)
-    if rng == RANGE_FROM_FILES:
+    rule = _stop_rule(range_opt, target_height, dem)
+    if rule == RANGE_FROM_FILES:
         _fail("--range needs a value (metres) for one observation")
     if config_path is not None:
         sensor = _load_sensor(config_path)
@@ -244,7 +249,7 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
 
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
     pixels = None if pixel is None else (pixel[0], pixel[1])
-    f, cov = locate_by_rule(sensor, pose, pixels, range_m=rng, height_m=stop_h, dem=dem, budget=budget)
+    f, cov = locate_by_rule(sensor, pose, pixels, rule, budget=budget)
     status = Status(int(f.status))
     out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
            "status": status.name}
@@ -293,7 +298,7 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
                   dem=None, budget=None, interp=None, compensate_path=None) -> None:
     if config_path is None:
         _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
-    rng, stop_h = _stop_rule(range_opt, stop_height, dem)
+    rule = _stop_rule(range_opt, stop_height, dem)
     cfg = _load_config(config_path)
     from .io.config import compensation_model
 
@@ -302,7 +307,7 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     except ConfigError as exc:
         _fail(str(exc))
     tel, det, issues = _read_inputs(telemetry, detections, cfg)
-    located = _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp, model)
+    located = _locate(cfg, tel, det, rule, time_tolerance, budget, interp, model)
     issues += located.issues
     _report_issues(issues)
     after = None
@@ -332,14 +337,14 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
 
 
-def _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget, interp, compensation=None):
+def _locate(cfg, tel, det, rule, time_tolerance, budget, interp, compensation=None):
     """locate_tables with the config's sensor and time offset (unless --time-offset was given)."""
     interp = dict(interp or {})
     if interp.get("time_offset_s") is None:
         interp["time_offset_s"] = cfg.telemetry.time_offset_s
     with err_console.status("locating..."):
         try:
-            return locate_tables(cfg.sensor(), tel, det, range_m=rng, height_m=stop_h, dem=dem,
+            return locate_tables(cfg.sensor(), tel, det, rule,
                                  time_tolerance_s=time_tolerance, budget=budget, compensation=compensation,
                                  **interp)
         except ValueError as exc:
@@ -483,7 +488,7 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
     except ValueError as exc:
         _fail(str(exc))
     console = Console()
-    console.print(f"[bold]{scn.name}[/]: {n:,} samples, seed {seed}, stop rule {scn.stop}; budget: "
+    console.print(f"[bold]{scn.name}[/]: {n:,} samples, seed {seed}, stop rule {scn.rule.describe()}; budget: "
                   + ", ".join(f"{s.name} {s.describe()}" for s in scn.budget))
     out_rows = []
     for k, st in enumerate(result.stats):

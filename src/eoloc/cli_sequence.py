@@ -60,7 +60,7 @@ def _located(telemetry, detections, config_path, range_opt, target_height, dem_p
     """Locate every detection: (config, located, detections table). With ``covariance`` and an
     [accuracy.budget] in the config, each fix carries its covariance."""
     dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
-    rng, stop_h = _stop_rule(range_opt, target_height, dem)
+    rule = _stop_rule(range_opt, target_height, dem)
     cfg = _load_config(config_path)
     tel, det, issues = _read_inputs(telemetry, detections, cfg)
     budget = None
@@ -68,7 +68,7 @@ def _located(telemetry, detections, config_path, range_opt, target_height, dem_p
         from .io.config import error_budget
 
         budget = error_budget(cfg, config_path)
-    located = _locate(cfg, tel, det, rng, stop_h, dem, time_tolerance, budget,
+    located = _locate(cfg, tel, det, rule, time_tolerance, budget,
                       dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset))
     _report_issues(issues + located.issues)
     if not located.fixes.ok.any():
@@ -242,7 +242,7 @@ eoloc triangulate TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml [--ray-sigma
               help="Output folder.")
 def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, time_tolerance, out_dir) -> None:
     from .io.telemetry import match_detections, telemetry_pose
-    from .sequence.triangulate import triangulate as tri
+    from .rules.multiview import triangulate as tri
 
     cfg = _load_config(config_path)
     sensor = cfg.sensor()

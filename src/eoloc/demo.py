@@ -15,8 +15,8 @@ from .geodesy import horizontal_distance_m
 from .io.config import error_budget, load_config
 from .io.export import fix_rows, write_csv, write_geojson
 from .io.telemetry import read_detections, read_telemetry
-from .locate import locate_range
 from .pipeline import RANGE_FROM_FILES, locate_tables
+from .rules import AtHeight, OnDEM, locate_range
 from .sensor import AzElGimbal, Camera, Pose, SensorModel
 
 S13_EXPECTED = (42.02058646, 125.03195512, 419.58)
@@ -70,12 +70,12 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     # M1: the turret tracks T1, so the image centre + laser range is T1
     # with each fix's first-order uncertainty from the config's [accuracy.budget]
     budget = error_budget(load_config(data / "camera.toml"), data / "camera.toml")
-    m1 = locate_tables(sensor, tel, None, range_m=RANGE_FROM_FILES, budget=budget)
+    m1 = locate_tables(sensor, tel, None, RANGE_FROM_FILES, budget=budget)
     t1 = truth["T1"]
     err1 = horizontal_distance_m(m1.fixes.lat_deg, m1.fixes.lon_deg, t1[0], t1[1])
     err1 = np.where(m1.fixes.ok, err1, np.nan)
     # M3: every detection on the ellipsoid at the targets' known ground height
-    m3 = locate_tables(sensor, tel, det, height_m=t1[2])
+    m3 = locate_tables(sensor, tel, det, AtHeight(t1[2]))
     for issue in m3.issues:
         console.print(f"[yellow]input issue (kept going):[/] {escape(str(issue))}", highlight=False)
     ids = np.asarray(m3.extra["target_id"], dtype=object)
@@ -142,7 +142,7 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """M5: a synthetic checkerboard frame seen obliquely over the Longs Peak DEM, orthorectified
     to UTM on the DEM, with [P]'s bounds shortcut measured against the rigorous ray."""
     from . import rectify as R
-    from .locate import locate_dem
+    from .rules import locate_dem
     from .terrain import open_dem
 
     console.rule("Image georeferencing (M5; eoloc rectify)")
@@ -171,7 +171,7 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
     from .sequence import rls_static, triangulate
 
     t1 = next(iter(truth.values()))
-    m3 = locate_tables(sensor, tel, det, height_m=t1[2], budget=budget)
+    m3 = locate_tables(sensor, tel, det, AtHeight(t1[2]), budget=budget)
     ids = np.asarray(m3.extra["target_id"]).astype(str)
     matched = match_detections(tel, det)
     rays = sensor.rays(telemetry_pose(tel, np.maximum(matched.record, 0)), (det.columns["u_px"], det.columns["v_px"]))
@@ -216,9 +216,9 @@ def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
                   f"{dem.grid.z.shape[1]} x {dem.grid.z.shape[0]} posts, "
                   f"{dem.spacing_m:.0f} m, ellipsoidal heights {lo:.0f}-{hi:.0f} m; "
                   f"{len(tel)} telemetry records at 6 000 m, {len(det)} detections")
-    m4 = locate_tables(sensor, tel, det, dem=dem)
+    m4 = locate_tables(sensor, tel, det, OnDEM(dem))
     flat_h = float(np.nanmean(dem.grid.z))
-    m3 = locate_tables(sensor, tel, det, height_m=flat_h)
+    m3 = locate_tables(sensor, tel, det, AtHeight(flat_h))
     ids = np.asarray(m4.extra["target_id"], dtype=object)
     t = np.array([truth.get(i, (np.nan,) * 3) for i in ids])
     errors = {}

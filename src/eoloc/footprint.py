@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
-from .locate import locate_on
 from .result import Fixes, Status
+from .rules import surface_rule
 from .sensor.model import Pose, SensorModel
 from .terrain.dem import DEM
 
@@ -166,7 +166,7 @@ def _bisect(sensor: SensorModel, pose: Pose, a: np.ndarray, b: np.ndarray,
 
 
 def _stop(sensor: SensorModel, pose: Pose, pixels: np.ndarray, surface) -> Fixes:
-    return locate_on(sensor, pose, surface, (pixels[..., 0], pixels[..., 1]))
+    return surface_rule(surface).locate(sensor, pose, (pixels[..., 0], pixels[..., 1]))
 
 
 def _n_frames(pose: Pose) -> int:

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .locate import stop_at_dem, stop_at_ellipsoid, stop_at_range
 from .result import Fixes, Status, with_status
+from .rules import AtHeight, AtRange, OnDEM
 from .sensor.camera import Camera
 from .sensor.gimbal import AzElGimbal
 from .sensor.model import Pose, Rays, SensorModel
@@ -74,10 +74,10 @@ class FrameGeometry:
 def stop_on(rays: Rays, surface, sensor: SensorModel) -> Fixes:
     """Stop rays (…, K) on ``surface``: a DEM, or ellipsoidal heights (m) broadcasting as (F, 1)."""
     if isinstance(surface, DEM):
-        return stop_at_dem(rays, surface, sensor=sensor)
+        return OnDEM(surface).stop(rays, sensor.ellipsoid)
     h = np.asarray(surface, dtype=np.float64)
     h = h[..., None] if h.ndim else h  # one height per packet, for all its points
-    fixes = stop_at_ellipsoid(rays, np.nan_to_num(h), sensor=sensor)
+    fixes = AtHeight(np.nan_to_num(h)).stop(rays, sensor.ellipsoid)
     return with_status(fixes, np.broadcast_to(~np.isfinite(h), fixes.shape), Status.INVALID_INPUT)
 
 
@@ -90,7 +90,7 @@ def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_de
     zero = np.zeros_like(tx)[..., None]
     centre_rays = packet_rays(sensor, pose, zero, zero)
     if range_m is not None:
-        centre = stop_at_range(centre_rays, np.asarray(range_m, dtype=np.float64)[..., None], sensor=sensor)
+        centre = AtRange(np.asarray(range_m, dtype=np.float64)[..., None]).stop(centre_rays, sensor.ellipsoid)
     else:
         centre = stop_on(centre_rays, surface, sensor)
     corner_rays = packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None])

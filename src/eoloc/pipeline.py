@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accuracy.budget import ErrorBudget
-from .accuracy.covariance import FixCovariance, locate_with_covariance, stop_rule
+from .accuracy.covariance import FixCovariance, locate_with_covariance
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
-from .locate import locate_dem, locate_ellipsoid, locate_range
 from .result import Fixes, Status, with_status
+from .rules import AtRange, StopRule, rule_from_options
 from .sensor import Pose, SensorModel
 from .sequence.interp import interpolate_poses
 
@@ -32,16 +32,16 @@ class Located:
     compensation: dict[str, np.ndarray] | None = None
 
 
-def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
+def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | str | None = None, *,
                   range_m: float | str | None = None, height_m: float | None = None, dem=None,
                   time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None, interpolate: bool = False,
                   max_gap_s: float = 0.5, time_offset_s: float = 0.0, compensation=None) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
-    Stop rule (exactly one): ``height_m`` (M3, ellipsoidal metres), ``dem`` (M4, a
-    :class:`eoloc.DEM`) or ``range_m`` (M1): a number for all, or ``"files"`` to take each
-    detection's ``range_m`` column (without detections: the telemetry's boresight range). A
-    telemetry range is never applied along another pixel's ray. With an error ``budget`` every
+    Stop ``rule``: a :class:`eoloc.StopRule`, or ``"files"`` for M1 with each detection's
+    ``range_m`` column (without detections: the telemetry's boresight range; a telemetry range is
+    never applied along another pixel's ray). The keywords ``height_m``, ``dem``, ``range_m``
+    (a number, or ``"files"``) name the rule instead. With an error ``budget`` every
     fix also gets its first-order covariance (:func:`eoloc.accuracy.locate_with_covariance`).
     ``interpolate``: each detection's pose is interpolated to its time (+ ``time_offset_s``,
     telemetry minus video clock) instead of taken from the nearest record; detections in a gap
@@ -50,7 +50,11 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     correction is added to every fix inside its trained range (the others are flagged); its
     per-fix columns come back in ``Located.compensation``.
     """
-    stop_rule(range_m, height_m, dem)
+    if rule is None:
+        rule = RANGE_FROM_FILES if isinstance(range_m, str) and range_m == RANGE_FROM_FILES else \
+            rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
+    if not (isinstance(rule, StopRule) or rule == RANGE_FROM_FILES):
+        raise TypeError(f"rule must be a stop rule or {RANGE_FROM_FILES!r}, got {rule!r}")
     issues: list[Issue] = []
     cx, cy = sensor.camera.centre_px
     if det is None:
@@ -76,34 +80,29 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, *,
     has_pose = record >= 0
     if not (interpolate and det is not None):
         pose = telemetry_pose(tel, np.where(has_pose, record, 0))
-    if range_m is not None:
-        from_files = range_m == RANGE_FROM_FILES
-        range_m = np.asarray(file_range) if from_files else np.full(u.shape, float(range_m))
-        if from_files:
-            path, lines = range_source
-            for j in np.flatnonzero(~np.isfinite(range_m) & has_pose):
-                issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
-                                                         "a constant --range R, or use --height H"))
-    fixes, cov = locate_by_rule(sensor, pose, (u, v), range_m=range_m, height_m=height_m, dem=dem, budget=budget)
+    if isinstance(rule, str):  # RANGE_FROM_FILES: M1 with each target's own range
+        rule = AtRange(np.asarray(file_range))
+        path, lines = range_source
+        for j in np.flatnonzero(~np.isfinite(rule.range_m) & has_pose):
+            issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
+                                                     "a constant --range R, or use --height H"))
+    fixes, cov = locate_by_rule(sensor, pose, (u, v), rule, budget=budget)
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     comp = None
     if compensation is not None:
         from .accuracy.compensation import compensate
 
-        fixes, comp = compensate(compensation, sensor, pose, fixes, (u, v), dem=dem)
+        fixes, comp = compensate(compensation, sensor, pose, fixes, (u, v), rule=rule)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
     return Located(fixes, extra, issues, cov, comp)
 
 
-def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, *, range_m=None, height_m=None, dem=None,
+def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule,
                    budget: ErrorBudget | None = None) -> tuple[Fixes, FixCovariance | None]:
-    """Fixes by the one stop rule given (M1 range_m, M3 height_m, M4 dem) and, with an error
-    ``budget``, their first-order covariance (else None)."""
+    """Fixes by stop ``rule`` and, with an error ``budget``, their first-order covariance (else None)."""
     if budget is not None:
-        return locate_with_covariance(sensor, pose, budget, pixels, range_m=range_m, height_m=height_m, dem=dem)
-    stop, value = stop_rule(range_m, height_m, dem)
-    fn = {"range": locate_range, "height": locate_ellipsoid, "dem": locate_dem}[stop]
-    return fn(sensor, pose, value, pixels), None
+        return locate_with_covariance(sensor, pose, budget, pixels, rule)
+    return rule.locate(sensor, pose, pixels), None
 
 
 def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float):

@@ -28,8 +28,8 @@ from numpy.typing import ArrayLike
 
 from . import geodesy
 from .footprint import footprints
-from .locate import locate_dem, locate_on
 from .result import Fixes, Status
+from .rules import locate_dem, surface_rule
 from .sensor.model import Pose, SensorModel
 from .terrain.dem import DEM
 
@@ -75,7 +75,7 @@ def ground_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, step_p
     us = np.unique(np.r_[np.arange(0.0, cam.width - 1, step_px), cam.width - 1.0])
     vs = np.unique(np.r_[np.arange(0.0, cam.height - 1, step_px), cam.height - 1.0])
     u, v = np.meshgrid(us, vs)
-    return GroundGrid(u, v, locate_on(sensor, pose, surface, (u, v)))
+    return GroundGrid(u, v, surface_rule(surface).locate(sensor, pose, (u, v)))
 
 
 # -- output grids ------------------------------------------------------------------------------
@@ -163,7 +163,7 @@ def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float
     """Ground sample distance (m) at the principal point: the mean ground distance to the
     neighbouring pixel across and down."""
     cx, cy = sensor.camera.centre_px
-    f = locate_on(sensor, pose, surface, (np.array([cx, cx + 1.0, cx]), np.array([cy, cy, cy + 1.0])))
+    f = surface_rule(surface).locate(sensor, pose, (np.array([cx, cx + 1.0, cx]), np.array([cy, cy, cy + 1.0])))
     if not f.ok.all():
         raise ValueError("the principal point does not see the ground: give the output resolution (gsd_m)")
     d = geodesy.horizontal_distance_m(f.lat_deg[0], f.lon_deg[0], f.lat_deg[1:], f.lon_deg[1:])
@@ -298,7 +298,7 @@ def shortcut_error(ortho: Ortho, sensor: SensorModel, pose: Pose, surface: float
     """Locate ``pixels`` ((N, 2) u, v of the original frame) rigorously, find them in the
     rectified image, read them back with :func:`bounds_shortcut`, and return the distances."""
     px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-    f = locate_on(sensor, pose, surface, (px[:, 0], px[:, 1]))
+    f = surface_rule(surface).locate(sensor, pose, (px[:, 0], px[:, 1]))
     x, y = pyproj.Transformer.from_crs(_WGS84, ortho.crs, always_xy=True).transform(f.lon_deg, f.lat_deg)
     row, col = ortho.pixel_of(x, y)
     lat1, lon1 = bounds_shortcut(ortho, row, col)

@@ -17,6 +17,7 @@ from .io.table import Table
 from .misb import FrameGeometry, frame_geometry, misb_sensor, packet_pose
 from .pipeline import locate_by_rule
 from .result import Fixes, Status
+from .rules import surface_rule
 from .sensor.camera import Camera
 from .sensor.model import SensorModel
 
@@ -164,8 +165,8 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
         sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
                              base.lever_arm_m)
         pose = pose_all.take(idx)
-        stop = {"dem": surface} if surface is not None else {"height_m": np.nan_to_num(c["fc_h_m"][row[idx]])}
-        fixes, cov = locate_by_rule(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), budget=budget, **stop)
+        rule = surface_rule(surface if surface is not None else np.nan_to_num(c["fc_h_m"][row[idx]]))
+        fixes, cov = locate_by_rule(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, budget=budget)
         st = np.asarray(fixes.status).copy()
         if surface is None:
             st[~np.isfinite(c["fc_h_m"][row[idx]])] = int(Status.INVALID_INPUT)

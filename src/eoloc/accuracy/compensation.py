@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike
 
 from .. import geodesy
 from ..result import Fixes
+from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
 from .cep import cep_empirical
 
@@ -121,7 +122,7 @@ def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], *, 
     """Locate every calibration observation (columns of the observations CSV: pose, pixel,
     gcp_lat/lon/h) with one stop rule: ``dem`` (M4), ``height_m`` (M3) or ``range_m`` (M1), or
     none: each GCP's own surveyed height (M3), which isolates the angular errors."""
-    from ..locate import locate_dem, locate_ellipsoid, locate_range
+    from ..rules import AtHeight, rule_from_options
 
     c = columns
     g3 = c.get("sensor_roll_deg")
@@ -131,12 +132,9 @@ def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], *, 
     uv = (c["u_px"], c["v_px"])
     if sum(x is not None for x in (dem, height_m, range_m)) > 1:
         raise ValueError("give at most one stop rule (dem, height_m or range_m)")
-    if dem is not None:
-        fixes = locate_dem(sensor, pose, dem, uv)
-    elif range_m is not None:
-        fixes = locate_range(sensor, pose, range_m, uv)
-    else:
-        fixes = locate_ellipsoid(sensor, pose, c["gcp_h_m"] if height_m is None else height_m, uv)
+    rule = (AtHeight(c["gcp_h_m"]) if dem is None and height_m is None and range_m is None
+            else rule_from_options(range_m=range_m, height_m=height_m, dem=dem))
+    fixes = rule.locate(sensor, pose, uv)
     truth = np.stack([c["gcp_lat_deg"], c["gcp_lon_deg"], c["gcp_h_m"]], -1)
     groups = c.get("flight", np.full(c["u_px"].shape, "all", dtype=object))
     return Observed(fixes, error_features(sensor, pose, fixes, uv), error_enu(fixes, truth), np.asarray(groups))
@@ -331,11 +329,11 @@ class CompensationModel:
 
 
 def compensate(model: CompensationModel, sensor: SensorModel, pose: Pose, fixes: Fixes, pixels=None, *,
-               dem=None) -> tuple[Fixes, dict[str, np.ndarray]]:
+               rule: StopRule | None = None) -> tuple[Fixes, dict[str, np.ndarray]]:
     """Apply ``model`` to ``fixes`` (of ``pixels`` seen from ``pose``): -> (corrected fixes, per-fix
     columns: the features, the correction east/north/up (m), whether it was applied, why not, and
-    the uncorrected position). Flagged fixes keep their uncorrected position. With ``dem`` the
-    corrected point is put back on the terrain (its height read from the DEM)."""
+    the uncorrected position). Flagged fixes keep their uncorrected position. Where the stop
+    ``rule`` has a terrain map (a DEM) the corrected point is put back on it."""
     flat = fixes.flat()
     f = error_features(sensor, pose, fixes, pixels).take(slice(None))
     pred = model.predict(f)
@@ -343,8 +341,9 @@ def compensate(model: CompensationModel, sensor: SensorModel, pose: Pose, fixes:
     p = flat.p_ecef() + np.einsum("nij,nj->ni", geodesy.R_ecef_enu(flat.lat_deg, flat.lon_deg), corr)
     lat, lon, h = geodesy.ecef_to_geodetic(p[:, 0], p[:, 1], p[:, 2])
     applied = pred.applied.ravel()
-    if dem is not None and applied.any():
-        h = np.where(applied, dem.height(lat, lon), h)
+    terrain = None if rule is None or not applied.any() else rule.terrain_height(lat, lon)
+    if terrain is not None:
+        h = np.where(applied, terrain, h)
     out = Fixes(*(np.where(applied, new, old).reshape(fixes.shape) for new, old in
                   ((lat, flat.lat_deg), (lon, flat.lon_deg), (h, flat.h_m))), np.reshape(flat.range_m, fixes.shape),
                 np.reshape(flat.status, fixes.shape))

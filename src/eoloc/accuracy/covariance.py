@@ -26,7 +26,8 @@ from numpy.typing import ArrayLike
 
 from .. import geodesy
 from ..result import Fixes, Status
-from ..sensor.model import Pose, SensorModel, _split_pixels
+from ..rules import StopRule, rule_from_options
+from ..sensor.model import Pose, SensorModel, split_pixels
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
 from .cep import cep_zero_mean, error_ellipses
@@ -115,31 +116,20 @@ class FixCovariance:
         return self.nonlinearity <= tol
 
 
-def stop_rule(range_m, height_m, dem) -> tuple[str, object]:
-    """The one stop rule given, as ("range" | "height" | "dem", its value); ValueError otherwise."""
-    given = [(k, v) for k, v in (("range", range_m), ("height", height_m), ("dem", dem)) if v is not None]
-    if len(given) != 1:
-        raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
-    stop, value = given[0]
-    if stop == "dem" and not isinstance(value, DEM):
-        raise TypeError(f"dem must be an eoloc.DEM (see eoloc.open_dem), got {type(value).__name__}")
-    return stop, value
-
-
-def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget, pixels: ArrayLike | None = None, *,
-                           range_m: ArrayLike | None = None, height_m: ArrayLike | None = None, dem: DEM | None = None,
+def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget, pixels: ArrayLike | None = None,
+                           rule: StopRule | None = None, *, range_m: ArrayLike | None = None,
+                           height_m: ArrayLike | None = None, dem: DEM | None = None,
                            velocity_ned_mps: ArrayLike = (0.0, 0.0, 0.0), rel_step: float = DEFAULT_REL_STEP,
                            check_linearity: bool = True) -> tuple[Fixes, FixCovariance]:
-    """Fixes and their first-order covariance under ``budget`` (one stop rule: M1 range_m, M3
-    height_m or M4 dem). Pose fields, pixels and the range/height broadcast to the targets' shape;
-    velocity_ned_mps (m/s) is used by a ``time_s`` source. The fixes are those of
-    :func:`eoloc.locate_range` / ``locate_ellipsoid`` / ``locate_dem`` for the same inputs.
+    """Fixes and their first-order covariance under ``budget`` by stop ``rule`` (or one of the
+    keywords range_m, height_m, dem naming it). Pose fields, pixels and the rule's range/height
+    broadcast to the targets' shape; velocity_ned_mps (m/s) is used by a ``time_s`` source. The
+    fixes are those of :func:`eoloc.locate` with the same rule.
     """
-    stop, value = stop_rule(range_m, height_m, dem)
-    value = value if stop == "dem" else np.asarray(value, dtype=np.float64)
+    rule = rule if rule is not None else rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
     if not rel_step > 0:
         raise ValueError(f"rel_step must be > 0, got {rel_step!r}")
-    u, v = _split_pixels(pixels, sensor.camera)
+    u, v = split_pixels(pixels, sensor.camera)
     srcs = [s for s in budget if s.sigma > 0]
     names = tuple(s.name for s in srcs)
     sig = np.array([s.sigma for s in srcs], dtype=np.float64)
@@ -152,7 +142,7 @@ def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget,
             base = 1 + 2 * n_src * b
             d[name][base + j] = k * sig[j]
             d[name][base + n_src + j] = -k * sig[j]
-    f = chain_fixes(sensor, pose, u, v, stop, value, d, rows, velocity_ned_mps=velocity_ned_mps)
+    f = chain_fixes(sensor, pose, u, v, rule, d, rows, velocity_ned_mps=velocity_ned_mps)
     shape = f.status.shape[1:]
     lat, lon, h, rng, st = (np.broadcast_to(x, (rows, *shape)) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m,
                                                                           f.status))

@@ -12,15 +12,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Literal
 
 import numpy as np
 
 from .. import geodesy
-from ..locate import stop_at_dem, stop_at_ellipsoid, stop_at_range
 from ..result import Fixes, Status
-from ..sensor.model import Pose, Rays, SensorModel
-from ..terrain.dem import DEM
+from ..rules import StopRule
+from ..sensor.model import Pose, SensorModel
 from .budget import ErrorBudget
 from .cep import cep_bivariate, drms, error_ellipse
 from .runners import Mapper, local_map
@@ -32,30 +30,25 @@ DEFAULT_CHUNK = 200_000
 class Scenario:
     """A nominal observation and its error budget.
 
-    pose: one aircraft pose (scalars); pixels: (K, 2) target pixels (default: the principal
-    point); stop: "range" (M1, ``range_m``), "height" (M3, ``height_m`` ellipsoidal) or "dem"
-    (M4, ``dem``); velocity_ned_mps: the aircraft's velocity, used by the time-offset source.
+    pose: one aircraft pose (scalars); rule: the stop rule (:class:`eoloc.AtRange`,
+    :class:`eoloc.AtHeight` or :class:`eoloc.OnDEM`; its own error source, range_m or terrain_m,
+    is perturbed by the budget); pixels: (K, 2) target pixels (default: the principal point);
+    velocity_ned_mps: the aircraft's velocity, used by the time-offset source.
     """
 
     name: str
     sensor: SensorModel
     pose: Pose
     budget: ErrorBudget
-    stop: Literal["range", "height", "dem"] = "height"
-    range_m: float | None = None
-    height_m: float | None = None
-    dem: DEM | None = None
+    rule: StopRule
     pixels: np.ndarray | None = None
     velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     description: str = ""
 
     def __post_init__(self) -> None:
-        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem}
-        if self.stop not in need:
-            raise ValueError(f"scenario {self.name}: stop must be 'range', 'height' or 'dem', got {self.stop!r}")
-        if need[self.stop] is None:
-            raise ValueError(f"scenario {self.name}: stop = {self.stop!r} needs "
-                             f"{ {'range': 'range_m', 'height': 'height_m', 'dem': 'dem'}[self.stop] }")
+        if not isinstance(self.rule, StopRule):
+            raise TypeError(f"scenario {self.name}: rule must be a stop rule (AtRange, AtHeight, OnDEM), "
+                            f"got {self.rule!r}")
         px = np.array([self.sensor.camera.centre_px]) if self.pixels is None else np.asarray(self.pixels, float)
         object.__setattr__(self, "pixels", px.reshape(-1, 2))
 
@@ -69,17 +62,16 @@ class Scenario:
 
 def perturbed_fixes(scn: Scenario, d: dict[str, np.ndarray], n: int) -> Fixes:
     """Fixes (n, K) of the scenario's K targets with the errors ``d`` (name -> (n,) draws) applied."""
-    stop_value = {"range": scn.range_m, "height": scn.height_m, "dem": scn.dem}[scn.stop]
-    return chain_fixes(scn.sensor, scn.pose, scn.pixels[:, 0], scn.pixels[:, 1], scn.stop, stop_value, d, n,
+    return chain_fixes(scn.sensor, scn.pose, scn.pixels[:, 0], scn.pixels[:, 1], scn.rule, d, n,
                        velocity_ned_mps=scn.velocity_ned_mps)
 
 
-def chain_fixes(sensor: SensorModel, pose: Pose, u, v, stop: str, stop_value, d: dict[str, np.ndarray], n: int,
+def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[str, np.ndarray], n: int,
                 *, velocity_ned_mps=(0.0, 0.0, 0.0)) -> Fixes:
     """The geolocation chain with input errors ``d`` (source name -> (n,) values) added.
 
-    pose fields, pixels (u, v) and the stop value (range m, height m, or a DEM) broadcast to the
-    targets' shape T; the result has shape (n, *T): row i holds every target with error row i.
+    pose fields, pixels (u, v) and the rule's value (a range or height per target) broadcast to
+    the targets' shape T; the result has shape (n, *T): row i holds every target with error row i.
     This is the one place the error sources of :data:`SOURCES` enter the chain (Monte Carlo and
     first-order covariance both go through it).
     """
@@ -87,8 +79,7 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, stop: str, stop_value, d:
     v = np.asarray(v, dtype=np.float64)
     shapes = [np.shape(x) for x in (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg,
                                      pose.roll_deg, *pose.gimbal_deg, u, v)]
-    if stop != "dem":
-        shapes.append(np.shape(stop_value))
+    shapes.append(rule.value_shape)
     lead = (n,) + (1,) * len(np.broadcast_shapes(*shapes))
 
     def z(name: str):
@@ -116,36 +107,13 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, stop: str, stop_value, d:
                      pose.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
     mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), lead)
     bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), lead)
-    terrain = z("terrain_m")
     frame = sensor.camera_frame(perturbed, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
                                 gimbal_skew_deg=z("gimbal_skew_deg"))
     xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
                                                principal_point_error_px=(z("cx_px"), z("cy_px")))
-    rays = sensor.rays_from(frame, xn, yn)
-    if stop == "range":
-        f = stop_at_range(rays, stop_value + z("range_m"), sensor=sensor)
-    elif stop == "height":
-        f = stop_at_ellipsoid(rays, stop_value + terrain, sensor=sensor)
-    elif stop == "dem":
-        f = _stop_on_shifted_dem(rays, stop_value, terrain, sensor)
-    else:
-        raise ValueError(f"stop must be 'range', 'height' or 'dem', got {stop!r}")
+    f = rule.stop(sensor.rays_from(frame, xn, yn), sensor.ellipsoid, errors=z)
     shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies
     return Fixes(*(np.broadcast_to(x, shape) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
-
-
-def _stop_on_shifted_dem(rays: Rays, dem: DEM, shift, sensor: SensorModel) -> Fixes:
-    """M4 on the DEM raised by ``shift`` m: the camera is lowered by the shift along its local
-    vertical instead (same geometry to shift x distance / R, ~1e-3 of the shift at 20 km)."""
-    if np.isscalar(shift):
-        return stop_at_dem(rays, dem, sensor=sensor)
-    lat, lon, _ = geodesy.ecef_to_geodetic(rays.ox, rays.oy, rays.oz, ell=sensor.ellipsoid)
-    up = -geodesy.R_ecef_ned(lat, lon)[..., :, 2]
-    s = np.broadcast_to(shift, rays.shape)
-    moved = Rays(rays.ox - s * up[..., 0], rays.oy - s * up[..., 1], rays.oz - s * up[..., 2],
-                 rays.dx, rays.dy, rays.dz, rays.invalid)
-    f = stop_at_dem(moved, dem, sensor=sensor)
-    return replace(f, h_m=f.h_m + s)
 
 
 def _angles(nominal, d, prefix, axes, lead):

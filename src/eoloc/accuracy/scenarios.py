@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rules import AtHeight, AtRange, OnDEM
 from ..sensor import AzElGimbal, Camera, Pose, RollPitchGimbal, SensorModel
 from ..terrain.dem import DEM
 from .budget import ErrorBudget, ErrorSource
@@ -28,7 +29,7 @@ def s13() -> Scenario:
     ))
     sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), AzElGimbal())
     return Scenario("s13", sensor, Pose(42.0, 125.0, 10_000.0, 10.0, 5.0, -2.0, (45.0, -75.0)), budget,
-                    stop="range", range_m=10_200.0, description=s13.__doc__)
+                    AtRange(10_200.0), description=s13.__doc__)
 
 
 def _q_budget(terrain: bool) -> ErrorBudget:
@@ -53,7 +54,7 @@ def q_ellipsoid() -> Scenario:
     pitch 3.5 +- 0.01, roll 0 +- 0.01; roll-pitch gimbal roll 50 +- 0.006, pitch -2.6 +- 0.006 deg;
     range-free on the ellipsoid at the terrain mean 5 083 m with the relief as a height error
     (sigma 62.47 m). [Q] used n = 5 000; source result sigma 0.00048 deg, 0.00060 deg, 62.3 m."""
-    return Scenario("q-ellipsoid", _Q_SENSOR, _Q_POSE, _q_budget(True), stop="height", height_m=Q_TERRAIN_MEAN_M,
+    return Scenario("q-ellipsoid", _Q_SENSOR, _Q_POSE, _q_budget(True), AtHeight(Q_TERRAIN_MEAN_M),
                     description=q_ellipsoid.__doc__)
 
 
@@ -85,7 +86,7 @@ def q_terrain(seed: int = 62) -> DEM:
 def q_dem(seed: int = 62) -> Scenario:
     """[Q] with a DEM: the same budget without the terrain term, located by M4 on a synthetic
     relief of the same statistics (q_terrain). Source result sigma 0.00015 deg, 0.00013 deg, 3.58 m."""
-    return Scenario("q-dem", _Q_SENSOR, _Q_POSE, _q_budget(False), stop="dem", dem=q_terrain(seed),
+    return Scenario("q-dem", _Q_SENSOR, _Q_POSE, _q_budget(False), OnDEM(q_terrain(seed)),
                     description=q_dem.__doc__)
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import geodesy
+from ..rules import AtHeight, OnDEM
 from ..sensor.model import Pose
 from .budget import ErrorBudget, ErrorSource
 from .montecarlo import Scenario, monte_carlo, truth_fixes
@@ -70,9 +71,9 @@ def sweep_point(scn: Scenario, method: str, angle: str, angle_deg: float, sigma_
     if method == "ellipsoid":
         run = ell
     elif method == "dem":
-        run = replace(scn, pose=pose, budget=base, stop="dem", height_m=None,
-                      dem=relief_dem(float(t.lat_deg[0]), float(t.lon_deg[0]), scn.height_m, sigma_m,
-                                     seed=relief_seed, half_deg=0.15))
+        run = replace(scn, pose=pose, budget=base,
+                      rule=OnDEM(relief_dem(float(t.lat_deg[0]), float(t.lon_deg[0]), float(scn.rule.h_m), sigma_m,
+                                            seed=relief_seed, half_deg=0.15)))
     else:
         raise ValueError(f"unknown sweep method {method!r}; use {' or '.join(METHODS)}")
     nan = float("nan")
@@ -97,12 +98,12 @@ def terrain_sweep(scn: Scenario, angles_deg: Sequence[float], terrain_sigmas_m: 
     """CEP and sigmas against a gimbal angle (``angle`` "gimbal1": azimuth / frame roll,
     "gimbal2": elevation / frame pitch, degrees) for each relief sigma (m), ellipsoid vs DEM.
 
-    ``scn`` must stop on the ellipsoid (``stop="height"``): its height is the mean terrain height;
+    ``scn`` must stop on the ellipsoid (an :class:`eoloc.AtHeight` rule): its height is the mean terrain height;
     a ``terrain_m`` source in its budget is replaced by each sigma. ``progress(1)`` after each point.
     """
-    if scn.stop != "height":
+    if not isinstance(scn.rule, AtHeight):  # the sweep compares this rule with a DEM: it is its subject
         raise ValueError(f"a terrain sweep needs a scenario that stops on the ellipsoid (stop = 'height', the mean "
-                         f"terrain height), got stop = {scn.stop!r}")
+                         f"terrain height), got stop = {scn.rule.name!r}")
     if angle not in ANGLES:
         raise ValueError(f"angle must be one of {', '.join(ANGLES)}, got {angle!r}")
     for m in methods:

@@ -196,6 +196,7 @@ def accuracy_scenario(cfg: Config, path: str | Path):
     """The Monte Carlo scenario of a config's [accuracy] section (DEM paths relative to the file)."""
     from ..accuracy.budget import ErrorBudget
     from ..accuracy.montecarlo import Scenario
+    from ..rules import AtHeight, AtRange, OnDEM
     from ..sensor import Pose
     from ..terrain import open_dem
 
@@ -208,12 +209,12 @@ def accuracy_scenario(cfg: Config, path: str | Path):
         raise ConfigError(f"config file {str(path)!r}: [accuracy] needs {' and '.join(missing)} for a Monte Carlo "
                           "run (the nominal observation); see the README")
     p = a.pose
-    dem = None
-    if a.stop == "dem":
-        dem = open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical)
+    # the config's `stop` key names the rule; its value comes from the key of the same meaning
+    rule = {"range": lambda: AtRange(a.range_m), "height": lambda: AtHeight(a.height_m),
+            "dem": lambda: OnDEM(open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical))}[a.stop]()
     return Scenario(Path(path).stem, cfg.sensor(),
                     Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
-                    ErrorBudget.from_mapping(a.budget), stop=a.stop, range_m=a.range_m, height_m=a.height_m, dem=dem,
+                    ErrorBudget.from_mapping(a.budget), rule,
                     pixels=None if a.pixels is None else a.pixels, velocity_ned_mps=a.velocity_ned_mps)
 
 

@@ -205,14 +205,14 @@ class SensorModel:
 
     def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
-        u, v = _split_pixels(pixels, self.camera)
+        u, v = split_pixels(pixels, self.camera)
         return self.camera.pixel_to_normalized(u, v)
 
     def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
         """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point).
         Pixels outside the image (see :meth:`Camera.outside`) are marked ``out_of_image``: every
         stop rule gives them OUT_OF_IMAGE."""
-        u, v = _split_pixels(pixels, self.camera)
+        u, v = split_pixels(pixels, self.camera)
         xn, yn = self.camera.pixel_to_normalized(u, v)
         return self.rays_from(self.camera_frame(pose), xn, yn, self.camera.outside(u, v, xn, yn))
 
@@ -277,7 +277,7 @@ def _rot9(angles_deg: ArrayLike) -> tuple:
     return tuple(R[..., i, j] for i in range(3) for j in range(3))
 
 
-def _split_pixels(pixels: ArrayLike | None, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+def split_pixels(pixels: ArrayLike | None, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     if pixels is None:
         return np.float64(camera.cx), np.float64(camera.cy)
     if isinstance(pixels, tuple) and len(pixels) == 2:

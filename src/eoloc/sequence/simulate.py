@@ -178,7 +178,7 @@ def synthetic_flight(sensor: SensorModel, *, centre: tuple[float, float, float] 
     pose_true = Pose(lat, lon, h, yaw, pitch, roll, (az, el))
 
     if targets_px is not None:
-        from ..locate import locate_ellipsoid
+        from ..rules import locate_ellipsoid
 
         k = f // 2
         mid_pose = Pose(lat[k], lon[k], h[k], yaw[k], pitch[k], roll[k], (az[k], el[k]))

@@ -14,14 +14,50 @@ Rays at or above the plane's horizon get NO_INTERSECTION.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _kernels
 from .._backend import get_backend, run
+from ..geodesy import WGS84, Ellipsoid
 from ..result import Fixes
-from ..sensor.model import Pose, SensorModel, _split_pixels
-from ._common import to_fixes
+from ..sensor.model import Pose, Rays, SensorModel, split_pixels
+from .base import StopRule, f64, to_fixes
+
+
+@dataclass(frozen=True)
+class FlatGround(StopRule):
+    """M2 ([Z15]): the flat local ground through the main target, ranged at ``main_pixel``
+    (default: the principal point) at slant range ``main_range_m`` (m).
+
+    Validity domain: the main range as for :class:`AtRange`; the camera above the plane
+    (BELOW_SURFACE otherwise); rays at or above the plane's horizon, or meeting it beyond
+    ``MAX_RANGE_M``, get NO_INTERSECTION; pixels outside the image OUT_OF_IMAGE.
+    """
+
+    main_range_m: ArrayLike
+    main_pixel: ArrayLike | None = None
+
+    name = "flat"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "main_range_m", f64(self.main_range_m))
+
+    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors=None) -> Fixes:
+        raise TypeError("FlatGround needs the camera and the main target's ray: use "
+                        "eoloc.locate(sensor, pose, FlatGround(...), pixels)")
+
+    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None) -> Fixes:
+        return locate_flat(sensor, pose, self.main_range_m, pixels, main_pixel=self.main_pixel)
+
+    @property
+    def value_shape(self) -> tuple[int, ...]:
+        return self.main_range_m.shape
+
+    def describe(self) -> str:
+        return "flat ground" if self.main_range_m.ndim else f"flat ground, main range {float(self.main_range_m):g} m"
 
 
 def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels: ArrayLike | None = None, *,
@@ -42,7 +78,7 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     with np.errstate(all="ignore"):
         nx, ny, nz, H = _kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
                                             np.asarray(main_range_m, dtype=np.float64), *ell)
-    u, v = _split_pixels(pixels, sensor.camera)
+    u, v = split_pixels(pixels, sensor.camera)
     xn, yn = sensor.camera.pixel_to_normalized(u, v)
     out = run("flat_target", *frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
     return to_fixes(out, frame.invalid, sensor.camera.outside(u, v, xn, yn))
@@ -62,7 +98,7 @@ def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixe
     pose9[6:] = sensor.gimbal.angles(pose.gimbal_deg)
     cam = sensor.camera
     main = np.array([cam.cx, cam.cy] if main_pixel is None else np.ravel(main_pixel), dtype=np.float64)
-    u, v = _split_pixels(pixels, cam)
+    u, v = split_pixels(pixels, cam)
     shape = np.broadcast_shapes(np.shape(u), np.shape(v))
     u = np.ascontiguousarray(np.broadcast_to(u, shape)).reshape(-1)
     v = np.ascontiguousarray(np.broadcast_to(v, shape)).reshape(-1)

@@ -117,3 +117,29 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
         return Triangulation(np.full(3, nan), nan, nan, nan, np.full((3, 3), nan), resid, angle, warning, nan,
                              status)
     return Triangulation(p, lat, lon, h, cov_enu, resid, angle, warning, s0, status)
+
+
+@dataclass(frozen=True)
+class MultiView:
+    """M8 as a stop rule over several rays: the least-squares intersection of one target's rays
+    (``sigma_rad``: each ray's angular standard deviation; ``min_angle_deg``: below it a weak
+    geometry warning). Validity domain: see this module; DEGENERATE otherwise."""
+
+    sigma_rad: ArrayLike = 1e-4
+    min_angle_deg: float = 2.0
+
+    name = "multiview"
+
+    def intersect(self, rays: Rays) -> Triangulation:
+        """The full result: point, covariance, residuals, angle, warning, status."""
+        return triangulate(rays, self.sigma_rad, min_angle_deg=self.min_angle_deg)
+
+    def stop(self, rays: Rays, ell=None, errors=None):
+        """The point as a one-element Fixes (range from the first ray's camera; NaN unless OK)."""
+        from ..result import Fixes
+
+        r = self.intersect(rays)
+        o = np.array([np.ravel(rays.ox)[0], np.ravel(rays.oy)[0], np.ravel(rays.oz)[0]])
+        rng = float(np.linalg.norm(r.p_ecef - o)) if r.ok else float("nan")
+        return Fixes(np.array([r.lat_deg]), np.array([r.lon_deg]), np.array([r.h_m]), np.array([rng]),
+                     np.array([int(r.status)], dtype=np.int8))

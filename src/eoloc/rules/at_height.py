@@ -1,0 +1,60 @@
+"""M3 — range-free geolocation on the surface of constant ellipsoidal height ([Q] §2.2, exact)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from numpy.typing import ArrayLike
+
+from ..geodesy import WGS84, Ellipsoid
+from ..result import Fixes
+from ..sensor.model import Pose, Rays, SensorModel
+from .base import Errors, StopRule, f64, no_errors, run_stop
+
+
+@dataclass(frozen=True)
+class AtHeight(StopRule):
+    """M3: the first point along each ray whose geodetic height is ``h_m`` (ellipsoidal m).
+
+    [Q] intersects the ray with the inflated ellipsoid (a + h, b + h), which is not the surface of
+    geodetic height h (1.4e-6 |h| off). eoloc starts there and certifies the answer. Geodetic
+    height along a line is convex, so a crossing where the ray descends is the first one. A point
+    within 1 µm of the surface on a descending ray is certain. Anything else is decided exactly
+    by Newton steps from the camera side, which never overshoot the first crossing
+    (``_kernels.ellipsoid_exact``).
+
+    Validity domain (the same on both backends): target heights from -100 km to +10 000 km; the
+    camera above the surface (on it, to 1 µm, or below it: BELOW_SURFACE, never a point); only
+    the near crossing; near-tangent rays decided to the contract (a point only on the surface to
+    < 1 mm, and only if the ray reaches it); a ray that misses or points away gets
+    NO_INTERSECTION. Monte Carlo perturbs the height by the budget's ``terrain_m`` source.
+    """
+
+    h_m: ArrayLike = 0.0
+
+    name = "height"
+    error_sources = ("terrain_m",)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "h_m", f64(self.h_m))
+
+    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors: Errors = no_errors) -> Fixes:
+        return run_stop("stop_at_ellipsoid", rays, self.h_m + errors("terrain_m"), ell)
+
+    @property
+    def value_shape(self) -> tuple[int, ...]:
+        return self.h_m.shape
+
+    def describe(self) -> str:
+        return "height" if self.h_m.ndim else f"height {float(self.h_m):g} m"
+
+
+def stop_at_ellipsoid(rays: Rays, height_m: ArrayLike = 0.0, *, sensor: SensorModel | None = None) -> Fixes:
+    """First point along each ray at ellipsoidal height ``height_m`` (m)."""
+    return AtHeight(height_m).stop(rays, WGS84 if sensor is None else sensor.ellipsoid)
+
+
+def locate_ellipsoid(sensor: SensorModel, pose: Pose, height_m: ArrayLike = 0.0,
+                     pixels: ArrayLike | None = None) -> Fixes:
+    """M3: pixels (default: principal point) of ``pose`` to the ground at ellipsoidal height ``height_m``."""
+    return AtHeight(height_m).locate(sensor, pose, pixels)

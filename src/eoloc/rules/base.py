@@ -1,0 +1,81 @@
+"""The shape every stop rule shares: a frozen value that stops rays and reports Fixes.
+
+A stop rule says where a ray ends: at a slant range, on a surface of constant height, on a DEM,
+on the flat ground through a ranged main target. Each rule is a frozen dataclass in a file of its
+own in this package. It states its validity domain in its docstring, runs its kernel(s) in
+:meth:`StopRule.stop` and knows which error sources perturb it (Monte Carlo and covariance pass
+them in ``errors``). Every caller (pipeline, Monte Carlo, covariance, compensation, footprints,
+rectification, KLV, CLI) holds a rule object and calls it, never branching on its kind.
+
+Adding a rule: one file here with a ``StopRule`` subclass and its kernel in ``eoloc._kernels``,
+plus its name in :data:`eoloc.rules.RULES` (README "Architecture").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._backend import run
+from ..geodesy import WGS84, Ellipsoid
+from ..result import Fixes, Status, mask_invalid
+from ..sensor.model import Pose, Rays, SensorModel
+
+Errors = Callable[[str], "np.ndarray | float"]  # error source name -> its draws (or 0.0)
+
+
+def no_errors(name: str) -> float:
+    return 0.0
+
+
+class StopRule:
+    """Base of the stop rules. ``name``: the rule's name in config files and on the command line;
+    ``error_sources``: the budget sources (eoloc.accuracy) that perturb the rule itself."""
+
+    name: ClassVar[str] = ""
+    error_sources: ClassVar[tuple[str, ...]] = ()
+
+    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors: Errors = no_errors) -> Fixes:
+        """Where each ray ends, with the rule's own error sources perturbed by ``errors``."""
+        raise NotImplementedError
+
+    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None) -> Fixes:
+        """Pixels (default: the principal point) of ``pose`` to the ground by this rule."""
+        return self.stop(sensor.rays(pose, pixels), sensor.ellipsoid)
+
+    def terrain_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray | None:
+        """Heights (ellipsoidal m) of the terrain map this rule stops on, at (lat, lon); None for
+        rules without a map (a corrected fix is then left at its own height)."""
+        return None
+
+    @property
+    def value_shape(self) -> tuple[int, ...]:
+        """The shape the rule's own value adds to the broadcast (a range or height per target)."""
+        return ()
+
+    def describe(self) -> str:
+        """One line for reports: the rule and its value."""
+        return self.name
+
+
+def run_stop(kernel: str, rays: Rays, value, ell: Ellipsoid) -> Fixes:
+    """Run stop-rule ``kernel`` with its parameter ``value`` (range, height, ...) on ``rays``."""
+    out = run(kernel, rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz, value, *ell.constants)
+    return to_fixes(out, rays.invalid, rays.out_of_image)
+
+
+def to_fixes(out, invalid, out_of_image=False) -> Fixes:
+    """Kernel outputs (lat rad, lon rad, h, range, status) -> Fixes, INVALID_INPUT where ``invalid``
+    (the pose could not be used), OUT_OF_IMAGE where ``out_of_image`` (the pixel is not in the image)."""
+    lat, lon, h, t, st = (np.asarray(x) for x in out)
+    arrays = (np.degrees(lat), np.degrees(lon), h, t, st.astype(np.int8, copy=False))
+    arrays = mask_invalid(arrays, np.broadcast_to(out_of_image, st.shape), Status.OUT_OF_IMAGE)
+    lat, lon, h, t, st = mask_invalid(arrays, np.broadcast_to(invalid, st.shape))
+    return Fixes(*(a[()] if a.ndim == 0 else a for a in (lat, lon, h, t, st)))
+
+
+def f64(x: ArrayLike) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
