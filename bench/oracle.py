@@ -61,6 +61,8 @@ def main() -> int:
           f"{time.perf_counter() - t0:.0f} s")
     for line in runner.lines():
         print(line)
+    for case in runner.cases:
+        print("wrong case:", *case)
     print(f"crashes: {crashes}; wrong: {runner.n_wrong}")
     return 1 if crashes or runner.n_wrong else 0
 

@@ -58,13 +58,31 @@ def to_ecef(lat, lon, h) -> np.ndarray:
     return np.stack(np.broadcast_arrays(x, y, z), -1)
 
 
+_A = 6378137.0
+_E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
+
+
 def geodetic(p: np.ndarray):
-    """ECEF -> (lat deg, lon deg, h m) by pymap3d (You's closed form + one iteration): nanometres
-    to 1000 km. PROJ's inverse is not used here: 0.1 mm off at 100 km, 7 mm at 900 km (measured)."""
+    """ECEF -> (lat deg, lon deg, h m): pymap3d's estimate, then Newton steps in the meridian
+    plane on the defining forward formula until it maps back to the point (nanometres and 1e-15
+    rad at any height). Neither library alone is exact enough here: PROJ's inverse is 0.1 mm off
+    in height at 100 km and 7 mm at 900 km; pymap3d's latitude 7e-8 deg off at 1000 km (measured)."""
     p = np.asarray(p, dtype=float)
     with np.errstate(all="ignore"):
         lat, lon, h = pymap3d.ecef2geodetic(p[..., 0], p[..., 1], p[..., 2])
-    return np.asarray(lat), np.asarray(lon), np.asarray(h)
+        lat = np.radians(np.asarray(lat, dtype=float))
+        h = np.asarray(h, dtype=float)
+        rho = np.hypot(p[..., 0], p[..., 1])
+        for _ in range(3):
+            sl, cl = np.sin(lat), np.cos(lat)
+            w2 = 1.0 - _E2 * sl * sl
+            n = _A / np.sqrt(w2)
+            m = _A * (1.0 - _E2) / (w2 * np.sqrt(w2))
+            d_rho = rho - (n + h) * cl
+            d_z = p[..., 2] - (n * (1.0 - _E2) + h) * sl
+            lat = lat + (-sl * d_rho + cl * d_z) / (m + h)
+            h = h + cl * d_rho + sl * d_z
+    return np.degrees(lat), np.asarray(lon), h
 
 
 def height(p: np.ndarray) -> np.ndarray:
@@ -476,11 +494,14 @@ class Runner:
         self.eoloc = eoloc
         self.backends = tuple(backends or eoloc.available_backends())
         self.reports: dict[str, Report] = {}
+        self.cases: list = []
 
     def _report(self, name: str) -> Report:
         return self.reports.setdefault(name, Report(name))
 
-    def _each_backend(self, name: str, locate, check):
+    def _each_backend(self, name: str, locate, check, inputs: dict | None = None):
+        """Run ``locate`` on each backend and ``check`` its answer; keep the inputs of the first
+        few wrong cases (``inputs``: arrays per case) in ``self.cases`` for the report."""
         statuses = []
         for be in self.backends:
             with self.eoloc.use_backend(be):
@@ -489,6 +510,11 @@ class Runner:
             check(rep, _fix_tuple(f))
             self._report(name).merge(rep)
             statuses.append(np.asarray(f.status).ravel())
+            for what, i, detail in rep.examples[:3]:
+                if inputs is not None and len(self.cases) < 20:
+                    self.cases.append((name, be, what, detail, {k: np.ravel(v)[i] if np.size(v) > 1 else v
+                                                                for k, v in inputs.items()},
+                                       [np.ravel(x)[i] for x in _fix_tuple(f)]))
         if len(statuses) > 1:
             self._report(name).fail("backend disagreement in status", statuses[0] != statuses[1])
 
@@ -521,7 +547,7 @@ class Runner:
             out = pixel_outside(CAMERA, c["u"], c["v"])
             sensor, pose = _sensor(eoloc, kind), _pose(eoloc, c, kind)
             self._each_backend("M3", lambda: eoloc.locate_ellipsoid(sensor, pose, ht, (c["u"], c["v"])),
-                               lambda rep, f: check_at_height(rep, f, o, d, ht, bad, out))
+                               lambda rep, f: check_at_height(rep, f, o, d, ht, bad, out), dict(c, ht=ht, kind=kind))
         self.m3_tangent(rng, n)
 
     def m3_tangent(self, rng, n: int) -> None:
@@ -548,7 +574,9 @@ class Runner:
         rays_ = eoloc.Rays(o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2])
         none = np.zeros(n, bool)
         self._each_backend("M3 tangent", lambda: eoloc.stop_at_ellipsoid(rays_, ht),
-                           lambda rep, f: check_at_height(rep, f, o, d, ht, none, none))
+                           lambda rep, f: check_at_height(rep, f, o, d, ht, none, none),
+                           {"ox": o[:, 0], "oy": o[:, 1], "oz": o[:, 2], "dx": d[:, 0], "dy": d[:, 1], "dz": d[:, 2],
+                            "ht": ht, "delta": delta})
 
     def m2(self, rng, n: int) -> None:
         eoloc = self.eoloc
@@ -574,7 +602,7 @@ class Runner:
                               tuple(g[:, None] for g in _gimbal_tuple(c, kind)))
             self._each_backend("M2", lambda: eoloc.locate_flat(sensor, pose, r0[:, None], (u, v)),
                                lambda rep, f: check_flat(rep, f, o, d, np.repeat(o0, 20, 0), np.repeat(d0, 20, 0),
-                                                         rep0, bad, out))
+                                                         rep0, bad, out), dict(cc, r0=rep0, kind=kind))
             # one frame at a time: the compiled real-time path
             for i in range(min(frames, 5)):
                 p1 = eoloc.Pose(*(c[k][i] for k in ("lat", "lon", "h", "yaw", "pitch", "roll")),

@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import eoloc
 import oracle_lib as O
@@ -32,24 +33,14 @@ def _saw(rep: O.Report, *codes: int) -> None:
         assert rep.statuses[code] > 0, f"the hostile mix produced no status {code}: {rep.line()}"
 
 
-def test_oracle_M1_range():
-    rep = _run("m1", 3000, 11)
-    _saw(rep, O.OK, O.INVALID_INPUT, O.OUT_OF_IMAGE)
-
-
-def test_oracle_M3_height():
-    rep = _run("m3", 2500, 12)
-    _saw(rep, O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE, O.INVALID_INPUT, O.OUT_OF_IMAGE)
-
-
-def test_oracle_M3_exact_tangent_family():
-    rep = _run("m3_tangent", 6000, 13)
-    _saw(rep, O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE)
-
-
-def test_oracle_M2_flat_ground():
-    rep = _run("m2", 3000, 14)
-    _saw(rep, O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE, O.INVALID_INPUT, O.OUT_OF_IMAGE)
+@pytest.mark.parametrize(("method", "n", "seed", "expected"), [
+    ("m1", 3000, 11, (O.OK, O.INVALID_INPUT, O.OUT_OF_IMAGE)),
+    ("m3", 2500, 12, (O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE, O.INVALID_INPUT, O.OUT_OF_IMAGE)),
+    ("m3_tangent", 6000, 13, (O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE)),
+    ("m2", 3000, 14, (O.OK, O.NO_INTERSECTION, O.BELOW_SURFACE, O.INVALID_INPUT, O.OUT_OF_IMAGE)),
+], ids=["M1 range", "M3 height", "M3 exact-tangent family", "M2 flat ground"])
+def test_oracle_every_answer_on_hostile_input(method, n, seed, expected):
+    _saw(_run(method, n, seed), *expected)
 
 
 def test_oracle_M4_real_tile_with_voids_and_every_edge():

@@ -14,6 +14,7 @@ Conventions (one per concept, everywhere in the library):
 """
 
 from ._backend import available_backends, get_backend, set_backend, use_backend
+from .errors import EolocError
 from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
 from .result import Fixes, Status
 from .rules import (
@@ -48,6 +49,7 @@ __all__ = [
     "Camera",
     "DistortionRatio",
     "Ellipsoid",
+    "EolocError",
     "FixedMount",
     "Fixes",
     "FlatGround",

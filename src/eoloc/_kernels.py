@@ -554,10 +554,8 @@ def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     state = _pick(state == UNDECIDED, _pick(h - ht <= SURFACE_TOL_M, OK, NO_INTERSECTION), state)
     state = _pick(valid, state, INVALID_INPUT)
     ok = state == OK
-    t = _pick(ok & (s < 0.0), t - (h - ht) / s, t)  # one last step from the left onto the surface
-    x = ox + t * dx
+    x = ox + t * dx  # (no last Newton step: at a tangent it would leap past the touching point)
     y = oy + t * dy
-    h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
     return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
             _pick(ok, t, np.nan), state)
 

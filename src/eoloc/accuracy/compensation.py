@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
+from ..errors import ModelFileError
 from ..result import Fixes
 from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
@@ -59,10 +60,6 @@ OUT_OBLIQUE = 1
 OUT_HEIGHT = 2
 UNCOVERED_CELL = 4
 NOT_LOCATED = 8
-
-
-class ModelFileError(ValueError):
-    """A compensation model file cannot be used (wrong format, version or feature set)."""
 
 
 @dataclass(frozen=True)

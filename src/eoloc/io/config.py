@@ -38,11 +38,8 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from ..errors import ConfigError
 from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_from_name
-
-
-class ConfigError(ValueError):
-    """The configuration file is missing, not TOML, or fails validation (message names the key)."""
 
 
 class _Strict(BaseModel):

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import KLVError
 from .table import Table
 
 UAS_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
@@ -105,10 +106,6 @@ class KLVStream:
     def summary(self) -> str:
         bad = ", ".join(f"{n} {k}" for k, n in self.counts().items() if k != "good") or "none bad"
         return f"{self.path} ({self.container}): {self.n_good} good ST 0601 packets; {bad}"
-
-
-class KLVError(ValueError):
-    """The file cannot be read as KLV at all (missing, empty, no ST 0601 packet in it)."""
 
 
 # -- reading ------------------------------------------------------------------------------------

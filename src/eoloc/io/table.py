@@ -16,9 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-class TableError(ValueError):
-    """The file cannot be read at all (missing, no header, required columns absent)."""
+from ..errors import TableError
 
 
 @dataclass(frozen=True)

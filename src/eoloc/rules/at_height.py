@@ -6,14 +6,14 @@ from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
 
-from ..geodesy import WGS84, Ellipsoid
+from ..geodesy import WGS84
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
-from .base import Errors, StopRule, f64, no_errors, run_stop
+from .base import KernelRule
 
 
 @dataclass(frozen=True)
-class AtHeight(StopRule):
+class AtHeight(KernelRule):
     """M3: the first point along each ray whose geodetic height is ``h_m`` (ellipsoidal m).
 
     [Q] intersects the ray with the inflated ellipsoid (a + h, b + h), which is not the surface of
@@ -34,19 +34,8 @@ class AtHeight(StopRule):
 
     name = "height"
     error_sources = ("terrain_m",)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "h_m", f64(self.h_m))
-
-    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors: Errors = no_errors) -> Fixes:
-        return run_stop("stop_at_ellipsoid", rays, self.h_m + errors("terrain_m"), ell)
-
-    @property
-    def value_shape(self) -> tuple[int, ...]:
-        return self.h_m.shape
-
-    def describe(self) -> str:
-        return "height" if self.h_m.ndim else f"height {float(self.h_m):g} m"
+    kernel = "stop_at_ellipsoid"
+    value_field = "h_m"
 
 
 def stop_at_ellipsoid(rays: Rays, height_m: ArrayLike = 0.0, *, sensor: SensorModel | None = None) -> Fixes:

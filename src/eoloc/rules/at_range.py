@@ -6,14 +6,14 @@ from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
 
-from ..geodesy import WGS84, Ellipsoid
+from ..geodesy import WGS84
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
-from .base import Errors, StopRule, f64, no_errors, run_stop
+from .base import KernelRule
 
 
 @dataclass(frozen=True)
-class AtRange(StopRule):
+class AtRange(KernelRule):
     """M1: the point at slant range ``range_m`` (m) from the camera along each ray.
 
     Validity domain: 0 < range <= 10 000 km (``MAX_RANGE_M``), a finite pose and a pixel in the
@@ -27,19 +27,8 @@ class AtRange(StopRule):
 
     name = "range"
     error_sources = ("range_m",)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "range_m", f64(self.range_m))
-
-    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors: Errors = no_errors) -> Fixes:
-        return run_stop("stop_at_range", rays, self.range_m + errors("range_m"), ell)
-
-    @property
-    def value_shape(self) -> tuple[int, ...]:
-        return self.range_m.shape
-
-    def describe(self) -> str:
-        return "range" if self.range_m.ndim else f"range {float(self.range_m):g} m"
+    kernel = "stop_at_range"
+    value_field = "range_m"
 
 
 def stop_at_range(rays: Rays, range_m: ArrayLike, *, sensor: SensorModel | None = None) -> Fixes:

@@ -61,6 +61,30 @@ class StopRule:
         return self.name
 
 
+class KernelRule(StopRule):
+    """A rule that is one stop kernel with one value per ray: the dataclass field ``value_field``
+    (a range, a height), perturbed by the rule's one error source."""
+
+    kernel: ClassVar[str] = ""
+    value_field: ClassVar[str] = ""
+    unit: ClassVar[str] = "m"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, self.value_field, f64(getattr(self, self.value_field)))
+
+    def stop(self, rays: Rays, ell: Ellipsoid = WGS84, errors: Errors = no_errors) -> Fixes:
+        value = getattr(self, self.value_field) + errors(self.error_sources[0])
+        return run_stop(self.kernel, rays, value, ell)
+
+    @property
+    def value_shape(self) -> tuple[int, ...]:
+        return np.shape(getattr(self, self.value_field))
+
+    def describe(self) -> str:
+        value = getattr(self, self.value_field)
+        return self.name if np.ndim(value) else f"{self.name} {float(value):g} {self.unit}"
+
+
 def run_stop(kernel: str, rays: Rays, value, ell: Ellipsoid) -> Fixes:
     """Run stop-rule ``kernel`` with its parameter ``value`` (range, height, ...) on ``rays``."""
     out = run(kernel, rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz, value, *ell.constants)

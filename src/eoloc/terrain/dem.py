@@ -22,12 +22,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import DEMError
 from .geoid import Geoid, default_geoid
 from .grid import LatLonGrid
-
-
-class DEMError(ValueError):
-    """A DEM cannot be used: missing, unreadable, no CRS, incompatible tiles (message names the file)."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,7 +23,7 @@ class Geoid:
     def __init__(self, path: str | Path, name: str | None = None) -> None:
         import rasterio
 
-        from .dem import DEMError
+        from ..errors import DEMError
 
         self.path = str(path)
         self.name = name or Path(path).stem

@@ -1,0 +1,31 @@
+"""eoloc's exceptions: one base, :class:`EolocError`, for every mistake a user can fix (a file
+that cannot be read or used, a configuration that fails validation). Each message names the file,
+key or field and the fix. Per-target problems are never exceptions: they are statuses
+(:class:`eoloc.Status`). EolocError derives from ValueError, so code that caught ValueError
+before still catches these."""
+
+from __future__ import annotations
+
+
+class EolocError(ValueError):
+    """Base of eoloc's user-facing errors."""
+
+
+class ConfigError(EolocError):
+    """The configuration file is missing, not TOML, or fails validation (message names the key)."""
+
+
+class TableError(EolocError):
+    """The file cannot be read at all (missing, no header, required columns absent)."""
+
+
+class DEMError(EolocError):
+    """A DEM cannot be used: missing, unreadable, no CRS, incompatible tiles (message names the file)."""
+
+
+class KLVError(EolocError):
+    """The file cannot be read as KLV at all (missing, empty, no ST 0601 packet in it)."""
+
+
+class ModelFileError(EolocError):
+    """A compensation model file cannot be used (wrong format, version or feature set)."""
