@@ -30,6 +30,11 @@ BELOW_SURFACE = 6
 OUT_OF_IMAGE = 7
 UNDECIDED = -1  # internal: the fast M3 path could not certify its answer; the exact path decides
 
+# Gimbal kinds (eoloc.sensor.gimbal.GimbalKind names them; plain ints here for numba)
+GIMBAL_AZEL = 0
+GIMBAL_ROLLPITCH = 1
+GIMBAL_FIXED = 2
+
 
 
 def _pick(cond, a, b):
@@ -392,7 +397,8 @@ def pixel_in_image(u, v, width, height):
 def undistort_ok(kind, dp, xd, yd, x, y):
     """True where ideal (x, y) is THE undistortion of distorted (xd, yd): the model maps it back
     (to 1e-9) on the branch where the model is one-to-one (Brown-Conrady: positive Jacobian, so
-    past the fold of a barrel lens a pixel is not inverted), and the ratio model's 1 + D > 0."""
+    past the fold of a barrel lens a pixel is not inverted), and the ratio model's 1 + D > 0
+    (seen as no change of sign between (xd, yd) and (x, y), without evaluating D again)."""
     if kind == DIST_BROWN:
         k1 = dp[0]
         k2 = dp[1]
@@ -408,8 +414,8 @@ def undistort_ok(kind, dp, xd, yd, x, y):
         jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
         back = np.abs(fx - xd) + np.abs(fy - yd) <= 1e-9 * (1.0 + np.abs(xd) + np.abs(yd))
         return back & (jxx * jyy - jxy * jxy > 0.0) & (jxx > 0.0)
-    if kind == DIST_RATIO:
-        return 1.0 + distortion_ratio(np.sqrt(xd * xd + yd * yd), dp) > 0.0
+    if kind == DIST_RATIO:  # x = xd / (1 + D): 1 + D > 0 exactly where no sign flips (and all finite)
+        return ((x - x) == 0.0) & ((y - y) == 0.0) & (x * xd >= 0.0) & (y * yd >= 0.0)
     return (x - x) == 0.0
 
 
@@ -500,22 +506,34 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     Otherwise one Newton step from [Q]'s inflated-ellipsoid root, and the answer is certified
     when the point is within 1 µm of the surface and g clearly falls there.
     """
-    valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
+    # the products every quadric below shares (numpy: each is one pass over the arrays)
+    dd_xy = dx * dx + dy * dy
+    dd_z = dz * dz
+    od_xy = ox * dx + oy * dy
+    od_z = oz * dz
+    oo_xy = ox * ox + oy * oy
+    oo_z = oz * oz
+    dd = dd_xy + dd_z
+    valid = (_finite(oo_xy + oo_z + dd + ht) & (np.abs(dd - 1.0) <= UNIT_TOL)
+             & (oo_xy + oo_z <= MAX_ORIGIN_M * MAX_ORIGIN_M) & (ht >= MIN_HEIGHT_M) & (ht <= MAX_HEIGHT_M))
     pad = 1.0e-3 + _PAD_REL * np.abs(ht)
     # the outer ellipsoid: no real root, or both behind the camera (sum < 0, product > 0)
-    A = a + ht + pad
-    B = b + ht + pad
-    ia = 1.0 / (A * A)
-    ib = 1.0 / (B * B)
-    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
-    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
-    qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
+    ia = 1.0 / ((a + ht + pad) * (a + ht + pad))
+    ib = 1.0 / ((b + ht + pad) * (b + ht + pad))
+    qa = dd_xy * ia + dd_z * ib
+    qb = od_xy * ia + od_z * ib
+    qc = oo_xy * ia + oo_z * ib - 1.0
     miss = (qb * qb - qa * qc < 0.0) | ((qb > 0.0) & (qc > 0.0))
     # the inner one: the camera inside it
-    A = a + ht - pad
-    B = b + ht - pad
-    below = (ox * ox + oy * oy) / (A * A) + oz * oz / (B * B) < 1.0
-    t1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b)
+    below = oo_xy / ((a + ht - pad) * (a + ht - pad)) + oo_z / ((b + ht - pad) * (b + ht - pad)) < 1.0
+    # [Q]'s inflated ellipsoid: its near root starts the Newton step
+    ia = 1.0 / ((a + ht) * (a + ht))
+    ib = 1.0 / ((b + ht) * (b + ht))
+    qa = dd_xy * ia + dd_z * ib
+    qb = od_xy * ia + od_z * ib
+    qc = oo_xy * ia + oo_z * ib - 1.0
+    disc = qb * qb - qa * qc
+    t1 = (-qb - np.sqrt(_pick(disc >= 0.0, disc, np.nan))) / qa
     t = _pick(t1 > 0.0, t1, np.nan)
     h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 1)
     t = t - (h - ht) / s
@@ -634,9 +652,9 @@ def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew):
     kind 1: roll-pitch framed camera (g1 frame roll, g2 frame pitch, g3 sensor roll);
     kind 2: fixed/generic mount ``R_fixed`` followed by a sensor roll g3 about the boresight.
     """
-    if kind == 0:
+    if kind == GIMBAL_AZEL:
         G = r_body_cam_azel(g1, g2, g3, skew)
-    elif kind == 1:
+    elif kind == GIMBAL_ROLLPITCH:
         G = r_body_cam_rollpitch(g1, g2, g3, skew)
     else:
         G = mat_mul(R_fixed, rot_z(g3))

@@ -22,7 +22,7 @@ from .io.telemetry import read_detections, read_telemetry
 from .pipeline import RANGE_FROM_FILES, locate_by_rule, locate_tables
 from .result import Status
 from .rules import StopRule, rule_from_options
-from .sensor import Camera, Pose, SensorModel, gimbal_from_name
+from .sensor import Camera, GimbalKind, Pose, SensorModel, gimbal_from_name
 
 CONVENTIONS = """
 \b
@@ -238,7 +238,7 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
             _fail("--pixel needs --config FILE to know the camera (without it the image centre is used)")
         # the centre pixel's ray is the boresight whatever the intrinsics: any camera will do
         sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), gimbal_from_name(gimbal or "az-el"))
-    if sensor.gimbal.kind == 2:
+    if sensor.gimbal.kind == GimbalKind.FIXED:
         angles = (sensor_roll,)
     else:
         if gimbal_angles is None:

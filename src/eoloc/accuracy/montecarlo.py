@@ -18,6 +18,7 @@ import numpy as np
 from .. import geodesy
 from ..result import Fixes, Status
 from ..rules import StopRule
+from ..sensor.gimbal import GimbalKind
 from ..sensor.model import Pose, SensorModel
 from .budget import ErrorBudget
 from .cep import cep_bivariate, drms, error_ellipse
@@ -97,7 +98,7 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
         lon = lon + vel[..., 1] * dt / m_lon
         h = h - vel[..., 2] * dt
     g = list(pose.gimbal_deg)
-    if sensor.gimbal.kind == 2:  # fixed mount: the tuple holds the sensor roll only
+    if sensor.gimbal.kind == GimbalKind.FIXED:  # fixed mount: the tuple holds the sensor roll only
         g = [(g[0] if g else 0.0) + z("sensor_roll_deg")]
     else:
         g = g + [0.0] * (3 - len(g))

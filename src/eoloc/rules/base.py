@@ -96,8 +96,10 @@ def to_fixes(out, invalid, out_of_image=False) -> Fixes:
     (the pose could not be used), OUT_OF_IMAGE where ``out_of_image`` (the pixel is not in the image)."""
     lat, lon, h, t, st = (np.asarray(x) for x in out)
     arrays = (np.degrees(lat), np.degrees(lon), h, t, st.astype(np.int8, copy=False))
-    arrays = mask_invalid(arrays, np.broadcast_to(out_of_image, st.shape), Status.OUT_OF_IMAGE)
-    lat, lon, h, t, st = mask_invalid(arrays, np.broadcast_to(invalid, st.shape))
+    for flag, status in ((out_of_image, Status.OUT_OF_IMAGE), (invalid, Status.INVALID_INPUT)):
+        if np.any(flag):  # (tested before broadcasting: a scalar False costs nothing)
+            arrays = mask_invalid(arrays, np.broadcast_to(flag, st.shape), status)
+    lat, lon, h, t, st = arrays
     return Fixes(*(a[()] if a.ndim == 0 else a for a in (lat, lon, h, t, st)))
 
 

@@ -2,7 +2,7 @@
 
 from .camera import Camera
 from .distortion import BrownConrady, DistortionRatio
-from .gimbal import AzElGimbal, FixedMount, Gimbal, RollPitchGimbal, gimbal_from_name
+from .gimbal import AzElGimbal, FixedMount, Gimbal, GimbalKind, RollPitchGimbal, gimbal_from_name
 from .model import Pose, Rays, SensorModel
 
 __all__ = [
@@ -12,6 +12,7 @@ __all__ = [
     "DistortionRatio",
     "FixedMount",
     "Gimbal",
+    "GimbalKind",
     "Pose",
     "Rays",
     "RollPitchGimbal",

@@ -129,6 +129,10 @@ class Camera:
         :meth:`pixel_to_normalized` is not the inverse, e.g. past the fold of a barrel lens)."""
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
+        m = 0.5 + _kernels.IMAGE_MARGIN_PX
+        if self.distortion is None and u.size and v.size and u.min() >= -m and v.min() >= -m \
+                and u.max() <= self.width - 1.0 + m and v.max() <= self.height - 1.0 + m:
+            return np.False_  # all inside (and finite): four reductions instead of a mask
         with np.errstate(all="ignore"):
             usable = _kernels.pixel_in_image(u, v, float(self.width), float(self.height))
             if self.distortion is not None:

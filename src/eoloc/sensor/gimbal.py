@@ -19,10 +19,22 @@ carry the constant part.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from .. import _kernels
+
+
+class GimbalKind(IntEnum):
+    """The gimbal models as the kernels know them (``eoloc._kernels.r_body_cam``)."""
+
+    AZ_EL = _kernels.GIMBAL_AZEL
+    ROLL_PITCH = _kernels.GIMBAL_ROLLPITCH
+    FIXED = _kernels.GIMBAL_FIXED
+
 
 _IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
@@ -49,7 +61,7 @@ class Gimbal:
                 f"sensor roll, got {len(gimbal_deg)} values: {gimbal_deg!r}"
             )
         padded = [np.asarray(a, dtype=np.float64) for a in gimbal_deg] + [np.float64(0.0)] * (3 - len(gimbal_deg))
-        if self.kind == 2:  # fixed mount: the only angle is the sensor roll, kernel reads it third
+        if self.kind == GimbalKind.FIXED:  # fixed mount: the only angle is the sensor roll, kernel reads it third
             padded = [np.float64(0.0), np.float64(0.0), padded[0]]
         return tuple(np.radians(a) for a in padded)
 
@@ -58,7 +70,7 @@ class Gimbal:
 class AzElGimbal(Gimbal):
     """Azimuth-elevation turret. Angles: (azimuth, elevation[, sensor_roll]) in degrees."""
 
-    kind: ClassVar[int] = 0
+    kind: ClassVar[GimbalKind] = GimbalKind.AZ_EL
     name: ClassVar[str] = "az-el"
     angle_names: ClassVar[tuple[str, ...]] = ("azimuth", "elevation")
 
@@ -83,7 +95,7 @@ class AzElGimbal(Gimbal):
 class RollPitchGimbal(Gimbal):
     """Roll-pitch framed camera ([Q]). Angles: (frame_roll, frame_pitch[, sensor_roll]) in degrees."""
 
-    kind: ClassVar[int] = 1
+    kind: ClassVar[GimbalKind] = GimbalKind.ROLL_PITCH
     name: ClassVar[str] = "roll-pitch"
     angle_names: ClassVar[tuple[str, ...]] = ("frame_roll", "frame_pitch")
 
@@ -97,7 +109,7 @@ class FixedMount(Gimbal):
     the right wing.
     """
 
-    kind: ClassVar[int] = 2
+    kind: ClassVar[GimbalKind] = GimbalKind.FIXED
     name: ClassVar[str] = "fixed"
     matrix: tuple[tuple[float, ...], ...] | None = None
     quaternion: tuple[float, float, float, float] | None = None

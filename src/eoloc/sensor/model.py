@@ -22,7 +22,7 @@ from .._backend import get_backend, run
 from ..geodesy import WGS84, Ellipsoid, _as_matrix
 from ..rotation import small_angle_rotation
 from .camera import Camera
-from .gimbal import AzElGimbal, Gimbal
+from .gimbal import AzElGimbal, Gimbal, GimbalKind
 
 
 def _f64(x: ArrayLike) -> np.ndarray:
@@ -72,7 +72,9 @@ class Pose:
 
 @dataclass(frozen=True)
 class Rays:
-    """Rays in ECEF: origins (camera positions) and unit directions, component arrays (m)."""
+    """Rays in ECEF: origins (camera positions) and unit directions, component arrays (m).
+    ``invalid`` (the pose cannot be used) and ``out_of_image`` (the pixel is not to be located)
+    broadcast against them: a scalar False where nothing is flagged."""
 
     ox: np.ndarray
     oy: np.ndarray
@@ -200,8 +202,7 @@ class SensorModel:
         dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
         shape = dx.shape
         return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
-                    np.broadcast_to(frame.oz, shape), dx, dy, dz, np.broadcast_to(frame.invalid, shape),
-                    np.broadcast_to(out_of_image, shape))
+                    np.broadcast_to(frame.oz, shape), dx, dy, dz, frame.invalid, out_of_image)
 
     def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
@@ -245,7 +246,7 @@ class SensorModel:
             stop_kind, stop_value = _kernels.STOP_ELLIPSOID, height_m
         else:
             raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
-        if self.gimbal.kind == 2:
+        if self.gimbal.kind == GimbalKind.FIXED:
             g1_deg, g3_deg = 0.0, g1_deg
         if self.camera.distortion is not None and (u is not None or v is not None):
             # the compiled single-target kernel is distortion-free: undistort the pixel first
