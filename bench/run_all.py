@@ -11,6 +11,7 @@ import bench_accuracy
 import bench_compensation
 import bench_geodesy
 import bench_locate
+import bench_startup
 import bench_terrain
 from _common import HEADER, machine
 
@@ -18,5 +19,5 @@ if __name__ == "__main__":
     print(f"Machine: {machine()}\n")
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
-                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000)):
+                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)):
         print(line, flush=True)

@@ -14,8 +14,8 @@ from rich.markup import escape
 from rich.table import Table as RichTable
 
 from . import __version__
+from .errors import ConfigError
 from .footprint import write_footprints_geojson
-from .io.config import ConfigError, load_config
 from .io.export import fix_rows, plain_value, write_csv, write_geojson
 from .io.table import TableError
 from .io.telemetry import read_detections, read_telemetry
@@ -154,8 +154,11 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
             _fail(str(exc))
     dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     if telemetry is None:
-        _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
-                    sensor_roll, pixel, as_json, dem, budget)
+        from ._backend import few_targets
+
+        with few_targets():
+            _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
+                        gimbal_angles, sensor_roll, pixel, as_json, dem, budget)
         return
     if lat is not None or lon is not None:
         _fail("give either a TELEMETRY file or --lat/--lon for one observation, not both")
@@ -196,6 +199,13 @@ def _stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
 
 def _load_sensor(config_path) -> SensorModel:
     return _load_config(config_path).sensor()
+
+
+def load_config(config_path):
+    """The TOML configuration (pydantic is imported only by the commands that read one)."""
+    from .io.config import load_config as load
+
+    return load(config_path)
 
 
 def _load_config(config_path):
@@ -245,8 +255,6 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
             _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
                   f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
         angles = (*gimbal_angles, sensor_roll)
-    from .accuracy.covariance import covariance_columns
-
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
     pixels = None if pixel is None else (pixel[0], pixel[1])
     f, cov = locate_by_rule(sensor, pose, pixels, rule, budget=budget)
@@ -254,6 +262,8 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
     out = {"lat": _num(f.lat_deg), "lon": _num(f.lon_deg), "h": _num(f.h_m), "range": _num(f.range_m),
            "status": status.name}
     if cov is not None:
+        from .accuracy.covariance import covariance_columns
+
         out.update({k: _num(v[0]) for k, v in covariance_columns(cov, f.ok).items()})
     if as_json:
         click.echo(json.dumps(out))

@@ -19,11 +19,11 @@ one visible from the anchor's direction (documented limitation).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pyproj
 
 from .result import Fixes, Status
 from .rules import surface_rule
@@ -31,7 +31,13 @@ from .sensor.model import Pose, SensorModel
 from .terrain.dem import DEM
 
 _BISECTIONS = 40  # 2^-40 of a segment: below 1e-9 px on any practical image
-_GEOD = pyproj.Geod(ellps="WGS84")
+
+
+@functools.cache
+def _geod():
+    import pyproj  # here, not at import: pyproj costs 60 ms of every command's start-up
+
+    return pyproj.Geod(ellps="WGS84")
 
 
 @dataclass(frozen=True)
@@ -63,7 +69,7 @@ class Footprint:
         """Geodesic area on the WGS-84 ellipsoid (pyproj), m^2; 0 without an outline."""
         if len(self) < 3:
             return 0.0
-        area, _ = _GEOD.polygon_area_perimeter(self.lon_deg, self.lat_deg)
+        area, _ = _geod().polygon_area_perimeter(self.lon_deg, self.lat_deg)
         return abs(float(area))
 
     def geojson_geometry(self) -> dict | None:
@@ -71,7 +77,7 @@ class Footprint:
         if len(self) < 3:
             return None
         ring = np.column_stack([self.lon_deg, self.lat_deg, self.h_m])
-        area, _ = _GEOD.polygon_area_perimeter(self.lon_deg, self.lat_deg)
+        area, _ = _geod().polygon_area_perimeter(self.lon_deg, self.lat_deg)
         if area < 0:  # pyproj: positive = counter-clockwise
             ring = ring[::-1]
         ring = np.vstack([ring, ring[:1]])

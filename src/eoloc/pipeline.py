@@ -6,17 +6,19 @@ No file access here: takes parsed tables, returns rows and issues; the CLI reads
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .accuracy.budget import ErrorBudget
-from .accuracy.covariance import FixCovariance, locate_with_covariance
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
 from .result import Fixes, Status, with_status
 from .rules import AtRange, StopRule, rule_from_options
 from .sensor import Pose, SensorModel
-from .sequence.interp import interpolate_poses
+
+if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only when a budget is given
+    from .accuracy.budget import ErrorBudget
+    from .accuracy.covariance import FixCovariance
 
 RANGE_FROM_FILES = "files"
 
@@ -101,6 +103,8 @@ def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule,
                    budget: ErrorBudget | None = None) -> tuple[Fixes, FixCovariance | None]:
     """Fixes by stop ``rule`` and, with an error ``budget``, their first-order covariance (else None)."""
     if budget is not None:
+        from .accuracy.covariance import locate_with_covariance
+
         return locate_with_covariance(sensor, pose, budget, pixels, rule)
     return rule.locate(sensor, pose, pixels), None
 
@@ -111,6 +115,8 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
         raise ValueError("pose interpolation needs time_s in both the telemetry and the detections "
                          "(frame numbers alone give no time to interpolate at)")
+    from .sequence.interp import interpolate_poses
+
     ip = interpolate_poses(tt, telemetry_pose(tel), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
     q = td + time_offset_s
     issues = []

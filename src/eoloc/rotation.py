@@ -18,7 +18,6 @@ import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
 from . import _kernels
 from .geodesy import _as_matrix
@@ -83,6 +82,8 @@ def matrix_from_quaternion(q: ArrayLike, *, scalar_first: bool = True) -> np.nda
     q = np.asarray(q, dtype=np.float64)
     if q.shape[-1:] != (4,):
         raise ValueError(f"a quaternion needs 4 components in its last axis, got shape {q.shape}")
+    from scipy.spatial.transform import Rotation  # here, not at import: scipy.spatial costs 0.2 s
+
     flat = Rotation.from_quat(q.reshape(-1, 4), scalar_first=scalar_first)
     return flat.as_matrix().reshape((*q.shape[:-1], 3, 3))
 
@@ -90,6 +91,8 @@ def matrix_from_quaternion(q: ArrayLike, *, scalar_first: bool = True) -> np.nda
 def quaternion_from_matrix(R: ArrayLike, *, scalar_first: bool = True) -> np.ndarray:
     """Unit quaternion(s) (..., 4) of rotation matrices (..., 3, 3), w >= 0."""
     R = np.asarray(R, dtype=np.float64)
+    from scipy.spatial.transform import Rotation
+
     q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=scalar_first)
     return q.reshape((*R.shape[:-2], 4))
 

@@ -1,14 +1,53 @@
 """Accuracy analysis: error budgets, Monte Carlo through the same kernels, CEP, sensitivities,
 first-order covariance of every fix."""
 
-from . import scenarios
-from .budget import SOURCES, ErrorBudget, ErrorSource
-from .cep import cep_bivariate, cep_empirical, cep_zero_mean, drms, error_ellipse, error_ellipses, prob_within
-from .covariance import FixCovariance, covariance_columns, locate_with_covariance
-from .montecarlo import MonteCarloResult, Scenario, Sensitivity, TargetStats, monte_carlo, sensitivity, truth_fixes
-from .runners import DaskMapper, dask_mapper, local_map
-from .scenarios import SCENARIOS, q_dem, q_ellipsoid, relief_dem, s13
-from .sweep import SweepPoint, terrain_sweep
+from importlib import import_module
+
+# names -> their module, imported on first use (PEP 562): `from eoloc.accuracy import ErrorBudget`
+# must not load Monte Carlo, CEP quadrature and scipy (start-up of the command line)
+_WHERE = {
+    "DaskMapper": "runners",
+    "ErrorBudget": "budget",
+    "ErrorSource": "budget",
+    "FixCovariance": "covariance",
+    "MonteCarloResult": "montecarlo",
+    "SCENARIOS": "scenarios",
+    "SOURCES": "budget",
+    "Scenario": "montecarlo",
+    "Sensitivity": "montecarlo",
+    "SweepPoint": "sweep",
+    "TargetStats": "montecarlo",
+    "cep_bivariate": "cep",
+    "cep_empirical": "cep",
+    "cep_zero_mean": "cep",
+    "covariance_columns": "covariance",
+    "dask_mapper": "runners",
+    "drms": "cep",
+    "error_ellipse": "cep",
+    "error_ellipses": "cep",
+    "local_map": "runners",
+    "locate_with_covariance": "covariance",
+    "monte_carlo": "montecarlo",
+    "prob_within": "cep",
+    "q_dem": "scenarios",
+    "q_ellipsoid": "scenarios",
+    "relief_dem": "scenarios",
+    "s13": "scenarios",
+    "sensitivity": "montecarlo",
+    "terrain_sweep": "sweep",
+    "truth_fixes": "montecarlo",
+}
+
+
+def __getattr__(name: str):
+    if name == "scenarios":
+        return import_module(".scenarios", __name__)
+    if name in _WHERE:
+        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "SCENARIOS",
