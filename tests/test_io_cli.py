@@ -273,3 +273,21 @@ def test_cli_footprint_writes_polygons_that_map_back_to_the_image_border(tmp_pat
     assert len(rows) == len(tel) and float(rows[0]["area_m2"]) > 0
     bad = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml")])
     assert bad.exit_code == 2 and "--height H" in bad.output
+
+
+def test_cli_unwritable_output_is_a_message_naming_the_path_not_a_traceback(tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder", encoding="utf-8")
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
+                                  "--target-height", "0", "--out", str(blocker / "out")])
+    assert r.exit_code == 2 and str(blocker) in r.output and "Traceback" not in r.output
+
+
+def test_cli_a_real_bug_keeps_its_traceback_and_asks_for_a_report(monkeypatch):
+    def broken(self, sensor, pose, pixels=None):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(eoloc.AtHeight, "locate", broken)
+    r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--height", "3000", "--gimbal-angles", "0",
+                                  "-45", "--target-height", "100", "--json"])
+    assert isinstance(r.exception, ZeroDivisionError) and "bug in eoloc" in r.output

@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table as RichTable
 
 from . import __version__
-from .errors import ConfigError
+from .errors import ConfigError, EolocError
 from .footprint import write_footprints_geojson
 from .io.export import fix_rows, plain_value, write_csv, write_geojson
 from .io.table import TableError
@@ -34,8 +34,10 @@ Units and conventions (the same everywhere in eoloc):
   az-el        gimbal azimuth about body z (right of the nose +), elevation (up +, -90 = down)
   roll-pitch   framed camera: frame roll about body x (+ looks left), frame pitch (+ looks forward)
   pixels       u = column (right), v = row (down); top-left pixel centre is (0, 0)
-  status       OK, NO_INTERSECTION, OUT_OF_COVERAGE, DEM_VOID, INVALID_INPUT, NO_TELEMETRY;
-               coordinates are empty wherever the status is not OK
+  status       OK, NO_INTERSECTION, OUT_OF_COVERAGE, DEM_VOID, INVALID_INPUT, NO_TELEMETRY,
+               BELOW_SURFACE (camera on or under the surface), OUT_OF_IMAGE (pixel outside the image),
+               DEGENERATE (multi-view rays do not determine a point); coordinates are empty
+               wherever the status is not OK
 """
 
 err_console = Console(stderr=True)
@@ -65,7 +67,29 @@ def _fail(message: str) -> None:
     sys.exit(2)
 
 
-@click.group(help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n" + CONVENTIONS)
+class _Main(click.Group):
+    """The command group: a user's mistake (an EolocError: a file or configuration that cannot be
+    used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
+    anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except EolocError as exc:
+            _fail(str(exc))
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            _fail(f"{where}{exc.strerror or exc}")
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except Exception:
+            err_console.print("[bold red]internal error:[/] this is a bug in eoloc, not in your input. Please report "
+                              "it with the command line and the traceback below.")
+            raise
+
+
+@click.group(cls=_Main, help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n"
+             + CONVENTIONS)
 @click.version_option(__version__, prog_name="eoloc")
 def main() -> None:
     pass
