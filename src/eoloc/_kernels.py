@@ -672,7 +672,7 @@ def _tuple9(p, i):
     return (p[i], p[i + 1], p[i + 2], p[i + 3], p[i + 4], p[i + 5], p[i + 6], p[i + 7], p[i + 8])
 
 
-# Layout of the parameter vector built by SensorModel._params().
+# Layout of the parameter vector built by SensorModel.kernel_params.
 P_FX, P_FY, P_CX, P_CY, P_KIND, P_MOUNT, P_FIXED, P_BORE, P_LEVER, P_ELL = 0, 1, 2, 3, 4, 5, 14, 23, 32, 35
 N_PARAMS = 39
 STOP_RANGE = 0
@@ -690,7 +690,7 @@ def params_camera_frame(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3):
 def locate_one(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3, u, v, stop_kind, stop_value):
     """Pixel (u, v) of one pose to ground, everything in degrees/metres at the edges.
 
-    Returns (lat_deg, lon_deg, h_m, range_m, status). ``params`` is SensorModel._params().
+    Returns (lat_deg, lon_deg, h_m, range_m, status). ``params`` is SensorModel.kernel_params.
     """
     d = np.pi / 180.0
     a = params[P_ELL]

@@ -96,7 +96,7 @@ def ecef_to_geodetic(x: ArrayLike, y: ArrayLike, z: ArrayLike, *, degrees: bool 
     return _out((lat, lon, h))
 
 
-def _as_matrix(t: tuple) -> np.ndarray:
+def as_matrix(t: tuple) -> np.ndarray:
     """9-tuple of broadcastable components -> (..., 3, 3)."""
     comps = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in t))
     return np.stack(comps, axis=-1).reshape((*comps[0].shape, 3, 3))
@@ -109,7 +109,7 @@ def R_ecef_ned(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.nd
     lon = np.asarray(lon, dtype=np.float64)
     if degrees:
         lat, lon = np.radians(lat), np.radians(lon)
-    return _as_matrix(_kernels.r_ecef_ned(lat, lon))
+    return as_matrix(_kernels.r_ecef_ned(lat, lon))
 
 
 _NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])

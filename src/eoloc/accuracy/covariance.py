@@ -31,7 +31,7 @@ from ..sensor.model import Pose, SensorModel, split_pixels
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
 from .cep import cep_zero_mean, error_ellipses
-from .montecarlo import _metres_per_degree, chain_fixes
+from .montecarlo import chain_fixes, metres_per_degree
 
 DEFAULT_REL_STEP = 1e-2
 _K90_1D = 1.6448536269514722  # two-sided 90 % quantile of a standard normal
@@ -73,11 +73,11 @@ class FixCovariance:
 
     @property
     def sigma_lat_deg(self) -> np.ndarray:
-        return self.sigma_enu[..., 1] / _metres_per_degree(self.lat_deg, self.h_m, geodesy.WGS84)[0]
+        return self.sigma_enu[..., 1] / metres_per_degree(self.lat_deg, self.h_m, geodesy.WGS84)[0]
 
     @property
     def sigma_lon_deg(self) -> np.ndarray:
-        return self.sigma_enu[..., 0] / _metres_per_degree(self.lat_deg, self.h_m, geodesy.WGS84)[1]
+        return self.sigma_enu[..., 0] / metres_per_degree(self.lat_deg, self.h_m, geodesy.WGS84)[1]
 
     @property
     def sigma_h_m(self) -> np.ndarray:

@@ -93,7 +93,7 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
     dt = z("time_s")
     vel = np.asarray(velocity_ned_mps, dtype=np.float64)
     if np.any(vel != 0.0) and not np.isscalar(dt):
-        m_lat, m_lon = _metres_per_degree(pose.lat_deg, pose.h_m, sensor.ellipsoid)
+        m_lat, m_lon = metres_per_degree(pose.lat_deg, pose.h_m, sensor.ellipsoid)
         lat = lat + vel[..., 0] * dt / m_lat
         lon = lon + vel[..., 1] * dt / m_lon
         h = h - vel[..., 2] * dt
@@ -128,7 +128,7 @@ def _angles(nominal, d, prefix, axes, lead):
     return out
 
 
-def _metres_per_degree(lat_deg, h, ell):
+def metres_per_degree(lat_deg, h, ell):
     """Metres per degree of latitude and of longitude at (lat_deg, h) (arrays broadcast)."""
     s = np.sin(np.radians(lat_deg))
     w = np.sqrt(1.0 - ell.e2 * s * s)

@@ -104,7 +104,7 @@ def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixe
     v = np.ascontiguousarray(np.broadcast_to(v, shape)).reshape(-1)
     out = [np.empty(u.size) for _ in range(4)] + [np.empty(u.size, dtype=np.int8)]
     dist = cam.distortion
-    _nb.flat_frame(sensor._params, 0 if dist is None else dist.kind, _NO_DIST if dist is None else dist.packed,
+    _nb.flat_frame(sensor.kernel_params, 0 if dist is None else dist.kind, _NO_DIST if dist is None else dist.packed,
                    float(cam.width), float(cam.height), pose9, main, main_range_m, u, v, *out)
     return to_fixes([o.reshape(shape) for o in out], False)
 

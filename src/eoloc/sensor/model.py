@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from .. import _kernels
 from .._backend import get_backend, run
-from ..geodesy import WGS84, Ellipsoid, _as_matrix
+from ..geodesy import WGS84, Ellipsoid, as_matrix
 from ..rotation import small_angle_rotation
 from .camera import Camera
 from .gimbal import AzElGimbal, Gimbal, GimbalKind
@@ -120,7 +120,7 @@ class CameraFrame:
 
     @property
     def R_ecef_cam(self) -> np.ndarray:
-        return _as_matrix(self.R)
+        return as_matrix(self.R)
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,7 @@ class SensorModel:
         return tuple(small_angle_rotation(self.boresight_misalignment_deg).ravel())
 
     @cached_property
-    def _params(self) -> np.ndarray:
+    def kernel_params(self) -> np.ndarray:
         """Parameter vector of the single-target kernel (layout in eoloc._kernels)."""
         c = self.camera
         p = np.concatenate([
@@ -173,7 +173,7 @@ class SensorModel:
     def R_body_cam(self, gimbal_deg: tuple) -> np.ndarray:
         """R_body_cam (..., 3, 3) for gimbal angles (degrees), misalignments included."""
         g1, g2, g3 = self.gimbal.angles(tuple(gimbal_deg))
-        return _as_matrix(_kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
+        return as_matrix(_kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
                                               self.gimbal.R_fixed9, self._R_bore9, 0.0))
 
     def camera_frame(self, pose: Pose, *, mount_misalignment_deg: ArrayLike | None = None,
@@ -254,7 +254,7 @@ class SensorModel:
                                                      self.camera.cy if v is None else v)
             u, v = float(xn * self.camera.fx + self.camera.cx), float(yn * self.camera.fy + self.camera.cy)
         fn = self._one_fn()
-        return fn(self._params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
+        return fn(self.kernel_params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
                   self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
 
     @staticmethod
