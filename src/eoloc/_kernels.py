@@ -516,16 +516,6 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     dd = dd_xy + dd_z
     valid = (_finite(oo_xy + oo_z + dd + ht) & (np.abs(dd - 1.0) <= UNIT_TOL)
              & (oo_xy + oo_z <= MAX_ORIGIN_M * MAX_ORIGIN_M) & (ht >= MIN_HEIGHT_M) & (ht <= MAX_HEIGHT_M))
-    pad = 1.0e-3 + _PAD_REL * np.abs(ht)
-    # the outer ellipsoid: no real root, or both behind the camera (sum < 0, product > 0)
-    ia = 1.0 / ((a + ht + pad) * (a + ht + pad))
-    ib = 1.0 / ((b + ht + pad) * (b + ht + pad))
-    qa = dd_xy * ia + dd_z * ib
-    qb = od_xy * ia + od_z * ib
-    qc = oo_xy * ia + oo_z * ib - 1.0
-    miss = (qb * qb - qa * qc < 0.0) | ((qb > 0.0) & (qc > 0.0))
-    # the inner one: the camera inside it
-    below = oo_xy / ((a + ht - pad) * (a + ht - pad)) + oo_z / ((b + ht - pad) * (b + ht - pad)) < 1.0
     # [Q]'s inflated ellipsoid: its near root starts the Newton step
     ia = 1.0 / ((a + ht) * (a + ht))
     ib = 1.0 / ((b + ht) * (b + ht))
@@ -542,10 +532,26 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
     # by convexity g(0) >= g(t) - t g'(t): the last term proves the camera is above the surface
     ok = valid & (np.abs(h - ht) <= _EXACT_TOL_M) & (s <= -UNIT_TOL) & (t * s < -2.0 * _EXACT_TOL_M)
-    st = _pick(ok, OK, _pick(valid, _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED)),
-                             INVALID_INPUT))
+    st = _pick(ok, OK, _pick(valid, UNDECIDED, INVALID_INPUT))
     return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
             _pick(ok, t, np.nan), st)
+
+
+def ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b):
+    """M3, for a valid ray the fast path did not certify: BELOW_SURFACE where the camera is
+    certainly under the surface (inside the inflated ellipsoid padded down), NO_INTERSECTION where
+    the ray certainly misses it (never enters the one padded up, ahead), else UNDECIDED."""
+    pad = 1.0e-3 + _PAD_REL * np.abs(ht)
+    oo_xy = ox * ox + oy * oy
+    oo_z = oz * oz
+    below = oo_xy / ((a + ht - pad) * (a + ht - pad)) + oo_z / ((b + ht - pad) * (b + ht - pad)) < 1.0
+    ia = 1.0 / ((a + ht + pad) * (a + ht + pad))
+    ib = 1.0 / ((b + ht + pad) * (b + ht + pad))
+    qa = (dx * dx + dy * dy) * ia + dz * dz * ib
+    qb = (ox * dx + oy * dy) * ia + oz * dz * ib
+    qc = oo_xy * ia + oo_z * ib - 1.0
+    miss = (qb * qb - qa * qc < 0.0) | ((qb > 0.0) & (qc > 0.0))  # no real root, or both behind
+    return _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED))
 
 
 def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
@@ -579,20 +585,24 @@ def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
 
 
 def stop_at_ellipsoid_scalar(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
-    """M3 for one ray: :func:`ellipsoid_fast`, and :func:`ellipsoid_exact` where it is undecided.
+    """M3 for one ray: :func:`ellipsoid_fast`, then where it is undecided
+    :func:`ellipsoid_classify` and, if that cannot tell either, :func:`ellipsoid_exact`.
     (The numba backend compiles this under the name ``stop_at_ellipsoid``.)"""
     lat, lon, h, t, st = ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)
     if st == UNDECIDED:
-        return ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)
+        st = ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b)
+        if st == UNDECIDED:
+            return ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)
     return lat, lon, h, t, st
 
 
 def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     """M3: first point along the ray whose geodetic height is ``ht`` (m) -> (lat, lon, h, range,
-    status), on arrays: :func:`ellipsoid_fast` everywhere, :func:`ellipsoid_exact` on the few rays
-    it leaves undecided (near-tangent rays, a camera within centimetres of the surface, surfaces
-    far above the Earth). A point is returned only on the surface to SURFACE_TOL_M and only at the
-    first crossing; a camera on or below the surface gets BELOW_SURFACE, a ray that does not
+    status), on arrays: :func:`ellipsoid_fast` everywhere, :func:`ellipsoid_classify` on the rays
+    it could not certify (misses, cameras below), :func:`ellipsoid_exact` on the few left
+    (near-tangent rays, a camera within centimetres of the surface, surfaces far above the Earth).
+    A point is returned only on the surface to 1 µm (SURFACE_TOL_M at an exact tangent) and only
+    at the first crossing; a camera on or below the surface gets BELOW_SURFACE, a ray that does not
     reach it NO_INTERSECTION; never the nearest point on the ray or the far crossing."""
     out = [np.asarray(v) for v in ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2)]
     out[4] = out[4].astype(np.int8)
@@ -600,8 +610,12 @@ def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     if todo.size:
         shape = out[4].shape
         sub = [np.broadcast_to(v, shape).reshape(-1)[todo] for v in (ox, oy, oz, dx, dy, dz, ht)]
-        for o, v in zip(out, ellipsoid_exact(*sub, a, b, e2, ep2), strict=True):
-            o.reshape(-1)[todo] = v
+        st = np.asarray(ellipsoid_classify(*sub, a, b))
+        out[4].reshape(-1)[todo] = st
+        left = np.flatnonzero(st == UNDECIDED)
+        if left.size:
+            for o, v in zip(out, ellipsoid_exact(*(x[left] for x in sub), a, b, e2, ep2), strict=True):
+                o.reshape(-1)[todo[left]] = v
     return tuple(o[()] if o.ndim == 0 else o for o in out)
 
 

@@ -68,7 +68,7 @@ _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
     "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
     "pose_frame", "ray_direction", "project_point", "ray_valid", "stop_at_range", "_height_slope",
-    "_m3_domain", "ellipsoid_fast", "ellipsoid_exact",
+    "_m3_domain", "ellipsoid_fast", "ellipsoid_classify", "ellipsoid_exact",
     "r_body_cam", "camera_frame", "_tuple9", "params_camera_frame", "locate_one", "grid_height", "inflated_roots",
     "cell_first_root", "distort_brown", "undistort_brown", "ppoly_eval", "distortion_ratio", "undistort", "distort",
     "flat_plane", "flat_target", "pixel_in_image", "undistort_ok",
@@ -157,6 +157,7 @@ try:
     _stop_range = _g["stop_at_range"]
     _ellipsoid_fast = _g["ellipsoid_fast"]
     _ellipsoid_exact = _g["ellipsoid_exact"]
+    _ellipsoid_classify = _g["ellipsoid_classify"]
 
     _flat_plane = _g["flat_plane"]
     _flat_target = _g["flat_target"]
@@ -255,10 +256,14 @@ try:
         for i in range(n):  # vectorised: the certified fast path
             lat[i], lon[i], h[i], t[i], st[i] = _ellipsoid_fast(_at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i),
                                                                 _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2, ep2)
-        for i in range(n):  # the few rays it left undecided
+        for i in range(n):  # the rays it did not certify: misses, cameras below, and the few left
             if st[i] == K.UNDECIDED:
-                lat[i], lon[i], h[i], t[i], st[i] = _ellipsoid_exact(
-                    _at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2, ep2)
+                st[i] = _ellipsoid_classify(_at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i),
+                                            _at(ht, i), a, b)
+                if st[i] == K.UNDECIDED:
+                    lat[i], lon[i], h[i], t[i], st[i] = _ellipsoid_exact(
+                        _at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2,
+                        ep2)
 
 finally:
     numba.config.CACHE_DIR = _saved_cache_dir
