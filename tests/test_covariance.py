@@ -185,8 +185,9 @@ def test_cli_locate_covariance_file_mode_one_observation_and_errors(tmp_path):
            for row in ok]
     inside = np.mean([e <= float(row["ce90_m"]) for e, row in zip(err, ok, strict=True)])
     assert 0.75 <= inside <= 1.0  # 29 fixes: 90 % +- 2 binomial sigma
-    args = ["locate", "--config", str(demo / "camera.toml"), "--lat", "35.13", "--lon", "112.66", "--height", "1140",
-            "--yaw", "290", "--gimbal-angles", "80", "-40", "--range", "900", "--covariance"]
+    args = ["locate", "--config", str(demo / "camera.toml"), "--lat", "35.13", "--lon", "112.66",
+            "--aircraft-height", "1140", "--yaw", "290", "--gimbal-angles", "80", "-40", "--range", "900",
+            "--covariance"]
     r = CliRunner().invoke(main, [*args, "--json"])
     out = json.loads(r.output)
     assert out["status"] == "OK" and 10 < out["cep50_m"] < 60 and out["nonlinearity"] < 0.01

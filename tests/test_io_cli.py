@@ -18,7 +18,7 @@ from eoloc.io.telemetry import match_detections, read_detections, read_telemetry
 from eoloc.pipeline import locate_tables
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
-S13_ARGS = ["--lat", "42", "--lon", "125", "--height", "10000", "--yaw", "10", "--pitch", "5", "--roll", "-2",
+S13_ARGS = ["--lat", "42", "--lon", "125", "--aircraft-height", "10000", "--yaw", "10", "--pitch", "5", "--roll", "-2",
             "--gimbal", "az-el", "--gimbal-angles", "45", "-75"]
 
 
@@ -169,7 +169,7 @@ def test_cli_errors_name_the_fix(camera_toml):
 def test_cli_file_mode_writes_csv_and_geojson(tmp_path):
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"),
-                                  "--config", str(DEMO / "camera.toml"), "--height", "600", "--out", str(out)])
+                                  "--config", str(DEMO / "camera.toml"), "--target-height", "600", "--out", str(out)])
     assert r.exit_code == 0, r.output
     assert "telemetry.csv:16" in r.output and "not a number" in r.output  # the demo's malformed line
     with (out / "fixes.csv").open() as fh:
@@ -215,7 +215,7 @@ def test_help_explains_units_and_conventions():
 
 def test_cli_dem_stop_rule_one_observation_and_errors(tmp_path):
     dem_file = Path(__file__).parent / "data" / "dem" / "srtm_ref.tif"
-    args = ["locate", "--lat", "39.6", "--lon", "40.4", "--height", "6000", "--gimbal", "az-el",
+    args = ["locate", "--lat", "39.6", "--lon", "40.4", "--aircraft-height", "6000", "--gimbal", "az-el",
             "--gimbal-angles", "0", "-90", "--dem", str(dem_file), "--json"]
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 0, r.output
@@ -252,7 +252,7 @@ def test_cli_file_mode_with_dem(tmp_path):
 def test_cli_footprint_writes_polygons_that_map_back_to_the_image_border(tmp_path):
     out = tmp_path / "fp"
     r = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
-                                  "--height", "600", "--edge-samples", "4", "--out", str(out)])
+                                  "--target-height", "600", "--edge-samples", "4", "--out", str(out)])
     assert r.exit_code == 0, r.output
     doc = json.loads((out / "footprints.geojson").read_text())
     tel = read_telemetry(DEMO / "telemetry.csv")
@@ -272,7 +272,7 @@ def test_cli_footprint_writes_polygons_that_map_back_to_the_image_border(tmp_pat
     rows = list(csv.DictReader((out / "footprints.csv").open()))
     assert len(rows) == len(tel) and float(rows[0]["area_m2"]) > 0
     bad = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml")])
-    assert bad.exit_code == 2 and "--height H" in bad.output
+    assert bad.exit_code == 2 and "--target-height H" in bad.output
 
 
 def test_cli_unwritable_output_is_a_message_naming_the_path_not_a_traceback(tmp_path):
@@ -288,6 +288,6 @@ def test_cli_a_real_bug_keeps_its_traceback_and_asks_for_a_report(monkeypatch):
         raise ZeroDivisionError("a bug")
 
     monkeypatch.setattr(eoloc.AtHeight, "locate", broken)
-    r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--height", "3000", "--gimbal-angles", "0",
-                                  "-45", "--target-height", "100", "--json"])
+    r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--aircraft-height", "3000",
+                                  "--gimbal-angles", "0", "-45", "--target-height", "100", "--json"])
     assert isinstance(r.exception, ZeroDivisionError) and "bug in eoloc" in r.output

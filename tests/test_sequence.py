@@ -153,7 +153,7 @@ def test_cli_interpolate_reports_the_gap_left_by_a_malformed_record(tmp_path):
 
     demo = Path(eoloc.__file__).parent / "data" / "demo"
     args = ["locate", str(demo / "telemetry.csv"), str(demo / "detections.csv"), "--config",
-            str(demo / "camera.toml"), "--height", "600", "--interpolate"]
+            str(demo / "camera.toml"), "--target-height", "600", "--interpolate"]
     r = CliRunner().invoke(main, [*args, "--out", str(tmp_path / "a")])
     assert r.exit_code == 0, r.output
     assert "time 12 s falls in a 2 s telemetry gap between lines 15 and 17" in " ".join(r.output.split())
@@ -170,5 +170,5 @@ def test_cli_interpolate_reports_the_gap_left_by_a_malformed_record(tmp_path):
             err = geod.inv(float(row["lon_deg"]), float(row["lat_deg"]), float(t["lon_deg"]), float(t["lat_deg"]))[2]
             assert row["status"] == "OK" and err < 150.0  # the flight's single-frame scatter: CEP ~30 m
     r = CliRunner().invoke(main, ["locate", str(demo / "telemetry.csv"), "--config", str(demo / "camera.toml"),
-                                  "--height", "600", "--interpolate"])
+                                  "--target-height", "600", "--interpolate"])
     assert r.exit_code == 2 and "needs a DETECTIONS file" in r.output

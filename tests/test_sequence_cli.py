@@ -85,7 +85,7 @@ def test_calibrate_cli_writes_the_config_and_locate_uses_it(tmp_path):
         for i in range(20):  # each GCP at its own height
             one = _write_rows(tmp_path / "one.csv", ["time_s", "target_id", "u_px", "v_px"],
                               [(g.obs_time_s[i], f"G{i}", *g.pixels[i])])
-            r = CliRunner().invoke(main, ["locate", str(tel), str(one), "--config", str(conf), "--height",
+            r = CliRunner().invoke(main, ["locate", str(tel), str(one), "--config", str(conf), "--target-height",
                                           str(g.gcp_llh[i, 2]), "--out", str(out)])
             assert r.exit_code == 0, r.output
             with (out / "fixes.csv").open() as fh:
@@ -121,7 +121,7 @@ def test_track_cli_associates_moving_targets_into_geojson_linestrings(tmp_path):
     det = _write_rows(tmp_path / "det.csv", ["time_s", "target_id", "u_px", "v_px"], rows)
     cam = tmp_path / "cam.toml"
     cam.write_text("[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 73.6\npixel_um = 5.5\n")
-    r = CliRunner().invoke(main, ["track", str(tel), str(det), "--config", str(cam), "--height", "226",
+    r = CliRunner().invoke(main, ["track", str(tel), str(det), "--config", str(cam), "--target-height", "226",
                                   "--associate", "--meas-sigma", "3", "--out", str(tmp_path / "out")])
     assert r.exit_code == 0, r.output
     assert "3 tracks" in r.output
@@ -137,7 +137,7 @@ def test_track_cli_associates_moving_targets_into_geojson_linestrings(tmp_path):
 def test_track_static_and_triangulate_on_the_demo(tmp_path):
     truth = {r["target_id"]: r for r in csv.DictReader((DEMO / "truth.csv").open())}
     args = [str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config", str(DEMO / "camera.toml")]
-    r = CliRunner().invoke(main, ["track", *args, "--height", "600", "--static", "--out", str(tmp_path)])
+    r = CliRunner().invoke(main, ["track", *args, "--target-height", "600", "--static", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     r2 = CliRunner().invoke(main, ["triangulate", *args, "--ray-sigma-deg", "1", "--out", str(tmp_path)])
     assert r2.exit_code == 0, r2.output

@@ -45,8 +45,8 @@ def _rays(o, d):
 
 
 def test_case1_cli_camera_below_target_surface_is_below_surface_not_the_antipode():
-    r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--height", "50", "--yaw", "0", "--pitch",
-                                  "0", "--roll", "0", "--gimbal", "az-el", "--gimbal-angles", "0", "-90",
+    r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--aircraft-height", "50", "--yaw", "0",
+                                  "--pitch", "0", "--roll", "0", "--gimbal", "az-el", "--gimbal-angles", "0", "-90",
                                   "--target-height", "100", "--json"])
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
@@ -61,7 +61,8 @@ def test_case1_cli_file_mode_target_height_above_the_aircraft(tmp_path):
     for height in ("1500", "1100"):
         out = tmp_path / height
         r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"),
-                                      "--config", str(DEMO / "camera.toml"), "--height", height, "--out", str(out)])
+                                      "--config", str(DEMO / "camera.toml"), "--target-height", height,
+                                      "--out", str(out)])
         assert r.exit_code == 0, r.output
         rows = list(csv.DictReader((out / "fixes.csv").open()))
         if height == "1500":
@@ -81,7 +82,7 @@ def test_case1_cli_file_mode_target_height_above_the_aircraft(tmp_path):
 def test_case1_cli_footprint_under_the_surface_has_no_polygon(tmp_path):
     out = tmp_path / "fp"
     r = CliRunner().invoke(main, ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
-                                  "--height", "1500", "--out", str(out)])
+                                  "--target-height", "1500", "--out", str(out)])
     assert r.exit_code == 0, r.output
     doc = json.loads((out / "footprints.geojson").read_text())
     statuses = [f["properties"]["status"] for f in doc["features"]]
@@ -254,3 +255,17 @@ def test_case7_near_parallel_rays_are_degenerate_with_no_point():
     d3 = (target - o3) / np.linalg.norm(target - o3, axis=1, keepdims=True)
     r3 = triangulate(_rays(o3, d3))
     assert r3.ok and np.linalg.norm(_ecef(r3.lat_deg, r3.lon_deg, r3.h_m) - target) < 1e-4
+
+
+def test_case1_the_old_height_flag_is_refused_naming_both_new_flags(tmp_path):
+    # --height meant the aircraft in one mode and the target in the other: that is how a user
+    # put the target surface above the aircraft. Every command now refuses it and names the fix.
+    for args in (["locate", "--lat", "45", "--lon", "7", "--height", "50", "--gimbal-angles", "0", "-90",
+                  "--target-height", "100"],
+                 ["locate", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"), "--height", "600"],
+                 ["footprint", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"), "--height", "600"],
+                 ["track", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config",
+                  str(DEMO / "camera.toml"), "--height", "600", "--out", str(tmp_path)]):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 2, (args, r.output)
+        assert "--target-height" in r.output and "--aircraft-height" in r.output and "Traceback" not in r.output

@@ -62,6 +62,25 @@ def dem_options(dem_help: str):
     return apply
 
 
+def target_height_option(help_text: str = "Stop the rays on the surface of this ellipsoidal height (m)."):
+    """--target-height H, the same flag on every command where a height surface stops the rays; the
+    old --height (which meant the aircraft's height in one place and the target's in another) is
+    refused with a message naming the flag to use."""
+    def apply(fn):
+        fn = click.option("--target-height", "target_height", type=float, default=None, help=help_text)(fn)
+        return click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
+                            callback=_refuse_height)(fn)
+
+    return apply
+
+
+def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
+    if value is not None:
+        raise click.UsageError("--height is no longer accepted: it meant two things. Give --target-height H for the "
+                               "surface the rays stop on (ellipsoidal m), or --aircraft-height H for the aircraft of "
+                               "one observation.", ctx)
+
+
 def _fail(message: str) -> None:
     err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
     sys.exit(2)
@@ -98,14 +117,15 @@ def main() -> None:
 LOCATE_HELP = """Geolocate targets: from files, or one observation given as options.
 
 \b
-FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--range [R] | --height H | --dem F)
+FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml
+              (--range [R] | --target-height H | --dem F)
   TELEMETRY.csv columns: time_s and/or frame, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg,
     roll_deg, gimbal1_deg, gimbal2_deg (or azimuth_deg, elevation_deg / frame_roll_deg,
     frame_pitch_deg), optional sensor_roll_deg, optional range_m (laser slant range).
   DETECTIONS.csv columns: time_s or frame, target_id, u_px, v_px, optional range_m.
   Without DETECTIONS the image centre of every record is located.
   --range alone takes each target's range_m from the files; --range R uses R metres for all;
-  --height H (same as --target-height) stops at ellipsoidal height H; --dem FILE (repeat for
+  --target-height H stops at ellipsoidal height H; --dem FILE (repeat for
   tiles: GeoTIFF, DTED, SRTM .hgt/.zip, ESRI ASCII) stops at the first hit on the terrain
   (heights taken as EGM96 and converted with the bundled geoid unless --vertical says otherwise).
   Writes fixes.csv and fixes.geojson into --out. Bad lines are reported (file:line) and skipped;
@@ -119,9 +139,9 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml (--
   the linearisation does not hold there, e.g. a ray grazing a ridge; use eoloc accuracy).
 
 \b
-ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitch 5 --roll -2
-                  --gimbal az-el --gimbal-angles 45 -75 --range 10200 [--json]
-  --height is then the aircraft's ellipsoidal height and --target-height H the stop rule;
+ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 10 --pitch 5
+                  --roll -2 --gimbal az-el --gimbal-angles 45 -75 --range 10200 [--json]
+  --aircraft-height is the aircraft's ellipsoidal height (m); the stop rule as in file mode;
   --pixel U V needs --config for the camera (image centre when omitted).
 """
 
@@ -132,9 +152,9 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --height 10000 --yaw 10 --pitc
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), help="Camera/gimbal/installation TOML.")
 @click.option("--range", "range_opt", is_flag=False, flag_value=RANGE_FROM_FILES, default=None,
               help="Stop at a slant range: R metres, or alone to read range_m from the files.")
-@click.option("--target-height", type=float, help="Stop rule: the target's ellipsoidal height, metres.")
-@click.option("--height", type=float, help="One observation: aircraft ellipsoidal height (m). File mode: "
-                                           "same as --target-height.")
+@target_height_option("Stop rule M3: the targets' ellipsoidal height, metres.")
+@click.option("--aircraft-height", "height", type=float,
+              help="One observation: the aircraft's (INS point's) ellipsoidal height, metres.")
 @click.option("--lat", type=float, help="One observation: aircraft latitude, degrees.")
 @click.option("--lon", type=float, help="One observation: aircraft longitude, degrees.")
 @click.option("--yaw", type=float, default=0.0, show_default=True, help="Heading, degrees from true north.")
@@ -184,11 +204,9 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
             _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
                         gimbal_angles, sensor_roll, pixel, as_json, dem, budget)
         return
-    if lat is not None or lon is not None:
-        _fail("give either a TELEMETRY file or --lat/--lon for one observation, not both")
-    if target_height is not None and height is not None:
-        _fail("in file mode --height and --target-height mean the same; give one")
-    stop_height = target_height if target_height is not None else height
+    if lat is not None or lon is not None or height is not None:
+        _fail("give either a TELEMETRY file or --lat/--lon/--aircraft-height for one observation, not both")
+    stop_height = target_height
     if interpolate and detections is None:
         _fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget,
@@ -259,7 +277,7 @@ def _read_inputs(telemetry, detections, cfg, reader=read_detections):
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
                 sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
     if lat is None or lon is None or height is None:
-        _fail("one observation needs --lat, --lon and --height (aircraft, ellipsoidal m), or give a TELEMETRY file")
+        _fail("one observation needs --lat, --lon and --aircraft-height (ellipsoidal m), or give a TELEMETRY file")
     rule = _stop_rule(range_opt, target_height, dem)
     if rule == RANGE_FROM_FILES:
         _fail("--range needs a value (metres) for one observation")
@@ -408,7 +426,7 @@ def _summary(rows: list[dict], counts: dict[str, int], limit: int = 12) -> None:
 FOOTPRINT_HELP = """Frame footprints: the ground outline of every telemetry record's image.
 
 \b
-eoloc footprint TELEMETRY.csv --config CAMERA.toml (--height H | --dem FILE...) [--edge-samples N]
+eoloc footprint TELEMETRY.csv --config CAMERA.toml (--target-height H | --dem FILE...) [--edge-samples N]
   The image border (N points per side, clockwise from the top-left corner) is located on the
   ellipsoidal height H or on the DEM. Where the border sees sky or leaves the DEM, the outline is
   clipped at the grazing ray / the DEM edge (found by bisection), never extended to a made-up
@@ -421,15 +439,17 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--height H | --dem FILE...) 
 @click.argument("telemetry", type=click.Path(dir_okay=False))
 @click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
               help="Camera/gimbal/installation TOML.")
-@click.option("--height", type=float, help="Ground: this ellipsoidal height (m).")
+@target_height_option("Ground: this ellipsoidal height (m).")
 @dem_options("Ground: DEM file(s); repeat for several tiles.")
 @click.option("--edge-samples", type=click.IntRange(1, 1000), default=16, show_default=True,
               help="Points per image side.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
               help="Folder for footprints.geojson and footprints.csv.")
-def footprint(telemetry, config_path, height, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir) -> None:
+def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid, dem_crs, edge_samples,
+              out_dir) -> None:
+    height = target_height
     if (height is None) == (not dem_paths):
-        _fail("choose the ground: --height H (ellipsoidal metres) or --dem FILE")
+        _fail("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
     surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
     cfg = _load_config(config_path)
     sensor = cfg.sensor()

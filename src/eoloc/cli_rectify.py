@@ -21,6 +21,7 @@ from .cli import (
     dem_options,
     err_console,
     main,
+    target_height_option,
 )
 from .io.telemetry import telemetry_pose
 
@@ -58,8 +59,7 @@ def _read_image(path: str) -> np.ndarray:
 @click.option("--telemetry", required=True, type=click.Path(dir_okay=False), help="Telemetry CSV with the pose.")
 @click.option("--frame", type=int, default=None, help="The telemetry record of this frame number.")
 @click.option("--time", "time_s", type=float, default=None, help="Or: the record nearest this time (s).")
-@click.option("--target-height", "--height", "height", type=float, default=None,
-              help="Ground: this ellipsoidal height (m).")
+@target_height_option("Ground: this ellipsoidal height (m).")
 @dem_options("Ground: DEM file(s); repeat for several tiles.")
 @click.option("--crs", default="utm", show_default=True,
               help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string.")
@@ -72,8 +72,9 @@ def _read_image(path: str) -> np.ndarray:
 @click.option("--grid-step", type=float, default=32, show_default=True, help="Ground grid spacing (pixels).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
               help="Folder for ortho.tif, footprint.geojson, ground_grid.csv and rectify.json.")
-def rectify(image, config_path, telemetry, frame, time_s, height, dem_paths, vertical, geoid, dem_crs, crs, gsd,
+def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd,
             resampling, nodata, occlusion, grid_step, out_dir) -> None:
+    height = target_height
     from . import rectify as R
     from .footprint import footprints, write_footprints_geojson
     from .io.export import write_csv

@@ -24,6 +24,7 @@ from .cli import (
     dem_options,
     err_console,
     main,
+    target_height_option,
 )
 from .io.export import fix_rows, write_csv, write_feature_collection, write_geojson
 from .pipeline import RANGE_FROM_FILES
@@ -37,8 +38,7 @@ def locate_options(fn):
                      help="Camera/gimbal/installation TOML."),
         click.option("--range", "range_opt", is_flag=False, flag_value=RANGE_FROM_FILES, default=None,
                      help="Stop at a slant range: R metres, or alone to read range_m from the files."),
-        click.option("--target-height", "--height", "target_height", type=float,
-                     help="Stop rule: the targets' ellipsoidal height, metres."),
+        target_height_option("Stop rule M3: the targets' ellipsoidal height, metres."),
         dem_options("Stop rule M4: DEM file(s)."),
         click.option("--time-tolerance", type=float, default=0.02, show_default=True,
                      help="Max |Δt| (s) pairing a detection with a telemetry record."),
@@ -73,14 +73,14 @@ def _located(telemetry, detections, config_path, range_opt, target_height, dem_p
     _report_issues(issues + located.issues)
     if not located.fixes.ok.any():
         _fail(f"none of the {len(located.fixes)} detections could be located (see the warnings above); "
-              "check the stop rule (--range needs range_m in the files, else give --range R or --height H)")
+              "check the stop rule (--range needs range_m in the files, else give --range R or --target-height H)")
     return cfg, located, det
 
 
 TRACK_HELP = """Filter detections over time: moving targets into tracks (M7), or static targets by RLS (M6).
 
 \b
-eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --height H | --dem F)
+eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --target-height H | --dem F)
   Every detection is located first (as eoloc locate), with its first-order covariance when the
   config has an [accuracy.budget] (else --meas-sigma metres).
   Moving (default): a constant-velocity Kalman filter per target in local ENU (Joseph-form

@@ -87,7 +87,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         path, lines = range_source
         for j in np.flatnonzero(~np.isfinite(rule.range_m) & has_pose):
             issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
-                                                     "a constant --range R, or use --height H"))
+                                                     "a constant --range R, or use --target-height H"))
     fixes, cov = locate_by_rule(sensor, pose, (u, v), rule, budget=budget)
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     comp = None
