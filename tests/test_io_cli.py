@@ -291,3 +291,26 @@ def test_cli_a_real_bug_keeps_its_traceback_and_asks_for_a_report(monkeypatch):
     r = CliRunner().invoke(main, ["locate", "--lat", "45", "--lon", "7", "--aircraft-height", "3000",
                                   "--gimbal-angles", "0", "-45", "--target-height", "100", "--json"])
     assert isinstance(r.exception, ZeroDivisionError) and "bug in eoloc" in r.output
+
+
+def test_encodings_cost_a_line_or_name_the_fix_never_a_traceback(tmp_path):
+    header = "time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,azimuth_deg,elevation_deg\n"
+    good = "0,45,7,3000,0,0,0,0,-45\n"
+    latin = tmp_path / "latin1.csv"
+    latin.write_bytes((header + "# caf\xe9 in a comment\n" + good + "1,45,7,3000,0,0,0,0,-45 caf\xe9\n"
+                       + good.replace("0,", "2,", 1)).encode("latin-1"))
+    tel = read_telemetry(latin)
+    assert len(tel) == 2 and tel.line.tolist() == [3, 5]  # every good record kept, physical line numbers
+    assert [i.line for i in tel.issues] == [4] and "0xE9 is not UTF-8" in tel.issues[0].message
+    u16 = tmp_path / "u16.csv"
+    u16.write_text(header + good, encoding="utf-16")
+    with pytest.raises(TableError, match="UTF-16.*save it as UTF-8"):
+        read_telemetry(u16)
+    huge = tmp_path / "huge.csv"
+    huge.write_text(header + good + "1," + "9" * 200_000 + ",7,3000,0,0,0,0,-45\n", encoding="utf-8")
+    with pytest.raises(TableError, match="line 3"):
+        read_telemetry(huge)
+    conf = tmp_path / "latin1.toml"
+    conf.write_bytes("[camera]\nwidth = 10  # caf\xe9\n".encode("latin-1"))
+    r = CliRunner().invoke(main, ["locate", str(latin), "--config", str(conf), "--target-height", "0"])
+    assert r.exit_code == 2 and "not UTF-8" in r.output and "Traceback" not in r.output

@@ -248,6 +248,11 @@ def load_config(path: str | Path) -> Config:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"config file {str(path)!r} does not exist (check the path)") from None
+    except IsADirectoryError:
+        raise ConfigError(f"config file {str(path)!r} is a folder: give the TOML file in it") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"config file {str(path)!r} is not UTF-8 (byte 0x{exc.object[exc.start]:02X} at offset "
+                          f"{exc.start}): save it as UTF-8") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
     try:

@@ -72,14 +72,31 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     issues: list[Issue] = []
     rows: list[tuple[int, list[str]]] = []
     header: list[str] | None = None
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        for lineno, raw in enumerate(csv.reader(fh), start=1):
-            if not raw or not "".join(raw).strip() or raw[0].lstrip().startswith("#"):
-                continue
-            if header is None:
-                header = [h.strip().lower() for h in raw]
-                continue
-            rows.append((lineno, raw))
+    with path.open("rb") as fb:
+        head = fb.read(4)
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise TableError(f"{what} file {str(path)!r} is UTF-16 text: save it as UTF-8 (with or without a BOM)")
+    # bytes that are not UTF-8 are kept as surrogates, so that one bad byte costs its own line
+    # (reported below), not the file
+    with path.open(newline="", encoding="utf-8-sig", errors="surrogateescape") as fh:
+        reader = csv.reader(fh)
+        try:
+            for raw in reader:
+                lineno = reader.line_num
+                if not raw or not "".join(raw).strip() or raw[0].lstrip().startswith("#"):
+                    continue
+                bad = next((c for c in "".join(raw) if "\udc80" <= c <= "\udcff"), None)
+                if bad is not None:
+                    issues.append(Issue(str(path), lineno, f"byte 0x{ord(bad) - 0xDC00:02X} is not UTF-8 (the file "
+                                                           "looks Latin-1 or similar; save it as UTF-8); line skipped"))
+                    continue
+                if header is None:
+                    header = [h.strip().lower() for h in raw]
+                    continue
+                rows.append((lineno, raw))
+        except csv.Error as exc:
+            raise TableError(f"{what} file {str(path)!r}, line {reader.line_num}: {exc} (a field far too long, or an "
+                             "unterminated quote: check the file around that line)") from None
     if header is None:
         raise TableError(f"{what} file {str(path)!r} is empty: it needs a header line naming its columns")
     index = _map_columns(header, columns, str(path), what)
