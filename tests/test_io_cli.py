@@ -304,7 +304,7 @@ def test_encodings_cost_a_line_or_name_the_fix_never_a_traceback(tmp_path):
     assert [i.line for i in tel.issues] == [4] and "0xE9 is not UTF-8" in tel.issues[0].message
     u16 = tmp_path / "u16.csv"
     u16.write_text(header + good, encoding="utf-16")
-    with pytest.raises(TableError, match="UTF-16.*save it as UTF-8"):
+    with pytest.raises(TableError, match=r"UTF-16.*save it as UTF-8"):
         read_telemetry(u16)
     huge = tmp_path / "huge.csv"
     huge.write_text(header + good + "1," + "9" * 200_000 + ",7,3000,0,0,0,0,-45\n", encoding="utf-8")
