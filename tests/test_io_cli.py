@@ -314,3 +314,28 @@ def test_encodings_cost_a_line_or_name_the_fix_never_a_traceback(tmp_path):
     conf.write_bytes("[camera]\nwidth = 10  # caf\xe9\n".encode("latin-1"))
     r = CliRunner().invoke(main, ["locate", str(latin), "--config", str(conf), "--target-height", "0"])
     assert r.exit_code == 2 and "not UTF-8" in r.output and "Traceback" not in r.output
+
+
+def test_klv_stream_with_nothing_to_draw_writes_no_map_and_says_so(tmp_path):
+    # the one-packet ST 0902 example: no aircraft track, footprint or fix a map could show
+    packet = Path(__file__).parent / "data" / "klv" / "DynamicOnlyMISMMSPacketData.bin"
+    r = CliRunner().invoke(main, ["klv", str(packet), "--out", str(tmp_path)])
+    assert r.exit_code == 0 and "no map" in r.output and "Traceback" not in r.output
+    assert (tmp_path / "telemetry.csv").exists() and not (tmp_path / "map.html").exists()
+
+
+@pytest.mark.parametrize("bad", [["--angles", "10:5:1"], ["--terrain-sigmas", ""], ["--angles", "nan"]])
+def test_sweep_with_an_empty_or_non_finite_list_is_refused(bad):
+    r = CliRunner().invoke(main, ["sweep", "--scenario", "q-ellipsoid", *bad])
+    assert r.exit_code == 2 and "start:stop:step" in r.output and "Traceback" not in r.output
+
+
+@pytest.mark.parametrize(("section", "key"), [("[camera.distortion]\nmodel = \"ratio\"\nfield = [0, 0.5, 1]\n",
+                                               "d_percent = [0, nan, 2]"),
+                                              ("[telemetry]\n", "heading_bias_deg = nan"),
+                                              ("[installation]\n", "lever_arm_m = [0, inf, 0]")])
+def test_config_refuses_non_finite_numbers_naming_the_key(tmp_path, section, key):
+    p = _write(tmp_path / "c.toml", "[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 50\npixel_um = 5.5\n"
+               + section + key + "\n")
+    with pytest.raises(ConfigError, match="finite number"):
+        load_config(p)

@@ -642,10 +642,15 @@ def _float_list(text: str) -> list[float]:
             a, b, c = (float(x) for x in text.split(":"))
             if c <= 0:
                 raise ValueError
-            return [float(x) for x in np.arange(a, b + 0.5 * c, c)]
-        return [float(x) for x in text.split(",") if x.strip()]
+            values = [float(x) for x in np.arange(a, b + 0.5 * c, c)]
+        else:
+            values = [float(x) for x in text.split(",") if x.strip()]
+        if not values or not all(np.isfinite(values)):
+            raise ValueError
+        return values
     except ValueError:
-        raise click.BadParameter(f"give numbers like 10,25,50 or start:stop:step (step > 0), got {text!r}") from None
+        raise click.BadParameter(f"give finite numbers like 10,25,50 or start:stop:step (step > 0, stop >= start), "
+                                 f"got {text!r}") from None
 
 
 @main.command(help=SWEEP_HELP)

@@ -136,9 +136,11 @@ def klv_job(path, out: Path, *, console: Console, dem=None, sensor=None, budget=
     from .io.kml import write_kml
 
     written.append(write_kml(out / "eoloc.kml", layers, name=Path(path).name))
-    if make_map:
-        from .io.mapview import write_map
+    from .io.mapview import drawable, write_map
 
+    if make_map and not drawable([track], prints, encoder_prints, layers.get("fixes")):
+        console.print("no map: the stream has no aircraft position, footprint or fix to draw")
+    elif make_map:
         written.append(write_map(out / "map.html", aircraft=[track], footprints=prints,
                                  encoder_footprints=encoder_prints, targets=layers.get("fixes"), dem=dem, tiles=tiles,
                                  title=f"eoloc: {Path(path).name}"))

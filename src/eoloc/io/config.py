@@ -43,7 +43,7 @@ from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # nan in a config is a typo
 
 
 class DistortionConfig(_Strict):

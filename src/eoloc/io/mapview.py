@@ -66,6 +66,11 @@ def _latlon(coords) -> list[list[float]]:
     return [[float(c[1]), float(c[0])] for c in coords]
 
 
+def drawable(*layers: list[dict] | None) -> bool:
+    """True when some feature of the layers has a geometry (else there is no map to write)."""
+    return any(f.get("geometry") for layer in layers for f in layer or ())
+
+
 def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprints: list[dict] | None = None,
               targets: list[dict] | None = None, tracks: list[dict] | None = None, truth: list[dict] | None = None,
               encoder_footprints: list[dict] | None = None, dem=None, tiles: str | None = None,
