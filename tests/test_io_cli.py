@@ -339,3 +339,22 @@ def test_config_refuses_non_finite_numbers_naming_the_key(tmp_path, section, key
                + section + key + "\n")
     with pytest.raises(ConfigError, match="finite number"):
         load_config(p)
+
+
+def test_a_picture_as_dem_is_named_as_such_with_no_warning_leaked(tmp_path):
+    import warnings
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pic = tmp_path / "photo.png"
+    plt.imsave(pic, np.random.default_rng(0).random((20, 20)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # rasterio's NotGeoreferencedWarning must not reach the user
+        with pytest.raises(eoloc.terrain.DEMError, match="no georeferencing at all: it is not a terrain model"):
+            eoloc.open_dem(pic)
+    r = CliRunner().invoke(main, ["locate", "--lat", "40", "--lon", "-105", "--aircraft-height", "6000",
+                                  "--gimbal-angles", "0", "-45", "--dem", str(pic)])
+    assert r.exit_code == 2 and "not a terrain model" in r.output and "assume_crs" not in r.output

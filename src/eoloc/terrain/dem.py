@@ -13,6 +13,7 @@ the heights as they are; ``geoid=PATH`` uses another grid (e.g. EGM2008) for the
 
 from __future__ import annotations
 
+import warnings
 import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -169,15 +170,20 @@ def open_dem(paths: str | Path | Sequence[str | Path], *, vertical: str = "egm96
             if not p.exists():
                 raise DEMError(f"DEM file {str(p)!r} does not exist (check the path)")
             try:
-                ds = rasterio.open(_gdal_path(p))
+                with warnings.catch_warnings():  # GDAL's "not georeferenced" warning: said below, in words
+                    warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+                    ds = rasterio.open(_gdal_path(p))
             except rasterio.errors.RasterioIOError as exc:
                 raise DEMError(f"DEM file {str(p)!r} cannot be read by GDAL: {exc}") from None
             datasets.append(ds)
             if ds.crs is None:
+                if ds.transform.is_identity:  # no georeferencing at all: a picture, not a terrain model
+                    raise DEMError(f"DEM file {str(p)!r} ({ds.driver}) has no georeferencing at all: it is not a "
+                                   "terrain model (DEMs come as GeoTIFF, DTED, SRTM .hgt or ESRI ASCII grids)")
                 if assume_crs is None:
                     raise DEMError(f"DEM file {str(p)!r} has no coordinate reference system (an ESRI ASCII grid "
-                                   "without .prj?); if it is lon/lat say so with assume_crs='EPSG:4326' "
-                                   "(--dem-crs EPSG:4326)")
+                                   "without .prj?); if it is lon/lat, say so with --dem-crs EPSG:4326 "
+                                   "(Python: open_dem(..., assume_crs='EPSG:4326'))")
         crs = datasets[0].crs or CRS.from_user_input(assume_crs)
         nodata = datasets[0].nodata
         if len(datasets) == 1:
