@@ -211,3 +211,16 @@ def test_cli_rectify(tmp_path):
     res = CliRunner().invoke(main, ["rectify", str(tmp_path / "frame.png"), "--config", str(cfg), "--telemetry",
                                     str(tel), "--frame", "8", "--target-height", "400"])
     assert res.exit_code != 0 and "no record of frame 8" in " ".join(res.output.split())
+
+
+def test_cli_rectify_time_outside_the_telemetry_is_refused_naming_the_span(tmp_path):
+    cfg = tmp_path / "cam.toml"
+    cfg.write_text('[camera]\nwidth = 40\nheight = 30\nhfov_deg = 30.0\n[gimbal]\nmodel = "az-el"\n')
+    cv2.imwrite(str(tmp_path / "frame.png"), np.zeros((30, 40), np.uint8))
+    tel = tmp_path / "tel.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                   "0,35.09,112.7,1900,10,1,-2,5,-50\n10,35.10,112.7,1900,10,1,-2,5,-50\n")
+    res = CliRunner().invoke(main, ["rectify", str(tmp_path / "frame.png"), "--config", str(cfg), "--telemetry",
+                                    str(tel), "--time", "100", "--target-height", "400", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "outside the telemetry" in res.output and "0 to 10 s" in " ".join(res.output.split())
+    assert not (tmp_path / "o").exists()

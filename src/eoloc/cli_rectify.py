@@ -97,6 +97,10 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
         if not np.isfinite(dt).any():
             _fail(f"{telemetry}: no time_s column to find --time in")
         k = int(np.nanargmin(dt))
+        t0, t1 = float(np.nanmin(tel.columns["time_s"])), float(np.nanmax(tel.columns["time_s"]))
+        if not t0 - 0.5 <= time_s <= t1 + 0.5:  # the nearest record would be a pose from another moment
+            _fail(f"--time {time_s:g} s is outside the telemetry of {telemetry} ({t0:g} to {t1:g} s): give a time "
+                  "inside it (or --frame N)")
     pose = telemetry_pose(tel, k)
     surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
     img = _read_image(image)
