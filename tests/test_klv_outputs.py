@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import eoloc
 from eoloc.cli import main
 from eoloc.io.klv import klv_telemetry, read_klv
 from eoloc.terrain.geoid import default_geoid
@@ -177,3 +178,22 @@ def test_klv_command_on_a_file_with_no_klv(tmp_path):
     p.write_bytes(np.random.default_rng(1).integers(0, 255, 3000, dtype=np.uint8).tobytes())
     res = CliRunner().invoke(main, ["klv", str(p), "--out", str(tmp_path / "o")])
     assert res.exit_code == 2 and "no MISB ST 0601 packet" in " ".join(res.output.split())
+
+
+def test_klv_footprints_are_counter_clockwise_rings(tmp_path):
+    """RFC 7946: exterior rings counter-clockwise (shoelace in lon/lat, positive), closed; both
+    eoloc's footprints and the encoder's corners."""
+    from click.testing import CliRunner
+
+    from eoloc.cli import main
+
+    flight = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "flight.klv"
+    r = CliRunner().invoke(main, ["klv", str(flight), "--out", str(tmp_path), "--no-map"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "footprints.geojson").read_text())
+    rings = [f["geometry"]["coordinates"][0] for f in doc["features"] if f["geometry"]]
+    assert rings
+    for ring in rings:
+        x = np.array([p[0] for p in ring])
+        y = np.array([p[1] for p in ring])
+        assert ring[0] == ring[-1] and np.sum(x[:-1] * y[1:] - x[1:] * y[:-1]) > 0

@@ -76,12 +76,18 @@ class Footprint:
         """RFC 7946 Polygon (lon, lat, h), exterior ring closed and counter-clockwise."""
         if len(self) < 3:
             return None
-        ring = np.column_stack([self.lon_deg, self.lat_deg, self.h_m])
-        area, _ = _geod().polygon_area_perimeter(self.lon_deg, self.lat_deg)
-        if area < 0:  # pyproj: positive = counter-clockwise
-            ring = ring[::-1]
-        ring = np.vstack([ring, ring[:1]])
-        return {"type": "Polygon", "coordinates": [[[round(float(c), 10) for c in p] for p in ring]]}
+        return polygon_geometry(self.lon_deg, self.lat_deg, self.h_m)
+
+
+def polygon_geometry(lon_deg, lat_deg, h_m) -> dict:
+    """An RFC 7946 Polygon from one ring of vertices (lon, lat, h): closed and counter-clockwise,
+    whichever way the vertices came (image borders run clockwise on the ground)."""
+    ring = np.column_stack([lon_deg, lat_deg, h_m])
+    area, _ = _geod().polygon_area_perimeter(ring[:, 0], ring[:, 1])
+    if area < 0:  # pyproj: positive = counter-clockwise
+        ring = ring[::-1]
+    ring = np.vstack([ring, ring[:1]])
+    return {"type": "Polygon", "coordinates": [[[round(float(c), 10) for c in p] for p in ring]]}
 
 
 def border_pixels(camera, edge_samples: int) -> np.ndarray:

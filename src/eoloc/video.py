@@ -12,6 +12,7 @@ import numpy as np
 
 from .accuracy.budget import ErrorBudget
 from .accuracy.covariance import covariance_columns
+from .footprint import polygon_geometry
 from .geodesy import horizontal_distance_m
 from .io.table import Table
 from .misb import FrameGeometry, frame_geometry, misb_sensor, packet_pose
@@ -77,8 +78,7 @@ def footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int
         else:
             lat, lon, h = geom.corners.lat_deg[i], geom.corners.lon_deg[i], geom.corners.h_m[i]
         ok = bool(np.all(np.isfinite(lat) & np.isfinite(lon)))
-        ring = [[float(a), float(b), float(z) if np.isfinite(z) else 0.0] for a, b, z in zip(lon, lat, h, strict=True)]
-        geometry = {"type": "Polygon", "coordinates": [ring + ring[:1]]} if ok else None
+        geometry = polygon_geometry(lon, lat, np.where(np.isfinite(h), h, 0.0)) if ok else None
         feats.append({"type": "Feature", "geometry": geometry,
                       "properties": {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}})
     return feats
