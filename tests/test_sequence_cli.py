@@ -132,6 +132,12 @@ def test_track_cli_associates_moving_targets_into_geojson_linestrings(tmp_path):
     with (tmp_path / "out" / "track_fixes.csv").open() as fh:
         got = list(csv.DictReader(fh))
     assert len(got) == len(rows) and all(row["track_id"].startswith("T") for row in got)
+    # each track's first row: position only; its speed and its sigma are unknown (empty), not 0
+    for tid in {row["track_id"] for row in got}:
+        first = next(row for row in got if row["track_id"] == tid)
+        assert first["speed_sigma_mps"] in ("", "nan") and first["speed_mps"] in ("", "nan")
+    later = [row for row in got if row["speed_sigma_mps"] not in ("", "nan")]
+    assert later and all(float(row["speed_sigma_mps"]) > 0 for row in later)
 
 
 def test_track_static_and_triangulate_on_the_demo(tmp_path):

@@ -161,6 +161,8 @@ def _track_rows(ts, located, with_cov: bool) -> list[dict]:
         cols["filt_lat_deg"][idx], cols["filt_lon_deg"][idx] = lat, lon
         cols["speed_mps"][idx], cols["speed_sigma_mps"][idx] = tr.speed_mps, tr.speed_sigma_mps
         cols["heading_deg"][idx] = tr.heading_deg
+        first = idx[:1]  # a track's first fix: position only, its speed and course are not known yet
+        cols["speed_mps"][first] = cols["speed_sigma_mps"][first] = cols["heading_deg"][first] = np.nan
         cols["sigma_e_m"][idx], cols["sigma_n_m"][idx] = np.sqrt(P[:, 0, 0]), np.sqrt(P[:, 1, 1])
     extra = dict(located.extra)
     extra["track_id"] = ts.assigned

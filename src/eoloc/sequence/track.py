@@ -80,12 +80,15 @@ class Track:
 
     @property
     def speed_sigma_mps(self) -> np.ndarray:
-        """1-sigma of the speed (first order, from the velocity covariance)."""
+        """1-sigma of the speed (first order, from the velocity covariance); NaN where the velocity
+        is exactly zero (a track's first fix: no direction, so no first-order sigma; unknown is
+        not zero)."""
         s, P = np.asarray(self.state), np.asarray(self.cov)
         v = s[:, 2:]
-        sp = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
-        g = v / sp[:, None]
-        return np.sqrt(np.einsum("ni,nij,nj->n", g, P[:, 2:, 2:], g))
+        sp = np.hypot(v[:, 0], v[:, 1])
+        g = v / np.maximum(sp, 1e-300)[:, None]
+        sig = np.sqrt(np.einsum("ni,nij,nj->n", g, P[:, 2:, 2:], g))
+        return np.where(sp > 0.0, sig, np.nan)
 
 
 @dataclass(frozen=True)
