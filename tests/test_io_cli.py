@@ -358,3 +358,12 @@ def test_a_picture_as_dem_is_named_as_such_with_no_warning_leaked(tmp_path):
     r = CliRunner().invoke(main, ["locate", "--lat", "40", "--lon", "-105", "--aircraft-height", "6000",
                                   "--gimbal-angles", "0", "-45", "--dem", str(pic)])
     assert r.exit_code == 2 and "not a terrain model" in r.output and "assume_crs" not in r.output
+
+
+def test_a_dem_that_misses_the_flight_is_summed_up_in_one_line(tmp_path):
+    dem = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"  # Colorado
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
+                                  "--dem", str(dem), "--out", str(tmp_path)])  # the demo flight is in Shanxi
+    text = " ".join(r.output.split())
+    assert r.exit_code == 0 and "no target was located" in text and "OUT_OF_COVERAGE" in text
+    assert "covering lat 40.2008..40.3100" in text

@@ -386,6 +386,7 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     csv_path = write_csv(out / "fixes.csv", rows)
     geo_path = write_geojson(out / "fixes.geojson", rows)
     _summary(rows, located.fixes.status_counts())
+    _none_located(located.fixes, rule)
     Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
 
 
@@ -421,6 +422,18 @@ def _summary(rows: list[dict], counts: dict[str, int], limit: int = 12) -> None:
     if len(rows) > limit:
         table.caption = f"first {limit} of {len(rows)} rows"
     Console().print(table)
+
+
+def _none_located(fixes, rule) -> None:
+    """One line when nothing at all was located: the commonest status, what it means and the rule
+    (a DEM that does not overlap the flight, a target height above the aircraft, ...)."""
+    counts = fixes.status_counts()
+    if not len(fixes) or counts.get("OK"):
+        return
+    name, n = max(counts.items(), key=lambda kv: kv[1])
+    what = rule.describe() if isinstance(rule, StopRule) else "range from the files"
+    err_console.print(f"[yellow]warning:[/] no target was located ({escape(what)}): {n} of {len(fixes)} are {name}: "
+                      f"{escape(Status[name].explanation)}")
 
 
 FOOTPRINT_HELP = """Frame footprints: the ground outline of every telemetry record's image.

@@ -90,7 +90,9 @@ class OnDEM(StopRule):
         return self.dem.height(lat_deg, lon_deg)
 
     def describe(self) -> str:
-        return f"DEM {self.dem.source}" + ("" if self.method == "march" else f" ({self.method})")
+        w, s, e, n = self.dem.bounds
+        return (f"DEM {self.dem.source or 'grid'} covering lat {s:.4f}..{n:.4f}, lon {w:.4f}..{e:.4f}"
+                + ("" if self.method == "march" else f", {self.method}"))
 
 
 def stop_at_dem(rays: Rays, dem: DEM, *, method: str = "march", eps_h: float = 1.0,
