@@ -159,3 +159,28 @@ def test_track_static_and_triangulate_on_the_demo(tmp_path):
             assert d < 3.5 * np.hypot(float(row["sigma_e_m"]), float(row["sigma_n_m"]))
     r3 = CliRunner().invoke(main, ["track", *args, "--range", "--out", str(tmp_path)])
     assert r3.exit_code == 2 and "none of the" in r3.output
+
+
+def test_calibrate_with_undetermined_parameters_names_them_and_refuses_to_write(tmp_path):
+    # one GCP observed three times from the same pose: six equations, but only two independent ones
+    # for three mount angles
+    nominal = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
+    true = dataclasses.replace(nominal, mount_misalignment_deg=(0.3, 0.2, 0.5))
+    g = gcp_flight(true, 20, noise=TelemetryNoise(white=JIT), seed=7, heading_bias_deg=0.0)
+    tel = _write_rows(tmp_path / "tel.csv", TEL_HEADER, _telemetry_rows(g.tel_time_s, g.tel_pose))
+    gcps = _write_rows(tmp_path / "gcps.csv", ["time_s", "gcp_id", "u_px", "v_px", "lat_deg", "lon_deg", "h_m"],
+                       [(g.obs_time_s[0], f"G{k}", *g.pixels[0], *g.gcp_llh[0]) for k in range(3)])
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text(CONFIG)
+    r = CliRunner().invoke(main, ["calibrate", str(tel), str(gcps), "--config", str(cfg), "--write",
+                                  "--out", str(tmp_path / "out")])
+    assert r.exit_code == 2 and "do not determine" in r.output and "Traceback" not in r.output
+    assert cfg.read_text() == CONFIG  # nothing written
+    text = (tmp_path / "out" / "calibration.json").read_text()
+
+    def no_constants(name):
+        raise AssertionError(f"{name} in calibration.json is not JSON")
+
+    report = json.loads(text, parse_constant=no_constants)  # NaN / Infinity would be refused
+    assert report["undetermined"] and set(report["undetermined"]) <= {"mount_x_deg", "mount_y_deg", "mount_z_deg"}
+    assert all(report["sigma"][k] is None for k in report["undetermined"])

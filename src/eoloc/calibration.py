@@ -67,6 +67,7 @@ class Calibration:
     heading_bias_deg: float
     time_offset_s: float
     warnings: list[str] = field(default_factory=list)
+    undetermined: list[str] = field(default_factory=list)  # parameters these observations cannot fix
 
     @property
     def sigma(self) -> np.ndarray:
@@ -164,10 +165,21 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     J = sol.jac
     chi2 = float(np.sum(fun(sol.x) ** 2))
     s0 = float(np.sqrt(chi2 / (m - p))) if m > p else float("nan")
+    # a parameter the observations do not determine: its column of J is (nearly) zero, or it lies
+    # in the near-null space of J (columns scaled to unit norm, singular values below 1e-8)
+    colnorm = np.linalg.norm(J, axis=0)
+    scaled = J / np.where(colnorm > 0, colnorm, 1.0)
+    _, sv, vt = np.linalg.svd(scaled, full_matrices=False)
+    null = vt[sv < 1e-8 * max(sv.max(initial=0.0), 1e-300)]
+    weak = (colnorm <= 1e-12 * max(colnorm.max(initial=0.0), 1e-300)) | (np.abs(null) > 0.1).any(axis=0)
+    undetermined = [names[i] for i in np.flatnonzero(weak)]
     try:
         cov = np.linalg.inv(J.T @ J) * max(s0, 1e-12) ** 2
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.inf)
+    if undetermined:
+        cov[weak, :] = np.inf
+        cov[:, weak] = np.inf
     s_cal, hb, dt = _apply(sensor, names, sol.x, heading_bias_deg, time_offset_s)
     r1 = project(sol.x) - uv
     warnings = []
@@ -180,6 +192,15 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
                                 "tell them apart (vary the attitude/look direction, or estimate one of them)")
     if not sol.success:
         warnings.append(f"least squares did not converge: {sol.message}")
+    if undetermined:
+        warnings.append(f"these observations do not determine {', '.join(undetermined)}: their values are not "
+                        "estimates (sigma infinite); add GCPs seen from other attitudes/look directions, or do not "
+                        "estimate them")
+    rms0, rms1 = float(np.sqrt(np.mean(r0[used] ** 2))), float(np.sqrt(np.mean(r1[used] ** 2)))
+    if np.allclose(sol.x, x0) and rms1 >= 0.999 * rms0:
+        warnings.append(f"the solver did not move from the start (RMS {rms0:.2f} -> {rms1:.2f} px): the "
+                        "parameters have no effect on these observations (check --max-gap, the time matching and "
+                        "the estimated groups)")
     norm = np.hypot(r1[:, 0], r1[:, 1]) / (pixel_sigma_px * max(s0, 1.0))
     for i in np.flatnonzero(used & (norm > 3.5)):
         warnings.append(f"observation {i}: residual {np.hypot(*r1[i]):.2f} px is an outlier (> 3.5 sigma); "
@@ -188,7 +209,7 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     err1 = _ground_error(s_cal, _pose_for(pose, telemetry, tq, hb, dt), uv, llh, p_gcp)
     nan2 = np.where(used[:, None], 0.0, np.nan)
     return Calibration(names, sol.x, cov, s0, r0 + nan2, r1 + nan2, np.where(used, err0, np.nan),
-                       np.where(used, err1, np.nan), used, s_cal, hb, dt, warnings)
+                       np.where(used, err1, np.nan), used, s_cal, hb, dt, warnings, undetermined)
 
 
 def _ground_error(sensor: SensorModel, pose: Pose, uv: np.ndarray, llh: np.ndarray, p_gcp: np.ndarray) -> np.ndarray:

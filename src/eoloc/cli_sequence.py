@@ -368,14 +368,16 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
     out = Path(out_dir)
     csv_path = write_csv(out / "gcp_residuals.csv", [{k: _plain(v) for k, v in r.items()} for r in rows])
     js = out / "calibration.json"
-    js.write_text(json.dumps({"parameters": cal.as_dict(), "sigma": dict(zip(cal.names, cal.sigma.tolist(),
-                                                                             strict=True)),
-                              "correlation": cal.correlation.tolist(), "s0": cal.s0,
-                              "rms_px_before": cal.rms(cal.residual_px_before),
-                              "rms_px_after": cal.rms(cal.residual_px_after),
-                              "rms_ground_m_before": cal.rms(cal.ground_error_before_m),
-                              "rms_ground_m_after": cal.rms(cal.ground_error_after_m),
-                              "warnings": cal.warnings}, indent=1) + "\n", encoding="utf-8")
+    report = {"parameters": cal.as_dict(), "sigma": dict(zip(cal.names, cal.sigma.tolist(), strict=True)),
+              "correlation": cal.correlation.tolist(), "s0": cal.s0, "undetermined": cal.undetermined,
+              "rms_px_before": cal.rms(cal.residual_px_before), "rms_px_after": cal.rms(cal.residual_px_after),
+              "rms_ground_m_before": cal.rms(cal.ground_error_before_m),
+              "rms_ground_m_after": cal.rms(cal.ground_error_after_m), "warnings": cal.warnings}
+    # JSON has no NaN or Infinity: an unknown sigma or correlation is null
+    js.write_text(json.dumps(_json_safe(report), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    if write_back and cal.undetermined:
+        _fail(f"not writing {config_path}: these observations do not determine {', '.join(cal.undetermined)} "
+              f"(see {js}); add GCPs seen from other attitudes or look directions, or leave them out of --estimate")
     if write_back:
         from .io.config import ConfigError, write_calibration
 
@@ -390,6 +392,17 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
             _fail(str(exc))
         Console().print(f"updated [bold]{config_path}[/]")
     Console().print(f"wrote [bold]{js}[/] and [bold]{csv_path}[/]")
+
+
+def _json_safe(v):
+    """Floats that are not finite -> None, through dicts and lists."""
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None
+    return v
 
 
 def _plain(v):
