@@ -367,3 +367,18 @@ def test_a_dem_that_misses_the_flight_is_summed_up_in_one_line(tmp_path):
     text = " ".join(r.output.split())
     assert r.exit_code == 0 and "no target was located" in text and "OUT_OF_COVERAGE" in text
     assert "covering lat 40.2008..40.3100" in text
+
+
+def test_repeated_telemetry_times_are_reported_never_chosen_silently(tmp_path):
+    p = _write(tmp_path / "t.csv",
+               "time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,azimuth_deg,elevation_deg\n"
+               "0,45,7,3000,0,0,0,0,-45\n"
+               "1,45,7,3000,0,0,0,0,-45\n"
+               "1,46.26,7,3000,0,0,0,0,-45\n"  # the same time, 140 km north
+               "2,45,7,3000,0,0,0,0,-45\n"
+               "2,45,7,3000,0,0,0,0,-45\n")  # an exact copy
+    t = read_telemetry(p)
+    assert t.line.tolist() == [2, 5]  # time 0 and the first time-2 record
+    msgs = {i.line: i.message for i in t.issues}
+    assert "also at line 3 with another pose: neither record is used" in msgs[4]
+    assert "repeats line 5 exactly" in msgs[6]

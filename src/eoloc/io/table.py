@@ -59,6 +59,10 @@ class Table:
     def has(self, name: str) -> bool:
         return name in self.columns
 
+    def keep(self, mask: np.ndarray) -> Table:
+        """The records where ``mask`` holds (issues kept)."""
+        return Table(self.path, {k: v[mask] for k, v in self.columns.items()}, self.line[mask], self.issues)
+
 
 def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple[str, ...]) -> Table:
     """Read a CSV with a header into a :class:`Table`.

@@ -106,7 +106,38 @@ def read_telemetry(path: str | Path) -> Table:
     t = read_table(path, TELEMETRY_COLUMNS, what="telemetry", key=("time_s", "frame"))
     for name in ("gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "range_m", "time_s", "frame"):
         t.columns.setdefault(name, np.full(len(t), np.nan))
-    return t
+    return _without_repeated_times(t)
+
+
+def _without_repeated_times(t: Table) -> Table:
+    """Records that repeat a time_s: an exact copy of an earlier record is dropped; records that
+    give different poses at one time are all dropped (which one is right cannot be told). Each
+    is reported with the line it repeats."""
+    times = t.columns["time_s"]
+    finite = np.flatnonzero(np.isfinite(times))
+    if finite.size < 2:
+        return t
+    order = finite[np.argsort(times[finite], kind="stable")]
+    same = np.flatnonzero(np.diff(times[order]) == 0.0)
+    if same.size == 0:
+        return t
+    drop = np.zeros(len(t), dtype=bool)
+    names = [k for k, v in t.columns.items() if v.dtype.kind == "f"]
+    for k in same:
+        first, later = order[k], order[k + 1]
+        while k > 0 and times[order[k - 1]] == times[first]:  # compare with the first record of the time
+            k -= 1
+            first = order[k]
+        identical = all(np.array_equal(t.columns[n][first], t.columns[n][later], equal_nan=True) for n in names)
+        if identical:
+            drop[later] = True
+            t.issues.append(Issue(t.path, int(t.line[later]), f"repeats line {int(t.line[first])} exactly; "
+                                                               "record skipped"))
+        else:
+            drop[[first, later]] = True
+            t.issues.append(Issue(t.path, int(t.line[later]), f"time_s {times[later]:g} also at line "
+                                  f"{int(t.line[first])} with another pose: neither record is used"))
+    return t.keep(~drop)
 
 
 def read_detections(path: str | Path) -> Table:
