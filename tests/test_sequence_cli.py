@@ -53,14 +53,22 @@ JIT = {"lat_deg": 5e-7, "lon_deg": 5e-7, "h_m": 0.1, "yaw_deg": 0.005, "pitch_de
        "gimbal1_deg": 0.003, "gimbal2_deg": 0.003, "u_px": 0.5, "v_px": 0.5}
 
 
-def test_calibrate_cli_writes_the_config_and_locate_uses_it(tmp_path):
+def _gcp_files(tmp_path, pick=None):
+    """A GCP flight of the demo camera with a (0.3, 0.2, 0.5) deg mount misalignment: the
+    telemetry CSV, the GCP observations CSV (all, or the rows ``pick`` gives) and the flight."""
     nominal = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
     true = dataclasses.replace(nominal, mount_misalignment_deg=(0.3, 0.2, 0.5))
     g = gcp_flight(true, 20, noise=TelemetryNoise(white=JIT), seed=7, heading_bias_deg=0.0)
     tel = _write_rows(tmp_path / "tel.csv", TEL_HEADER, _telemetry_rows(g.tel_time_s, g.tel_pose))
+    rows = [(t, f"G{i}", *px, *llh) for i, (t, px, llh) in enumerate(zip(g.obs_time_s, g.pixels, g.gcp_llh,
+                                                                        strict=True))]
     gcps = _write_rows(tmp_path / "gcps.csv", ["time_s", "gcp_id", "u_px", "v_px", "lat_deg", "lon_deg", "h_m"],
-                       [(t, f"G{i}", *px, *llh) for i, (t, px, llh) in enumerate(
-                           zip(g.obs_time_s, g.pixels, g.gcp_llh, strict=True))])
+                       rows if pick is None else pick(rows))
+    return tel, gcps, g
+
+
+def test_calibrate_cli_writes_the_config_and_locate_uses_it(tmp_path):
+    tel, gcps, g = _gcp_files(tmp_path)
     cfg = tmp_path / "camera.toml"
     cfg.write_text(CONFIG)
     r = CliRunner().invoke(main, ["calibrate", str(tel), str(gcps), "--config", str(cfg), "--pixel-sigma", "0.5",
@@ -164,12 +172,7 @@ def test_track_static_and_triangulate_on_the_demo(tmp_path):
 def test_calibrate_with_undetermined_parameters_names_them_and_refuses_to_write(tmp_path):
     # one GCP observed three times from the same pose: six equations, but only two independent ones
     # for three mount angles
-    nominal = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
-    true = dataclasses.replace(nominal, mount_misalignment_deg=(0.3, 0.2, 0.5))
-    g = gcp_flight(true, 20, noise=TelemetryNoise(white=JIT), seed=7, heading_bias_deg=0.0)
-    tel = _write_rows(tmp_path / "tel.csv", TEL_HEADER, _telemetry_rows(g.tel_time_s, g.tel_pose))
-    gcps = _write_rows(tmp_path / "gcps.csv", ["time_s", "gcp_id", "u_px", "v_px", "lat_deg", "lon_deg", "h_m"],
-                       [(g.obs_time_s[0], f"G{k}", *g.pixels[0], *g.gcp_llh[0]) for k in range(3)])
+    tel, gcps, _ = _gcp_files(tmp_path, lambda rows: [(rows[0][0], f"G{k}", *rows[0][2:]) for k in range(3)])
     cfg = tmp_path / "camera.toml"
     cfg.write_text(CONFIG)
     r = CliRunner().invoke(main, ["calibrate", str(tel), str(gcps), "--config", str(cfg), "--write",
