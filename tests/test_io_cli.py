@@ -382,3 +382,15 @@ def test_repeated_telemetry_times_are_reported_never_chosen_silently(tmp_path):
     msgs = {i.line: i.message for i in t.issues}
     assert "also at line 3 with another pose: neither record is used" in msgs[4]
     assert "repeats line 5 exactly" in msgs[6]
+
+
+def test_detections_that_cannot_be_paired_or_are_empty_are_named(tmp_path):
+    det_frames = _write(tmp_path / "d.csv", "frame,target_id,u_px,v_px\n1,A,10,10\n")
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(det_frames), "--config",
+                                  str(DEMO / "camera.toml"), "--target-height", "0", "--out", str(tmp_path / "o")])
+    text = " ".join(r.output.split())
+    assert r.exit_code == 2 and "frame only" in text and "time_s only" in text and "nothing to pair" in text
+    header_only = _write(tmp_path / "h.csv", "time_s,target_id,u_px,v_px\n")
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(header_only), "--config",
+                                  str(DEMO / "camera.toml"), "--target-height", "0", "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 2 and "no usable record" in r.output and not (tmp_path / "o2").exists()

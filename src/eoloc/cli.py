@@ -271,6 +271,9 @@ def _read_inputs(telemetry, detections, cfg, reader=read_detections):
     if len(tel) == 0:
         _report_issues(issues)
         _fail(f"telemetry file {telemetry!r} has no usable record")
+    if det is not None and len(det) == 0:
+        _report_issues(issues)
+        _fail(f"file {detections!r} has no usable record (only a header?): nothing to locate")
     return tel, det, issues
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..sensor.model import Pose
-from .table import Column, Issue, Table, read_table
+from .table import Column, Issue, Table, TableError, read_table
 
 TELEMETRY_COLUMNS = [
     Column("time_s", required=False, unit="s"),
@@ -172,7 +172,16 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
     n = len(det)
     record = np.full(n, -1, dtype=np.int64)
     issues: list[Issue] = []
-    use_frames = np.isfinite(det.columns["frame"]).any() and np.isfinite(tel.columns["frame"]).any()
+    has = {name: (np.isfinite(t.columns["frame"]).any(), np.isfinite(t.columns["time_s"]).any())
+           for name, t in (("detections", det), ("telemetry", tel))}
+    use_frames = has["detections"][0] and has["telemetry"][0]
+    if n and not use_frames and not (has["detections"][1] and has["telemetry"][1]):
+        def gives(name: str) -> str:
+            f, t = has[name]
+            return "frame and time_s" if f and t else "frame only" if f else "time_s only" if t else "neither"
+
+        raise TableError(f"{det.path} gives {gives('detections')} and {tel.path} {gives('telemetry')}: nothing to "
+                         "pair them by; add the same column (frame, or time_s) to both files")
     if use_frames:
         lookup = {int(f): i for i, f in enumerate(tel.columns["frame"]) if math.isfinite(f)}
         for j, f in enumerate(det.columns["frame"]):
