@@ -187,3 +187,26 @@ def test_calibrate_with_undetermined_parameters_names_them_and_refuses_to_write(
     report = json.loads(text, parse_constant=no_constants)  # NaN / Infinity would be refused
     assert report["undetermined"] and set(report["undetermined"]) <= {"mount_x_deg", "mount_y_deg", "mount_z_deg"}
     assert all(report["sigma"][k] is None for k in report["undetermined"])
+
+
+def test_track_static_on_moving_targets_flags_them_and_inflates_the_uncertainty(tmp_path):
+    sensor = SensorModel(Camera.from_focal_mm(73.6, 5.5, 1024, 768), AzElGimbal())
+    vel = [(0.0, 0.0), (-12.0, 5.0)]  # T0 stands still, T1 drives at 13 m/s
+    fl = synthetic_flight(sensor, centre=(42.6, 120.9, 226.0), targets_px=[(453, 342), (476, 251)],
+                          velocity_enu_mps=vel, height_agl_m=2279.0, ground_range_m=2300.0, bearing_deg=190.0,
+                          heading_deg=350.2, pitch_deg=2.0, roll_deg=-1.8, speed_mps=50.0, duration_s=6.0, fps=10.0,
+                          noise=TelemetryNoise(white={**JIT, "u_px": 1.0, "v_px": 1.0}), seed=3)
+    tel = _write_rows(tmp_path / "tel.csv", TEL_HEADER, _telemetry_rows(fl.time_s, fl.pose_measured))
+    rows = [(t, f"T{j}", *fl.pixels_measured[k, j]) for k, t in enumerate(fl.time_s) for j in range(2)]
+    det = _write_rows(tmp_path / "det.csv", ["time_s", "target_id", "u_px", "v_px"], rows)
+    cam = tmp_path / "cam.toml"
+    cam.write_text("[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 73.6\npixel_um = 5.5\n")
+    r = CliRunner().invoke(main, ["track", str(tel), str(det), "--config", str(cam), "--target-height", "226",
+                                  "--static", "--meas-sigma", "3", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    got = {row["target_id"]: row for row in csv.DictReader((tmp_path / "static_targets.csv").open())}
+    assert not got["T0"]["warning"] and float(got["T0"]["scatter_ratio"]) < 3
+    moving = got["T1"]
+    assert float(moving["scatter_ratio"]) > 3 and "target moves" in moving["warning"]
+    # the inflated CEP50 is of the size of the path it drove (13 m/s over 6 s ~ 78 m), not a few metres
+    assert float(moving["cep50_m"]) > 10.0 and "target T1" in " ".join(r.output.split())

@@ -169,6 +169,9 @@ def _track_rows(ts, located, with_cov: bool) -> list[dict]:
     return fix_rows(located.fixes, extra, cols)
 
 
+SCATTER_LIMIT = 3.0  # scatter ratio (mean chi^2 / 2 per frame, 1 expected) past which a "static" target is not
+
+
 def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path) -> None:
     from .sequence.rls import rls_static
 
@@ -182,16 +185,28 @@ def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path
             continue
         est = rls_static(f, None if cov is None else cov.reshape(-1, 3, 3)[sel], sigma_m=meas_sigma,
                          forgetting=forgetting, window=window)
-        s = np.sqrt(np.diagonal(est.cov_enu))
         ok_f = np.flatnonzero(f.ok)
         single = np.hypot(est.sigma_m[ok_f[0], 0], est.sigma_m[ok_f[0], 1])  # the first fix's own sigma
         conv = int(est.converged_frame)
+        s = np.sqrt(np.diagonal(est.cov_enu))
+        # frames that spread far more than their sigma allows: the target moved (or the sigma is
+        # optimistic), so the "static" model is rejected and averaging does not shrink the error.
+        # The uncertainty becomes the fixes' own scatter (one frame's sigma times sqrt(ratio)), said.
+        ratio = float(est.scatter_ratio)
+        inflate = 1.0
+        if ratio > SCATTER_LIMIT:
+            inflate = max(np.sqrt(ratio), single / np.sqrt(2.0) * np.sqrt(ratio) / float(np.mean(s[:2])))
+        s = s * inflate
+        warning = "" if inflate == 1.0 else (
+            f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their sigma allows (> {SCATTER_LIMIT:g}): "
+            f"the target moves, or the sigma is optimistic; its uncertainty is the fixes' own scatter, "
+            f"{inflate:.1f}x the static estimate's (for a moving target use eoloc track without --static)")
         rows.append({"target_id": tid, "frames": int(sel.size), "used": int(est.n_used),
                      "lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m),
                      "sigma_e_m": float(s[0]), "sigma_n_m": float(s[1]), "sigma_u_m": float(s[2]),
-                     "cep50_m": float(est.cep50_m), "first_fix_sigma_h_m": float(single),
-                     "scatter_ratio": float(est.scatter_ratio),
-                     "converged_at_s": float(t[sel][conv]) if conv >= 0 else None, "status": "OK"})
+                     "cep50_m": float(est.cep50_m) * inflate, "first_fix_sigma_h_m": float(single),
+                     "scatter_ratio": ratio, "converged_at_s": float(t[sel][conv]) if conv >= 0 else None,
+                     "status": "OK", "warning": warning})
     def cells(r):
         if r["status"] != "OK":
             return [r["target_id"], f"0/{r['frames']}", "", "", "", "", "no fix"]
@@ -203,6 +218,9 @@ def _static(fixes: Fixes, cov, ids, t, forgetting, meas_sigma, window, out: Path
           ("target", "fixes", "lat, lon (°)", "h (m)", "CEP50 (m)", "scatter", "converged"), cells)
     Console().print("scatter: the frames' scatter against their declared sigma (1 = independent errors that "
                     "average away; near 0 = a common bias that no number of frames removes)")
+    for r in rows:
+        if r.get("warning"):
+            err_console.print(f"[yellow]warning:[/] target {escape(r['target_id'])}: {escape(r['warning'])}")
 
 
 def _emit(out: Path, stem: str, rows: list[dict], title: str, columns: tuple[str, ...], cells) -> None:
