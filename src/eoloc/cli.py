@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from importlib import resources
 from pathlib import Path
 
@@ -13,106 +12,29 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
 
-from . import __version__
-from .errors import ConfigError, EolocError
+from .cli_common import (
+    CONVENTIONS,
+    dem_options,
+    err_console,
+    fail,
+    load_config,
+    load_config_or_fail,
+    locate_with_config,
+    main,
+    open_dem_or_fail,
+    progress,
+    read_inputs,
+    report_issues,
+    stop_rule,
+    target_height_option,
+)
+from .errors import ConfigError
 from .footprint import write_footprints_geojson
 from .io.export import fix_rows, plain_value, write_csv, write_geojson
-from .io.table import TableError
-from .io.telemetry import read_detections, read_telemetry
-from .pipeline import RANGE_FROM_FILES, locate_by_rule, locate_tables
+from .pipeline import RANGE_FROM_FILES, locate_by_rule
 from .result import Status
-from .rules import StopRule, rule_from_options
+from .rules import StopRule
 from .sensor import Camera, GimbalKind, Pose, SensorModel, gimbal_from_name
-
-CONVENTIONS = """
-\b
-Units and conventions (the same everywhere in eoloc):
-  lat/lon      WGS-84 geodetic degrees; heights ellipsoidal metres (not MSL)
-  yaw          heading, degrees clockwise from true north
-  pitch        degrees, nose up positive; roll: degrees, right wing down positive
-  attitude     R_ned_body = Rz(yaw) Ry(pitch) Rx(roll); body x nose, y right wing, z down
-  az-el        gimbal azimuth about body z (right of the nose +), elevation (up +, -90 = down)
-  roll-pitch   framed camera: frame roll about body x (+ looks left), frame pitch (+ looks forward)
-  pixels       u = column (right), v = row (down); top-left pixel centre is (0, 0)
-  status       OK, NO_INTERSECTION, OUT_OF_COVERAGE, DEM_VOID, INVALID_INPUT, NO_TELEMETRY,
-               BELOW_SURFACE (camera on or under the surface), OUT_OF_IMAGE (pixel outside the image),
-               DEGENERATE (multi-view rays do not determine a point); coordinates are empty
-               wherever the status is not OK
-"""
-
-err_console = Console(stderr=True)
-
-
-def dem_options(dem_help: str):
-    """--dem (repeatable), --vertical, --geoid and --dem-crs: the same DEM options on every command."""
-    opts = [
-        click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help=dem_help),
-        click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96",
-                     show_default=True, help="Vertical datum of the DEM heights (converted to ellipsoidal)."),
-        click.option("--geoid", type=click.Path(dir_okay=False), default=None,
-                     help="Geoid grid for --vertical (default: the bundled EGM96 15')."),
-        click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326."),
-    ]
-
-    def apply(fn):
-        for o in reversed(opts):
-            fn = o(fn)
-        return fn
-
-    return apply
-
-
-def target_height_option(help_text: str = "Stop the rays on the surface of this ellipsoidal height (m)."):
-    """--target-height H, the same flag on every command where a height surface stops the rays; the
-    old --height (which meant the aircraft's height in one place and the target's in another) is
-    refused with a message naming the flag to use."""
-    def apply(fn):
-        fn = click.option("--target-height", "target_height", type=float, default=None, help=help_text)(fn)
-        return click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
-                            callback=_refuse_height)(fn)
-
-    return apply
-
-
-def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
-    if value is not None:
-        raise click.UsageError("--height is no longer accepted: it meant two things. Give --target-height H for the "
-                               "surface the rays stop on (ellipsoidal m), or --aircraft-height H for the aircraft of "
-                               "one observation.", ctx)
-
-
-def _fail(message: str) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
-    sys.exit(2)
-
-
-class _Main(click.Group):
-    """The command group: a user's mistake (an EolocError: a file or configuration that cannot be
-    used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
-    anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
-
-    def invoke(self, ctx: click.Context):
-        try:
-            return super().invoke(ctx)
-        except EolocError as exc:
-            _fail(str(exc))
-        except OSError as exc:
-            where = f"{exc.filename}: " if exc.filename else ""
-            _fail(f"{where}{exc.strerror or exc}")
-        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
-            raise
-        except Exception:
-            err_console.print("[bold red]internal error:[/] this is a bug in eoloc, not in your input. Please report "
-                              "it with the command line and the traceback below.")
-            raise
-
-
-@click.group(cls=_Main, help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n"
-             + CONVENTIONS)
-@click.version_option(__version__, prog_name="eoloc")
-def main() -> None:
-    pass
-
 
 LOCATE_HELP = """Geolocate targets: from files, or one observation given as options.
 
@@ -189,14 +111,14 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
     budget = None
     if covariance:
         if config_path is None:
-            _fail("--covariance needs --config FILE with an [accuracy.budget] section (the error sources)")
+            fail("--covariance needs --config FILE with an [accuracy.budget] section (the error sources)")
         from .io.config import error_budget
 
         try:
             budget = error_budget(load_config(config_path), config_path)
         except ConfigError as exc:
-            _fail(str(exc))
-    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+            fail(str(exc))
+    dem = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     if telemetry is None:
         from ._backend import few_targets
 
@@ -205,99 +127,49 @@ def locate(telemetry, detections, config_path, range_opt, target_height, height,
                         gimbal_angles, sensor_roll, pixel, as_json, dem, budget)
         return
     if lat is not None or lon is not None or height is not None:
-        _fail("give either a TELEMETRY file or --lat/--lon/--aircraft-height for one observation, not both")
+        fail("give either a TELEMETRY file or --lat/--lon/--aircraft-height for one observation, not both")
     stop_height = target_height
     if interpolate and detections is None:
-        _fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
+        fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance, dem, budget,
                   dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset), compensate_path)
 
 
-def _open_dem(paths, vertical, geoid, dem_crs):
-    from .terrain import DEMError, open_dem
-
-    try:
-        with err_console.status("reading the DEM..."):
-            return open_dem(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
-    except DEMError as exc:
-        _fail(str(exc))
 
 
-def _stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
-    """The command line's stop rule, parsed once into a rule object (or RANGE_FROM_FILES: M1 with
-    each target's range_m column)."""
-    if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
-        _fail("choose one stop rule: --range [R] (laser slant range), --target-height H (ellipsoidal metres) "
-              "or --dem FILE (terrain)")
-    if range_opt == RANGE_FROM_FILES:
-        return RANGE_FROM_FILES
-    if range_opt is not None:
-        try:
-            range_opt = float(range_opt)
-        except ValueError:
-            _fail(f"--range takes metres or nothing (then range_m from the files), got {range_opt!r}")
-    return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
 
 
 def _load_sensor(config_path) -> SensorModel:
-    return _load_config(config_path).sensor()
+    return load_config_or_fail(config_path).sensor()
 
 
-def load_config(config_path):
-    """The TOML configuration (pydantic is imported only by the commands that read one)."""
-    from .io.config import load_config as load
-
-    return load(config_path)
 
 
-def _load_config(config_path):
-    try:
-        return load_config(config_path)
-    except ConfigError as exc:
-        _fail(str(exc))
 
 
-def _read_inputs(telemetry, detections, cfg, reader=read_detections):
-    """Telemetry (the config's heading bias removed) and the second file, with their issues reported;
-    fails when the telemetry has no usable record."""
-    from .io.telemetry import with_heading_bias
-
-    try:
-        tel = with_heading_bias(read_telemetry(telemetry), cfg.telemetry.heading_bias_deg)
-        det = reader(detections) if detections else None
-    except TableError as exc:
-        _fail(str(exc))
-    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
-    if len(tel) == 0:
-        _report_issues(issues)
-        _fail(f"telemetry file {telemetry!r} has no usable record")
-    if det is not None and len(det) == 0:
-        _report_issues(issues)
-        _fail(f"file {detections!r} has no usable record (only a header?): nothing to locate")
-    return tel, det, issues
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
                 sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
     if lat is None or lon is None or height is None:
-        _fail("one observation needs --lat, --lon and --aircraft-height (ellipsoidal m), or give a TELEMETRY file")
-    rule = _stop_rule(range_opt, target_height, dem)
+        fail("one observation needs --lat, --lon and --aircraft-height (ellipsoidal m), or give a TELEMETRY file")
+    rule = stop_rule(range_opt, target_height, dem)
     if rule == RANGE_FROM_FILES:
-        _fail("--range needs a value (metres) for one observation")
+        fail("--range needs a value (metres) for one observation")
     if config_path is not None:
         sensor = _load_sensor(config_path)
         if gimbal is not None and gimbal != sensor.gimbal.name:
-            _fail(f"--gimbal {gimbal} contradicts the config's gimbal model {sensor.gimbal.name!r}")
+            fail(f"--gimbal {gimbal} contradicts the config's gimbal model {sensor.gimbal.name!r}")
     else:
         if pixel is not None:
-            _fail("--pixel needs --config FILE to know the camera (without it the image centre is used)")
+            fail("--pixel needs --config FILE to know the camera (without it the image centre is used)")
         # the centre pixel's ray is the boresight whatever the intrinsics: any camera will do
         sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), gimbal_from_name(gimbal or "az-el"))
     if sensor.gimbal.kind == GimbalKind.FIXED:
         angles = (sensor_roll,)
     else:
         if gimbal_angles is None:
-            _fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
+            fail(f"--gimbal-angles A B is required for the {sensor.gimbal.name} gimbal "
                   f"({', '.join(sensor.gimbal.angle_names)}, degrees)")
         angles = (*gimbal_angles, sensor_roll)
     pose = Pose(lat, lon, height, yaw, pitch, roll, angles)
@@ -352,19 +224,19 @@ def _cell(key: str, v) -> str:
 def _locate_files(telemetry, detections, config_path, range_opt, stop_height, out_dir, time_tolerance,
                   dem=None, budget=None, interp=None, compensate_path=None) -> None:
     if config_path is None:
-        _fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
-    rule = _stop_rule(range_opt, stop_height, dem)
-    cfg = _load_config(config_path)
+        fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
+    rule = stop_rule(range_opt, stop_height, dem)
+    cfg = load_config_or_fail(config_path)
     from .io.config import compensation_model
 
     try:
         model = compensation_model(cfg, config_path, compensate_path)
     except ConfigError as exc:
-        _fail(str(exc))
-    tel, det, issues = _read_inputs(telemetry, detections, cfg)
-    located = _locate(cfg, tel, det, rule, time_tolerance, budget, interp, model)
+        fail(str(exc))
+    tel, det, issues = read_inputs(telemetry, detections, cfg)
+    located = locate_with_config(cfg, tel, det, rule, time_tolerance, budget, interp, model)
     issues += located.issues
-    _report_issues(issues)
+    report_issues(issues)
     after = None
     if located.covariance is not None:
         from .accuracy.covariance import covariance_columns
@@ -393,25 +265,8 @@ def _locate_files(telemetry, detections, config_path, range_opt, stop_height, ou
     Console().print(f"wrote [bold]{csv_path}[/] and [bold]{geo_path}[/]")
 
 
-def _locate(cfg, tel, det, rule, time_tolerance, budget, interp, compensation=None):
-    """locate_tables with the config's sensor and time offset (unless --time-offset was given)."""
-    interp = dict(interp or {})
-    if interp.get("time_offset_s") is None:
-        interp["time_offset_s"] = cfg.telemetry.time_offset_s
-    with err_console.status("locating..."):
-        try:
-            return locate_tables(cfg.sensor(), tel, det, rule,
-                                 time_tolerance_s=time_tolerance, budget=budget, compensation=compensation,
-                                 **interp)
-        except ValueError as exc:
-            _fail(str(exc))
 
 
-def _report_issues(issues, limit: int = 15) -> None:
-    for issue in issues[:limit]:
-        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
-    if len(issues) > limit:
-        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
 
 
 def _summary(rows: list[dict], counts: dict[str, int], limit: int = 12) -> None:
@@ -465,12 +320,12 @@ def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid,
               out_dir) -> None:
     height = target_height
     if (height is None) == (not dem_paths):
-        _fail("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
-    surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
-    cfg = _load_config(config_path)
+        fail("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
+    surface = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
+    cfg = load_config_or_fail(config_path)
     sensor = cfg.sensor()
-    tel, _, issues = _read_inputs(telemetry, None, cfg)
-    _report_issues(issues)
+    tel, _, issues = read_inputs(telemetry, None, cfg)
+    report_issues(issues)
     rows, prints = footprint_rows(sensor, tel, surface, edge_samples)
     out = Path(out_dir)
     geo = write_footprints_geojson(out / "footprints.geojson", prints, rows)
@@ -549,14 +404,14 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
     scn, n, seed = _scenario_from(config_path, scenario, samples, seed)
     total = n + (len(scn.budget) * sensitivity_samples if sensitivity else 0)
     try:
-        with _mapper(dask_address) as mapper, _progress() as bar:
+        with _mapper(dask_address) as mapper, progress() as bar:
             task = bar.add_task("Monte Carlo", total=total)
             result = monte_carlo(scn, n, seed=seed, progress=lambda k: bar.advance(task, k), keep_samples=plots,
                                  mapper=mapper)
             rows_s = run_sensitivity(scn, sensitivity_samples, seed=seed, progress=lambda k: bar.advance(task, k),
                                      mapper=mapper) if sensitivity else []
     except ValueError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     console = Console()
     console.print(f"[bold]{scn.name}[/]: {n:,} samples, seed {seed}, stop rule {scn.rule.describe()}; budget: "
                   + ", ".join(f"{s.name} {s.describe()}" for s in scn.budget))
@@ -608,7 +463,7 @@ def _scenario_from(config_path, scenario, samples, seed, default_n=None):
     from .io.config import accuracy_scenario
 
     if (config_path is None) == (scenario is None):
-        _fail("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")
+        fail("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")
     if scenario is not None:
         n = samples or default_n or (1_000_000 if scenario == "s13" else 5000)
         return SCENARIOS[scenario](), n, (0 if seed is None else seed)
@@ -616,7 +471,7 @@ def _scenario_from(config_path, scenario, samples, seed, default_n=None):
         cfg = load_config(config_path)
         scn = accuracy_scenario(cfg, config_path)
     except ConfigError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     return scn, samples or default_n or cfg.accuracy.samples, (cfg.accuracy.seed if seed is None else seed)
 
 
@@ -631,11 +486,6 @@ def _mapper(address):
     return dask_mapper(address)
 
 
-def _progress():
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                    console=err_console, transient=True)
 
 
 SWEEP_HELP = """Accuracy against the pointing angle and the terrain relief, ellipsoid vs DEM ([Q] Fig. 10).
@@ -690,12 +540,12 @@ def sweep(config_path, scenario, angle, angles, terrain_sigmas, samples, seed, d
     scn, n, seed = _scenario_from(config_path, scenario, samples, seed, default_n=5000)
     methods = ("ellipsoid", "dem")
     try:
-        with _mapper(dask_address) as mapper, _progress() as bar:
+        with _mapper(dask_address) as mapper, progress() as bar:
             task = bar.add_task("sweep points", total=len(angle_list) * len(sigma_list) * len(methods))
             points = terrain_sweep(scn, angle_list, sigma_list, angle=angle, n=n, seed=seed, methods=methods,
                                    mapper=mapper, progress=lambda k: bar.advance(task, k))
     except ValueError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     table = RichTable(title=f"{scn.name}: CEP50 (m), {n:,} samples per point; ellipsoid / DEM")
     table.add_column(f"{angle} (deg)", justify="right")
     for s in sigma_list:

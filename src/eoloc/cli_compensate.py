@@ -12,7 +12,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table as RichTable
 
-from .cli import _fail, _load_config, _open_dem, _report_issues, dem_options, err_console, main
+from .cli_common import dem_options, err_console, fail, load_config_or_fail, main, open_dem_or_fail, report_issues
 from .io.table import TableError
 
 COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles ([P], SPEC §4.3).
@@ -46,9 +46,9 @@ def _bands(text: str) -> tuple[float, ...]:
     try:
         edges = tuple(float(x) for x in text.split(","))
     except ValueError:
-        _fail(f"--bands takes comma-separated degrees, e.g. 0,30,45,60,70,90; got {text!r}")
+        fail(f"--bands takes comma-separated degrees, e.g. 0,30,45,60,70,90; got {text!r}")
     if len(edges) < 2 or any(b <= a for a, b in itertools.pairwise(edges)):
-        _fail(f"--bands must be at least two increasing angles, got {text!r}")
+        fail(f"--bands must be at least two increasing angles, got {text!r}")
     return edges
 
 
@@ -71,13 +71,13 @@ def compensate() -> None:
 def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
     from .accuracy.calflight import InstallationErrors, calibration_flights
 
-    sensor = _load_config(config_path).sensor()
+    sensor = load_config_or_fail(config_path).sensor()
     try:
         tr = calibration_flights(sensor, n_flights=flights, looks_per_flight=looks, seed=seed)
         te = (calibration_flights(sensor, n_flights=test_flights, looks_per_flight=looks, seed=seed + 1000,
                                   first_flight=flights) if test_flights else None)
     except ValueError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     out = Path(out_dir)
     written = [_write_obs(out / "train.csv", tr.columns)]
     if te is not None:
@@ -105,17 +105,17 @@ def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, 
     from .accuracy.compensation import locate_observations
     from .io.telemetry import read_observations
 
-    sensor = _load_config(config_path).sensor()
+    sensor = load_config_or_fail(config_path).sensor()
     try:
         t = read_observations(obs_path)
     except TableError as exc:
-        _fail(str(exc))
-    _report_issues(t.issues)
+        fail(str(exc))
+    report_issues(t.issues)
     if len(t) == 0:
-        _fail(f"{obs_path}: no usable observation")
-    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+        fail(f"{obs_path}: no usable observation")
+    dem = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     if dem is not None and target_height is not None:
-        _fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
+        fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
     with err_console.status(f"locating {len(t)} observations..."):
         obs = locate_observations(sensor, t.columns, dem=dem, height_m=target_height)
     bad = np.flatnonzero(~obs.fixes.ok)
@@ -196,7 +196,7 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
             model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
                           info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
         except ValueError as exc:
-            _fail(str(exc))
+            fail(str(exc))
     n_flights = len(np.unique(g))
     print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
     print_bands(cv_b.table(edges), "held-out oblique bands (each band predicted by a model that never saw it)")
@@ -257,7 +257,7 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
     try:
         model = C.CompensationModel.load(model_path)
     except C.ModelFileError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
     pred = model.predict(obs.features)
     e0 = obs.errors_enu[:, :2]

@@ -11,16 +11,16 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table as RichTable
 
-from .cli import (
+from .cli_common import (
     CONVENTIONS,
-    _fail,
-    _load_config,
-    _open_dem,
-    _read_inputs,
-    _report_issues,
     dem_options,
     err_console,
+    fail,
+    load_config_or_fail,
     main,
+    open_dem_or_fail,
+    read_inputs,
+    report_issues,
     target_height_option,
 )
 from .io.telemetry import telemetry_pose
@@ -49,7 +49,7 @@ def _read_image(path: str) -> np.ndarray:
             with rasterio.open(path) as ds:
                 return ds.read()
     except RasterioIOError as exc:
-        _fail(f"image {path!r} cannot be read (GDAL reads PNG, JPEG, TIFF, ...): {exc}")
+        fail(f"image {path!r} cannot be read (GDAL reads PNG, JPEG, TIFF, ...): {exc}")
 
 
 @main.command(help=RECTIFY_HELP + CONVENTIONS)
@@ -80,36 +80,36 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
     from .io.export import write_csv
 
     if (height is None) == (not dem_paths):
-        _fail("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
+        fail("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
     if (frame is None) == (time_s is None):
-        _fail("choose the frame's telemetry record: --frame N or --time T")
-    cfg = _load_config(config_path)
+        fail("choose the frame's telemetry record: --frame N or --time T")
+    cfg = load_config_or_fail(config_path)
     sensor = cfg.sensor()
-    tel, _, issues = _read_inputs(telemetry, None, cfg)
-    _report_issues(issues)
+    tel, _, issues = read_inputs(telemetry, None, cfg)
+    report_issues(issues)
     if frame is not None:
         hit = np.flatnonzero(tel.columns["frame"] == frame)
         if hit.size == 0:
-            _fail(f"{telemetry}: no record of frame {frame}")
+            fail(f"{telemetry}: no record of frame {frame}")
         k = int(hit[0])
     else:
         dt = np.abs(tel.columns["time_s"] - time_s)
         if not np.isfinite(dt).any():
-            _fail(f"{telemetry}: no time_s column to find --time in")
+            fail(f"{telemetry}: no time_s column to find --time in")
         k = int(np.nanargmin(dt))
         t0, t1 = float(np.nanmin(tel.columns["time_s"])), float(np.nanmax(tel.columns["time_s"]))
         if not t0 - 0.5 <= time_s <= t1 + 0.5:  # the nearest record would be a pose from another moment
-            _fail(f"--time {time_s:g} s is outside the telemetry of {telemetry} ({t0:g} to {t1:g} s): give a time "
+            fail(f"--time {time_s:g} s is outside the telemetry of {telemetry} ({t0:g} to {t1:g} s): give a time "
                   "inside it (or --frame N)")
     pose = telemetry_pose(tel, k)
-    surface = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
+    surface = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else height
     img = _read_image(image)
     with err_console.status("rectifying..."):
         try:
             ortho = R.orthorectify(img, sensor, pose, surface, crs=crs, gsd_m=gsd, resampling=resampling,
                                    nodata=nodata, occlusion=occlusion)
         except ValueError as exc:
-            _fail(f"{image}: {exc}")
+            fail(f"{image}: {exc}")
         grid = R.ground_grid(sensor, pose, surface, step_px=grid_step)
         ok = grid.fixes.ok.ravel()
         px = np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]

@@ -11,19 +11,19 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
 
-from .cli import (
+from .cli_common import (
     CONVENTIONS,
-    _fail,
-    _load_config,
-    _locate,
-    _open_dem,
-    _progress,
-    _read_inputs,
-    _report_issues,
-    _stop_rule,
     dem_options,
     err_console,
+    fail,
+    load_config_or_fail,
+    locate_with_config,
     main,
+    open_dem_or_fail,
+    progress,
+    read_inputs,
+    report_issues,
+    stop_rule,
     target_height_option,
 )
 from .io.export import fix_rows, write_csv, write_feature_collection, write_geojson
@@ -59,20 +59,20 @@ def _located(telemetry, detections, config_path, range_opt, target_height, dem_p
              time_tolerance, interpolate, max_gap, time_offset, *, covariance: bool):
     """Locate every detection: (config, located, detections table). With ``covariance`` and an
     [accuracy.budget] in the config, each fix carries its covariance."""
-    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
-    rule = _stop_rule(range_opt, target_height, dem)
-    cfg = _load_config(config_path)
-    tel, det, issues = _read_inputs(telemetry, detections, cfg)
+    dem = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+    rule = stop_rule(range_opt, target_height, dem)
+    cfg = load_config_or_fail(config_path)
+    tel, det, issues = read_inputs(telemetry, detections, cfg)
     budget = None
     if covariance and cfg.accuracy is not None:
         from .io.config import error_budget
 
         budget = error_budget(cfg, config_path)
-    located = _locate(cfg, tel, det, rule, time_tolerance, budget,
+    located = locate_with_config(cfg, tel, det, rule, time_tolerance, budget,
                       dict(interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset))
-    _report_issues(issues + located.issues)
+    report_issues(issues + located.issues)
     if not located.fixes.ok.any():
-        _fail(f"none of the {len(located.fixes)} detections could be located (see the warnings above); "
+        fail(f"none of the {len(located.fixes)} detections could be located (see the warnings above); "
               "check the stop rule (--range needs range_m in the files, else give --range R or --target-height H)")
     return cfg, located, det
 
@@ -117,7 +117,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
                                  geoid, dem_crs, time_tolerance, interpolate, max_gap, time_offset, covariance=True)
     t = np.asarray(located.extra["time_s"], dtype=np.float64)
     if not np.isfinite(t[located.fixes.ok]).all():
-        _fail("tracking needs time_s in the detections file (frame numbers alone give no time)")
+        fail("tracking needs time_s in the detections file (frame numbers alone give no time)")
     cov = None if located.covariance is None else located.covariance.cov_enu
     ids = np.asarray(located.extra["target_id"]).astype(str)
     out = Path(out_dir)
@@ -126,7 +126,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
         return
     from .sequence.track import TrackerConfig, track_features, track_fixes
 
-    with _progress() as bar:
+    with progress() as bar:
         task = bar.add_task("tracking", total=None)
         ts = track_fixes(t, located.fixes, cov, None if associate else ids, associate=associate,
                          config=TrackerConfig(accel_psd=accel_psd, meas_sigma_m=meas_sigma, max_coast_s=max_coast),
@@ -264,11 +264,11 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
     from .io.telemetry import match_detections, telemetry_pose
     from .rules.multiview import triangulate as tri
 
-    cfg = _load_config(config_path)
+    cfg = load_config_or_fail(config_path)
     sensor = cfg.sensor()
-    tel, det, issues = _read_inputs(telemetry, detections, cfg)
+    tel, det, issues = read_inputs(telemetry, detections, cfg)
     matched = match_detections(tel, det, time_tolerance_s=time_tolerance)
-    _report_issues(issues + matched.issues)
+    report_issues(issues + matched.issues)
     has = matched.record >= 0
     pose = telemetry_pose(tel, np.where(has, matched.record, 0))
     rays = sensor.rays(pose, (det.columns["u_px"], det.columns["v_px"]))
@@ -346,11 +346,11 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
     bad = [g for g in groups if g not in GROUPS]
     if bad or not groups:
-        _fail(f"--estimate: unknown {bad or groups}; choose from {', '.join(GROUPS)}")
-    cfg = _load_config(config_path)
+        fail(f"--estimate: unknown {bad or groups}; choose from {', '.join(GROUPS)}")
+    cfg = load_config_or_fail(config_path)
     sensor = cfg.sensor()
     # the raw telemetry: the config's heading bias is the starting value, not a correction here
-    tel, obs, issues = _read_inputs(telemetry, gcps, cfg.model_copy(update={"telemetry": type(cfg.telemetry)()}),
+    tel, obs, issues = read_inputs(telemetry, gcps, cfg.model_copy(update={"telemetry": type(cfg.telemetry)()}),
                                     reader=read_gcps)
     hb0, dt0 = cfg.telemetry.heading_bias_deg, cfg.telemetry.time_offset_s
     kw = {}
@@ -358,14 +358,14 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
     if interpolate or "time" in groups:
         tt, to = tel.columns["time_s"], obs.columns["time_s"]
         if not (np.isfinite(tt).any() and np.isfinite(to).all()):
-            _fail("interpolation / the time offset needs time_s in both the telemetry and the GCP file")
+            fail("interpolation / the time offset needs time_s in both the telemetry and the GCP file")
         kw = {"telemetry": TelemetryTrack(tt, telemetry_pose(tel), max_gap), "time_s": to}
     else:
         m = match_detections(tel, obs, time_tolerance_s=time_tolerance)
         issues += m.issues
         keep = m.record >= 0
         kw = {"pose": telemetry_pose(tel, m.record[keep])}
-    _report_issues(issues)
+    report_issues(issues)
     c = obs.columns
     uv = np.c_[c["u_px"], c["v_px"]][keep]
     llh = np.c_[c["lat_deg"], c["lon_deg"], c["h_m"]][keep]
@@ -374,7 +374,7 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
             cal = solve(sensor, uv, llh, estimate=groups, pixel_sigma_px=pixel_sigma, heading_bias_deg=hb0,
                         time_offset_s=dt0, robust=robust, **kw)
     except ValueError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     _print_calibration(cal, sensor, hb0, dt0)
     gid = np.asarray(c["gcp_id"])[keep]
     lines = np.asarray(obs.line)[keep]
@@ -394,7 +394,7 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
     # JSON has no NaN or Infinity: an unknown sigma or correlation is null
     js.write_text(json.dumps(_json_safe(report), indent=1, allow_nan=False) + "\n", encoding="utf-8")
     if write_back and cal.undetermined:
-        _fail(f"not writing {config_path}: these observations do not determine {', '.join(cal.undetermined)} "
+        fail(f"not writing {config_path}: these observations do not determine {', '.join(cal.undetermined)} "
               f"(see {js}); add GCPs seen from other attitudes or look directions, or leave them out of --estimate")
     if write_back:
         from .io.config import ConfigError, write_calibration
@@ -407,7 +407,7 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
                               heading_bias_deg=cal.heading_bias_deg if "heading" in groups else None,
                               time_offset_s=cal.time_offset_s if "time" in groups else None)
         except ConfigError as exc:
-            _fail(str(exc))
+            fail(str(exc))
         Console().print(f"updated [bold]{config_path}[/]")
     Console().print(f"wrote [bold]{js}[/] and [bold]{csv_path}[/]")
 

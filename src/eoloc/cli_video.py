@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
 
-from .cli import _fail, _load_config, _open_dem, _report_issues, dem_options, err_console, main
+from .cli_common import dem_options, err_console, fail, load_config_or_fail, main, open_dem_or_fail, report_issues
 from .io.export import fix_rows, write_csv, write_feature_collection, write_geojson
 
 KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV data stream), check it,
@@ -57,13 +57,13 @@ when sent, else MSL (15, 25) + EGM96 undulation. A tag missing from a packet kee
 def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, make_map, tiles, write_klv,
         footprint_every) -> None:
     console = Console()
-    dem = _open_dem(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+    dem = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
     sensor, budget = None, None
     if config_path:
         from .accuracy.budget import ErrorBudget
         from .misb import misb_sensor
 
-        cfg = _load_config(config_path)
+        cfg = load_config_or_fail(config_path)
         inst = cfg.installation
         sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
         budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
@@ -82,10 +82,10 @@ def klv_job(path, out: Path, *, console: Console, dem=None, sensor=None, budget=
     try:
         stream = read_klv(path)
     except KLVError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     _print_packets(console, stream)
     if not stream.packets:
-        _fail(f"{path}: no packet could be decoded, so there is nothing to locate")
+        fail(f"{path}: no packet could be decoded, so there is nothing to locate")
     sensor = sensor or misb_sensor()
     tel = klv_telemetry(stream)
     c = tel.columns
@@ -103,7 +103,7 @@ def klv_job(path, out: Path, *, console: Console, dem=None, sensor=None, budget=
                       "plane through the frame centre, or a coarser terrain model): far corners of an oblique view "
                       "differ by the terrain, not the pointing. Leave out --dem to compare the pointing alone.[/]")
     det = vmti_detections(stream)
-    _report_issues(det.issues)
+    report_issues(det.issues)
     written = [write_csv(out / "telemetry.csv", _table_rows(tel)),
                write_csv(out / "frames.csv", _frame_rows(tel, check))]
     prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
@@ -152,7 +152,7 @@ def klv_job(path, out: Path, *, console: Console, dem=None, sensor=None, budget=
 
 def _print_packets(console: Console, stream) -> None:
     console.print(escape(stream.summary()))
-    _report_issues([str(i) for i in stream.issues])
+    report_issues([str(i) for i in stream.issues])
     for w in stream.field_warnings:
         err_console.print(f"[yellow]note:[/] {escape(w)}", highlight=False)
 
@@ -252,13 +252,13 @@ def map_command(telemetry, fixes, footprints, tracks, dem_paths, tiles, output, 
         try:
             aircraft = [aircraft_feature(read_telemetry(telemetry))]
         except TableError as exc:
-            _fail(str(exc))
-    dem = _open_dem(dem_paths, "egm96", None, None) if dem_paths else None
+            fail(str(exc))
+    dem = open_dem_or_fail(dem_paths, "egm96", None, None) if dem_paths else None
     try:
         path = write_map(output, aircraft=aircraft, targets=_features(fixes), footprints=_features(footprints),
                          tracks=_features(tracks), dem=dem, tiles=tiles, title=title)
     except ValueError as exc:
-        _fail(f"{exc}: give --telemetry, --fixes, --footprints or --tracks files that have located points")
+        fail(f"{exc}: give --telemetry, --fixes, --footprints or --tracks files that have located points")
     Console().print(f"wrote [bold]{path}[/]")
 
 
@@ -268,8 +268,8 @@ def _features(paths) -> list[dict]:
         try:
             doc = json.loads(Path(p).read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:
-            _fail(f"{p}: not a readable GeoJSON file ({exc})")
+            fail(f"{p}: not a readable GeoJSON file ({exc})")
         if doc.get("type") != "FeatureCollection":
-            _fail(f"{p}: expected a GeoJSON FeatureCollection, found type {doc.get('type')!r}")
+            fail(f"{p}: expected a GeoJSON FeatureCollection, found type {doc.get('type')!r}")
         feats += doc["features"]
     return feats
