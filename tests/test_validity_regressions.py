@@ -226,7 +226,8 @@ def test_case6_void_passed_above_the_highest_post_is_no_void():
     for backend in eoloc.available_backends():
         with eoloc.use_backend(backend):
             got[backend] = int(eoloc.locate_dem(SENSOR, pose, voided).status)
-    assert len(set(got.values())) == 1 and Status.DEM_VOID not in got.values(), got
+    # the ray clears the voids by 1-7 m, then meets the 300 m post in the west: a hit on both
+    assert set(got.values()) == {Status.OK}, got
 
 
 # ---------------------------------------------------------------- 7. triangulation, degenerate

@@ -496,15 +496,14 @@ def _m3_domain(ox, oy, oz, dx, dy, dz, ht):
 
 def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     """M3, the certified fast path -> (lat, lon, h, range, status), status UNDECIDED where it
-    cannot prove its answer (then :func:`ellipsoid_exact` decides).
+    cannot prove its answer.
 
     Geodetic height along a straight line, g(t) = h(o + t d) - ht, is convex (the signed distance
     to a convex body; normals do not cross within 6 000 km of the surface). So a crossing where g
-    falls (g'(t) < 0) is the first one, and the camera is above the surface. The inflated
-    ellipsoids (a + H, b + H) at H = ht -/+ pad enclose the surface: the camera inside the inner
-    one is certainly below it; a ray that never enters the outer one ahead certainly misses.
-    Otherwise one Newton step from [Q]'s inflated-ellipsoid root, and the answer is certified
-    when the point is within 1 µm of the surface and g clearly falls there.
+    falls (g'(t) < 0) is the first one, and the camera is above the surface. One Newton step from
+    [Q]'s inflated-ellipsoid root, and the answer is certified when the point is within 1 µm of
+    the surface and g clearly falls there; every other valid ray is UNDECIDED, for
+    :func:`ellipsoid_classify` (misses, cameras below) and then :func:`ellipsoid_exact`.
     """
     # the products every quadric below shares (numpy: each is one pass over the arrays)
     dd_xy = dx * dx + dy * dy
@@ -561,12 +560,11 @@ def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     (OK, within SURFACE_TOL_M) or where g stops falling with the ray still above it (a true miss,
     near-tangent rays included). The camera on or below the surface: BELOW_SURFACE."""
     valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
-    h0, s0, sl, cl = _height_slope(ox, oy, oz, dx, dy, dz, a, b, e2, ep2, 2)
+    _, _, _, h0 = _bowring(ox, oy, oz, a, b, e2, ep2, 2)  # the camera's own height
     pad = 1.0e-3 + _PAD_REL * np.abs(ht)
     o1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
     t = _pick(o1 > 0.0, o1, 0.0)
     state = _pick(h0 - ht <= _EXACT_TOL_M, BELOW_SURFACE, UNDECIDED)  # on (to 1 µm) or below
-    h = h0
     for _ in range(_EXACT_STEPS):
         h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
         g = h - ht

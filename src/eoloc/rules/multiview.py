@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
-from ..result import Status
+from ..result import Fixes, Status
 from ..sensor.model import Rays
 
 DEGENERATE_ANGLE_DEG = 0.01  # rays closer to parallel than this do not determine a point
@@ -136,8 +136,6 @@ class MultiView:
 
     def stop(self, rays: Rays, ell=None, errors=None):
         """The point as a one-element Fixes (range from the first ray's camera; NaN unless OK)."""
-        from ..result import Fixes
-
         r = self.intersect(rays)
         o = np.array([np.ravel(rays.ox)[0], np.ravel(rays.oy)[0], np.ravel(rays.oz)[0]])
         rng = float(np.linalg.norm(r.p_ecef - o)) if r.ok else float("nan")
