@@ -10,7 +10,8 @@ import pytest
 
 import eoloc
 from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy
-from eoloc.footprint import border_pixels, footprints, write_footprints_geojson
+from eoloc.footprint import border_pixels, footprint_features, footprints
+from eoloc.io.writers import write_layer
 
 SENSOR = SensorModel(Camera.from_hfov(60.0, 640, 480))
 GEOD = pyproj.Geod(ellps="WGS84")
@@ -84,7 +85,8 @@ def test_several_frames_and_geojson(tmp_path):
     pose = Pose(np.array([40.0, 40.01, np.nan]), 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, np.array([-90.0, -2.0, -90.0])))
     prints = footprints(SENSOR, pose, 0.0, edge_samples=4)
     assert [p.status for p in prints] == [Status.OK, Status.OK, Status.INVALID_INPUT]
-    path = write_footprints_geojson(tmp_path / "fp.geojson", prints, [{"frame": k} for k in range(3)])
+    feats = footprint_features(prints, [{"frame": k} for k in range(3)])
+    (path,) = write_layer(tmp_path, "fp", [f["properties"] for f in feats], ["geojson"], features=feats)
     doc = json.loads(path.read_text())
     f0, f1, f2 = doc["features"]
     ring = np.array(f0["geometry"]["coordinates"][0])

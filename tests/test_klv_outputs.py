@@ -66,11 +66,26 @@ def test_kml_has_every_layer_with_msl_heights(run):
 
 
 def test_cot_events_carry_the_fix_and_its_one_sigma_errors(run):
+    """A TAK data package: MANIFEST/manifest.xml lists one <uid>/<uid>.cot entry per OK fix; each
+    entry is one standalone <event> document (TAK ingests no <events> wrapper) whose time is the
+    fix's own UTC time from the stream, not the time of writing."""
+    import zipfile
+
     out, _, rows = run
-    events = ET.parse(out / "fixes.cot.xml").getroot().findall("event")
+    with zipfile.ZipFile(out / "fixes.cot.zip") as zf:
+        manifest = ET.fromstring(zf.read("MANIFEST/manifest.xml"))
+        entries = [c.get("zipEntry") for c in manifest.iter("Content")]
+        events = [ET.fromstring(zf.read(e)) for e in entries]
+    assert manifest.tag == "MissionPackageManifest" and manifest.get("version") == "2"
     ok = [r for r in rows if r["status"] == "OK"]
-    assert len(events) == len(ok)
+    assert len(events) == len(ok) == len(set(entries))
+    assert all(ev.tag == "event" and e == f"{ev.get('uid')}/{ev.get('uid')}.cot" for ev, e in zip(events, entries,
+                                                                                                   strict=True))
     for ev, r in zip(events, ok, strict=True):
+        assert ev.get("time") == r["time_utc"] and r["time_utc"].endswith("Z")
+        assert float(r["time_s"]) == pytest.approx(
+            __import__("datetime").datetime.fromisoformat(r["time_utc"].replace("Z", "+00:00")).timestamp(),
+            abs=1e-3)
         p = ev.find("point")
         assert float(p.get("lat")) == pytest.approx(float(r["lat_deg"]), abs=1e-8)
         assert float(p.get("hae")) == pytest.approx(float(r["h_m"]), abs=0.01)

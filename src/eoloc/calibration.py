@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from . import geodesy
+from .errors import InputError
 from .rules import locate_ellipsoid
 from .sensor.model import Pose, SensorModel
 from .sequence.interp import interpolate_poses
@@ -121,16 +122,16 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     """
     bad = [e for e in estimate if e not in GROUPS]
     if bad or not estimate:
-        raise ValueError(f"estimate: unknown or no parameters {bad or estimate!r}; choose from {sorted(GROUPS)}")
+        raise InputError(f"estimate: unknown or no parameters {bad or estimate!r}; choose from {sorted(GROUPS)}")
     if "time" in estimate and (telemetry is None or time_s is None):
-        raise ValueError("estimating the time offset needs the telemetry records (telemetry=) and the "
+        raise InputError("estimating the time offset needs the telemetry records (telemetry=) and the "
                          "observations' video times (time_s=)")
     if (pose is None) == (telemetry is None):
-        raise ValueError("give the observations' poses either as pose= or as telemetry= with time_s=")
+        raise InputError("give the observations' poses either as pose= or as telemetry= with time_s=")
     if telemetry is not None and time_s is None:
-        raise ValueError("telemetry= needs the observations' video times (time_s=)")
+        raise InputError("telemetry= needs the observations' video times (time_s=)")
     if not pixel_sigma_px > 0:
-        raise ValueError(f"pixel_sigma_px must be > 0, got {pixel_sigma_px!r}")
+        raise InputError(f"pixel_sigma_px must be > 0, got {pixel_sigma_px!r}")
     uv = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
     llh = np.asarray(gcp_lat_lon_h, dtype=np.float64).reshape(-1, 3)
     if llh.shape[0] != uv.shape[0]:
@@ -152,7 +153,7 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     used = np.all(np.isfinite(r0), -1) & np.all(np.isfinite(uv), -1) & np.all(np.isfinite(llh), -1)
     m, p = 2 * int(used.sum()), len(names)
     if m <= p:
-        raise ValueError(f"{int(used.sum())} usable GCP observations give {m} equations for {p} parameters: "
+        raise InputError(f"{int(used.sum())} usable GCP observations give {m} equations for {p} parameters: "
                          "observe more GCPs (at least one more than half the parameter count)")
 
     def fun(x):

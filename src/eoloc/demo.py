@@ -13,8 +13,9 @@ from rich.table import Table as RichTable
 from .accuracy.covariance import covariance_columns
 from .geodesy import horizontal_distance_m
 from .io.config import error_budget, load_config
-from .io.export import fix_rows, write_csv, write_geojson
+from .io.export import fix_rows
 from .io.telemetry import read_detections, read_telemetry
+from .io.writers import write_layer
 from .pipeline import RANGE_FROM_FILES, locate_tables
 from .rules import AtHeight, OnDEM, locate_range
 from .sensor import AzElGimbal, Camera, Pose, SensorModel
@@ -102,7 +103,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
         extra = dict(located.extra, error_vs_truth_m=err)
         after = covariance_columns(located.covariance, located.fixes.ok) if located.covariance is not None else None
         rows = fix_rows(located.fixes, extra, after)
-        written += [write_csv(out_dir / f"{name}.csv", rows), write_geojson(out_dir / f"{name}.geojson", rows)]
+        written += write_layer(out_dir, name, rows)
     console.print("wrote " + ", ".join(str(p) for p in written))
     run_mountain_demo(out_dir, console=console, data=data / "mountain")
     run_klv_demo(out_dir / "klv", console=console, data=data / "mountain")
@@ -116,7 +117,7 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor) -> None:
     from .accuracy import compensation as C
     from .accuracy.calflight import calibration_flights
     from .accuracy.plots import plot_compensation
-    from .cli_compensate import print_bands
+    from .render import print_bands
 
     console.rule("Large oblique angles: learned error compensation ([P]; eoloc compensate)")
     tr = calibration_flights(sensor, n_flights=6, looks_per_flight=300, seed=0)
@@ -132,7 +133,7 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor) -> None:
     console.print(f"{len(tr)} calibration looks on 6 flights (heights 1-4.5 km, oblique 0-78°) train the physical "
                   f"model; {len(te)} looks on 3 other flights test it ({int((~pred.applied).sum())} outside the "
                   "trained range flagged, left as located):")
-    print_bands(rows, "held-out flights, located on the station DEM: CEP50 by oblique band")
+    print_bands(rows, "held-out flights, located on the station DEM: CEP50 by oblique band", console)
     png = plot_compensation(o_te.features.oblique_deg, before, {"compensated": after}, rows,
                             out_dir / "compensation.png", title="held-out flights, before and after compensation")
     console.print(f"wrote {out_dir / 'compensation.json'} and {png}")
@@ -201,7 +202,7 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
 def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """M4 over real terrain (SRTM, Longs Peak): every detection on the DEM, against the truth and
     against what the ellipsoid at one height would give; footprints on the DEM."""
-    from .footprint import footprints, write_footprints_geojson
+    from .footprint import footprint_features, footprints
     from .io.telemetry import telemetry_pose
     from .terrain import open_dem
 
@@ -241,9 +242,9 @@ def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     prints = footprints(sensor, telemetry_pose(tel, every), dem, edge_samples=12)
     clipped = sum(bool(p.clipped.any()) for p in prints)
     rows = fix_rows(m4.fixes, dict(m4.extra, error_vs_truth_m=errors["dem"]))
-    written = [write_csv(out_dir / "fixes_dem.csv", rows), write_geojson(out_dir / "fixes_dem.geojson", rows),
-               write_footprints_geojson(out_dir / "footprints_dem.geojson", prints,
-                                        [{"time_s": float(tel.columns["time_s"][i])} for i in every])]
+    feats = footprint_features(prints, [{"time_s": float(tel.columns["time_s"][i])} for i in every])
+    written = [*write_layer(out_dir, "fixes_dem", rows),
+               *write_layer(out_dir, "footprints_dem", [f["properties"] for f in feats], ["geojson"], features=feats)]
     console.print(f"{len(prints)} frame footprints on the DEM, {clipped} clipped where the image sees past the "
                   "DEM's edge (the outline stops at the edge instead of guessing)")
     console.print("wrote " + ", ".join(str(p) for p in written))
@@ -254,14 +255,18 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     corrupted on purpose): decoded, checked against the encoder's frame centres, targets located on
     the DEM and compared with the survey, and written as CSV, GeoJSON, KML, CoT and an HTML map."""
     from .accuracy.budget import ErrorBudget
-    from .cli_video import klv_job
+    from .jobs.klv import klv_job, write_klv_products
+    from .render import print_klv_job
     from .terrain import open_dem
 
     console.rule("KLV in: MISB ST 0601 + ST 0903 VMTI -> fixes, footprints, map (eoloc klv)")
     dem = open_dem(data / "longs_peak_srtmgl3.tif")
     budget = ErrorBudget.from_mapping(load_config(data / "klv.toml").accuracy.budget)
-    job = klv_job(data / "flight.klv", out_dir, console=console, dem=dem, budget=budget)
-    v = job["fixes"]
+    job = klv_job(data / "flight.klv", dem=dem, budget=budget)
+    print_klv_job(job, console, console)
+    written, _ = write_klv_products(job, out_dir)
+    console.print("wrote " + ", ".join(str(p) for p in written))
+    v = job.vmti
     truth = _read_truth(data / "truth.csv")
     with (data / "vmti_targets.csv").open() as fh:
         names = {r["vmti_target_id"]: r["target_id"] for r in csv.DictReader(fh)}
@@ -273,4 +278,4 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
                                ids[known], err[known]))
     console.print("[dim]Same flight as the CSV run above, through the KLV path: heading sent with 0.0055° steps "
                   "(tag 5), heights as MSL (tag 15, back to ellipsoidal through EGM96), pixels as whole VMTI "
-                  "pixels. Open out/demo/klv/map.html in a browser (it works offline).[/]")
+                  f"pixels. Open {out_dir / 'map.html'} in a browser (it works offline).[/]")

@@ -8,7 +8,12 @@ from __future__ import annotations
 
 
 class EolocError(ValueError):
-    """Base of eoloc's user-facing errors."""
+    """Base of eoloc's user-facing errors. ``issues``: the per-line problems that explain it (the
+    bad lines of a file none of whose lines could be used), shown before the message."""
+
+    def __init__(self, message: str, issues=()) -> None:
+        super().__init__(message)
+        self.issues = list(issues)
 
 
 class ConfigError(EolocError):
@@ -29,3 +34,9 @@ class KLVError(EolocError):
 
 class ModelFileError(EolocError):
     """A compensation model file cannot be used (wrong format, version or feature set)."""
+
+
+class InputError(EolocError):
+    """The inputs are readable but cannot give what was asked (too few usable observations, a time
+    outside the telemetry, a frame that sees no ground, a scenario no target of which can be
+    located): the message says what is missing and how to supply it."""

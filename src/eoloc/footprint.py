@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from .errors import InputError
 from .result import Fixes, Status
 from .rules import surface_rule
 from .sensor.model import Pose, SensorModel
@@ -93,7 +93,7 @@ def polygon_geometry(lon_deg, lat_deg, h_m) -> dict:
 def border_pixels(camera, edge_samples: int) -> np.ndarray:
     """(4 * edge_samples, 2) points on the image's outer border, clockwise from the top-left corner."""
     if edge_samples < 1:
-        raise ValueError(f"edge_samples must be >= 1, got {edge_samples}")
+        raise InputError(f"edge_samples must be >= 1, got {edge_samples}")
     corners = camera.corners_px()
     s = np.arange(edge_samples)[:, None] / edge_samples
     return np.vstack([corners[k] + s * (corners[(k + 1) % 4] - corners[k]) for k in range(4)])
@@ -189,9 +189,9 @@ def _n_frames(pose: Pose) -> int:
     return int(shape[0]) if shape else 1
 
 
-def write_footprints_geojson(path: str | Path, prints: list[Footprint], properties: list[dict] | None = None) -> Path:
-    """FeatureCollection of footprint polygons (null geometry where a frame sees no ground), with
-    status, area, vertex counts and the centre fix as properties."""
+def footprint_features(prints: list[Footprint], properties: list[dict] | None = None) -> list[dict]:
+    """GeoJSON features of footprint polygons (null geometry where a frame sees no ground), with
+    status, area, vertex counts and the centre fix as properties (written by eoloc.io.writers)."""
     features = []
     for k, fp in enumerate(prints):
         props = dict(properties[k]) if properties else {}
@@ -201,13 +201,11 @@ def write_footprints_geojson(path: str | Path, prints: list[Footprint], properti
                       "centre_lat_deg": _none(fp.centre[0]), "centre_lon_deg": _none(fp.centre[1]),
                       "centre_h_m": _none(fp.centre[2])})
         features.append({"type": "Feature", "geometry": fp.geojson_geometry(), "properties": props})
-    from .io.export import write_feature_collection
-
-    return write_feature_collection(path, features)
+    return features
 
 
 def _none(x: float) -> float | None:
     return None if np.isnan(x) else x
 
 
-__all__ = ["Footprint", "border_pixels", "footprints", "write_footprints_geojson"]
+__all__ = ["Footprint", "border_pixels", "footprint_features", "footprints"]

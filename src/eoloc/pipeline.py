@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .errors import InputError
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
 from .result import Fixes, Status, with_status
@@ -113,7 +114,7 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
     """(index of the telemetry record at or before each detection or -1, interpolated poses, issues)."""
     tt, td = tel.columns["time_s"], det.columns["time_s"]
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
-        raise ValueError("pose interpolation needs time_s in both the telemetry and the detections "
+        raise InputError("pose interpolation needs time_s in both the telemetry and the detections "
                          "(frame numbers alone give no time to interpolate at)")
     from .sequence.interp import interpolate_poses
 

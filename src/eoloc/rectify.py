@@ -27,6 +27,7 @@ import pyproj
 from numpy.typing import ArrayLike
 
 from . import geodesy
+from .errors import InputError
 from .footprint import footprints
 from .result import Fixes, Status
 from .rules import locate_dem, surface_rule
@@ -100,7 +101,7 @@ def output_crs(name: str, lat_deg: float, lon_deg: float) -> pyproj.CRS:
     try:
         return pyproj.CRS.from_user_input(name)
     except pyproj.exceptions.CRSError as exc:
-        raise ValueError(f"output CRS {name!r}: use utm, gk6, gk3 or an EPSG code / PROJ string ({exc})") from None
+        raise InputError(f"output CRS {name!r}: use utm, gk6, gk3 or an EPSG code / PROJ string ({exc})") from None
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float
     cx, cy = sensor.camera.centre_px
     f = surface_rule(surface).locate(sensor, pose, (np.array([cx, cx + 1.0, cx]), np.array([cy, cy, cy + 1.0])))
     if not f.ok.all():
-        raise ValueError("the principal point does not see the ground: give the output resolution (gsd_m)")
+        raise InputError("the principal point does not see the ground: give the output resolution (gsd_m)")
     d = geodesy.horizontal_distance_m(f.lat_deg[0], f.lon_deg[0], f.lat_deg[1:], f.lon_deg[1:])
     return float(np.mean(d))
 
@@ -183,20 +184,20 @@ def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: flo
     from scipy.ndimage import map_coordinates
 
     if resampling not in RESAMPLING:
-        raise ValueError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
+        raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
     img = _bands_first(np.asarray(image), sensor)
     prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
     if len(prints) != 1:
         raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
     fp = prints[0]
     if fp.status != Status.OK:
-        raise ValueError(f"the frame sees no ground ({fp.status.name}): nothing to rectify")
+        raise InputError(f"the frame sees no ground ({fp.status.name}): nothing to rectify")
     clat, clon = (fp.centre[0], fp.centre[1]) if np.isfinite(fp.centre[0]) else (float(np.mean(fp.lat_deg)),
                                                                                  float(np.mean(fp.lon_deg)))
     out_crs = output_crs(crs, clat, clon)
     gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, surface)
     if not gsd > 0:
-        raise ValueError(f"gsd_m must be > 0, got {gsd_m!r}")
+        raise InputError(f"gsd_m must be > 0, got {gsd_m!r}")
     to_crs = pyproj.Transformer.from_crs(_WGS84, out_crs, always_xy=True)
     if out_crs.is_geographic:
         M, N = _radii(clat)
@@ -209,7 +210,7 @@ def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: flo
     cols = math.ceil((np.max(x) - x0) / res[0])
     rows = math.ceil((y1 - np.min(y)) / res[1])
     if rows * cols > max_cells:
-        raise ValueError(f"the output would be {rows} x {cols} cells at {gsd:g} m (the footprint reaches "
+        raise InputError(f"the output would be {rows} x {cols} cells at {gsd:g} m (the footprint reaches "
                          f"{'the horizon' if fp.clipped.any() else 'far'}): give a coarser gsd_m (--gsd) or "
                          "raise max_cells")
     transform = from_origin(x0, y1, res[0], res[1])
@@ -258,7 +259,7 @@ def _bands_first(img: np.ndarray, sensor: SensorModel) -> np.ndarray:
     elif img.ndim == 3 and img.shape[1:] != (H, W) and img.shape[:2] == (H, W):
         img = np.moveaxis(img, -1, 0)
     if img.ndim != 3 or img.shape[1:] != (H, W):
-        raise ValueError(f"image of shape {img.shape} does not match the camera's {W} x {H} pixels "
+        raise InputError(f"image of shape {img.shape} does not match the camera's {W} x {H} pixels "
                          "((H, W), (bands, H, W) or (H, W, bands))")
     return img
 

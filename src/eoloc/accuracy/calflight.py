@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import geodesy
+from ..errors import InputError
 from ..sensor.gimbal import AzElGimbal
 from ..sensor.model import Pose, SensorModel
 from ..terrain.dem import DEM
@@ -105,7 +106,7 @@ def calibration_flights(sensor: SensorModel, *, n_flights: int = 8, looks_per_fl
     ``F{first_flight + i:02d}`` (so a second call with another seed and ``first_flight`` gives
     independent test flights)."""
     if sensor.gimbal.kind != AzElGimbal.kind:
-        raise ValueError("calibration_flights points an az-el turret; give the sensor an AzElGimbal")
+        raise InputError("calibration_flights points an az-el turret; give the sensor an AzElGimbal")
     errors = errors or InstallationErrors()
     noise = noise or FlightNoise()
     rng = np.random.default_rng(seed)

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
-from ..errors import ModelFileError
+from ..errors import InputError, ModelFileError
 from ..result import Fixes
 from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
@@ -382,7 +382,7 @@ def fit(features: ErrorFeatures, errors_enu: ArrayLike, *, feature_set: str = "p
     f = features.take(slice(None))
     ok = _valid(f, e)
     if ok.sum() < 20:
-        raise ValueError(f"{int(ok.sum())} usable training fixes: at least 20 are needed (more than 100 spread "
+        raise InputError(f"{int(ok.sum())} usable training fixes: at least 20 are needed (more than 100 spread "
                          "over heights, oblique angles and directions to be useful)")
     f, e = f.take(ok), e[ok]
     g = None if groups is None else np.asarray(groups)[ok]

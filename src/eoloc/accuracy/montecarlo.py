@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import geodesy
+from ..errors import InputError
 from ..result import Fixes, Status
 from ..rules import StopRule
 from ..sensor.gimbal import GimbalKind
@@ -299,11 +300,11 @@ def monte_carlo(scn: Scenario, n: int, *, seed: int = 0, chunk: int = DEFAULT_CH
     ``keep_samples`` also returns every sample (memory: 56 bytes per sample and target).
     """
     if n < 2:
-        raise ValueError(f"Monte Carlo needs n >= 2 samples, got {n}")
+        raise InputError(f"Monte Carlo needs n >= 2 samples, got {n}")
     truth = truth_fixes(scn)
     bad = np.flatnonzero(truth.status != Status.OK)
     if bad.size:
-        raise ValueError(f"scenario {scn.name}: target(s) {bad.tolist()} cannot be located even without errors "
+        raise InputError(f"scenario {scn.name}: target(s) {bad.tolist()} cannot be located even without errors "
                          f"({', '.join(Status(int(truth.status[i])).name for i in bad)}); check the pose and pixels")
     sizes = chunk_sizes(n, chunk)
     seeds = np.random.SeedSequence(seed).spawn(len(sizes))

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import geodesy
+from ..errors import InputError
 from ..rules import AtHeight, OnDEM
 from ..sensor.model import Pose
 from .budget import ErrorBudget, ErrorSource
@@ -102,10 +103,10 @@ def terrain_sweep(scn: Scenario, angles_deg: Sequence[float], terrain_sigmas_m: 
     a ``terrain_m`` source in its budget is replaced by each sigma. ``progress(1)`` after each point.
     """
     if not isinstance(scn.rule, AtHeight):  # the sweep compares this rule with a DEM: it is its subject
-        raise ValueError(f"a terrain sweep needs a scenario that stops on the ellipsoid (stop = 'height', the mean "
+        raise InputError(f"a terrain sweep needs a scenario that stops on the ellipsoid (stop = 'height', the mean "
                          f"terrain height), got stop = {scn.rule.name!r}")
     if angle not in ANGLES:
-        raise ValueError(f"angle must be one of {', '.join(ANGLES)}, got {angle!r}")
+        raise InputError(f"angle must be one of {', '.join(ANGLES)}, got {angle!r}")
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"unknown sweep method {m!r}; use {' or '.join(METHODS)}")

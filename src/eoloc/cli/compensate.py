@@ -9,13 +9,14 @@ from pathlib import Path
 
 import click
 import numpy as np
-from rich.console import Console
-from rich.table import Table as RichTable
 
-from .cli_common import dem_options, err_console, fail, load_config_or_fail, main, open_dem_or_fail, report_issues
-from .io.table import TableError
+from ..render import print_bands
+from .common import load_config, open_dem, progress
+from .main import console, err_console, fail, report_issues
+from .options import config_option, dem_options, json_option, out_option, target_height_option
 
-COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles ([P], SPEC §4.3).
+COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles (after Peng et al.'s
+error prediction and compensation at large oblique angles).
 
 \b
   eoloc compensate simulate --config CAMERA.toml --out cal/     synthetic calibration flights
@@ -52,7 +53,7 @@ def _bands(text: str) -> tuple[float, ...]:
     return edges
 
 
-@main.group(help=COMPENSATE_HELP)
+@click.group(help=COMPENSATE_HELP)
 def compensate() -> None:
     pass
 
@@ -66,34 +67,31 @@ def compensate() -> None:
               help="Independent flights for evaluate.")
 @click.option("--looks", type=click.IntRange(10, 100_000), default=400, show_default=True,
               help="Observations per flight.")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-cal", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the flights and their errors.")
+@out_option("train.csv, test.csv and dem.tif", default="eoloc-cal")
 def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
-    from .accuracy.calflight import InstallationErrors, calibration_flights
+    from ..accuracy.calflight import InstallationErrors, calibration_flights
 
-    sensor = load_config_or_fail(config_path).sensor()
-    try:
-        tr = calibration_flights(sensor, n_flights=flights, looks_per_flight=looks, seed=seed)
-        te = (calibration_flights(sensor, n_flights=test_flights, looks_per_flight=looks, seed=seed + 1000,
-                                  first_flight=flights) if test_flights else None)
-    except ValueError as exc:
-        fail(str(exc))
+    sensor = load_config(config_path).sensor()
+    tr = calibration_flights(sensor, n_flights=flights, looks_per_flight=looks, seed=seed)
+    te = (calibration_flights(sensor, n_flights=test_flights, looks_per_flight=looks, seed=seed + 1000,
+                              first_flight=flights) if test_flights else None)
     out = Path(out_dir)
     written = [_write_obs(out / "train.csv", tr.columns)]
     if te is not None:
         written.append(_write_obs(out / "test.csv", te.columns))
     written.append(tr.dem.write_geotiff(out / "dem.tif"))
     e = InstallationErrors()
-    Console().print(f"{len(tr)} training observations on {flights} flights"
+    console.print(f"{len(tr)} training observations on {flights} flights"
                     + (f", {len(te)} test observations on {test_flights} flights" if te is not None else "")
                     + f". Installation errors: gimbal bias {e.gimbal_bias_deg}°, mount {e.mount_misalignment_deg}°, "
                       f"boresight {e.boresight_misalignment_deg}°, heading bias {e.heading_bias_deg}°, time offset "
                       f"{e.time_offset_s} s, DEM bias {e.dem_bias_m} m.")
-    Console().print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
 
 
 def _write_obs(path: Path, cols: dict[str, np.ndarray]) -> Path:
-    from .io.export import plain_value, write_csv
+    from ..io.export import plain_value, write_csv
 
     names = list(cols)
     rows = [{k: plain_value(cols[k][i]) for k in names} for i in range(cols["u_px"].size)]
@@ -102,18 +100,15 @@ def _write_obs(path: Path, cols: dict[str, np.ndarray]) -> Path:
 
 def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, dem_crs):
     """(sensor, observations table, Observed) with the issues of the file reported."""
-    from .accuracy.compensation import locate_observations
-    from .io.telemetry import read_observations
+    from ..accuracy.compensation import locate_observations
+    from ..io.telemetry import read_observations
 
-    sensor = load_config_or_fail(config_path).sensor()
-    try:
-        t = read_observations(obs_path)
-    except TableError as exc:
-        fail(str(exc))
+    sensor = load_config(config_path).sensor()
+    t = read_observations(obs_path)
     report_issues(t.issues)
     if len(t) == 0:
         fail(f"{obs_path}: no usable observation")
-    dem = open_dem_or_fail(dem_paths, vertical, geoid, dem_crs) if dem_paths else None
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is not None and target_height is not None:
         fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
     with err_console.status(f"locating {len(t)} observations..."):
@@ -127,29 +122,9 @@ def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, 
 
 def stop_options(fn):
     fn = dem_options("Stop rule M4: the DEM the fixes are located on (as in operation).")(fn)
-    fn = click.option("--target-height", type=float, default=None,
-                      help="Stop rule M3: this ellipsoidal height for every point (default: each point's own "
-                           "surveyed height).")(fn)
-    return click.option("--config", "config_path", required=True, type=click.Path(dir_okay=False),
-                        help="Camera/gimbal/installation TOML.")(fn)
-
-
-def print_bands(rows, title: str) -> None:
-    t = RichTable(title=title, caption="CEP50 in metres; Δ: change against 'located'")
-    t.add_column("oblique")
-    t.add_column("n", justify="right")
-    t.add_column("located", justify="right")
-    names = list(rows[0].cep_after_m) if rows else []
-    for n in names:
-        t.add_column(n, justify="right")
-        t.add_column("Δ", justify="right")
-    for r in rows:
-        cells = [("> " if r.summary else "") + (f"{r.lo_deg:.0f}°" if r.summary else f"{r.lo_deg:.0f}–{r.hi_deg:.0f}°"),
-                 str(r.n), f"{r.cep_before_m:.2f}"]
-        for n in names:
-            cells += [f"{r.cep_after_m[n]:.2f}", f"{-100 * r.reduction(n):+.0f}%"]
-        t.add_row(*cells)
-    Console().print(t)
+    fn = target_height_option("Stop rule M3: this ellipsoidal height for every point (default: each point's own "
+                              "surveyed height).")(fn)
+    return config_option()(fn)
 
 
 @compensate.command("train", help="Fit a compensation model to calibration observations; print its "
@@ -159,24 +134,24 @@ def print_bands(rows, title: str) -> None:
 @click.argument("observations", type=click.Path(dir_okay=False))
 @stop_options
 @click.option("--features", "feature_set", type=click.Choice(["p", "p+bearing"]), default="p+bearing",
-              show_default=True, help="p: [P]'s oblique, azimuth, height; p+bearing adds the look bearing "
+              show_default=True, help="p: Peng et al.'s oblique, azimuth, height; p+bearing adds the look bearing "
                                       "relative to the heading (body-fixed errors need it).")
 @click.option("--up", is_flag=True, help="Also predict the vertical error.")
 @click.option("--per-bin", type=click.IntRange(1), default=None,
-              help="[P]'s sample selection: at most N observations per height x oblique x direction cell.")
+              help="Peng et al.'s sample selection: at most N observations per height x oblique x direction cell.")
 @click.option("--height-bins", default="0,1500,2500,3500,6000", show_default=True,
               help="With --per-bin: height-above-target bin edges (m).")
 @click.option("--bands", default="0,30,45,60,70,90", show_default=True, help=BANDS_HELP)
-@click.option("--compare/--no-compare", default=True, show_default=True,
-              help="Cross-validate the other families too (trees, the other feature set).")
+@click.option("--compare/--no-compare", default=False, show_default=True,
+              help="Also cross-validate the other families (a gradient-boosted tree ensemble, the other feature "
+                   "set): minutes instead of seconds.")
 @click.option("-o", "--model", "model_path", type=click.Path(dir_okay=False), default="compensation.json",
               show_default=True, help="Model file to write.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
-              help="Folder for the PNG and the cross-validation CSV.")
+@out_option("the PNG and the cross-validation CSV")
 def train(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, feature_set, up, per_bin,
           height_bins, bands, compare, model_path, out_dir) -> None:
-    from .accuracy import compensation as C
-    from .accuracy.plots import plot_compensation
+    from ..accuracy import compensation as C
+    from ..accuracy.plots import plot_compensation
 
     edges = _bands(bands)
     _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
@@ -184,19 +159,20 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
     if per_bin is not None:
         sel, counts = C.select_bins(obs.features.take(keep), height_edges=[float(x) for x in height_bins.split(",")],
                                     oblique_edges=edges, per_cell=per_bin)
-        Console().print(f"sample selection: {sel.size} of {keep.size} observations, at most {per_bin} per cell; "
+        console.print(f"sample selection: {sel.size} of {keep.size} observations, at most {per_bin} per cell; "
                         f"{int((counts == 0).sum())} of {counts.size} height × oblique × direction cells are empty")
         keep = keep[sel]
     f, e, g = obs.features.take(keep), obs.errors_enu[keep], obs.groups[keep]
     sets = ("p", "p+bearing") if compare else (feature_set,)
-    with err_console.status("cross-validating..."):
-        try:
-            cv_f = C.cross_validate(f, e, g, by="flight", feature_sets=sets, trees=compare, oblique_edges=edges)
-            cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
-            model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
-                          info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
-        except ValueError as exc:
-            fail(str(exc))
+    with progress() as bar:
+        task = bar.add_task("cross-validating", total=3)
+        cv_f = C.cross_validate(f, e, g, by="flight", feature_sets=sets, trees=compare, oblique_edges=edges)
+        bar.advance(task)
+        cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
+        bar.advance(task)
+        model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
+                      info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
+        bar.advance(task)
     n_flights = len(np.unique(g))
     print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
     print_bands(cv_b.table(edges), "held-out oblique bands (each band predicted by a model that never saw it)")
@@ -210,11 +186,11 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
     info = {"cv_by_flight": _table_dict(cv_f.table(edges)), "cv_by_band": _table_dict(cv_b.table(edges))}
     model = dataclasses.replace(model, info={**model.info, **info})
     path = model.save(model_path)
-    Console().print(f"model: physical, features {feature_set}, ridge {model.ridge:g}, "
+    console.print(f"model: physical, features {feature_set}, ridge {model.ridge:g}, "
                     f"{model.info['n_samples']} samples, "
                     f"oblique {model.oblique_range[0]:.1f}–{model.oblique_range[1]:.1f}°, height "
                     f"{model.height_range[0]:.0f}–{model.height_range[1]:.0f} m")
-    Console().print(f"wrote [bold]{path}[/], [bold]{png}[/] and [bold]{csv_path}[/]")
+    console.print(f"wrote [bold]{path}[/], [bold]{png}[/] and [bold]{csv_path}[/]")
 
 
 def _stop_label(dem_paths, target_height) -> str:
@@ -229,7 +205,7 @@ def _table_dict(rows) -> list[dict]:
 
 
 def _write_table(path: Path, rows, kinds) -> Path:
-    from .io.export import write_csv
+    from ..io.export import write_csv
 
     out = []
     for kind, r in zip(kinds, rows, strict=True):
@@ -245,26 +221,23 @@ def _write_table(path: Path, rows, kinds) -> Path:
 @click.argument("observations", type=click.Path(dir_okay=False))
 @stop_options
 @click.option("--bands", default="0,30,45,60,70,90", show_default=True, help=BANDS_HELP)
-@click.option("--json", "as_json", is_flag=True, help="Also print the band table as JSON.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-out", show_default=True,
-              help="Folder for the PNG and the per-fix CSV.")
+@json_option("Print the band table as JSON on stdout (tables go to stderr).")
+@out_option("the PNG and the per-fix CSV")
 def evaluate(model_path, observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, bands,
              as_json, out_dir) -> None:
-    from .accuracy import compensation as C
-    from .accuracy.plots import plot_compensation
+    from ..accuracy import compensation as C
+    from ..accuracy.plots import plot_compensation
 
     edges = _bands(bands)
-    try:
-        model = C.CompensationModel.load(model_path)
-    except C.ModelFileError as exc:
-        fail(str(exc))
+    model = C.CompensationModel.load(model_path)
     _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
     pred = model.predict(obs.features)
     e0 = obs.errors_enu[:, :2]
     e1 = e0 + pred.correction_enu[:, :2]
     ok = obs.fixes.ok & pred.applied
     rows = C.band_table(np.where(ok, obs.features.oblique_deg, np.nan), e0, {"compensated": e1}, edges)
-    print_bands(rows, f"{observations}: CEP50 by oblique band, before and after {model_path}")
+    print_bands(rows, f"{observations}: CEP50 by oblique band, before and after {model_path}",
+                err_console if as_json else console)
     flagged = obs.fixes.ok & ~pred.applied
     reasons = pred.reasons(obs.features, model)
     if flagged.any():
@@ -275,7 +248,7 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
     png = plot_compensation(obs.features.oblique_deg[ok], e0[ok], {"compensated": e1[ok]}, rows,
                             out / "compensation.png",
                             title=f"{Path(observations).name}: location error against oblique angle")
-    from .io.export import plain_value, write_csv
+    from ..io.export import plain_value, write_csv
 
     fx = [{"line": int(table.line[i]), "flight": table.columns["flight"][i],
            **{k: plain_value(v[i]) for k, v in obs.features.columns().items()},
@@ -287,4 +260,4 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
     csv_path = write_csv(out / "compensation_fixes.csv", fx)
     if as_json:
         click.echo(json.dumps(_table_dict(rows)))
-    Console().print(f"wrote [bold]{png}[/] and [bold]{csv_path}[/]")
+    console.print(f"wrote [bold]{png}[/] and [bold]{csv_path}[/]")

@@ -1,22 +1,14 @@
-"""What every `eoloc` command shares: the command group, the options declared once (DEM, target
-height), the conventions text, and the helpers that read inputs and turn a user's mistake into
-one line and exit code 2. The commands (cli.py, cli_*.py) import from here; nothing here imports
-a command, so the command modules form no circle."""
+"""The options every command shares, declared once: the stop rule (--range [R], --target-height,
+--dem and its datum options), the config, the output folder and formats, pose matching, Dask,
+--json; and the conventions text. A command module takes what it needs from here."""
 
 from __future__ import annotations
 
-import sys
+import math
 
 import click
-from rich.console import Console
-from rich.markup import escape
 
-from . import __version__
-from .errors import ConfigError, EolocError
-from .io.table import TableError
-from .io.telemetry import read_detections, read_telemetry
-from .pipeline import RANGE_FROM_FILES, locate_tables
-from .rules import StopRule, rule_from_options
+from ..pipeline import RANGE_FROM_FILES
 
 CONVENTIONS = """
 \b
@@ -34,21 +26,50 @@ Units and conventions (the same everywhere in eoloc):
                wherever the status is not OK
 """
 
+MINUS = "\u2212"  # a negative --range value travels as U+2212 past click's "looks like an option" test
 
-err_console = Console(stderr=True)
+
+def negative_values_kept(args: list[str], options: tuple[str, ...] = ("--range",)) -> list[str]:
+    """``--range -5`` / ``--range=-5``: click reads an optional-value option's "-5" as an option
+    ("No such option '-5'"); the value is passed on with a Unicode minus so the option's own type
+    refuses it by name."""
+    out = list(args)
+    for i, a in enumerate(out):
+        for opt in options:
+            if a.startswith(opt + "=-"):
+                out[i] = opt + "=" + MINUS + a[len(opt) + 2:]
+            elif a == opt and i + 1 < len(out) and _is_number(out[i + 1]):
+                out[i + 1] = out[i + 1].replace("-", MINUS, 1)
+    return out
 
 
-def dem_options(dem_help: str):
-    """--dem (repeatable), --vertical, --geoid and --dem-crs: the same DEM options on every command."""
-    opts = [
-        click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help=dem_help),
-        click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96",
-                     show_default=True, help="Vertical datum of the DEM heights (converted to ellipsoidal)."),
-        click.option("--geoid", type=click.Path(dir_okay=False), default=None,
-                     help="Geoid grid for --vertical (default: the bundled EGM96 15')."),
-        click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326."),
-    ]
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return text.startswith("-")
 
+
+class RangeMetres(click.ParamType):
+    """--range: a slant range in metres (> 0, finite), or no value (each target's range_m column)."""
+
+    name = "metres"
+
+    def convert(self, value, param, ctx):
+        if value == RANGE_FROM_FILES or isinstance(value, float):
+            return value
+        try:
+            r = float(str(value).replace(MINUS, "-"))
+        except ValueError:
+            self.fail(f"takes metres (e.g. --range 1200) or nothing (then range_m from the files), got {value!r}",
+                      param, ctx)
+        if not (math.isfinite(r) and r > 0):
+            self.fail(f"a slant range is a finite distance > 0 metres, got {value.replace(MINUS, '-')!r}", param, ctx)
+        return r
+
+
+def _apply(opts):
     def apply(fn):
         for o in reversed(opts):
             fn = o(fn)
@@ -57,16 +78,33 @@ def dem_options(dem_help: str):
     return apply
 
 
+def range_option(help_text: str = "Stop rule M1 (laser range): R metres along every ray, or --range alone to take "
+                                  "each target's range_m column from the files."):
+    return click.option("--range", "range_opt", type=RangeMetres(), is_flag=False, flag_value=RANGE_FROM_FILES,
+                        default=None, metavar="[R]", help=help_text)
+
+
+def dem_options(dem_help: str):
+    """--dem (repeatable), --vertical, --geoid and --dem-crs: the same DEM options on every command."""
+    return _apply([
+        click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help=dem_help),
+        click.option("--vertical", type=click.Choice(["egm96", "egm2008", "ellipsoid"]), default="egm96",
+                     show_default=True, help="Vertical datum of the DEM heights (converted to ellipsoidal)."),
+        click.option("--geoid", type=click.Path(dir_okay=False), default=None,
+                     help="Geoid grid for --vertical (default: the bundled EGM96 15')."),
+        click.option("--dem-crs", default=None, help="CRS of a DEM that carries none (ESRI ASCII), e.g. EPSG:4326."),
+    ])
+
+
 def target_height_option(help_text: str = "Stop the rays on the surface of this ellipsoidal height (m)."):
     """--target-height H, the same flag on every command where a height surface stops the rays; the
     old --height (which meant the aircraft's height in one place and the target's in another) is
     refused with a message naming the flag to use."""
-    def apply(fn):
-        fn = click.option("--target-height", "target_height", type=float, default=None, help=help_text)(fn)
-        return click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
-                            callback=_refuse_height)(fn)
-
-    return apply
+    return _apply([
+        click.option("--target-height", "target_height", type=float, default=None, metavar="H", help=help_text),
+        click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
+                     callback=_refuse_height),
+    ])
 
 
 def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
@@ -76,122 +114,78 @@ def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
                                "one observation.", ctx)
 
 
-def fail(message: str) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
-    sys.exit(2)
+def stop_rule_options(fn=None, *, dem_help: str = "Stop rule M4: DEM file(s) (GeoTIFF, DTED, SRTM .hgt/.zip, ESRI "
+                                                  "ASCII); repeat for tiles."):
+    """--range [R] | --target-height H | --dem FILE...: one of them chooses the stop rule."""
+    apply = _apply([range_option(), target_height_option("Stop rule M3: the targets' ellipsoidal height, metres."),
+                    dem_options(dem_help)])
+    return apply if fn is None else apply(fn)
 
 
-class _Main(click.Group):
-    """The command group: a user's mistake (an EolocError: a file or configuration that cannot be
-    used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
-    anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
-
-    def invoke(self, ctx: click.Context):
-        try:
-            return super().invoke(ctx)
-        except EolocError as exc:
-            fail(str(exc))
-        except OSError as exc:
-            where = f"{exc.filename}: " if exc.filename else ""
-            fail(f"{where}{exc.strerror or exc}")
-        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
-            raise
-        except Exception:
-            err_console.print("[bold red]internal error:[/] this is a bug in eoloc, not in your input. Please report "
-                              "it with the command line and the traceback below.")
-            raise
+def config_option(required: bool = True, help_text: str = "Camera/gimbal/installation TOML (see the README)."):
+    return click.option("--config", "config_path", required=required, type=click.Path(dir_okay=False),
+                        metavar="CONFIG.toml", help=help_text)
 
 
-@click.group(cls=_Main, help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n"
-             + CONVENTIONS)
-@click.version_option(__version__, prog_name="eoloc")
-def main() -> None:
-    pass
+def out_option(what: str, default: str = "eoloc-out"):
+    return click.option("--out", "out_dir", type=click.Path(file_okay=False), default=default, show_default=True,
+                        help=f"Folder for {what} (created if needed).")
 
 
-def open_dem_or_fail(paths, vertical, geoid, dem_crs):
-    from .terrain import DEMError, open_dem
+def formats_option(default=("csv", "geojson")):
+    from ..io.writers import FORMATS
 
-    try:
-        with err_console.status("reading the DEM..."):
-            return open_dem(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
-    except DEMError as exc:
-        fail(str(exc))
-
-
-def stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
-    """The command line's stop rule, parsed once into a rule object (or RANGE_FROM_FILES: M1 with
-    each target's range_m column)."""
-    if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
-        fail("choose one stop rule: --range [R] (laser slant range), --target-height H (ellipsoidal metres) "
-              "or --dem FILE (terrain)")
-    if range_opt == RANGE_FROM_FILES:
-        return RANGE_FROM_FILES
-    if range_opt is not None:
-        try:
-            range_opt = float(range_opt)
-        except ValueError:
-            fail(f"--range takes metres or nothing (then range_m from the files), got {range_opt!r}")
-    return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
+    return click.option("--format", "-f", "formats", type=click.Choice(FORMATS), multiple=True, default=default,
+                        show_default=True,
+                        help="Output format of every layer; repeat for several: csv, geojson (RFC 7946), kml "
+                             "(heights as MSL for Google Earth), cot (a TAK data package, one event per located "
+                             "point).")
 
 
-def load_config(config_path):
-    """The TOML configuration (pydantic is imported only by the commands that read one)."""
-    from .io.config import load_config as load
-
-    return load(config_path)
+def json_option(help_text: str = "Print the result as one JSON document on stdout (tables and notes go to "
+                                 "stderr)."):
+    return click.option("--json", "as_json", is_flag=True, help=help_text)
 
 
-def load_config_or_fail(config_path):
-    try:
-        return load_config(config_path)
-    except ConfigError as exc:
-        fail(str(exc))
+def pairing_options(fn):
+    """How a detection finds its pose: the nearest record within --time-tolerance, or --interpolate."""
+    return _apply([
+        click.option("--time-tolerance", type=click.FloatRange(0.0), default=0.02, show_default=True,
+                     help="Max |Δt| (s) pairing a detection with a telemetry record."),
+        click.option("--interpolate", is_flag=True,
+                     help="Interpolate the pose to each detection's time_s (position by a spline in ECEF, attitude "
+                          "by slerp) instead of the nearest record."),
+        click.option("--max-gap", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
+                     help="With --interpolate: longest telemetry gap (s) to interpolate across."),
+        click.option("--time-offset", type=float, default=None,
+                     help="With --interpolate: telemetry clock minus video clock (s); default: the config's "
+                          "[telemetry] time_offset_s, else 0."),
+    ])(fn)
 
 
-def read_inputs(telemetry, detections, cfg, reader=read_detections):
-    """Telemetry (the config's heading bias removed) and the second file, with their issues reported;
-    fails when the telemetry has no usable record."""
-    from .io.telemetry import with_heading_bias
+DASK_HELP = ("Run on dask.distributed: a scheduler address (tcp://host:8786), or local[:N] for a local cluster of N "
+             "worker processes. Same seed, same figures.")
+
+
+def dask_option(fn):
+    return click.option("--dask", "dask_address", default=None, metavar="ADDRESS", help=DASK_HELP)(fn)
+
+
+def float_list(text: str) -> list[float]:
+    """'10,25,50' or 'start:stop:step' (stop included) -> finite floats; a click error otherwise."""
+    import numpy as np
 
     try:
-        tel = with_heading_bias(read_telemetry(telemetry), cfg.telemetry.heading_bias_deg)
-        det = reader(detections) if detections else None
-    except TableError as exc:
-        fail(str(exc))
-    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
-    if len(tel) == 0:
-        report_issues(issues)
-        fail(f"telemetry file {telemetry!r} has no usable record")
-    if det is not None and len(det) == 0:
-        report_issues(issues)
-        fail(f"file {detections!r} has no usable record (only a header?): nothing to locate")
-    return tel, det, issues
-
-
-def locate_with_config(cfg, tel, det, rule, time_tolerance, budget, interp, compensation=None):
-    """locate_tables with the config's sensor and time offset (unless --time-offset was given)."""
-    interp = dict(interp or {})
-    if interp.get("time_offset_s") is None:
-        interp["time_offset_s"] = cfg.telemetry.time_offset_s
-    with err_console.status("locating..."):
-        try:
-            return locate_tables(cfg.sensor(), tel, det, rule,
-                                 time_tolerance_s=time_tolerance, budget=budget, compensation=compensation,
-                                 **interp)
-        except ValueError as exc:
-            fail(str(exc))
-
-
-def report_issues(issues, limit: int = 15) -> None:
-    for issue in issues[:limit]:
-        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
-    if len(issues) > limit:
-        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
-
-
-def progress():
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                    console=err_console, transient=True)
+        if ":" in text:
+            a, b, c = (float(x) for x in text.split(":"))
+            if c <= 0:
+                raise ValueError
+            values = [float(x) for x in np.arange(a, b + 0.5 * c, c)]
+        else:
+            values = [float(x) for x in text.split(",") if x.strip()]
+        if not values or not all(np.isfinite(values)):
+            raise ValueError
+        return values
+    except ValueError:
+        raise click.BadParameter(f"give finite numbers like 10,25,50 or start:stop:step (step > 0, stop >= start), "
+                                 f"got {text!r}") from None

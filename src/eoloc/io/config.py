@@ -19,10 +19,12 @@
     mount_misalignment_deg = [0.0, 0.0, 0.0]      # gimbal base vs INS, about body x, y, z
     boresight_misalignment_deg = [0.0, 0.0, 0.0]  # optical axis vs gimbal, about camera x, y, z
     lever_arm_m = [0.0, 0.0, 0.0]                 # camera from INS reference, body FRD metres
+    # misalignments over 5 deg are refused as a units mistake unless allow_large_misalignment = true
 
     [telemetry]              # optional corrections of the GPS/INS records (eoloc calibrate writes them)
     heading_bias_deg = 0.0   # INS heading minus true heading: subtracted from every yaw read
     time_offset_s = 0.0      # telemetry clock minus video clock (default of --time-offset)
+    time_origin = "unix"     # optional: what time_s = 0 is ("unix" or an ISO 8601 instant); adds time_utc
 
     [compensation]           # optional: learned error compensation (eoloc compensate train writes the model)
     model = "compensation.json"   # relative to this file; applied by eoloc locate (or --compensate MODEL)
@@ -43,7 +45,12 @@ from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # nan in a config is a typo
+    # nan in a config is a typo; so is `width = true` or `width = "1024"`: no type is coerced (strict),
+    # except TOML's integers where a real number is asked and its arrays for tuples (see load_config)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, strict=True)
+
+
+SMALL_ANGLE_DEG = 5.0  # misalignments are small corrections; larger ones need allow_large_misalignment
 
 
 class DistortionConfig(_Strict):
@@ -119,11 +126,43 @@ class InstallationConfig(_Strict):
     mount_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     boresight_misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    allow_large_misalignment: bool = False
+
+    @model_validator(mode="after")
+    def _plausible(self) -> InstallationConfig:
+        limit = 180.0 if self.allow_large_misalignment else SMALL_ANGLE_DEG
+        for key in ("mount_misalignment_deg", "boresight_misalignment_deg"):
+            worst = max(abs(a) for a in getattr(self, key))
+            if worst > limit:
+                fix = ("angles are in degrees, in (-180, 180]" if self.allow_large_misalignment else
+                       f"a misalignment is a small correction (<= {SMALL_ANGLE_DEG:g} deg): check the units (degrees, "
+                       "not radians or arc-minutes), or model a tilted mount with [gimbal] model = 'fixed'; set "
+                       "allow_large_misalignment = true if it really is this large")
+                raise ValueError(f"{key} = {list(getattr(self, key))} has {worst:g} deg: {fix}")
+        if max(abs(x) for x in self.lever_arm_m) > 100.0:
+            raise ValueError(f"lever_arm_m = {list(self.lever_arm_m)}: more than 100 m from the INS; it is in metres")
+        return self
 
 
 class TelemetryConfig(_Strict):
-    heading_bias_deg: float = 0.0
-    time_offset_s: float = 0.0
+    heading_bias_deg: float = Field(0.0, ge=-180.0, le=180.0)
+    time_offset_s: float = Field(0.0, ge=-86400.0, le=86400.0)
+    time_origin: str | None = None  # "unix", or the ISO 8601 UTC instant of time_s = 0 (adds time_utc columns)
+
+    @model_validator(mode="after")
+    def _origin(self) -> TelemetryConfig:
+        if self.time_origin is not None and self.time_origin != "unix":
+            from datetime import datetime
+
+            try:
+                t = datetime.fromisoformat(self.time_origin.replace("Z", "+00:00"))
+            except ValueError:
+                t = None
+            if t is None or t.tzinfo is None:
+                raise ValueError(f"time_origin = {self.time_origin!r}: give \"unix\" (time_s counts seconds since "
+                                 "1970-01-01 UTC) or an ISO 8601 instant with its zone, e.g. "
+                                 "\"2026-11-23T09:30:00Z\"")
+        return self
 
 
 class CompensationConfig(_Strict):
@@ -149,9 +188,9 @@ class AccuracyConfig(_Strict):
     stop: Literal["range", "height", "dem"] | None = None
     range_m: float | None = Field(None, gt=0)
     height_m: float | None = None
-    dem: list[str] | None = None
+    dem: tuple[str, ...] | None = None
     dem_vertical: Literal["egm96", "egm2008", "ellipsoid"] = "egm96"
-    pixels: list[tuple[float, float]] | None = None
+    pixels: tuple[tuple[float, float], ...] | None = None
     velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     samples: int = Field(100_000, ge=2)
     seed: int = 0
@@ -256,7 +295,7 @@ def load_config(path: str | Path) -> Config:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
     try:
-        cfg = Config.model_validate(raw)
+        cfg = Config.model_validate(_tuples(raw))
         cfg.sensor()
     except ValidationError as exc:
         lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}" for e in exc.errors()]
@@ -264,6 +303,15 @@ def load_config(path: str | Path) -> Config:
     except ValueError as exc:
         raise ConfigError(f"config file {str(path)!r} is invalid: {exc}") from None
     return cfg
+
+
+def _tuples(v):
+    """TOML arrays as tuples, through tables: strict validation takes tuples, and TOML has no other."""
+    if isinstance(v, dict):
+        return {k: _tuples(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return tuple(_tuples(x) for x in v)
+    return v
 
 
 def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresight_misalignment_deg=None,
@@ -285,7 +333,7 @@ def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresigh
         doc[section][key] = [round(float(v), 6) for v in value] if np.ndim(value) else round(float(value), 6)
     text = tomlkit.dumps(doc)
     try:
-        Config.model_validate(tomllib.loads(text)).sensor()
+        Config.model_validate(_tuples(tomllib.loads(text))).sensor()
     except (ValidationError, ValueError) as exc:
         raise ConfigError(f"the calibrated config would not validate, {str(path)!r} left unchanged: {exc}") from None
     tmp = path.with_suffix(path.suffix + ".tmp")

@@ -1,6 +1,10 @@
 """Cursor-on-Target (CoT 2.0) XML events of fixes, for TAK (ATAK/WinTAK/TAK Server) users.
 
-One ``<event>`` per located target. CoT's ``<point>`` takes lat/lon in WGS-84 degrees and
+One ``<event>`` per located target, each its own XML document (TAK ingests one event per file or
+per message, never an ``<events>`` wrapper); many events go into a TAK data package (a zip with
+``MANIFEST/manifest.xml``, version 2, one ``<uid>/<uid>.cot`` entry per event) that ATAK and
+WinTAK import whole. Event times are the fix's ``time_utc`` (ISO 8601) when the inputs give the
+clock's origin, else the time of writing. CoT's ``<point>`` takes lat/lon in WGS-84 degrees and
 ``hae`` in metres above the ellipsoid (eoloc's h_m as is), with ``ce``/``le`` the circular and
 linear 1-sigma errors in metres (the CoT base schema); 9999999 means unknown, which is what a fix
 without a covariance gets, never an invented number. CE90/LE90 and CEP50 go in the remarks.
@@ -31,8 +35,8 @@ def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", 
     known); None for a fix that failed (no point to send)."""
     if row.get("status") != "OK":
         return None
-    t_s = _num(row, "time_s")
-    t = datetime.fromtimestamp(t_s, UTC) if math.isfinite(t_s) else (now or datetime.now(UTC))
+    iso = row.get("time_utc")
+    t = datetime.fromisoformat(iso) if isinstance(iso, str) and iso else (now or datetime.now(UTC))
     tid = row.get("target_id", row.get("track_id", "fix"))
     frame = row.get("frame")
     uid = f"{uid_prefix}-{tid}" if frame is None else f"{uid_prefix}-{tid}-{frame}"
@@ -54,18 +58,38 @@ def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", 
     return ev
 
 
-def write_cot(path: str | Path, rows: list[dict], **kwargs) -> tuple[Path, int]:
-    """All OK fixes as CoT events in one XML file (root ``<events>``); returns (path, count).
-    A TAK feed sends each event on its own; :func:`cot_event` gives them one at a time."""
-    root = ET.Element("events")
-    n = 0
-    for row in rows:
-        ev = cot_event(row, **kwargs)
-        if ev is not None:
-            root.append(ev)
-            n += 1
-    ET.indent(root)
+def cot_events(rows: list[dict], **kwargs) -> list[ET.Element]:
+    """The CoT events of every OK fix row, in order."""
+    return [ev for ev in (cot_event(row, **kwargs) for row in rows) if ev is not None]
+
+
+def event_bytes(ev: ET.Element) -> bytes:
+    """One event as a standalone XML document (what a TAK feed sends as one message)."""
+    ET.indent(ev)
+    return ET.tostring(ev, encoding="utf-8", xml_declaration=True)
+
+
+def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", **kwargs) -> tuple[Path, int]:
+    """All OK fixes as a TAK data package (zip: one ``<uid>/<uid>.cot`` per event and
+    ``MANIFEST/manifest.xml``); returns (path, number of events)."""
+    import zipfile
+
+    events = cot_events(rows, **kwargs)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
-    return path, n
+    manifest = ET.Element("MissionPackageManifest", version="2")
+    conf = ET.SubElement(manifest, "Configuration")
+    ET.SubElement(conf, "Parameter", name="uid", value=f"eoloc-{path.stem}")
+    ET.SubElement(conf, "Parameter", name="name", value=name)
+    ET.SubElement(conf, "Parameter", name="onReceiveImport", value="true")
+    contents = ET.SubElement(manifest, "Contents")
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for ev in events:
+            uid = ev.get("uid")
+            entry = f"{uid}/{uid}.cot"
+            zf.writestr(entry, event_bytes(ev))
+            c = ET.SubElement(contents, "Content", ignore="false", zipEntry=entry)
+            ET.SubElement(c, "Parameter", name="uid", value=uid)
+        ET.indent(manifest)
+        zf.writestr("MANIFEST/manifest.xml", ET.tostring(manifest, encoding="utf-8", xml_declaration=True))
+    return path, len(events)

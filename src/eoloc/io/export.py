@@ -33,6 +33,51 @@ def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
     return rows
 
 
+def utc_times(time_s, origin: str | None) -> np.ndarray | None:
+    """ISO 8601 UTC instants (millisecond, "Z") of times in seconds: ``origin`` "unix" (seconds since
+    1970, as MISB ST 0601 sends them) or an ISO 8601 instant that time_s = 0 stands for; None when
+    no origin is known (relative times are never dressed up as dates). Unknown times give None."""
+    if origin is None:
+        return None
+    from datetime import UTC, datetime, timedelta
+
+    t0 = (datetime(1970, 1, 1, tzinfo=UTC) if origin == "unix" else
+          datetime.fromisoformat(origin.replace("Z", "+00:00")).astimezone(UTC))
+    t = np.asarray(time_s, dtype=np.float64)
+    out = np.full(t.shape, None, dtype=object)
+    for i in np.flatnonzero(np.isfinite(t)):
+        out[i] = (t0 + timedelta(seconds=float(t[i]))).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+    return out
+
+
+def with_utc(extra: Mapping[str, Sequence], origin: str | None) -> dict:
+    """``extra`` with a ``time_utc`` column after ``time_s`` when the clock's origin is known."""
+    extra = dict(extra)
+    iso = utc_times(extra["time_s"], origin) if "time_s" in extra else None
+    if iso is None:
+        return extra
+    out = {}
+    for k, v in extra.items():
+        out[k] = v
+        if k == "time_s":
+            out["time_utc"] = iso
+    return out
+
+
+def json_safe(v):
+    """Plain JSON values through dicts and lists: numpy scalars as Python ones, and NaN or
+    infinity as None (null), which JSON has no other way to say."""
+    if isinstance(v, dict):
+        return {k: json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [json_safe(x) for x in v]
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
 def plain_value(v):
     """A numpy scalar as a plain Python value; NaN as None (an empty cell / JSON null)."""
     if isinstance(v, np.generic):

@@ -10,7 +10,6 @@ off it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +29,9 @@ def _msl(coords: np.ndarray, geoid) -> np.ndarray:
 
 def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None, name: str = "eoloc") -> Path:
     """One KML document, one folder per layer ({name: GeoJSON features}). Points, LineStrings and
-    Polygons are supported; properties become ExtendedData; a feature with a ``time_s`` property
-    gets a TimeStamp (UTC) so Google Earth's time slider plays the flight."""
+    Polygons are supported; properties become ExtendedData; a feature with a ``time_utc`` property
+    (ISO 8601, known when the inputs give their clock's origin) gets a TimeStamp so Google Earth's
+    time slider plays the flight."""
     import simplekml
 
     from ..terrain.geoid import default_geoid
@@ -66,9 +66,9 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
             for key, val in props.items():
                 if val is not None and not isinstance(val, (list, dict)):
                     obj.extendeddata.newdata(name=key, value=str(val))
-            t = props.get("time_s")
-            if isinstance(t, (int, float)) and np.isfinite(t):
-                obj.timestamp.when = datetime.fromtimestamp(t, UTC).isoformat().replace("+00:00", "Z")
+            t = props.get("time_utc")
+            if isinstance(t, str) and t:
+                obj.timestamp.when = t
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     kml.save(str(path))

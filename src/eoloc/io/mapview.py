@@ -19,6 +19,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..errors import InputError
+
 _COLOURS = {"aircraft": "#1f77b4", "footprints": "#ff9900", "encoder footprints": "#888888", "targets": "#d62728",
             "tracks": "#9467bd", "truth": "#2ca02c"}
 
@@ -85,7 +87,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
     points = [c for layer in (aircraft, footprints, targets, tracks, truth, encoder_footprints) for f in layer or ()
               if f.get("geometry") for c in _coords(f["geometry"])]
     if not points:
-        raise ValueError("write_map: nothing to draw (no feature has a geometry)")
+        raise InputError("write_map: nothing to draw (no feature has a geometry)")
     lat = np.array([p[1] for p in points])
     lon = np.array([p[0] for p in points])
     m = OfflineMap(location=[float(lat.mean()), float(lon.mean())], tiles=tiles, control_scale=True,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from numpy.typing import ArrayLike
 
+from ..errors import InputError
 from ..result import Fixes
 from ..sensor.model import Pose, SensorModel
 from ..terrain.dem import DEM
@@ -57,7 +58,7 @@ def rule_from_options(*, range_m: ArrayLike | None = None, height_m: ArrayLike |
     several. The adapter for callers that take the rule as options (config files, the CLI)."""
     given = [(cls, v) for cls, v in ((AtRange, range_m), (AtHeight, height_m), (OnDEM, dem)) if v is not None]
     if len(given) != 1:
-        raise ValueError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
+        raise InputError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
     cls, value = given[0]
     return cls(value)
 

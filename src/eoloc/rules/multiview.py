@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
+from ..errors import InputError
 from ..result import Fixes, Status
 from ..sensor.model import Rays
 
@@ -74,7 +75,7 @@ def triangulate(rays: Rays, sigma_rad: ArrayLike = 1e-4, *, min_angle_deg: float
     good &= ~np.broadcast_to(rays.invalid, rays.shape).reshape(-1)
     o, d, sig = o[good], d[good], sig[good]
     if o.shape[0] < 2:
-        raise ValueError(f"triangulation needs at least 2 usable rays, got {o.shape[0]}")
+        raise InputError(f"triangulation needs at least 2 usable rays, got {o.shape[0]}")
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     P = np.eye(3) - d[:, :, None] * d[:, None, :]  # projectors onto each ray's normal plane
     w = np.ones(o.shape[0])

@@ -27,6 +27,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
 from .. import geodesy
+from ..errors import InputError
 from ..rotation import R_ned_body, euler_from_R_ned_body
 from ..sensor.model import Pose
 
@@ -85,7 +86,7 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
     keep = np.r_[True, np.diff(ts) > 0]  # a repeated time stamp: the first record stands
     order, ts = order[keep], ts[keep]
     if ts.size < 2:
-        raise ValueError(f"pose interpolation needs at least two usable telemetry records, got {ts.size}")
+        raise InputError(f"pose interpolation needs at least two usable telemetry records, got {ts.size}")
     lat, lon, h, yaw, pitch, roll, *gim = (f[order] for f in fields)
     gaps = [Gap(int(order[i]), int(order[i + 1]), float(ts[i]), float(ts[i + 1]))
             for i in np.flatnonzero(np.diff(ts) > max_gap_s)]

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 
 from .. import geodesy
 from ..accuracy.cep import cep_zero_mean, error_ellipses
+from ..errors import InputError
 from ..result import Fixes
 
 
@@ -100,7 +101,7 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     if origin is None:
         good = np.flatnonzero(fixes.ok.ravel())
         if good.size == 0:
-            raise ValueError("no fix with status OK to filter")
+            raise InputError("no fix with status OK to filter")
         i = good[0]
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
     z = _enu_of(fixes, origin)

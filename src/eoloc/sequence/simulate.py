@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import geodesy
+from ..errors import InputError
 from ..sensor.gimbal import AzElGimbal
 from ..sensor.model import Pose, SensorModel
 
@@ -160,7 +161,7 @@ def synthetic_flight(sensor: SensorModel, *, centre: tuple[float, float, float] 
     Table 1's geometry: 1 140 m ellipsoidal, pitch 2.1°, a target about 965 m away.
     """
     if sensor.gimbal.kind != AzElGimbal.kind:
-        raise ValueError("synthetic_flight points an az-el turret; give the sensor an AzElGimbal")
+        raise InputError("synthetic_flight points an az-el turret; give the sensor an AzElGimbal")
     lat0, lon0, h0 = (float(c) for c in centre)
     noise = noise or TelemetryNoise()
     rng = np.random.default_rng(seed)

@@ -25,6 +25,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from .. import geodesy
+from ..errors import InputError
 from ..result import Fixes
 
 H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
@@ -148,11 +149,11 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
     if associate is None:
         associate = target_id is None
     if not associate and target_id is None:
-        raise ValueError("without target ids the fixes must be associated (associate=True)")
+        raise InputError("without target ids the fixes must be associated (associate=True)")
     ok = np.ravel(fixes.ok) & np.isfinite(t)
     if origin is None:
         if not ok.any():
-            raise ValueError("no fix with status OK to track")
+            raise InputError("no fix with status OK to track")
         i = int(np.flatnonzero(ok)[0])
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
     z = geodesy.ecef_to_enu(fixes.flat().p_ecef(), *origin)
@@ -183,7 +184,7 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
             pairs = [(ids[j], j) for j in here if ids[j] in live]
             fresh = [j for j in here if ids[j] not in live]
             if len({ids[j] for j in here}) != here.size:
-                raise ValueError(f"target id repeated within the frame at t = {tk:g} s")
+                raise InputError(f"target id repeated within the frame at t = {tk:g} s")
         for key, j in pairs:
             lv = live[key]
             lv.x, lv.P = joseph_update(*pred[key], z[j, :2], R[j])

@@ -1,0 +1,107 @@
+"""What the commands share beyond options: reading the config and the DEM with a status line,
+parsing the stop rule once into a rule object, and progress that shows on a terminal (a bar) and
+off it (a line every few seconds, so logs of long jobs show they are alive)."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from ..pipeline import RANGE_FROM_FILES
+from ..rules import StopRule, rule_from_options
+from .main import err_console
+
+
+def load_config(config_path):
+    """The TOML configuration (pydantic is imported only by the commands that read one)."""
+    from ..io.config import load_config as load
+
+    return load(config_path)
+
+
+def open_dem(paths, vertical, geoid, dem_crs):
+    """The DEM of --dem (None when not given); a DEMError names the file and the fix."""
+    if not paths:
+        return None
+    from ..terrain import open_dem as open_
+
+    with err_console.status("reading the DEM..."):
+        return open_(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
+
+
+def stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
+    """The command line's stop rule, parsed once into a rule object (or RANGE_FROM_FILES: M1 with
+    each target's range_m column)."""
+    if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
+        raise click.UsageError("choose one stop rule: --range [R] (laser slant range), --target-height H "
+                               "(ellipsoidal metres) or --dem FILE (terrain)")
+    if range_opt == RANGE_FROM_FILES:
+        return RANGE_FROM_FILES
+    return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
+
+
+def ground(target_height, dem):
+    """Commands that need a surface (footprint, rectify): exactly one of --target-height or --dem."""
+    if (target_height is None) == (dem is None):
+        raise click.UsageError("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
+    return dem if dem is not None else target_height
+
+
+class LineProgress:
+    """rich.progress's API (add_task, advance, update) for a stream that is not a terminal: one line
+    on stderr when a task starts, then at most every ``every_s`` seconds, and when it ends."""
+
+    def __init__(self, every_s: float = 5.0) -> None:
+        self.every_s = every_s
+        self.tasks: dict[int, dict] = {}
+
+    def __enter__(self) -> LineProgress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for t in self.tasks.values():
+            if not exc[0] and t["total"] and t["done"] < t["total"]:
+                self._line(t, force=True)
+
+    def add_task(self, description: str, total=None, **_) -> int:
+        k = len(self.tasks)
+        self.tasks[k] = {"description": description, "total": total, "done": 0, "shown": time.monotonic(),
+                         "start": time.monotonic()}
+        err_console.print(f"{description}: started" + (f" ({total:,} to do)" if total else ""), highlight=False)
+        return k
+
+    def advance(self, task: int, advance: float = 1) -> None:
+        t = self.tasks[task]
+        t["done"] += advance
+        self._line(t)
+
+    def update(self, task: int, completed=None, total=None, **_) -> None:
+        t = self.tasks[task]
+        if total is not None:
+            t["total"] = total
+        if completed is not None:
+            t["done"] = completed
+        self._line(t)
+
+    def _line(self, t: dict, force: bool = False) -> None:
+        now = time.monotonic()
+        finished = bool(t["total"]) and t["done"] >= t["total"]
+        if not (force or finished or now - t["shown"] >= self.every_s) or t.get("ended"):
+            return
+        t["shown"] = now
+        t["ended"] = finished
+        of = f"/{t['total']:,}" if t["total"] else ""
+        pct = f" ({100 * t['done'] / t['total']:.0f} %)" if t["total"] else ""
+        err_console.print(f"{t['description']}: {t['done']:,.0f}{of}{pct}, {now - t['start']:.0f} s",
+                          highlight=False)
+
+
+def progress():
+    """A progress display: a bar on a terminal, progress lines elsewhere (CI logs, pipes)."""
+    if not err_console.is_terminal:
+        return LineProgress()
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                    console=err_console, transient=True)

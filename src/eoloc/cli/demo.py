@@ -1,0 +1,22 @@
+"""`eoloc demo`: the bundled example, run through the jobs (eoloc.demo)."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import click
+
+from .main import console
+
+
+@click.command(help="Run the bundled example: a short flight over static targets, located by laser range "
+                    "and on the ellipsoid, compared with the known truth; a mountain flight on a real DEM; the "
+                    "same flight as a MISB KLV stream; learned compensation; an orthorectified frame; and the "
+                    "Sun et al. (2013) reference case.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-demo", show_default=True,
+              help="Folder for the outputs (CSV, GeoJSON, KML, CoT, the map, GeoTIFF).")
+def demo(out_dir) -> None:
+    from ..demo import run_demo
+
+    run_demo(Path(out_dir), console=console, data=resources.files("eoloc") / "data" / "demo")

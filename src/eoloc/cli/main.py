@@ -1,0 +1,70 @@
+"""The `eoloc` command group and its consoles: a user's mistake becomes one message and exit code
+2, a bug keeps its traceback. Command modules never import this module's group: they define plain
+click commands that ``eoloc.cli`` registers, so no command module sits in an import circle."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+from rich.console import Console
+from rich.markup import escape
+
+from .. import __version__
+from ..errors import EolocError
+from .options import CONVENTIONS, negative_values_kept
+
+console = Console()
+err_console = Console(stderr=True)
+
+
+def fail(message: str) -> None:
+    """A usage mistake found by a command itself: one line on stderr, exit code 2."""
+    err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
+    sys.exit(2)
+
+
+def report_issues(issues, limit: int = 15) -> None:
+    """The per-line problems of the inputs (file:line: message), the first ``limit`` of them."""
+    issues = list(issues)
+    for issue in issues[:limit]:
+        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
+    if len(issues) > limit:
+        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
+
+
+def warn(message: str, label: str = "warning") -> None:
+    err_console.print(f"[yellow]{label}:[/] {escape(message)}", highlight=False)
+
+
+class Main(click.Group):
+    """The command group: a user's mistake (an EolocError: a file or configuration that cannot be
+    used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
+    anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
+
+    def main(self, args=None, *rest, **kwargs):
+        args = sys.argv[1:] if args is None else list(args)
+        return super().main(negative_values_kept(args), *rest, **kwargs)
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except EolocError as exc:
+            report_issues(exc.issues)
+            fail(str(exc))
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            fail(f"{where}{exc.strerror or exc}")
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except Exception:
+            err_console.print("[bold red]internal error:[/] this is a bug in eoloc, not in your input. Please report "
+                              "it with the command line and the traceback below.")
+            raise
+
+
+@click.group(cls=Main, help="eoloc - geolocate ground targets seen by airborne electro-optical sensors.\n"
+             + CONVENTIONS)
+@click.version_option(__version__, prog_name="eoloc")
+def main() -> None:
+    pass

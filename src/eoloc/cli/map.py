@@ -1,0 +1,65 @@
+"""`eoloc map`: a self-contained HTML map of eoloc outputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..errors import InputError
+from .common import open_dem
+from .main import err_console
+
+MAP_HELP = """Write a self-contained HTML map (works offline) from eoloc outputs.
+
+\b
+eoloc map [--telemetry T.csv] [--fixes F.geojson ...] [--footprints P.geojson] [--tracks K.geojson]
+          [--dem D.tif] [-o map.html]
+  --telemetry draws the aircraft path (an eoloc telemetry CSV: lat_deg, lon_deg, h_m);
+  --fixes draws targets, with their CEP50 as a circle in metres where the file has cep50_m;
+  --footprints draws frame outlines; --tracks draws track LineStrings (eoloc track);
+  --dem lays a hillshade of the terrain underneath; --tiles adds web tiles (needs a network).
+"""
+
+
+@click.command(name="map", help=MAP_HELP)
+@click.option("--telemetry", type=click.Path(dir_okay=False), default=None, help="Telemetry CSV (aircraft path).")
+@click.option("--fixes", multiple=True, type=click.Path(dir_okay=False), help="Fixes GeoJSON (repeatable).")
+@click.option("--footprints", multiple=True, type=click.Path(dir_okay=False), help="Footprints GeoJSON.")
+@click.option("--tracks", multiple=True, type=click.Path(dir_okay=False), help="Tracks GeoJSON.")
+@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help="DEM for a hillshade.")
+@click.option("--tiles", default=None, help="Web map tiles (e.g. OpenStreetMap; needs a network).")
+@click.option("-o", "--output", default="map.html", show_default=True, type=click.Path(dir_okay=False),
+              help="The HTML file to write.")
+@click.option("--title", default="eoloc", show_default=True, help="Title of the page.")
+def map_command(telemetry, fixes, footprints, tracks, dem_paths, tiles, output, title) -> None:
+    from ..io.mapview import drawable, write_map
+
+    aircraft = None
+    if telemetry:
+        from ..io.telemetry import read_telemetry
+        from ..video import aircraft_feature
+
+        aircraft = [aircraft_feature(read_telemetry(telemetry))]
+    dem = open_dem(dem_paths, "egm96", None, None)
+    layers = dict(targets=_features(fixes), footprints=_features(footprints), tracks=_features(tracks))
+    if not drawable(aircraft, *layers.values()):
+        raise InputError("nothing to draw: give --telemetry, --fixes, --footprints or --tracks files that have located "
+                         "points")
+    path = write_map(output, aircraft=aircraft, **layers, dem=dem, tiles=tiles, title=title)
+    err_console.print(f"wrote [bold]{path}[/]")
+
+
+def _features(paths) -> list[dict]:
+    feats: list[dict] = []
+    for p in paths:
+        try:
+            doc = json.loads(Path(p).read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(f"{p}: not a readable GeoJSON file ({exc})") from None
+        if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
+            kind = doc.get("type") if isinstance(doc, dict) else type(doc).__name__
+            raise InputError(f"{p}: expected a GeoJSON FeatureCollection, found {kind!r}")
+        feats += doc["features"]
+    return feats

@@ -1,0 +1,146 @@
+"""The `eoloc klv` job: a MISB ST 0601 stream decoded, checked against the encoder's own frame
+geometry, its ST 0903 VMTI targets located; and the writer of its products."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import KLVError
+from ..io.export import fix_features, fix_rows, plain_value, with_utc
+
+
+@dataclass
+class KLVJob:
+    """Everything `eoloc klv` computes: the decoded stream, its telemetry table, the frame check,
+    the VMTI detections and their fixes (None without VMTI), fix rows, and the GeoJSON layers
+    (aircraft, footprints, encoder footprints, fixes)."""
+
+    path: Path
+    stream: object
+    telemetry: object
+    check: object
+    detections: object
+    vmti: object | None
+    rows: list[dict]
+    layers: dict[str, list[dict]]
+    dem: object | None = None
+    issues: list = field(default_factory=list)
+
+    @property
+    def surface(self) -> str:
+        return "the DEM" if self.dem is not None else "the frame-centre elevation"
+
+
+def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1) -> KLVJob:
+    """Decode ``path`` (raw KLV or MPEG-TS), recompute every frame's centre and corners, locate the
+    VMTI detections on ``dem`` or the frame-centre elevation (with uncertainty from ``budget``)."""
+    from ..io.klv import klv_telemetry, read_klv, vmti_detections
+    from ..misb import misb_sensor
+    from ..video import aircraft_feature, check_frames, dem_footprint_features, footprint_features, locate_vmti
+
+    stream = read_klv(path)
+    if not stream.packets:
+        raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate",
+                       [str(i) for i in stream.issues])
+    sensor = sensor or misb_sensor()
+    tel = klv_telemetry(stream)
+    check = check_frames(tel, dem, sensor=sensor)
+    det = vmti_detections(stream)
+    prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
+              footprint_features(tel, check.geometry, every=footprint_every))
+    layers = {"aircraft": [aircraft_feature(tel)], "footprints": prints,
+              "encoder footprints": footprint_features(tel, None, every=footprint_every)}
+    rows: list[dict] = []
+    v = None
+    if len(det):
+        v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
+        rows = fix_rows(v.fixes, with_utc(v.extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
+        layers["fixes"] = fix_features(rows)
+    return KLVJob(Path(path), stream, tel, check, det, v, rows, layers, dem, list(det.issues))
+
+
+def telemetry_rows(tel) -> list[dict]:
+    """telemetry.csv: every packet in eoloc's conventions."""
+    keys = list(tel.columns)
+    iso = with_utc({"time_s": tel.columns["time_s"]}, "unix")["time_utc"]
+    return [{"packet": int(tel.line[i]), "time_utc": iso[i],
+             **{k: plain_value(tel.columns[k][i]) for k in keys if k != "frame"}} for i in range(len(tel))]
+
+
+def frame_rows(tel, check) -> list[dict]:
+    """frames.csv: eoloc's frame centre against the encoder's, per packet."""
+    g, c = check.geometry, tel.columns
+    rows = []
+    for i in range(len(tel)):
+        row = {"packet": int(tel.line[i]), "time_s": plain_value(c["time_s"][i]),
+               "encoder_lat_deg": plain_value(c["fc_lat_deg"][i]), "encoder_lon_deg": plain_value(c["fc_lon_deg"][i]),
+               "encoder_h_m": plain_value(c["fc_h_m"][i]), "eoloc_lat_deg": plain_value(g.centre.lat_deg[i]),
+               "eoloc_lon_deg": plain_value(g.centre.lon_deg[i]), "eoloc_h_m": plain_value(g.centre.h_m[i]),
+               "centre_distance_m": plain_value(check.centre_m[i]), "range_difference_m": plain_value(check.range_m[i])}
+        row.update({f"corner{k + 1}_distance_m": plain_value(check.corners_m[i, k]) for k in range(4)})
+        rows.append(row)
+    return rows
+
+
+def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
+                      make_map: bool = True, tiles: str | None = None,
+                      klv_out: str | Path | None = None) -> tuple[list[Path], str | None]:
+    """telemetry.csv, frames.csv, footprints, fixes (in ``formats``), eoloc.kml with every layer,
+    map.html and, with ``klv_out``, the stream re-encoded with its fixes. Returns (paths, a note
+    when there was nothing to draw on a map)."""
+    from ..io.export import write_csv
+    from ..io.kml import write_kml
+    from ..io.mapview import drawable, write_map
+    from ..io.writers import write_layer
+
+    out = Path(out)
+    written = [write_csv(out / "telemetry.csv", telemetry_rows(job.telemetry)),
+               write_csv(out / "frames.csv", frame_rows(job.telemetry, job.check))]
+    prints = job.layers["footprints"]
+    written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson"], features=prints)
+    if job.rows:
+        written += write_layer(out, "fixes", job.rows, [f for f in formats if f != "kml"])
+        if klv_out:
+            written.append(write_klv_stream(Path(klv_out), job))
+    written.append(write_kml(out / "eoloc.kml", job.layers, name=job.path.name))
+    note = None
+    lay = job.layers
+    if make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
+        note = "no map: the stream has no aircraft position, footprint or fix to draw"
+    elif make_map:
+        written.append(write_map(out / "map.html", aircraft=lay["aircraft"], footprints=prints,
+                                 encoder_footprints=lay["encoder footprints"], targets=lay.get("fixes"), dem=job.dem,
+                                 tiles=tiles, title=f"eoloc: {job.path.name}"))
+    return written, note
+
+
+def write_klv_stream(path: Path, job: KLVJob) -> Path:
+    """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46."""
+    from ..io.klv import with_target_location
+    from ..terrain.geoid import default_geoid
+
+    v, tel = job.vmti, job.telemetry
+    f = v.fixes
+    first: dict[int, int] = {}
+    for j in np.flatnonzero(f.ok):
+        frame = int(v.extra["frame"][j])
+        if frame not in first or v.extra["target_id"][j] < v.extra["target_id"][first[frame]]:
+            first[frame] = j
+    ce = v.uncertainty.get("ce90_m", np.full(len(f), np.nan))
+    le = v.uncertainty.get("le90_m", np.full(len(f), np.nan))
+    hae = tel.columns["target_elevation_hae"] > 0  # the datum the reader gives tag 42 in each packet
+    geoid = default_geoid()
+    out = bytearray()
+    for i, p in enumerate(job.stream.packets):
+        raw = p.uas.packet.raw
+        j = first.get(p.index)
+        if j is not None:
+            h = float(f.h_m[j]) if hae[i] else float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))
+            raw = with_target_location(raw, float(f.lat_deg[j]), float(f.lon_deg[j]), h, ce90_m=ce[j], le90_m=le[j])
+        out += raw
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(bytes(out))
+    return path

@@ -1,0 +1,85 @@
+"""The `eoloc locate` job in file mode: telemetry (+ detections) + config + stop rule -> one row
+per target, with the uncertainty and compensation columns when asked, and the warnings a user
+should read."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io.export import fix_rows, with_utc
+from ..io.table import Issue
+from ..pipeline import Located, locate_tables
+from ..result import Status
+from ..rules import StopRule
+from .inputs import read_inputs
+
+NONLINEARITY_LIMIT = 0.1  # past it the first-order covariance does not describe the fix
+
+
+@dataclass
+class LocateJob:
+    """Rows (one per target, every record kept), the Located arrays, the issues of the inputs and
+    the notes (whole-run warnings) in the order to show them."""
+
+    rows: list[dict]
+    located: Located
+    issues: list[Issue] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    compensation_summary: str | None = None
+
+    @property
+    def status_counts(self) -> dict[str, int]:
+        return self.located.fixes.status_counts()
+
+
+def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule: StopRule | str, *,
+                 time_tolerance_s: float = 0.02, budget=None, interpolate: bool = False, max_gap_s: float = 0.5,
+                 time_offset_s: float | None = None, compensation=None) -> LocateJob:
+    """Locate every detection (or every record's image centre) of the files with the config's
+    sensor; ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
+    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg)
+    located = locate_tables(cfg.sensor(), inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
+                            budget=budget, compensation=compensation, interpolate=interpolate, max_gap_s=max_gap_s,
+                            time_offset_s=cfg.telemetry.time_offset_s if time_offset_s is None else time_offset_s)
+    notes: list[str] = []
+    after = None
+    if located.covariance is not None:
+        from ..accuracy.covariance import covariance_columns
+
+        after = covariance_columns(located.covariance, located.fixes.ok)
+        loose = np.flatnonzero(located.fixes.ok & ~(after["nonlinearity"] <= NONLINEARITY_LIMIT))
+        if loose.size:
+            notes.append(f"{loose.size} fixes have a nonlinearity > {NONLINEARITY_LIMIT:g} (column nonlinearity): "
+                         "their first-order uncertainty is not to be trusted")
+    summary = None
+    if located.compensation is not None:
+        comp = located.compensation
+        after = {**(after or {}), **comp}
+        ok = located.fixes.ok.ravel()
+        applied = comp["comp_applied"] & ok
+        flagged = ok & ~comp["comp_applied"]
+        shift = np.hypot(comp["comp_e_m"], comp["comp_n_m"])[applied]
+        summary = (f"compensation: {int(applied.sum())} fixes corrected"
+                   + (f" (median shift {np.median(shift):.1f} m, max {shift.max():.1f} m)" if shift.size else "")
+                   + f"; {int(flagged.sum())} outside the model's trained range left as located (column comp_flag "
+                     "says why)")
+    nothing = none_located(located.fixes, rule)
+    if nothing:
+        notes.append(nothing)
+    extra = with_utc(located.extra, cfg.telemetry.time_origin)
+    return LocateJob(fix_rows(located.fixes, extra, after), located, inputs.issues + located.issues, notes,
+                     summary)
+
+
+def none_located(fixes, rule) -> str | None:
+    """One line when nothing at all was located: the commonest status, what it means and the rule
+    (a DEM that does not overlap the flight, a target height above the aircraft, ...)."""
+    counts = fixes.status_counts()
+    if not len(fixes) or counts.get("OK"):
+        return None
+    name, n = max(counts.items(), key=lambda kv: kv[1])
+    what = rule.describe() if isinstance(rule, StopRule) else "range from the files"
+    return f"no target was located ({what}): {n} of {len(fixes)} are {name}: {Status[name].explanation}"
