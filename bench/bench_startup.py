@@ -18,9 +18,9 @@ BIN = Path(sys.executable).parent
 BASELINE = [sys.executable, "-c", "import numpy"]
 COMMANDS = {
     "eoloc --help": [str(BIN / "eoloc"), "--help"],
-    "eoloc locate (one observation, --json)": [str(BIN / "eoloc"), "locate", "--lat", "45", "--lon", "7", "--height",
-                                               "3000", "--gimbal-angles", "0", "-45", "--target-height", "100",
-                                               "--json"],
+    "eoloc locate (one observation, --json)": [str(BIN / "eoloc"), "locate", "--lat", "45", "--lon", "7",
+                                               "--aircraft-height", "3000", "--gimbal-angles", "0", "-45",
+                                               "--target-height", "100", "--json"],
 }
 
 

@@ -9,6 +9,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import bench_accuracy
 import bench_compensation
+import bench_csv
 import bench_geodesy
 import bench_locate
 import bench_startup
@@ -19,5 +20,5 @@ if __name__ == "__main__":
     print(f"Machine: {machine()}\n")
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
-                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)):
+                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15) + bench_csv.main()):
         print(line, flush=True)

@@ -38,8 +38,9 @@ def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", 
     iso = row.get("time_utc")
     t = datetime.fromisoformat(iso) if isinstance(iso, str) and iso else (now or datetime.now(UTC))
     tid = row.get("target_id", row.get("track_id", "fix"))
-    frame = row.get("frame")
-    uid = f"{uid_prefix}-{tid}" if frame is None else f"{uid_prefix}-{tid}-{frame}"
+    # one fix, one uid: the frame (or the source line) tells fixes of the same target apart
+    which = next((row[k] for k in ("frame", "line") if row.get(k) is not None), None)
+    uid = f"{uid_prefix}-{tid}" if which is None else f"{uid_prefix}-{tid}-{which}"
     ev = ET.Element("event", version="2.0", uid=str(uid), type=cot_type, how="m-i", time=_iso(t), start=_iso(t),
                     stale=_iso(t + timedelta(seconds=stale_s)))
     se, sn, su = _num(row, "sigma_e_m"), _num(row, "sigma_n_m"), _num(row, "sigma_u_m")

@@ -69,72 +69,241 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
 
     ``key``: the columns of which at least one must parse for a record to be kept (e.g. time or
     frame) — without it the record cannot be matched to anything.
+
+    The lines are sorted out first, vectorised over the file's bytes (comments, blank lines, lines
+    of only commas, wrong field counts, bytes that are not UTF-8: each bad line reported with its
+    physical number); the good ones are parsed by pyarrow's CSV reader; values are then checked
+    column by column (numbers, finite, in range, whole frames). Files with quoted fields go
+    through Python's csv module line by line instead, so that a quoted newline keeps the line
+    numbers right and an unterminated quote costs its own line only.
     """
     path = Path(path)
     if not path.is_file():
         raise TableError(f"{what} file {str(path)!r} does not exist (check the path)")
-    issues: list[Issue] = []
-    rows: list[tuple[int, list[str]]] = []
-    header: list[str] | None = None
-    with path.open("rb") as fb:
-        head = fb.read(4)
-    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+    data = path.read_bytes()
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise TableError(f"{what} file {str(path)!r} is UTF-16 text: save it as UTF-8 (with or without a BOM)")
-    # bytes that are not UTF-8 are kept as surrogates, so that one bad byte costs its own line
-    # (reported below), not the file
-    with path.open(newline="", encoding="utf-8-sig", errors="surrogateescape") as fh:
-        reader = csv.reader(fh)
+    if data[:3] == b"\xef\xbb\xbf":
+        data = b" " * 3 + data[3:]  # same byte offsets; the header's names are stripped anyway
+    src = str(path)
+    lines = _Lines(data, src)
+    if lines.header is None:
+        raise TableError(f"{what} file {src!r} is empty: it needs a header line naming its columns")
+    header = lines.header
+    index = _map_columns(header, columns, src, what)
+    wanted = [c for c in columns if c.name in index]
+    raw = lines.parse(header, {c.name: index[c.name] for c in wanted}, {c.name for c in wanted if c.text})
+    issues = lines.issues
+    n = lines.numbers.size
+    arrays: dict[str, np.ndarray] = {}
+    cell_issues: list[tuple[int, int, str]] = []  # (record, column order, message)
+    for order, col in enumerate(wanted):
+        values = raw[col.name]
+        if col.text:
+            arrays[col.name] = values
+            continue
+        arrays[col.name] = _check_column(values, col, order, cell_issues)
+    present = [k for k in key if k in arrays]
+    key_ok = np.zeros(n, dtype=bool)
+    for k in present:
+        key_ok |= ~np.isnan(arrays[k])
+    by_record: dict[int, list[str]] = {}
+    for rec, _order, msg in sorted(cell_issues):
+        by_record.setdefault(rec, []).append(msg)
+    for rec in np.flatnonzero(~key_ok):
+        more = by_record.pop(int(rec), [])
+        issues.append(Issue(src, int(lines.numbers[rec]), f"no usable {' or '.join(key)}; line skipped"
+                            + (f" ({'; '.join(more)})" if more else "")))
+    for rec, msgs in by_record.items():
+        issues.extend(Issue(src, int(lines.numbers[rec]), m) for m in msgs)
+    issues.sort(key=lambda i: i.line)
+    return Table(src, {k: v[key_ok] for k, v in arrays.items()}, lines.numbers[key_ok], issues)
+
+
+class _Lines:
+    """The physical lines of a CSV file sorted out: the header, the numbers of the data lines that
+    have the header's field count, and an issue for every other line that is not a comment or
+    blank. ``parse`` gives the data lines' cells, column by column."""
+
+    def __init__(self, data: bytes, path: str) -> None:
+        self.data, self.path = data, path
+        self.issues: list[Issue] = []
+        self.header: list[str] | None = None
+        self.quoted = b'"' in data
+        buf = np.frombuffer(data, dtype=np.uint8)
+        ends = np.flatnonzero(buf == 10)
+        if not data.endswith(b"\n"):
+            ends = np.append(ends, len(data))
+        starts = np.concatenate(([0], ends[:-1] + 1)).astype(np.int64)
+        self.starts, self.ends = starts, ends
+        def per_line(mask: np.ndarray) -> np.ndarray:  # how many bytes of each line the mask marks
+            at = np.flatnonzero(mask)
+            return np.searchsorted(at, ends) - np.searchsorted(at, starts)
+
+        self.n_commas = per_line(buf == 44)
+        self.n_nonspace = (ends - starts) - per_line((buf == 32) | (buf == 9) | (buf == 13))
+        first = np.full(starts.size, 0, dtype=np.uint8)
+        has = starts < ends
+        first[has] = buf[starts[has]]
+        self.comment = first == ord("#")
+        odd = np.flatnonzero((self.n_nonspace > 0) & ~self.comment & np.isin(first, (9, 32)))
+        for i in odd:  # a comment indented by spaces
+            self.comment[i] = self.line(i).lstrip().startswith(b"#")
+        blank = (self.n_nonspace == 0) | self.comment
+        self.bad_utf8 = np.zeros(starts.size, dtype=bool)
         try:
-            for raw in reader:
-                lineno = reader.line_num
-                if not raw or not "".join(raw).strip() or raw[0].lstrip().startswith("#"):
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            for i in np.flatnonzero(~blank):
+                try:
+                    self.line(i).decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    self.bad_utf8[i] = True
+                    self.issues.append(Issue(path, int(i) + 1, f"byte 0x{exc.object[exc.start]:02X} is not UTF-8 (the "
+                                             "file looks Latin-1 or similar; save it as UTF-8); line skipped"))
+        content = np.flatnonzero(~blank & ~self.bad_utf8)
+        if content.size == 0:
+            self.numbers = np.zeros(0, dtype=np.int64)
+            return
+        h = int(content[0])
+        self.header = [x.strip().lower() for x in next(csv.reader([self.line(h).decode("utf-8")]))]
+        self.data_lines = content[1:]
+        self.quoted = b'"' in data[self.ends[h]:]  # quotes in the header alone do not need the slow path
+
+    def line(self, i: int) -> bytes:
+        return self.data[self.starts[i]:self.ends[i]].rstrip(b"\r")
+
+    def parse(self, header: list[str], index: dict[str, int], text: set[str]) -> dict[str, np.ndarray]:
+        """The cells of the good data lines: float64 arrays (NaN empty) or, where a column is not
+        all numbers, arrays of strings; text columns as stripped strings."""
+        if self.quoted:
+            return self._parse_quoted(header, index, text)
+        lines = self.data_lines
+        width = len(header)
+        comma_only = self.n_nonspace[lines] == self.n_commas[lines]
+        wrong = self.n_commas[lines] != width - 1
+        for i in lines[comma_only]:
+            self.issues.append(Issue(self.path, int(i) + 1, "a line of only commas (no values); line skipped"))
+        for i in lines[wrong & ~comma_only]:
+            self.issues.append(Issue(self.path, int(i) + 1, f"{int(self.n_commas[i]) + 1} fields where the header "
+                                                            f"has {width}; line skipped"))
+        good = lines[~comma_only & ~wrong]
+        self.numbers = good.astype(np.int64) + 1
+        if good.size == 0:
+            return {name: np.zeros(0, dtype=object) if name in text else (np.zeros(0), np.zeros(0, dtype=bool))
+                    for name in index}
+        buf = np.frombuffer(self.data, dtype=np.uint8)
+        keep = np.zeros(self.starts.size, dtype=bool)
+        keep[good] = True
+        length = np.diff(np.append(self.starts, len(self.data)))
+        clean = buf[np.repeat(keep, length)].tobytes()
+        if not clean.endswith(b"\n"):
+            clean += b"\n"
+        return _arrow_columns(clean, width, index, text, int((self.ends - self.starts).max()))
+
+    def _parse_quoted(self, header: list[str], index: dict[str, int], text: set[str]) -> dict[str, np.ndarray]:
+        width = len(header)
+        rows: list[list[str]] = []
+        numbers: list[int] = []
+        lines = [int(i) for i in self.data_lines]
+        k = 0
+        while k < len(lines):
+            i = lines[k]
+            record = self.line(i).decode("utf-8")
+            span = 1
+            # a record continues past the line end only inside a quote, and only when the joined
+            # record then has the header's field count (else: an unterminated quote on this line)
+            while record.count('"') % 2 and k + span < len(lines) and lines[k + span] == i + span and span < 64:
+                record += "\n" + self.line(i + span).decode("utf-8")
+                span += 1
+            fields = next(csv.reader([record]), [])
+            if record.count('"') % 2 or len(fields) != width:
+                if record.count('"') % 2 or span > 1:
+                    self.issues.append(Issue(self.path, i + 1, "an unterminated quote (a field opened with \" "
+                                                               "and never closed); line skipped"))
+                    k += 1
                     continue
-                bad = next((c for c in "".join(raw) if "\udc80" <= c <= "\udcff"), None)
-                if bad is not None:
-                    issues.append(Issue(str(path), lineno, f"byte 0x{ord(bad) - 0xDC00:02X} is not UTF-8 (the file "
-                                                           "looks Latin-1 or similar; save it as UTF-8); line skipped"))
-                    continue
-                if header is None:
-                    header = [h.strip().lower() for h in raw]
-                    continue
-                rows.append((lineno, raw))
-        except csv.Error as exc:
-            raise TableError(f"{what} file {str(path)!r}, line {reader.line_num}: {exc} (a field far too long, or an "
-                             "unterminated quote: check the file around that line)") from None
-    if header is None:
-        raise TableError(f"{what} file {str(path)!r} is empty: it needs a header line naming its columns")
-    index = _map_columns(header, columns, str(path), what)
-    data: dict[str, list] = {c.name: [] for c in columns if c.name in index}
-    kept_lines: list[int] = []
-    for lineno, raw in rows:
-        if len(raw) != len(header):
-            issues.append(Issue(str(path), lineno, f"{len(raw)} fields where the header has {len(header)}; "
-                                                   "line skipped"))
-            continue
-        values: dict[str, object] = {}
-        line_issues: list[str] = []
-        for col in columns:
-            if col.name not in index:
+                if all(not f.strip() for f in fields):
+                    msg = "a line of only commas (no values); line skipped"
+                else:
+                    msg = f"{len(fields)} fields where the header has {width}; line skipped"
+                self.issues.append(Issue(self.path, i + 1, msg))
+                k += 1
                 continue
-            cell = raw[index[col.name]].strip()
-            if col.text:
-                values[col.name] = cell
+            if all(not f.strip() for f in fields):
+                self.issues.append(Issue(self.path, i + 1, "a line of only commas (no values); line skipped"))
+                k += span
                 continue
-            values[col.name] = _parse(cell, col, line_issues)
-        key_ok = any(k in values and not (isinstance(values[k], float) and math.isnan(values[k])) for k in key)
-        if not key_ok:
-            issues.append(Issue(str(path), lineno, f"no usable {' or '.join(key)}; line skipped"
-                                + (f" ({'; '.join(line_issues)})" if line_issues else "")))
+            rows.append(fields)
+            numbers.append(i + 1)
+            k += span
+        self.numbers = np.array(numbers, dtype=np.int64)
+        out = {}
+        for name, j in index.items():
+            cells = np.array([r[j].strip() for r in rows], dtype=object)
+            out[name] = cells if name in text else _numbers(cells)
+        return out
+
+
+def _arrow_columns(clean: bytes, width: int, index: dict[str, int], text: set[str],
+                   longest: int) -> dict[str, np.ndarray]:
+    """pyarrow's CSV reader on the clean lines: numeric columns as float64 (an empty cell NaN),
+    falling back to strings for a column with a cell that is not a number."""
+    import io
+
+    import pyarrow as pa
+    from pyarrow import csv as pacsv
+
+    names = [f"c{j}" for j in range(width)]
+    wanted = {name: f"c{j}" for name, j in index.items()}
+    read = pacsv.ReadOptions(column_names=names, block_size=max(1 << 22, 2 * longest + 64))
+    parse = pacsv.ParseOptions(quote_char=False, newlines_in_values=False)
+
+    def load(types):
+        conv = pacsv.ConvertOptions(column_types=types, include_columns=list(wanted.values()), null_values=[""],
+                                    strings_can_be_null=True, quoted_strings_can_be_null=True)
+        return pacsv.read_csv(io.BytesIO(clean), read_options=read, parse_options=parse, convert_options=conv)
+
+    types = {c: (pa.string() if name in text else pa.float64()) for name, c in wanted.items()}
+    try:
+        table = load(types)
+        as_text: set[str] = set()
+    except pa.ArrowInvalid:  # some cell is not a number: read every column as text, convert each
+        table = load(dict.fromkeys(wanted.values(), pa.string()))
+        as_text = {n for n in wanted if n not in text}
+    out = {}
+    for name, c in wanted.items():
+        col = table.column(c)
+        if name in text:
+            out[name] = np.array([("" if v is None else v.strip()) for v in col.to_pylist()], dtype=object)
+        elif name in as_text:
+            try:
+                out[name] = (col.cast(pa.float64()).to_numpy(zero_copy_only=False),
+                             col.is_null().to_numpy(zero_copy_only=False))
+            except pa.ArrowInvalid:
+                cells = np.array([("" if v is None else v.strip()) for v in col.to_pylist()], dtype=object)
+                out[name] = _numbers(cells)
+        else:
+            out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64),  # nulls -> NaN
+                         col.is_null().to_numpy(zero_copy_only=False))
+    return out
+
+
+def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Strings to float64 where they parse, the others kept as strings (for the message); and
+    which cells were empty."""
+    vals: list = []
+    mixed = False
+    for c in cells:
+        if c == "":
+            vals.append(math.nan)
             continue
-        issues.extend(Issue(str(path), lineno, m) for m in line_issues)
-        for name, value in values.items():
-            data[name].append(value)
-        kept_lines.append(lineno)
-    arrays = {
-        c.name: np.array(data[c.name], dtype=object if c.text else np.float64)
-        for c in columns if c.name in data
-    }
-    return Table(str(path), arrays, np.array(kept_lines, dtype=np.int64), issues)
+        try:
+            vals.append(float(c))
+        except ValueError:
+            vals.append(c)
+            mixed = True
+    return np.array(vals, dtype=object if mixed else np.float64), np.array([c == "" for c in cells], dtype=bool)
 
 
 def _map_columns(header: list[str], columns: list[Column], path: str, what: str) -> dict[str, int]:
@@ -152,21 +321,37 @@ def _map_columns(header: list[str], columns: list[Column], path: str, what: str)
     return index
 
 
-def _parse(cell: str, col: Column, issues: list[str]) -> float:
-    if cell == "":
-        if col.required:
-            issues.append(f"column {col.name!r} is empty")
-        return math.nan
-    try:
-        value = float(cell)
-    except ValueError:
-        issues.append(f"column {col.name!r}: {cell!r} is not a number")
-        return math.nan
-    if math.isnan(value):
-        issues.append(f"column {col.name!r} is NaN")
-        return math.nan
-    if not col.lo <= value <= col.hi:
-        unit = f" {col.unit}" if col.unit else ""
-        issues.append(f"column {col.name!r}: {value:g}{unit} is outside [{col.lo:g}, {col.hi:g}]")
-        return math.nan
-    return value
+def _check_column(cells: tuple[np.ndarray, np.ndarray], col: Column, order: int,
+                  issues: list[tuple[int, int, str]]) -> np.ndarray:
+    """A column's values as float64, NaN where a cell is empty, not a number, not finite, out of
+    the column's range or (frames) not whole; an issue for each such cell (empty ones only when
+    the column is required)."""
+    values, empty = cells
+    if values.dtype == object:  # some cells are not numbers: they are kept as strings
+        words = np.array([isinstance(v, str) for v in values], dtype=bool)
+        for i in np.flatnonzero(words):
+            issues.append((int(i), order, f"column {col.name!r}: {values[i]!r} is not a number"))
+        values = np.where(words, np.nan, values).astype(np.float64)
+    else:
+        words = np.zeros(values.size, dtype=bool)
+    if col.required:
+        for i in np.flatnonzero(empty):
+            issues.append((int(i), order, f"column {col.name!r} is empty"))
+    for i in np.flatnonzero(np.isnan(values) & ~empty & ~words):
+        issues.append((int(i), order, f"column {col.name!r} is NaN"))
+    inf = np.isinf(values)
+    for i in np.flatnonzero(inf):
+        issues.append((int(i), order, f"column {col.name!r}: {values[i]:g} is not a finite number"))
+    with np.errstate(invalid="ignore"):
+        out = ~inf & ~np.isnan(values) & ~((values >= col.lo) & (values <= col.hi))
+    unit = f" {col.unit}" if col.unit else ""
+    for i in np.flatnonzero(out):
+        issues.append((int(i), order, f"column {col.name!r}: {values[i]:g}{unit} is outside [{col.lo:g}, {col.hi:g}]"))
+    bad = inf | out
+    if col.name == "frame":
+        with np.errstate(invalid="ignore"):
+            frac = ~bad & ~np.isnan(values) & (values != np.round(values))
+        for i in np.flatnonzero(frac):
+            issues.append((int(i), order, f"column 'frame': {values[i]:g} is not a whole frame number"))
+        bad |= frac
+    return np.where(bad, np.nan, values)

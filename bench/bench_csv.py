@@ -1,0 +1,121 @@
+"""CSV reading: eoloc's telemetry reader (line accounting + pyarrow + value checks) against
+pyarrow.csv reading the same file with no checks, alternated in one run (goal <= 3x); and
+`eoloc locate` on 10^5 telemetry + 10^6 detections against pandas reading the two files (goal
+<= 10x, peak memory <= 1.5 GB).
+
+    python bench/bench_csv.py [--lines 1000000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from _common import HEADER, machine, row
+
+TEL_COLUMNS = ("time_s", "lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "azimuth_deg",
+               "elevation_deg")
+
+
+def telemetry_file(path: Path, n: int, seed: int = 0) -> Path:
+    import pyarrow as pa
+    from pyarrow import csv as pacsv
+
+    rng = np.random.default_rng(seed)
+    cols = {"time_s": np.arange(n) * 0.04, "lat_deg": 45 + rng.normal(0, 0.01, n),
+            "lon_deg": 7 + rng.normal(0, 0.01, n),
+            "h_m": 3000 + rng.normal(0, 5, n), "yaw_deg": rng.uniform(0, 360, n), "pitch_deg": rng.normal(0, 2, n),
+            "roll_deg": rng.normal(0, 2, n), "azimuth_deg": rng.uniform(-180, 180, n),
+            "elevation_deg": rng.uniform(-90, -20, n)}
+    pacsv.write_csv(pa.table(cols), path, pacsv.WriteOptions(quoting_style="none"))
+    return path
+
+
+def detections_file(path: Path, n: int, n_tel: int, seed: int = 1) -> Path:
+    import pyarrow as pa
+    from pyarrow import csv as pacsv
+
+    rng = np.random.default_rng(seed)
+    rec = rng.integers(0, n_tel, n)
+    cols = {"time_s": rec * 0.04, "target_id": pa.array([f"T{k}" for k in rng.integers(0, 50, n)]),
+            "u_px": rng.uniform(0, 1023, n), "v_px": rng.uniform(0, 767, n)}
+    pacsv.write_csv(pa.table(cols), path, pacsv.WriteOptions(quoting_style="none"))
+    return path
+
+
+def read_pair(path: Path, repeat: int = 3) -> tuple[float, float]:
+    """(eoloc, pyarrow) best times, alternated."""
+    from pyarrow import csv as pacsv
+
+    from eoloc.io.telemetry import read_telemetry
+
+    read_telemetry(path)
+    pacsv.read_csv(path)
+    te, tp = [], []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        t = read_telemetry(path)
+        te.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        pacsv.read_csv(path)
+        tp.append(time.perf_counter() - t0)
+    assert len(t) > 0 and not t.issues
+    return min(te), min(tp)
+
+
+def locate_pair(tel: Path, det: Path, out: Path) -> tuple[float, float, float]:
+    """(eoloc locate wall s, its peak RSS in MB, pandas reading both files s)."""
+    import pandas as pd
+
+    t0 = time.perf_counter()
+    pd.read_csv(tel)
+    pd.read_csv(det)
+    t_pd = time.perf_counter() - t0
+    cfg = Path(__file__).parents[1] / "src" / "eoloc" / "data" / "demo" / "camera.toml"
+    t0 = time.perf_counter()
+    subprocess.run([str(Path(sys.executable).parent / "eoloc"), "locate", str(tel), str(det), "--config", str(cfg),
+                    "--target-height", "600", "--out", str(out), "-f", "csv"], check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    return wall, peak_mb, t_pd
+
+
+def main(lines: int = 1_000_000, locate: bool = True) -> list[str]:
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        tel = telemetry_file(tmp / "tel.csv", lines)
+        te, tp = read_pair(tel)
+        mb = tel.stat().st_size / 1e6
+        out.append(row(f"read {lines:,} telemetry lines ({mb:.0f} MB), every line checked", f"{te:.2f} s",
+                       f"pyarrow.csv, no checks: {tp:.2f} s", tp / te))
+        print(f"csv read: eoloc {te:.2f} s, pyarrow {tp:.2f} s, eoloc/pyarrow {te / tp:.2f}x (goal <= 3x)",
+              file=sys.stderr)
+        if locate:
+            tel5 = telemetry_file(tmp / "tel5.csv", 100_000)
+            det = detections_file(tmp / "det.csv", 1_000_000, 100_000)
+            wall, peak, t_pd = locate_pair(tel5, det, tmp / "out")
+            out.append(row("eoloc locate: 10^5 telemetry + 10^6 detections, M3, fixes.csv",
+                           f"{wall:.1f} s, peak {peak:.0f} MB", f"pandas reading both files: {t_pd:.2f} s",
+                           t_pd / wall))
+            print(f"locate: {wall:.1f} s = {wall / t_pd:.1f}x pandas' read (goal <= 10x), peak {peak:.0f} MB "
+                  "(goal <= 1500)", file=sys.stderr)
+    return out
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--lines", type=int, default=1_000_000)
+    ap.add_argument("--no-locate", action="store_true")
+    a = ap.parse_args()
+    print(f"Machine: {machine()}\n\n{HEADER}")
+    for line in main(a.lines, not a.no_locate):
+        print(line)
