@@ -20,5 +20,6 @@ if __name__ == "__main__":
     print(f"Machine: {machine()}\n")
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
-                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15) + bench_csv.main()):
+                 + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)
+                 + bench_csv.main()):
         print(line, flush=True)
