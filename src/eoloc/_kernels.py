@@ -2,12 +2,12 @@
 
 Every function here takes floats or numpy arrays that broadcast, works component by component
 (a vector is three values ``x, y, z``; a rotation is a 9-tuple in row-major order) and uses only
-arithmetic, numpy ufuncs and :func:`_pick` / :func:`_finite`.  Angles are radians, lengths metres.
+arithmetic, numpy ufuncs and :func:`pick` / :func:`_finite`.  Angles are radians, lengths metres.
 
 Two backends run these *same* functions:
 
 - numpy: called directly on arrays (the reference path, always available);
-- numba: :mod:`eoloc._nb` compiles each function for scalars (``_pick`` becomes a branch, sine,
+- numba: :mod:`eoloc._nb` compiles each function for scalars (``pick`` becomes a branch, sine,
   cosine and atan2 become the polynomials below) inside element loops that LLVM vectorises, and
   the single-target fast path calls them directly.
 
@@ -37,7 +37,7 @@ GIMBAL_FIXED = 2
 
 
 
-def _pick(cond, a, b):
+def pick(cond, a, b):
     """``a`` where ``cond`` else ``b`` (numpy: np.where; numba: a branch)."""
     return np.where(cond, a, b)
 
@@ -106,13 +106,13 @@ def sincos_poly(t):
     c = w + (((1.0 - w) - hz) + z * z * (_C[0] + z * (_C[1] + z * (_C[2] + z * (_C[3] + z * (_C[4] + z * _C[5]))))))
     k = q - 4.0 * np.floor(0.25 * q)  # quadrant 0..3
     odd = (k == 1.0) | (k == 3.0)
-    sn = _pick(odd, c, s)
-    cs = _pick(odd, s, c)
-    sn = _pick(k >= 2.0, -sn, sn)
-    cs = _pick((k == 1.0) | (k == 2.0), -cs, cs)
-    sn = _pick(t == 0.0, t, sn)  # sin(-0) = -0, as in C: the reduction above turns -0 into +0
+    sn = pick(odd, c, s)
+    cs = pick(odd, s, c)
+    sn = pick(k >= 2.0, -sn, sn)
+    cs = pick((k == 1.0) | (k == 2.0), -cs, cs)
+    sn = pick(t == 0.0, t, sn)  # sin(-0) = -0, as in C: the reduction above turns -0 into +0
     ok = np.abs(t) <= SINCOS_MAX
-    return _pick(ok, sn, np.nan), _pick(ok, cs, np.nan)
+    return pick(ok, sn, np.nan), pick(ok, cs, np.nan)
 
 
 def atan2_poly(y, x):
@@ -123,22 +123,22 @@ def atan2_poly(y, x):
     swap = ay > ax
     num = np.minimum(ax, ay)
     den = np.maximum(ax, ay)
-    t = _pick(den == 0.0, 0.0, _pick(ax == ay, 1.0, num / den))  # 0/0 and inf/inf
-    t = _pick((ax == ax) & (ay == ay), t, np.nan)  # a NaN in gives NaN out
+    t = pick(den == 0.0, 0.0, pick(ax == ay, 1.0, num / den))  # 0/0 and inf/inf
+    t = pick((ax == ax) & (ay == ay), t, np.nan)  # a NaN in gives NaN out
     # fdlibm atan on [0, 1]: reduce about 0 (t < 7/16), 0.5 (t < 11/16) or 1
     mid = t >= 0.4375
     top = t >= 0.6875
-    tr = _pick(top, (t - 1.0) / (t + 1.0), _pick(mid, (2.0 * t - 1.0) / (2.0 + t), t))
-    hi = _pick(top, _ATAN_ONE[0], _pick(mid, _ATAN_HALF[0], 0.0))
-    lo = _pick(top, _ATAN_ONE[1], _pick(mid, _ATAN_HALF[1], 0.0))
+    tr = pick(top, (t - 1.0) / (t + 1.0), pick(mid, (2.0 * t - 1.0) / (2.0 + t), t))
+    hi = pick(top, _ATAN_ONE[0], pick(mid, _ATAN_HALF[0], 0.0))
+    lo = pick(top, _ATAN_ONE[1], pick(mid, _ATAN_HALF[1], 0.0))
     z = tr * tr
     w = z * z
     s1 = z * (_AT[0] + w * (_AT[2] + w * (_AT[4] + w * (_AT[6] + w * (_AT[8] + w * _AT[10])))))
     s2 = w * (_AT[1] + w * (_AT[3] + w * (_AT[5] + w * (_AT[7] + w * _AT[9]))))
     a = hi - ((tr * (s1 + s2) - lo) - tr)
-    a = _pick(swap, (_PIO2[0] - a) + _PIO2[1], a)
-    a = _pick(np.signbit(x), (_PI[0] - a) + _PI[1], a)
-    a = _pick(swap & (t == 0.0), _PIO2[0], a)  # x = ±0 or |y| = inf with x finite: exactly ±pi/2
+    a = pick(swap, (_PIO2[0] - a) + _PIO2[1], a)
+    a = pick(np.signbit(x), (_PI[0] - a) + _PI[1], a)
+    a = pick(swap & (t == 0.0), _PIO2[0], a)  # x = ±0 or |y| = inf with x finite: exactly ±pi/2
     return np.copysign(a, y)
 
 
@@ -256,7 +256,7 @@ def geodetic_to_ecef(lat, lon, h, a, e2):
     return r * co, r * so, (n * (1.0 - e2) + h) * sl
 
 
-def _bowring(x, y, z, a, b, e2, ep2, steps):
+def bowring(x, y, z, a, b, e2, ep2, steps):
     """Sine and cosine of the geodetic latitude, p = sqrt(x² + y²) and h, without any atan2.
 
     Bowring's formula from the reduced latitude of the point's projection. Two steps: 2 nm
@@ -284,7 +284,7 @@ def _bowring(x, y, z, a, b, e2, ep2, steps):
 
 def ecef_to_geodetic(x, y, z, a, b, e2, ep2):
     """ECEF metres to geodetic (rad, rad, m ellipsoidal); longitude 0 on the polar axis."""
-    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, 2)
     return atan2(sl, cl), atan2(y, x), h
 
 
@@ -314,7 +314,7 @@ def ray_direction(R_ecef_cam, xn, yn):
 def project_point(R_ecef_cam, ox, oy, oz, px, py, pz):
     """Ground to image: normalised image point (xn, yn) and depth along the boresight (m)."""
     cx, cy, cz = mat_t_vec(R_ecef_cam, px - ox, py - oy, pz - oz)
-    zs = _pick(cz > 0.0, cz, np.nan)
+    zs = pick(cz > 0.0, cz, np.nan)
     return cx / zs, cy / zs, cz
 
 
@@ -362,7 +362,7 @@ def ppoly_eval(x, dp, i0, n):
     (highest power first, in powers of x - breakpoint); the end pieces extrapolate."""
     idx = 0
     for j in range(1, n - 1):
-        idx = idx + _pick(x >= dp[i0 + j], 1, 0)
+        idx = idx + pick(x >= dp[i0 + j], 1, 0)
     c = i0 + n + 4 * idx
     s = x - dp[i0 + idx]
     return ((dp[c] * s + dp[c + 1]) * s + dp[c + 2]) * s + dp[c + 3]
@@ -462,9 +462,9 @@ def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
     """M1: the point at slant range ``rng`` (m, 0 < rng <= MAX_RANGE_M) along the ray
     -> (lat, lon, h, range, status)."""
     valid = ray_valid(ox, oy, oz, dx, dy, dz) & (rng > 0.0) & (rng <= MAX_RANGE_M)
-    r = _pick(valid, rng, np.nan)
+    r = pick(valid, rng, np.nan)
     lat, lon, h = ecef_to_geodetic(ox + r * dx, oy + r * dy, oz + r * dz, a, b, e2, ep2)
-    return lat, lon, h, r, _pick(valid, OK, INVALID_INPUT)
+    return lat, lon, h, r, pick(valid, OK, INVALID_INPUT)
 
 
 def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
@@ -478,15 +478,15 @@ def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     qb = (ox * dx + oy * dy) * ia + oz * dz * ib
     qc = (ox * ox + oy * oy) * ia + oz * oz * ib - 1.0
     disc = qb * qb - qa * qc
-    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
+    sq = np.sqrt(pick(disc >= 0.0, disc, np.nan))
     return (-qb - sq) / qa, (-qb + sq) / qa
 
 
 def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2, steps):
     """(geodetic height of (x, y, z), its derivative along the unit direction d = up . d, sin lat,
     cos lat) by ``steps`` Bowring steps: the gradient of geodetic height is the unit ellipsoid normal."""
-    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, steps)
-    cl_p = _pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
+    sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, steps)
+    cl_p = pick(p > 0.0, cl / p, 0.0)  # cos(lat) / p: up = (cl_p x, cl_p y, sl)
     return h, cl_p * (x * dx + y * dy) + sl * dz, sl, cl
 
 
@@ -522,8 +522,8 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     qb = od_xy * ia + od_z * ib
     qc = oo_xy * ia + oo_z * ib - 1.0
     disc = qb * qb - qa * qc
-    t1 = (-qb - np.sqrt(_pick(disc >= 0.0, disc, np.nan))) / qa
-    t = _pick(t1 > 0.0, t1, np.nan)
+    t1 = (-qb - np.sqrt(pick(disc >= 0.0, disc, np.nan))) / qa
+    t = pick(t1 > 0.0, t1, np.nan)
     h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 1)
     t = t - (h - ht) / s
     x = ox + t * dx
@@ -531,9 +531,9 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     h, s, sl, cl = _height_slope(x, y, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
     # by convexity g(0) >= g(t) - t g'(t): the last term proves the camera is above the surface
     ok = valid & (np.abs(h - ht) <= _EXACT_TOL_M) & (s <= -UNIT_TOL) & (t * s < -2.0 * _EXACT_TOL_M)
-    st = _pick(ok, OK, _pick(valid, UNDECIDED, INVALID_INPUT))
-    return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
-            _pick(ok, t, np.nan), st)
+    st = pick(ok, OK, pick(valid, UNDECIDED, INVALID_INPUT))
+    return (pick(ok, atan2(sl, cl), np.nan), pick(ok, atan2(y, x), np.nan), pick(ok, h, np.nan),
+            pick(ok, t, np.nan), st)
 
 
 def ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b):
@@ -550,7 +550,7 @@ def ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b):
     qb = (ox * dx + oy * dy) * ia + oz * dz * ib
     qc = oo_xy * ia + oo_z * ib - 1.0
     miss = (qb * qb - qa * qc < 0.0) | ((qb > 0.0) & (qc > 0.0))  # no real root, or both behind
-    return _pick(below, BELOW_SURFACE, _pick(miss, NO_INTERSECTION, UNDECIDED))
+    return pick(below, BELOW_SURFACE, pick(miss, NO_INTERSECTION, UNDECIDED))
 
 
 def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
@@ -560,26 +560,26 @@ def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     (OK, within SURFACE_TOL_M) or where g stops falling with the ray still above it (a true miss,
     near-tangent rays included). The camera on or below the surface: BELOW_SURFACE."""
     valid = _m3_domain(ox, oy, oz, dx, dy, dz, ht)
-    _, _, _, h0 = _bowring(ox, oy, oz, a, b, e2, ep2, 2)  # the camera's own height
+    _, _, _, h0 = bowring(ox, oy, oz, a, b, e2, ep2, 2)  # the camera's own height
     pad = 1.0e-3 + _PAD_REL * np.abs(ht)
     o1, _ = inflated_roots(ox, oy, oz, dx, dy, dz, ht + pad, a, b)
-    t = _pick(o1 > 0.0, o1, 0.0)
-    state = _pick(h0 - ht <= _EXACT_TOL_M, BELOW_SURFACE, UNDECIDED)  # on (to 1 µm) or below
+    t = pick(o1 > 0.0, o1, 0.0)
+    state = pick(h0 - ht <= _EXACT_TOL_M, BELOW_SURFACE, UNDECIDED)  # on (to 1 µm) or below
     for _ in range(_EXACT_STEPS):
         h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
         g = h - ht
-        state = _pick(state == UNDECIDED, _pick(g <= _EXACT_TOL_M, OK, _pick(s >= 0.0, NO_INTERSECTION, UNDECIDED)),
+        state = pick(state == UNDECIDED, pick(g <= _EXACT_TOL_M, OK, pick(s >= 0.0, NO_INTERSECTION, UNDECIDED)),
                       state)
-        t = _pick(state == UNDECIDED, t - g / s, t)
+        t = pick(state == UNDECIDED, t - g / s, t)
     # still falling after every step: a (near-)double root, decided by the height reached
     h, s, sl, cl = _height_slope(ox + t * dx, oy + t * dy, oz + t * dz, dx, dy, dz, a, b, e2, ep2, 2)
-    state = _pick(state == UNDECIDED, _pick(h - ht <= SURFACE_TOL_M, OK, NO_INTERSECTION), state)
-    state = _pick(valid, state, INVALID_INPUT)
+    state = pick(state == UNDECIDED, pick(h - ht <= SURFACE_TOL_M, OK, NO_INTERSECTION), state)
+    state = pick(valid, state, INVALID_INPUT)
     ok = state == OK
     x = ox + t * dx  # (no last Newton step: at a tangent it would leap past the touching point)
     y = oy + t * dy
-    return (_pick(ok, atan2(sl, cl), np.nan), _pick(ok, atan2(y, x), np.nan), _pick(ok, h, np.nan),
-            _pick(ok, t, np.nan), state)
+    return (pick(ok, atan2(sl, cl), np.nan), pick(ok, atan2(y, x), np.nan), pick(ok, h, np.nan),
+            pick(ok, t, np.nan), state)
 
 
 def stop_at_ellipsoid_scalar(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
@@ -625,12 +625,12 @@ def flat_plane(R_ecef_cam, ox, oy, oz, xn0, yn0, rng0, a, b, e2, ep2):
     along it, m); NaN when the range is not a positive number.
     """
     dx, dy, dz = ray_direction(R_ecef_cam, xn0, yn0)
-    r = _pick(_finite(rng0) & (rng0 > 0.0), rng0, np.nan)
+    r = pick(_finite(rng0) & (rng0 > 0.0), rng0, np.nan)
     x = ox + r * dx
     y = oy + r * dy
-    sl, cl, p, _ = _bowring(x, y, oz + r * dz, a, b, e2, ep2, 2)
-    cn = _pick(p > 0.0, x / p, 1.0)  # cos and sin of the main target's longitude
-    sn = _pick(p > 0.0, y / p, 0.0)
+    sl, cl, p, _ = bowring(x, y, oz + r * dz, a, b, e2, ep2, 2)
+    cn = pick(p > 0.0, x / p, 1.0)  # cos and sin of the main target's longitude
+    sn = pick(p > 0.0, y / p, 0.0)
     nx = -cl * cn
     ny = -cl * sn
     nz = -sl
@@ -647,10 +647,10 @@ def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
     c = dx * nx + dy * ny + dz * nz
     rng = H / c
     away = (c <= 0.0) | (rng > MAX_RANGE_M)  # pointing at or above the plane's horizon
-    lat, lon, h, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, _pick(away, np.nan, rng), a, b, e2, ep2)
+    lat, lon, h, t, st = stop_at_range(ox, oy, oz, dx, dy, dz, pick(away, np.nan, rng), a, b, e2, ep2)
     known = _finite(H) & (st != OK)
-    st = _pick(known & away, NO_INTERSECTION, st)
-    return lat, lon, h, t, _pick(known & (H <= 0.0), BELOW_SURFACE, st)
+    st = pick(known & away, NO_INTERSECTION, st)
+    return lat, lon, h, t, pick(known & (H <= 0.0), BELOW_SURFACE, st)
 
 
 # ---------------------------------------------------------------- whole chain, one call
@@ -741,14 +741,14 @@ def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     fc = (lon - lon0) / dlon
     eps = 1e-9  # edge posts computed as 999.0000000001 are still edge posts
     inside = (fr >= -eps) & (fr <= nrow - 1.0 + eps) & (fc >= -eps) & (fc <= ncol - 1.0 + eps)
-    r0 = _floor_index(_pick(inside, fr, 0.0), nrow - 2)
-    c0 = _floor_index(_pick(inside, fc, 0.0), ncol - 2)
+    r0 = _floor_index(pick(inside, fr, 0.0), nrow - 2)
+    c0 = _floor_index(pick(inside, fc, 0.0), ncol - 2)
     ar = fr - r0
     ac = fc - c0
     top = (1.0 - ac) * z[r0, c0] + ac * z[r0, c0 + 1]
     bottom = (1.0 - ac) * z[r0 + 1, c0] + ac * z[r0 + 1, c0 + 1]
     h = (1.0 - ar) * top + ar * bottom
-    return _pick(inside, h, np.nan), inside
+    return pick(inside, h, np.nan), inside
 
 
 def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
@@ -768,12 +768,12 @@ def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
     c2 = -D * dar * dac
     g_lo = c0 + s_lo * (c1 + s_lo * c2)
     disc = c1 * c1 - 4.0 * c2 * c0
-    sq = np.sqrt(_pick(disc >= 0.0, disc, np.nan))
-    q = -0.5 * (c1 + _pick(c1 >= 0.0, sq, -sq))  # stable quadratic roots: q / c2 and c0 / q
+    sq = np.sqrt(pick(disc >= 0.0, disc, np.nan))
+    q = -0.5 * (c1 + pick(c1 >= 0.0, sq, -sq))  # stable quadratic roots: q / c2 and c0 / q
     quad = np.abs(c2) > 1e-12 * (np.abs(c1) + np.abs(c0) + 1e-300)
-    r1 = _pick(quad, q / c2, -c0 / c1)
-    r2 = _pick(quad, c0 / q, np.nan)
+    r1 = pick(quad, q / c2, -c0 / c1)
+    r2 = pick(quad, c0 / q, np.nan)
     ok1 = (r1 >= s_lo) & (r1 <= s_hi)
     ok2 = (r2 >= s_lo) & (r2 <= s_hi)
-    first = _pick(ok1 & ok2, np.minimum(r1, r2), _pick(ok1, r1, _pick(ok2, r2, np.nan)))
-    return _pick(g_lo <= 0.0, s_lo, first)
+    first = pick(ok1 & ok2, np.minimum(r1, r2), pick(ok1, r1, pick(ok2, r2, np.nan)))
+    return pick(g_lo <= 0.0, s_lo, first)

@@ -36,13 +36,13 @@ from ._kernels import (
     NO_INTERSECTION,
     OK,
     OUT_OF_COVERAGE,
-    _bowring,
-    _pick,
     atan2,
+    bowring,
     cell_first_root,
     ecef_to_geodetic,
     grid_height,
     inflated_roots,
+    pick,
     ray_valid,
     stop_at_ellipsoid,
 )
@@ -83,8 +83,8 @@ def _band(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b, e2, ep2):
     _, _, _, t_top, _ = stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, hmax, a, b, e2, ep2)
     _, _, _, t_bottom, _ = stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, hmin, a, b, e2, ep2)
     _, t_top_exit = inflated_roots(ox, oy, oz, dx, dy, dz, hmax + 1.0, a, b)  # leaving the band upward
-    t_start = _pick(h_cam <= hmax, 0.0, t_top)
-    t_end = _pick(t_bottom == t_bottom, t_bottom + 1.0, t_top_exit)
+    t_start = pick(h_cam <= hmax, 0.0, t_top)
+    t_end = pick(t_bottom == t_bottom, t_bottom + 1.0, t_top_exit)
     return t_start, t_end, h_cam
 
 
@@ -204,7 +204,7 @@ def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_n
     x = ox + t * dx
     y = oy + t * dy
     z = oz + t * dz
-    sl, cl, p, h = _bowring(x, y, z, a, b, e2, ep2, 2)
+    sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, 2)
     fr = (atan2(sl, cl) / _D2R - lat0) / dlat
     fc = (atan2(y, x) / _D2R - lon0) / dlon
     turn = 360.0 / abs(dlon)

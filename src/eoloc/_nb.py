@@ -1,6 +1,6 @@
 """numba backend: compiled twins of :mod:`eoloc._kernels` and the loops that drive them.
 
-Each kernel function is recompiled for scalars with ``_pick`` turned into a branch and ``sincos`` /
+Each kernel function is recompiled for scalars with ``pick`` turned into a branch and ``sincos`` /
 ``atan2`` into the kernels' branch-free polynomials, so this module holds no math of its own, only
 drivers. A driver takes the element count, its inputs (each a flat array of that length or a
 scalar: ``_at`` specialises at compile time) and its output arrays, and is one loop that LLVM
@@ -66,7 +66,7 @@ def _at9(a0, a1, a2, a3, a4, a5, a6, a7, a8, i):
 
 _KERNELS = (
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body",
-    "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic",
+    "r_ecef_ned", "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "bowring", "ecef_to_geodetic",
     "pose_frame", "ray_direction", "project_point", "ray_valid", "stop_at_range", "_height_slope",
     "_m3_domain", "ellipsoid_fast", "ellipsoid_classify", "ellipsoid_exact",
     "r_body_cam", "camera_frame", "_tuple9", "params_camera_frame", "locate_one", "grid_height", "inflated_roots",
@@ -81,7 +81,7 @@ _KERNELS = (
 # tuple of mixed array and scalar elements, leaves instructions LLVM cannot vectorise.
 _INLINE = frozenset({
     "_finite", "mat_mul", "mat_vec", "mat_t_vec", "rot_x", "rot_y", "rot_z", "r_ned_body", "r_ecef_ned",
-    "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "_bowring", "ecef_to_geodetic", "pose_frame",
+    "r_body_cam_azel", "r_body_cam_rollpitch", "geodetic_to_ecef", "bowring", "ecef_to_geodetic", "pose_frame",
     "ray_direction", "project_point", "ray_valid", "stop_at_range", "inflated_roots",
     "_height_slope", "_m3_domain", "ellipsoid_fast", "flat_target",
     "r_body_cam", "camera_frame",
@@ -116,7 +116,7 @@ _saved_cache_dir = numba.config.CACHE_DIR
 numba.config.CACHE_DIR = _cache_dir()
 try:
     _g = dict(vars(K))
-    _g["_pick"] = njit(forceinline=True, **_JIT)(_pick_scalar)
+    _g["pick"] = njit(forceinline=True, **_JIT)(_pick_scalar)
     _g["_floor_index"] = njit(**_JIT)(_floor_index_scalar)
     # call- and branch-free trigonometry (the fdlibm polynomials), so that LLVM vectorises the loops
     _g["sincos"] = njit(forceinline=True, **_JIT)(pytypes.FunctionType(K.sincos_poly.__code__, _g, "sincos"))
@@ -130,7 +130,7 @@ try:
         pytypes.FunctionType(K.stop_at_ellipsoid_scalar.__code__, _g, "stop_at_ellipsoid"))
     # the M4 march: its helpers compiled with the kernels' twins in their globals
     _gm = dict(vars(M))
-    _gm.update({name: _g[name] for name in (*_KERNELS, "_pick", "_floor_index", "sincos", "atan2")})
+    _gm.update({name: _g[name] for name in (*_KERNELS, "pick", "_floor_index", "sincos", "atan2")})
     for _name in ("_band_fast", "_knot", "_knot_length", "_hermite", "_surface_gap", "_walk_cells",
                   "_coarse_clear", "_polish", "march_ray"):
         _f = getattr(M, _name)

@@ -32,15 +32,21 @@ def print_bands(rows, title: str, console: Console | None = None) -> None:
     (console or Console()).print(band_table(rows, title))
 
 
+def print_issues(issues, err_console: Console, limit: int = 15) -> None:
+    """The per-line problems of the inputs (file:line: message), the first ``limit`` of them."""
+    issues = list(issues)
+    for issue in issues[:limit]:
+        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
+    if len(issues) > limit:
+        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
+
+
 def print_klv_job(job, console: Console, err_console: Console) -> None:
     """What `eoloc klv` says about a stream: packets, issues, field notes, the span, the frame
     check against the encoder and the VMTI summary."""
     stream, tel, check = job.stream, job.telemetry, job.check
     console.print(escape(stream.summary()))
-    for issue in [str(i) for i in stream.issues][:15]:
-        err_console.print(f"[yellow]warning:[/] {escape(issue)}", highlight=False)
-    if len(stream.issues) > 15:
-        err_console.print(f"[yellow]... and {len(stream.issues) - 15} more issues[/]")
+    print_issues(stream.issues, err_console)
     for w in stream.field_warnings:
         err_console.print(f"[yellow]note:[/] {escape(w)}", highlight=False)
     c = tel.columns
@@ -60,8 +66,7 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
         console.print("[dim]On a DEM the corners are compared with the encoder's own surface for them (often a level "
                       "plane through the frame centre, or a coarser terrain model): far corners of an oblique view "
                       "differ by the terrain, not the pointing. Leave out --dem to compare the pointing alone.[/]")
-    for issue in job.issues[:15]:
-        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
+    print_issues(job.issues, err_console)
     if job.vmti is not None:
         det = job.detections
         console.print(f"VMTI: {len(det)} detections of {len(set(det.columns['target_id']))} targets located on "

@@ -12,6 +12,7 @@ from rich.markup import escape
 
 from .. import __version__
 from ..errors import EolocError
+from ..render import print_issues
 from .options import CONVENTIONS, negative_values_kept
 
 console = Console()
@@ -26,11 +27,7 @@ def fail(message: str) -> None:
 
 def report_issues(issues, limit: int = 15) -> None:
     """The per-line problems of the inputs (file:line: message), the first ``limit`` of them."""
-    issues = list(issues)
-    for issue in issues[:limit]:
-        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
-    if len(issues) > limit:
-        err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
+    print_issues(issues, err_console, limit)
 
 
 def warn(message: str, label: str = "warning") -> None:

@@ -129,7 +129,7 @@ class _Lines:
         self.data, self.path = data, path
         self.issues: list[Issue] = []
         self.header: list[str] | None = None
-        self.quoted = b'"' in data
+        self.quoted = False
         buf = np.frombuffer(data, dtype=np.uint8)
         ends = np.flatnonzero(buf == 10)
         if not data.endswith(b"\n"):
@@ -217,26 +217,21 @@ class _Lines:
                 record += "\n" + self.line(i + span).decode("utf-8")
                 span += 1
             fields = next(csv.reader([record]), [])
-            if record.count('"') % 2 or len(fields) != width:
-                if record.count('"') % 2 or span > 1:
-                    self.issues.append(Issue(self.path, i + 1, "an unterminated quote (a field opened with \" "
-                                                               "and never closed); line skipped"))
-                    k += 1
-                    continue
-                if all(not f.strip() for f in fields):
-                    msg = "a line of only commas (no values); line skipped"
-                else:
-                    msg = f"{len(fields)} fields where the header has {width}; line skipped"
-                self.issues.append(Issue(self.path, i + 1, msg))
-                k += 1
+            if record.count('"') % 2 or (span > 1 and len(fields) != width):
+                self.issues.append(Issue(self.path, i + 1, "an unterminated quote (a field opened with \" and never "
+                                                           "closed); line skipped"))
+                k += 1  # the lines it swallowed are read again on their own
                 continue
+            k += span
             if all(not f.strip() for f in fields):
                 self.issues.append(Issue(self.path, i + 1, "a line of only commas (no values); line skipped"))
-                k += span
+                continue
+            if len(fields) != width:
+                self.issues.append(Issue(self.path, i + 1, f"{len(fields)} fields where the header has {width}; "
+                                                           "line skipped"))
                 continue
             rows.append(fields)
             numbers.append(i + 1)
-            k += span
         self.numbers = np.array(numbers, dtype=np.int64)
         out = {}
         for name, j in index.items():
@@ -252,6 +247,7 @@ def _arrow_columns(clean: bytes, width: int, index: dict[str, int], text: set[st
     import io
 
     import pyarrow as pa
+    import pyarrow.compute as pc
     from pyarrow import csv as pacsv
 
     names = [f"c{j}" for j in range(width)]
@@ -275,13 +271,13 @@ def _arrow_columns(clean: bytes, width: int, index: dict[str, int], text: set[st
     for name, c in wanted.items():
         col = table.column(c)
         if name in text:
-            out[name] = np.array([("" if v is None else v.strip()) for v in col.to_pylist()], dtype=object)
+            out[name] = pc.utf8_trim_whitespace(col.fill_null("")).to_numpy(zero_copy_only=False).astype(object)
         elif name in as_text:
             try:
                 out[name] = (col.cast(pa.float64()).to_numpy(zero_copy_only=False),
                              col.is_null().to_numpy(zero_copy_only=False))
             except pa.ArrowInvalid:
-                cells = np.array([("" if v is None else v.strip()) for v in col.to_pylist()], dtype=object)
+                cells = pc.utf8_trim_whitespace(col.fill_null("")).to_numpy(zero_copy_only=False).astype(object)
                 out[name] = _numbers(cells)
         else:
             out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64),  # nulls -> NaN

@@ -26,6 +26,7 @@ class LocateJob:
 
     rows: list[dict]
     located: Located
+    extra: dict  # the per-target descriptive columns of the rows (located.extra with time_utc when known)
     issues: list[Issue] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     compensation_summary: str | None = None
@@ -70,7 +71,7 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule
     if nothing:
         notes.append(nothing)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
-    return LocateJob(fix_rows(located.fixes, extra, after), located, inputs.issues + located.issues, notes,
+    return LocateJob(fix_rows(located.fixes, extra, after), located, extra, inputs.issues + located.issues, notes,
                      summary)
 
 

@@ -76,8 +76,7 @@ def _track_rows(ts, job: LocateJob) -> list[dict]:
         first = idx[:1]  # a track's first fix: position only, its speed and course are not known yet
         cols["speed_mps"][first] = cols["speed_sigma_mps"][first] = cols["heading_deg"][first] = np.nan
         cols["sigma_e_m"][idx], cols["sigma_n_m"][idx] = np.sqrt(P[:, 0, 0]), np.sqrt(P[:, 1, 1])
-    extra = {k: [r.get(k) for r in job.rows] for k in job.rows[0] if k in located.extra or k == "time_utc"}
-    extra["track_id"] = ts.assigned
+    extra = dict(job.extra, track_id=ts.assigned)
     return fix_rows(located.fixes, extra, cols)
 
 
