@@ -17,8 +17,10 @@ from eoloc import AzElGimbal, Camera, Pose, SensorModel, locate_ellipsoid
 from eoloc.accuracy import compensation as C
 from eoloc.accuracy.calflight import FlightNoise, InstallationErrors, calibration_flights
 from eoloc.cli import main
-from eoloc.io.config import ConfigError, compensation_model, load_config
+from eoloc.io.config import ConfigError, load_config
+from eoloc.io.raster import write_dem
 from eoloc.io.telemetry import read_observations
+from eoloc.jobs.setup import compensation_model
 from eoloc.terrain import open_dem
 
 CAM = Camera.from_focal_mm(50.0, 5.5, 1024, 768)
@@ -206,7 +208,7 @@ def test_model_file_round_trip_and_clear_errors(tmp_path):
 
 def test_dem_geotiff_round_trip(tmp_path):
     tr, *_ = _flights()
-    back = open_dem(tr.dem.write_geotiff(tmp_path / "dem.tif"), vertical="ellipsoid")
+    back = open_dem(write_dem(tr.dem, tmp_path / "dem.tif"), vertical="ellipsoid")
     g = tr.dem.grid
     lats = g.lat0 + g.dlat * np.array([0, 17, 100])
     lons = g.lon0 + g.dlon * np.array([0, 33, 200])

@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import eoloc
 from eoloc.cli import main
@@ -137,3 +139,87 @@ def test_file_mode_json_kml_cot_and_utc_times(tmp_path):
     with zipfile.ZipFile(tmp_path / "o" / "fixes.cot.zip") as zf:
         cots = [n for n in zf.namelist() if n.endswith(".cot")]
     assert len(cots) == len(set(cots)) == n_ok
+
+
+_cell = st.one_of(st.floats(allow_nan=False, allow_infinity=False, width=32).map(repr),
+                  st.sampled_from(["", "x", "inf", "nan", " 3 ", "1e400", "-0"]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.lists(st.tuples(st.integers(0, 10**6).map(str) | _cell, _cell, _cell), min_size=1, max_size=40),
+       at=st.integers(0, 40))
+def test_clean_files_read_in_one_go_agree_with_the_line_by_line_path(tmp_path_factory, rows, at):
+    """A file with no comment, quote or odd line is read by pyarrow in one go; a comment line
+    sends the same content line by line. Both must keep the same records with the same values
+    and report the same issues, at line numbers that differ by the comment's line exactly."""
+    tmp = tmp_path_factory.mktemp("csv")
+    lines = [f"{t},T,{u},{v}\n" for t, u, v in rows]
+    at = min(at, len(lines))
+    fast, slow = tmp / "fast.csv", tmp / "slow.csv"
+    fast.write_text("time_s,target_id,u_px,v_px\n" + "".join(lines))
+    slow.write_text("time_s,target_id,u_px,v_px\n" + "".join(lines[:at]) + "# a comment\n" + "".join(lines[at:]))
+    a, b = read_detections(fast), read_detections(slow)
+    shift = lambda n: n + (n >= at + 2)  # noqa: E731 - the comment sits on line at + 2
+    assert [shift(n) for n in a.line.tolist()] == b.line.tolist()
+    for name in ("time_s", "u_px", "v_px"):
+        np.testing.assert_array_equal(a.columns[name], b.columns[name])
+    np.testing.assert_array_equal(a.columns["time_s"], [float(rows[n - 2][0]) for n in a.line])  # Python's parse
+    assert [(shift(i.line), i.message) for i in a.issues] == [(i.line, i.message) for i in b.issues]
+
+
+_text = st.text(alphabet=st.sampled_from(list('ab ,"\n\r;é')), max_size=6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(floats=st.lists(st.floats(min_value=-1e9, max_value=1e9) | st.just(float("nan")), min_size=1, max_size=30),
+       data=st.data())
+def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
+    """Records -> write_csv (pyarrow, chunked on two threads) -> Python's csv module: every row
+    there, text cells exact (commas, quotes, line breaks quoted), numbers within the stated
+    rounding (9 decimals for *_deg, 4 otherwise), no value as an empty cell, booleans True/False."""
+    from eoloc.io import export
+    from eoloc.io.records import Records
+
+    n = len(floats)
+    texts = data.draw(st.lists(st.none() | _text, min_size=n, max_size=n))
+    flags = data.draw(st.lists(st.booleans(), min_size=n, max_size=n))
+    recs = Records({"id": np.arange(n), "lat_deg": np.array(floats), "range_m": np.array(floats),
+                    "note": np.array(texts, dtype=object), "ok": np.array(flags)})
+    path = tmp_path_factory.mktemp("w") / "r.csv"
+    old = export.CSV_CHUNK
+    export.CSV_CHUNK = 7  # several chunks, rendered in parallel and written in order
+    try:
+        export.write_csv(path, recs)
+    finally:
+        export.CSV_CHUNK = old
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["id"]) for r in rows] == list(range(n))
+    for r, x, t, b in zip(rows, floats, texts, flags, strict=True):
+        for key, tol in (("lat_deg", 0.5e-9), ("range_m", 0.5e-4)):
+            if np.isnan(x):
+                assert r[key] == ""
+            else:
+                assert abs(float(r[key]) - x) <= tol + 1e-15 * abs(x)
+        assert r["note"] == ("" if t is None else t)
+        assert r["ok"] == str(b)
+
+
+def test_records_from_rows_round_trip_and_streamed_geojson(tmp_path):
+    """Dict rows -> Records -> rows gives the same values back (None for a missing key), and the
+    streamed GeoJSON equals the features built in memory."""
+    from eoloc.io.export import fix_features, write_fix_geojson
+    from eoloc.io.records import Records
+
+    rows = [{"target_id": "A", "lat_deg": 45.0, "lon_deg": 7.0, "h_m": 600.0, "status": "OK", "frame": 3},
+            {"target_id": "B", "lat_deg": None, "lon_deg": None, "h_m": None, "status": "NO_INTERSECTION",
+             "frame": 4, "extra": True}]
+    recs = Records.from_rows(rows)
+    assert recs["frame"].dtype == np.int64 and recs["lat_deg"].dtype == np.float64
+    back = recs.rows()
+    assert back[0] == {**rows[0], "extra": None} and back[1] == rows[1]
+    path = write_fix_geojson(tmp_path / "f.geojson", recs, chunk=1)
+    doc = json.loads(path.read_text())
+    assert doc["features"] == fix_features(recs)
+    assert doc["features"][0]["geometry"]["coordinates"] == [7.0, 45.0, 600.0]
+    assert doc["features"][1]["geometry"] is None

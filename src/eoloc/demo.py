@@ -12,10 +12,11 @@ from rich.table import Table as RichTable
 
 from .accuracy.covariance import covariance_columns
 from .geodesy import horizontal_distance_m
-from .io.config import error_budget, load_config
-from .io.export import fix_rows
+from .io.config import load_config
+from .io.export import fix_records
 from .io.telemetry import read_detections, read_telemetry
 from .io.writers import write_layer
+from .jobs.setup import error_budget
 from .pipeline import RANGE_FROM_FILES, locate_tables
 from .rules import AtHeight, OnDEM, locate_range
 from .sensor import AzElGimbal, Camera, Pose, SensorModel
@@ -102,8 +103,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     for name, located, err in (("fixes_range", m1, err1), ("fixes_ellipsoid", m3, err3)):
         extra = dict(located.extra, error_vs_truth_m=err)
         after = covariance_columns(located.covariance, located.fixes.ok) if located.covariance is not None else None
-        rows = fix_rows(located.fixes, extra, after)
-        written += write_layer(out_dir, name, rows)
+        written += write_layer(out_dir, name, fix_records(located.fixes, extra, after))
     console.print("wrote " + ", ".join(str(p) for p in written))
     run_mountain_demo(out_dir, console=console, data=data / "mountain")
     run_klv_demo(out_dir / "klv", console=console, data=data / "mountain")
@@ -143,6 +143,7 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """M5: a synthetic checkerboard frame seen obliquely over the Longs Peak DEM, orthorectified
     to UTM on the DEM, with [P]'s bounds shortcut measured against the rigorous ray."""
     from . import rectify as R
+    from .io.raster import write_ortho
     from .rules import locate_dem
     from .terrain import open_dem
 
@@ -154,7 +155,7 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     f = locate_dem(sensor, pose, dem, (u, v))
     frame = np.where(f.ok, 60 + 140 * ((np.floor(f.lat_deg / 0.001) + np.floor(f.lon_deg / 0.001)) % 2), 0)
     ortho = R.orthorectify(frame.astype(np.uint8), sensor, pose, dem, crs="utm")
-    path = ortho.write(out_dir / "ortho.tif")
+    path = write_ortho(ortho, out_dir / "ortho.tif")
     grid = R.ground_grid(sensor, pose, dem, step_px=40)
     ok = grid.fixes.ok.ravel()
     short = R.shortcut_error(ortho, sensor, pose, dem, np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]).summary()
@@ -241,9 +242,9 @@ def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     every = np.arange(0, len(tel), 5)
     prints = footprints(sensor, telemetry_pose(tel, every), dem, edge_samples=12)
     clipped = sum(bool(p.clipped.any()) for p in prints)
-    rows = fix_rows(m4.fixes, dict(m4.extra, error_vs_truth_m=errors["dem"]))
+    records = fix_records(m4.fixes, dict(m4.extra, error_vs_truth_m=errors["dem"]))
     feats = footprint_features(prints, [{"time_s": float(tel.columns["time_s"][i])} for i in every])
-    written = [*write_layer(out_dir, "fixes_dem", rows),
+    written = [*write_layer(out_dir, "fixes_dem", records),
                *write_layer(out_dir, "footprints_dem", [f["properties"] for f in feats], ["geojson"], features=feats)]
     console.print(f"{len(prints)} frame footprints on the DEM, {clipped} clipped where the image sees past the "
                   "DEM's edge (the outline stops at the edge instead of guessing)")

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pyproj
@@ -54,17 +53,6 @@ class GroundGrid:
     u_px: np.ndarray
     v_px: np.ndarray
     fixes: Fixes
-
-    def rows(self) -> list[dict]:
-        """One dict per grid point (u, v, lat, lon, h, status), for CSV export."""
-        f = self.fixes.flat()
-        out = []
-        for i, (u, v) in enumerate(zip(self.u_px.ravel(), self.v_px.ravel(), strict=True)):
-            ok = f.status[i] == Status.OK
-            out.append({"u_px": float(u), "v_px": float(v), "lat_deg": float(f.lat_deg[i]) if ok else None,
-                        "lon_deg": float(f.lon_deg[i]) if ok else None, "h_m": float(f.h_m[i]) if ok else None,
-                        "status": Status(int(f.status[i])).name})
-        return out
 
 
 def ground_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, step_px: float = 32.0) -> GroundGrid:
@@ -140,25 +128,6 @@ class Ortho:
         y1, y0 = t.f, t.f + rows * t.e
         tr = pyproj.Transformer.from_crs(self.crs, _WGS84, always_xy=True)
         return tr.transform_bounds(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1), densify_pts=101)
-
-    def write(self, path: str | Path, *, tags: dict | None = None) -> Path:
-        """GeoTIFF (deflate, tiled when large) with the CRS, transform and nodata."""
-        import rasterio
-
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        b, h, w = self.data.shape
-        profile = {"driver": "GTiff", "width": w, "height": h, "count": b, "dtype": self.data.dtype.name,
-                   "crs": rasterio.crs.CRS.from_wkt(self.crs.to_wkt()), "transform": self.transform,
-                   "nodata": self.nodata, "compress": "deflate"}
-        if w >= 256 and h >= 256:
-            profile.update(tiled=True, blockxsize=256, blockysize=256)
-        with rasterio.open(path, "w", **profile) as ds:
-            ds.write(self.data)
-            if tags:
-                ds.update_tags(**{k: str(v) for k, v in tags.items()})
-        return path
-
 
 def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float:
     """Ground sample distance (m) at the principal point: the mean ground distance to the

@@ -43,7 +43,7 @@ SCENARIOS = ("s13", "q-ellipsoid", "q-dem")
 @out_option("accuracy.csv, sensitivity.csv and the plots")
 def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samples, plots, dask_address,
              out_dir) -> None:
-    from ..io.export import write_csv
+    from ..io.writers import write_layer
     from ..jobs.accuracy import accuracy_job, mapper, scenario_from
 
     scn, n, seed = scenario_from(config_path, scenario, samples, seed)
@@ -69,7 +69,7 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
     from pathlib import Path
 
     out = Path(out_dir)
-    written = [write_csv(out / "accuracy.csv", job.rows)]
+    written = write_layer(out, "accuracy", job.rows, ["csv"])
     if job.sensitivity:
         t2 = RichTable(title=f"sensitivity, each source alone (target 0, {sensitivity_samples:,} samples each)")
         for c in ("source", "law", "μ lat (deg/unit)", "μ lon (deg/unit)", "μ h (m/unit)", "σ horizontal (m)"):
@@ -78,7 +78,7 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
             t2.add_row(r.source, r.law, f"{r.mu_lat:.4g}", f"{r.mu_lon:.4g}", f"{r.mu_h:.4g}",
                        f"{r.sigma_horizontal_m:.3g}")
         console.print(t2)
-        written.append(write_csv(out / "sensitivity.csv", [vars(r) for r in job.sensitivity]))
+        written += write_layer(out, "sensitivity", [vars(r) for r in job.sensitivity], ["csv"])
     if plots:
         from ..accuracy.plots import plot_scatter
 

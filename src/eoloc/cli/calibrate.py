@@ -47,7 +47,7 @@ eoloc calibrate TELEMETRY.csv GCPS.csv --config CAMERA.toml [--estimate mount,he
 @out_option("calibration.json and gcp_residuals.csv")
 def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, interpolate, max_gap, time_tolerance,
               write_config, out_dir) -> None:
-    from ..io.export import write_csv
+    from ..io.writers import write_layer
     from ..jobs.calibrate import calibrate_job, write_back
 
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
@@ -58,7 +58,7 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
     report_issues(job.issues)
     _print_calibration(job)
     out = Path(out_dir)
-    csv_path = write_csv(out / "gcp_residuals.csv", job.rows)
+    (csv_path,) = write_layer(out, "gcp_residuals", job.rows, ["csv"])
     js = out / "calibration.json"
     js.parent.mkdir(parents=True, exist_ok=True)
     js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")

@@ -71,6 +71,7 @@ def compensate() -> None:
 @out_option("train.csv, test.csv and dem.tif", default="eoloc-cal")
 def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
     from ..accuracy.calflight import InstallationErrors, calibration_flights
+    from ..io.raster import write_dem
 
     sensor = load_config(config_path).sensor()
     tr = calibration_flights(sensor, n_flights=flights, looks_per_flight=looks, seed=seed)
@@ -80,7 +81,7 @@ def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
     written = [_write_obs(out / "train.csv", tr.columns)]
     if te is not None:
         written.append(_write_obs(out / "test.csv", te.columns))
-    written.append(tr.dem.write_geotiff(out / "dem.tif"))
+    written.append(write_dem(tr.dem, out / "dem.tif"))
     e = InstallationErrors()
     console.print(f"{len(tr)} training observations on {flights} flights"
                     + (f", {len(te)} test observations on {test_flights} flights" if te is not None else "")
@@ -91,11 +92,10 @@ def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
 
 
 def _write_obs(path: Path, cols: dict[str, np.ndarray]) -> Path:
-    from ..io.export import plain_value, write_csv
+    from ..io.records import Records
+    from ..io.writers import write_layer
 
-    names = list(cols)
-    rows = [{k: plain_value(cols[k][i]) for k in names} for i in range(cols["u_px"].size)]
-    return write_csv(path, rows)
+    return write_layer(path.parent, path.stem, Records(dict(cols)), ["csv"])[0]
 
 
 def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, dem_crs):
@@ -205,14 +205,14 @@ def _table_dict(rows) -> list[dict]:
 
 
 def _write_table(path: Path, rows, kinds) -> Path:
-    from ..io.export import write_csv
+    from ..io.writers import write_layer
 
     out = []
     for kind, r in zip(kinds, rows, strict=True):
         row = {"held_out": kind, "lo_deg": r.lo_deg, "hi_deg": r.hi_deg, "n": r.n, "cep_before_m": r.cep_before_m}
         row.update({f"cep_after_{k}_m": v for k, v in r.cep_after_m.items()})
         out.append(row)
-    return write_csv(path, out)
+    return write_layer(path.parent, path.stem, out, ["csv"])[0]
 
 
 @compensate.command("evaluate", help="Apply a model to observations it was not trained on: CEP by oblique band "
@@ -248,16 +248,16 @@ def evaluate(model_path, observations, config_path, target_height, dem_paths, ve
     png = plot_compensation(obs.features.oblique_deg[ok], e0[ok], {"compensated": e1[ok]}, rows,
                             out / "compensation.png",
                             title=f"{Path(observations).name}: location error against oblique angle")
-    from ..io.export import plain_value, write_csv
+    from ..io.records import Records
+    from ..io.writers import write_layer
 
-    fx = [{"line": int(table.line[i]), "flight": table.columns["flight"][i],
-           **{k: plain_value(v[i]) for k, v in obs.features.columns().items()},
-           "err_e_m": plain_value(e0[i, 0]), "err_n_m": plain_value(e0[i, 1]),
-           "comp_e_m": plain_value(pred.correction_enu[i, 0]), "comp_n_m": plain_value(pred.correction_enu[i, 1]),
-           "after_e_m": plain_value(e1[i, 0]), "after_n_m": plain_value(e1[i, 1]),
-           "comp_applied": bool(pred.applied[i]),
-           "comp_flag": reasons[i]} for i in range(len(table))]
-    csv_path = write_csv(out / "compensation_fixes.csv", fx)
+    fx = Records({"line": np.asarray(table.line), "flight": np.asarray(table.columns["flight"]),
+                  **{k: np.asarray(v) for k, v in obs.features.columns().items()},
+                  "err_e_m": e0[:, 0], "err_n_m": e0[:, 1],
+                  "comp_e_m": pred.correction_enu[:, 0], "comp_n_m": pred.correction_enu[:, 1],
+                  "after_e_m": e1[:, 0], "after_n_m": e1[:, 1], "comp_applied": np.asarray(pred.applied, dtype=bool),
+                  "comp_flag": np.asarray(reasons, dtype=object)})
+    (csv_path,) = write_layer(out, "compensation_fixes", fx, ["csv"])
     if as_json:
         click.echo(json.dumps(_table_dict(rows)))
     console.print(f"wrote [bold]{png}[/] and [bold]{csv_path}[/]")

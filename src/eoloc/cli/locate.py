@@ -90,7 +90,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if covariance:
         if config_path is None:
             fail("--covariance needs --config FILE with an [accuracy.budget] section (the error sources)")
-        from ..io.config import error_budget
+        from ..jobs.setup import error_budget
 
         budget = error_budget(load_config(config_path), config_path)
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
@@ -112,22 +112,22 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
         fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     rule = stop_rule(range_opt, target_height, dem)
     cfg = load_config(config_path)
-    from ..io.config import compensation_model
     from ..io.export import json_safe
     from ..io.writers import write_layer
     from ..jobs.locate import locate_files
+    from ..jobs.setup import compensation_model
 
     model = compensation_model(cfg, config_path, compensate_path)
     with err_console.status("locating..."):
         job = locate_files(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance, budget=budget,
                            interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model)
     report_issues(job.issues)
-    written = write_layer(out_dir, "fixes", job.rows, formats)
+    written = write_layer(out_dir, "fixes", job.records, formats)
     if as_json:
         click.echo(json.dumps(json_safe({"status_counts": job.status_counts, "written": [str(p) for p in written],
-                                         "fixes": job.rows}), allow_nan=False))
+                                         "fixes": job.records.rows()}), allow_nan=False))
     else:
-        console.print(fix_summary_table(job.rows, job.status_counts))
+        console.print(fix_summary_table(job.records, job.status_counts))
     if job.compensation_summary:
         err_console.print(job.compensation_summary, highlight=False)
     for note in job.notes:

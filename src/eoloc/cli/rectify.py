@@ -49,7 +49,8 @@ image's bounds) against the rigorous ray.
 @out_option("ortho.tif, footprint.geojson, ground_grid.csv and rectify.json")
 def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd,
             resampling, nodata, occlusion, grid_step, out_dir) -> None:
-    from ..io.export import write_csv
+    from ..io.export import fix_records
+    from ..io.raster import write_ortho
     from ..io.writers import write_layer
     from ..jobs.rectify import rectify_job
 
@@ -61,14 +62,15 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
     report_issues(job.issues)
     ortho, fp, short = job.ortho, job.footprint, job.shortcut
     out = Path(out_dir)
-    tif = ortho.write(out / "ortho.tif", tags={"EOLOC_SOURCE": Path(image).name,
+    tif = write_ortho(ortho, out / "ortho.tif", tags={"EOLOC_SOURCE": Path(image).name,
                                                "EOLOC_TELEMETRY_LINE": job.telemetry_line,
                                                "EOLOC_SURFACE": "DEM" if dem_paths else target_height})
     from ..footprint import footprint_features
 
     feats = footprint_features([fp], [{"image": Path(image).name}])
     written = [tif, *write_layer(out, "footprint", [f["properties"] for f in feats], ["geojson"], features=feats),
-               write_csv(out / "ground_grid.csv", job.grid.rows())]
+               *write_layer(out, "ground_grid", fix_records(job.grid.fixes, {"u_px": job.grid.u_px,
+                                                                          "v_px": job.grid.v_px}), ["csv"])]
     report = {"image": str(image), "telemetry_line": job.telemetry_line, "crs": ortho.crs.to_string(),
               "size": list(ortho.shape), "bands": int(ortho.data.shape[0]), "res": list(ortho.res),
               "valid_fraction": float(ortho.valid.mean()), "footprint_area_m2": fp.area_m2,

@@ -3,7 +3,10 @@ demo shares with the commands live in :mod:`eoloc.render`, outside the CLI packa
 
 from __future__ import annotations
 
+import numpy as np
 from rich.table import Table as RichTable
+
+from ..io.records import Records
 
 
 def number_cell(key: str, v) -> str:
@@ -15,17 +18,22 @@ def number_cell(key: str, v) -> str:
     return str(v)
 
 
-def fix_summary_table(rows: list[dict], counts: dict[str, int], limit: int = 12) -> RichTable:
-    """The first ``limit`` fix rows, with the status counts in the title; empty columns dropped."""
-    table = RichTable(title=f"{len(rows)} targets: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+def fix_summary_table(records: Records, counts: dict[str, int], limit: int = 12) -> RichTable:
+    """The first ``limit`` fix records, with the status counts in the title; empty columns dropped."""
+    n = len(records)
+    table = RichTable(title=f"{n} targets: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     cols = ("time_s", "frame", "target_id", "lat_deg", "lon_deg", "h_m", "range_m", "status")
-    cols = tuple(c for c in cols if any(r.get(c) is not None for r in rows))
+    cols = tuple(c for c in cols if c in records.columns and _has_values(records[c]))
     for c in cols:
         # coordinates never wrap or get cut to "44.9999…" at 80 columns
         table.add_column(c, no_wrap=True, overflow="fold" if not c.endswith("_deg") else "ignore",
                          min_width=13 if c.endswith("_deg") else None)
-    for row in rows[:limit]:
+    for row in records.rows(0, limit):
         table.add_row(*(number_cell(c, row.get(c)) for c in cols))
-    if len(rows) > limit:
-        table.caption = f"first {limit} of {len(rows)} rows"
+    if n > limit:
+        table.caption = f"first {limit} of {n} rows"
     return table
+
+
+def _has_values(v: np.ndarray) -> bool:
+    return bool((~np.isnan(v)).any()) if v.dtype.kind == "f" else any(x is not None for x in v)

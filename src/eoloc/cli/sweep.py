@@ -40,7 +40,7 @@ eoloc sweep CONFIG.toml --angle gimbal2 --angles 20:80:10 --terrain-sigmas 10,50
 def sweep(config_path, scenario, angle, angles, terrain_sigmas, samples, seed, dask_address, out_dir) -> None:
     from ..accuracy.plots import plot_sweep
     from ..accuracy.sweep import terrain_sweep
-    from ..io.export import write_csv
+    from ..io.writers import write_layer
     from ..jobs.accuracy import mapper, scenario_from
 
     angle_list, sigma_list = float_list(angles), float_list(terrain_sigmas)
@@ -62,6 +62,6 @@ def sweep(config_path, scenario, angle, angles, terrain_sigmas, samples, seed, d
         if p.note:
             warn(f"{p.method} {angle} {p.angle_deg:g}° σ {p.terrain_sigma_m:g} m: {p.note}")
     out = Path(out_dir)
-    csv_path = write_csv(out / "sweep.csv", [vars(p) for p in points])
+    (csv_path,) = write_layer(out, "sweep", [vars(p) for p in points], ["csv"])
     png = plot_sweep(points, out / "sweep.png", title=f"{scn.name}: CEP50 against {angle}, {n:,} samples per point")
     err_console.print(f"wrote [bold]{csv_path}[/] and [bold]{png}[/]")

@@ -89,7 +89,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
         if tj.unassigned:
             warn(f"{tj.unassigned} located detections joined no confirmed track (clutter, or a target seen fewer "
                  "than 3 times)")
-        written = write_layer(out_dir, "track_fixes", tj.rows, [f for f in formats if f != "geojson"])
+        written = write_layer(out_dir, "track_fixes", tj.records, [f for f in formats if f != "geojson"])
         written += write_layer(out_dir, "tracks", [f["properties"] for f in tj.features],
                                [f for f in formats if f in ("geojson", "kml")] or ["geojson"], features=tj.features)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))

@@ -228,58 +228,6 @@ class Config(_Strict):
                            self.installation.lever_arm_m)
 
 
-def accuracy_scenario(cfg: Config, path: str | Path):
-    """The Monte Carlo scenario of a config's [accuracy] section (DEM paths relative to the file)."""
-    from ..accuracy.budget import ErrorBudget
-    from ..accuracy.montecarlo import Scenario
-    from ..rules import AtHeight, AtRange, OnDEM
-    from ..sensor import Pose
-    from ..terrain import open_dem
-
-    a = cfg.accuracy
-    if a is None:
-        raise ConfigError(f"config file {str(path)!r} has no [accuracy] section (pose, stop rule, budget); "
-                          "see the README, or use --scenario for a built-in one")
-    missing = [k for k in ("pose", "stop") if getattr(a, k) is None]
-    if missing:
-        raise ConfigError(f"config file {str(path)!r}: [accuracy] needs {' and '.join(missing)} for a Monte Carlo "
-                          "run (the nominal observation); see the README")
-    p = a.pose
-    # the config's `stop` key names the rule; its value comes from the key of the same meaning
-    rule = {"range": lambda: AtRange(a.range_m), "height": lambda: AtHeight(a.height_m),
-            "dem": lambda: OnDEM(open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical))}[a.stop]()
-    return Scenario(Path(path).stem, cfg.sensor(),
-                    Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
-                    ErrorBudget.from_mapping(a.budget), rule,
-                    pixels=None if a.pixels is None else a.pixels, velocity_ned_mps=a.velocity_ned_mps)
-
-
-def error_budget(cfg: Config, path: str | Path):
-    """The config's [accuracy.budget] as an ErrorBudget (for per-fix covariance)."""
-    from ..accuracy.budget import ErrorBudget
-
-    if cfg.accuracy is None:
-        raise ConfigError(f"config file {str(path)!r} has no [accuracy.budget] section: list the error sources, "
-                          "e.g. yaw_deg = {normal = 0.02}; see the README")
-    return ErrorBudget.from_mapping(cfg.accuracy.budget)
-
-
-def compensation_model(cfg: Config, path: str | Path, override: str | Path | None = None):
-    """The compensation model of ``--compensate`` (``override``) or of the config's [compensation]
-    (its path relative to the config file), checked against the config's feature set; None if
-    neither names one."""
-    from ..accuracy.compensation import CompensationModel, ModelFileError
-
-    c = cfg.compensation
-    if override is None and c is None:
-        return None
-    model_path = Path(override) if override is not None else Path(path).parent / c.model
-    try:
-        return CompensationModel.load(model_path, features=None if c is None else c.features)
-    except ModelFileError as exc:
-        raise ConfigError(str(exc)) from None
-
-
 def load_config(path: str | Path) -> Config:
     """Read and validate a TOML configuration; errors name the file and the key."""
     path = Path(path)

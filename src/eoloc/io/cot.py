@@ -31,7 +31,7 @@ def _num(row: dict, key: str) -> float:
 
 def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", stale_s: float = 300.0,
               now: datetime | None = None) -> ET.Element | None:
-    """The CoT event of one fix row (``export.fix_rows`` layout, with the covariance columns when
+    """The CoT event of one fix row (``export.fix_records`` layout, with the covariance columns when
     known); None for a fix that failed (no point to send)."""
     if row.get("status") != "OK":
         return None

@@ -11,26 +11,26 @@ from pathlib import Path
 import numpy as np
 
 from ..result import Fixes, Status
+from .records import Records
 
 FIX_COLUMNS = ("lat_deg", "lon_deg", "h_m", "range_m", "status")
 
 
-def fix_rows(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
-             after: Mapping[str, Sequence] | None = None) -> list[dict]:
-    """One dict per target: the ``extra`` columns first (ids, times, pixels), then the fix, then
-    the ``after`` columns (e.g. its uncertainty)."""
-    extra = dict(extra or {})
-    after = dict(after or {})
-    n = len(fixes)
-    flat = {k: np.ravel(getattr(fixes, k)) for k in FIX_COLUMNS}
-    rows = []
-    for i in range(n):
-        row = {k: plain_value(v[i]) for k, v in extra.items()}
-        row.update({k: plain_value(flat[k][i]) for k in FIX_COLUMNS[:-1]})
-        row["status"] = Status(int(flat["status"][i])).name
-        row.update({k: plain_value(v[i]) for k, v in after.items()})
-        rows.append(row)
-    return rows
+STATUS_NAMES = np.array([None] * (max(Status) + 1), dtype=object)
+for _s in Status:
+    STATUS_NAMES[_s] = _s.name
+
+
+def fix_records(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
+                after: Mapping[str, Sequence] | None = None) -> Records:
+    """The fixes as records: the ``extra`` columns first (ids, times, pixels), then the fix
+    (lat_deg, lon_deg, h_m, range_m, status by name), then the ``after`` columns (e.g. its
+    uncertainty)."""
+    cols = {k: np.asarray(v).ravel() for k, v in (extra or {}).items()}
+    cols.update({k: np.ravel(getattr(fixes, k)).astype(np.float64) for k in FIX_COLUMNS[:-1]})
+    cols["status"] = STATUS_NAMES[np.ravel(fixes.status).astype(np.intp)]
+    cols.update({k: np.asarray(v).ravel() for k, v in (after or {}).items()})
+    return Records(cols)
 
 
 def utc_times(time_s, origin: str | None) -> np.ndarray | None:
@@ -39,14 +39,17 @@ def utc_times(time_s, origin: str | None) -> np.ndarray | None:
     no origin is known (relative times are never dressed up as dates). Unknown times give None."""
     if origin is None:
         return None
-    from datetime import UTC, datetime, timedelta
+    from datetime import UTC, datetime
 
-    t0 = (datetime(1970, 1, 1, tzinfo=UTC) if origin == "unix" else
-          datetime.fromisoformat(origin.replace("Z", "+00:00")).astimezone(UTC))
+    t0_ms = 0
+    if origin != "unix":
+        t0 = datetime.fromisoformat(origin.replace("Z", "+00:00"))
+        t0_ms = round((t0 if t0.tzinfo else t0.replace(tzinfo=UTC)).timestamp() * 1000)
     t = np.asarray(time_s, dtype=np.float64)
-    out = np.full(t.shape, None, dtype=object)
-    for i in np.flatnonzero(np.isfinite(t)):
-        out[i] = (t0 + timedelta(seconds=float(t[i]))).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+    ok = np.isfinite(t) & (np.abs(t) < 1e13)
+    ms = np.where(ok, np.floor(np.where(ok, t, 0.0) * 1000.0 + 1e-6), 0).astype(np.int64) + t0_ms
+    out = (np.datetime_as_string(ms.astype("datetime64[ms]"), unit="ms").astype(object) + "Z")
+    out[~ok] = None
     return out
 
 
@@ -78,50 +81,104 @@ def json_safe(v):
     return v
 
 
-def plain_value(v):
-    """A numpy scalar as a plain Python value; NaN as None (an empty cell / JSON null)."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and math.isnan(v):
-        return None
-    return v
+CSV_CHUNK = 1 << 17  # rows rendered per pyarrow call (two at a time, one per core)
 
 
-def write_csv(path: str | Path, rows: list[dict]) -> Path:
-    """CSV with a header; empty cells where there is no value. Angles with 9 decimals (< 0.1 mm)."""
+def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
+    """CSV with a header; empty cells where there is no value; angles (``*_deg``) rounded to 9
+    decimals (< 0.1 mm), other numbers to 4. Rendered by pyarrow in chunks on two threads."""
+    import io
+    from concurrent.futures import ThreadPoolExecutor
+
+    import pyarrow as pa
+    from pyarrow import csv as pacsv
+
+    recs = records if isinstance(records, Records) else Records.from_rows(records)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fields = list(rows[0]) if rows else list(FIX_COLUMNS)
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields)
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: _fmt(k, v) for k, v in row.items()})
+    names = recs.names or list(FIX_COLUMNS)
+    quote = any(v.dtype == object and _needs_quotes(v) for v in recs.columns.values())
+    options = pacsv.WriteOptions(include_header=False, quoting_style="needed" if quote else "none")
+
+    def render(start: int) -> bytes:  # conversion, rounding and rendering of one chunk (GIL mostly released)
+        part = recs.slice(start, start + CSV_CHUNK)
+        sink = pa.BufferOutputStream()
+        pacsv.write_csv(pa.table({k: _csv_array(k, v) for k, v in part.columns.items()}), sink, options)
+        return sink.getvalue().to_pybytes()
+
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow(names)
+    with path.open("wb") as fh:
+        fh.write(header.getvalue().encode("utf-8"))
+        if len(recs):
+            with ThreadPoolExecutor(2) as pool:
+                for chunk in pool.map(render, range(0, len(recs), CSV_CHUNK)):
+                    fh.write(chunk)
     return path
 
 
-def _fmt(key: str, v):
-    if v is None:
-        return ""
+def _csv_array(name: str, v: np.ndarray):
+    """One column as pyarrow renders it in CSV: numbers rounded (no value: empty), booleans as
+    True/False, anything else as text."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if v.dtype.kind == "f":
+        return pc.round(pa.array(v, mask=np.isnan(v)), 9 if name.endswith("_deg") else 4)
+    if v.dtype.kind in "iu":
+        return pa.array(v)
+    if v.dtype.kind == "b":
+        return pa.DictionaryArray.from_arrays(pa.array(v.astype(np.int8)), pa.array(["False", "True"]))
+    try:  # text and None (ids, status, ISO times): straight through pyarrow
+        return pa.array(v, type=pa.string(), from_pandas=True)
+    except (pa.ArrowInvalid, pa.ArrowTypeError):
+        pass
+    cells = [None if x is None or (isinstance(x, float) and math.isnan(x)) else
+             (_fmt(name, x) if isinstance(x, (float, bool, np.generic)) else str(x)) for x in v.tolist()]
+    return pa.array(cells, type=pa.string())
+
+
+def _needs_quotes(v: np.ndarray) -> bool:
+    """Whether a text column has a cell that CSV must quote (a comma, quote or line break)."""
+    text = "".join(x for x in v.tolist() if isinstance(x, str))
+    return any(c in text for c in ',"\n\r')
+
+
+def _fmt(key: str, v) -> str:
+    if isinstance(v, np.generic):
+        v = v.item()
     if isinstance(v, float):
         return f"{v:.9f}" if key.endswith("_deg") else f"{v:.4f}"
-    return v
+    return str(v)
 
 
-def fix_features(rows: list[dict]) -> list[dict]:
-    """GeoJSON Point features of fix rows (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
-    features = []
-    for row in rows:
-        props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
-        ok = row.get("status") == "OK"
-        geom = {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"], row["h_m"]]} if ok else None
-        features.append({"type": "Feature", "geometry": geom, "properties": props})
-    return features
+def fix_features(records: Records | Sequence[Mapping]) -> list[dict]:
+    """GeoJSON Point features of fix records (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
+    recs = records if isinstance(records, Records) else Records.from_rows(records)
+    return [_point_feature(row) for row in recs.rows()]
 
 
-def write_geojson(path: str | Path, rows: list[dict]) -> Path:
-    """GeoJSON FeatureCollection of fix rows; failed fixes have a null geometry."""
-    return write_feature_collection(path, fix_features(rows), indent=1)
+def _point_feature(row: dict) -> dict:
+    props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
+    ok = row.get("status") == "OK"
+    geom = {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"], row["h_m"]]} if ok else None
+    return {"type": "Feature", "geometry": geom, "properties": props}
+
+
+def write_fix_geojson(path: str | Path, records: Records, chunk: int = 65536) -> Path:
+    """GeoJSON FeatureCollection of fix records, streamed in chunks (a million fixes never sit
+    in memory as dicts); failed fixes have a null geometry."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", encoding="utf-8") as fh:
+        fh.write('{"type": "FeatureCollection", "features": [')
+        sep = "\n"
+        for part in records.chunks(chunk):
+            for row in part.rows():
+                fh.write(sep + json.dumps(_point_feature(row), allow_nan=False))
+                sep = ",\n"
+        fh.write("\n]}\n")
+    return path
 
 
 def write_feature_collection(path: str | Path, features: list[dict], indent: int | None = None) -> Path:

@@ -86,15 +86,23 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     if data[:3] == b"\xef\xbb\xbf":
         data = b" " * 3 + data[3:]  # same byte offsets; the header's names are stripped anyway
     src = str(path)
-    lines = _Lines(data, src)
-    if lines.header is None:
+    fast = _clean_file(data)
+    lines = None if fast is not None else _Lines(data, src)
+    header = fast[0] if fast is not None else lines.header
+    if header is None:
         raise TableError(f"{what} file {src!r} is empty: it needs a header line naming its columns")
-    header = lines.header
     index = _map_columns(header, columns, src, what)
     wanted = [c for c in columns if c.name in index]
-    raw = lines.parse(header, {c.name: index[c.name] for c in wanted}, {c.name for c in wanted if c.text})
-    issues = lines.issues
-    n = lines.numbers.size
+    cols = {c.name: index[c.name] for c in wanted}
+    text = {c.name for c in wanted if c.text}
+    raw = _arrow_clean(data, fast[1], len(header), cols, text) if fast is not None else None
+    if raw is None:  # not clean after all: sort the lines out one by one
+        lines = lines or _Lines(data, src)
+        raw = lines.parse(header, cols, text)
+        numbers, issues = lines.numbers, lines.issues
+    else:
+        numbers, issues = np.arange(2, 2 + _size(raw), dtype=np.int64), []
+    n = numbers.size
     arrays: dict[str, np.ndarray] = {}
     cell_issues: list[tuple[int, int, str]] = []  # (record, column order, message)
     for order, col in enumerate(wanted):
@@ -112,12 +120,34 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
         by_record.setdefault(rec, []).append(msg)
     for rec in np.flatnonzero(~key_ok):
         more = by_record.pop(int(rec), [])
-        issues.append(Issue(src, int(lines.numbers[rec]), f"no usable {' or '.join(key)}; line skipped"
+        issues.append(Issue(src, int(numbers[rec]), f"no usable {' or '.join(key)}; line skipped"
                             + (f" ({'; '.join(more)})" if more else "")))
     for rec, msgs in by_record.items():
-        issues.extend(Issue(src, int(lines.numbers[rec]), m) for m in msgs)
+        issues.extend(Issue(src, int(numbers[rec]), m) for m in msgs)
     issues.sort(key=lambda i: i.line)
-    return Table(src, {k: v[key_ok] for k, v in arrays.items()}, lines.numbers[key_ok], issues)
+    return Table(src, {k: v[key_ok] for k, v in arrays.items()}, numbers[key_ok], issues)
+
+
+def _clean_file(data: bytes) -> tuple[list[str], int] | None:
+    """The header and the offset of the first data line when the file can be read in one go:
+    ASCII or UTF-8, the header on line 1, no comment, no quote; else None (the lines are then
+    sorted out one by one). Blank, comma-only and short lines are caught after the parse."""
+    nl = data.find(b"\n")
+    first = data[: nl if nl >= 0 else len(data)].rstrip(b"\r")
+    if not first.strip() or first.lstrip().startswith(b"#") or b"#" in data or data.find(b'"', len(first)) >= 0:
+        return None
+    if not data.isascii():
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+    header = [x.strip().lower() for x in next(csv.reader([first.decode("utf-8")]))]
+    return header, (nl + 1 if nl >= 0 else len(data))
+
+
+def _size(raw: dict) -> int:
+    v = next(iter(raw.values()))
+    return len(v[0] if isinstance(v, tuple) else v)
 
 
 class _Lines:
@@ -240,8 +270,36 @@ class _Lines:
         return out
 
 
-def _arrow_columns(clean: bytes, width: int, index: dict[str, int], text: set[str],
-                   longest: int) -> dict[str, np.ndarray]:
+def _arrow_clean(data: bytes, offset: int, width: int, index: dict[str, int],
+                 text: set[str]) -> dict[str, np.ndarray] | None:
+    """The whole body (from ``offset``) through pyarrow in one go, or None when a line turns out
+    not to be clean (a wrong field count, a blank or comma-only line): the caller then sorts the
+    lines out one by one, with their numbers."""
+    import pyarrow as pa
+
+    if not data[offset:offset + 1]:
+        return None  # a header alone
+    wrong: list[int] = []
+    body = pa.py_buffer(data)[offset:]
+
+    def handler(row) -> str:
+        wrong.append(1)
+        return "skip"
+
+    raw = _arrow_columns(body, width, index, text, 1 << 16, handler)
+    if wrong or not raw:
+        return None
+    n = _size(raw)
+    if n != data.count(b"\n", offset) + (0 if data.endswith(b"\n") or offset >= len(data) else 1):
+        return None
+    empty = np.ones(n, dtype=bool)  # a blank or comma-only line is a row with every cell empty
+    for name, v in raw.items():
+        empty &= (v == "") if name in text else v[1]
+    return None if empty.any() else raw
+
+
+def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
+                   longest: int, invalid_row=None) -> dict[str, np.ndarray]:
     """pyarrow's CSV reader on the clean lines: numeric columns as float64 (an empty cell NaN),
     falling back to strings for a column with a cell that is not a number."""
     import io
@@ -253,12 +311,14 @@ def _arrow_columns(clean: bytes, width: int, index: dict[str, int], text: set[st
     names = [f"c{j}" for j in range(width)]
     wanted = {name: f"c{j}" for name, j in index.items()}
     read = pacsv.ReadOptions(column_names=names, block_size=max(1 << 22, 2 * longest + 64))
-    parse = pacsv.ParseOptions(quote_char=False, newlines_in_values=False)
+    parse = pacsv.ParseOptions(quote_char=False, newlines_in_values=False, ignore_empty_lines=False,
+                               invalid_row_handler=invalid_row)
 
     def load(types):
         conv = pacsv.ConvertOptions(column_types=types, include_columns=list(wanted.values()), null_values=[""],
                                     strings_can_be_null=True, quoted_strings_can_be_null=True)
-        return pacsv.read_csv(io.BytesIO(clean), read_options=read, parse_options=parse, convert_options=conv)
+        src = pa.BufferReader(clean) if isinstance(clean, pa.Buffer) else io.BytesIO(clean)
+        return pacsv.read_csv(src, read_options=read, parse_options=parse, convert_options=conv)
 
     types = {c: (pa.string() if name in text else pa.float64()) for name, c in wanted.items()}
     try:

@@ -22,7 +22,8 @@ class AccuracyJob:
 def scenario_from(config_path, scenario, samples, seed, default_n=None):
     """(scenario, samples, seed) from a config's [accuracy] section or a built-in scenario."""
     from ..accuracy import SCENARIOS
-    from ..io.config import accuracy_scenario, load_config
+    from ..io.config import load_config
+    from .setup import accuracy_scenario
 
     if (config_path is None) == (scenario is None):
         raise InputError("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")

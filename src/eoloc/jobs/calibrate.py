@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..io.export import json_safe, plain_value
+from ..io.export import json_safe
+from ..io.records import plain_value
 from ..io.table import Issue
 from .inputs import read_inputs
 

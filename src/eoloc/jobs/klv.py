@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import KLVError
-from ..io.export import fix_features, fix_rows, plain_value, with_utc
+from ..io.export import fix_features, fix_records, with_utc
+from ..io.records import Records
 
 
 @dataclass
 class KLVJob:
     """Everything `eoloc klv` computes: the decoded stream, its telemetry table, the frame check,
-    the VMTI detections and their fixes (None without VMTI), fix rows, and the GeoJSON layers
+    the VMTI detections and their fixes (None without VMTI), fix records, and the GeoJSON layers
     (aircraft, footprints, encoder footprints, fixes)."""
 
     path: Path
@@ -24,7 +25,7 @@ class KLVJob:
     check: object
     detections: object
     vmti: object | None
-    rows: list[dict]
+    records: Records
     layers: dict[str, list[dict]]
     dem: object | None = None
     issues: list = field(default_factory=list)
@@ -53,36 +54,30 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
               footprint_features(tel, check.geometry, every=footprint_every))
     layers = {"aircraft": [aircraft_feature(tel)], "footprints": prints,
               "encoder footprints": footprint_features(tel, None, every=footprint_every)}
-    rows: list[dict] = []
+    records = Records({})
     v = None
     if len(det):
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
-        rows = fix_rows(v.fixes, with_utc(v.extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
-        layers["fixes"] = fix_features(rows)
-    return KLVJob(Path(path), stream, tel, check, det, v, rows, layers, dem, list(det.issues))
+        records = fix_records(v.fixes, with_utc(v.extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
+        layers["fixes"] = fix_features(records)
+    return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, list(det.issues))
 
 
-def telemetry_rows(tel) -> list[dict]:
+def telemetry_records(tel) -> Records:
     """telemetry.csv: every packet in eoloc's conventions."""
-    keys = list(tel.columns)
     iso = with_utc({"time_s": tel.columns["time_s"]}, "unix")["time_utc"]
-    return [{"packet": int(tel.line[i]), "time_utc": iso[i],
-             **{k: plain_value(tel.columns[k][i]) for k in keys if k != "frame"}} for i in range(len(tel))]
+    return Records({"packet": np.asarray(tel.line), "time_utc": iso,
+                    **{k: np.asarray(v) for k, v in tel.columns.items() if k != "frame"}})
 
 
-def frame_rows(tel, check) -> list[dict]:
+def frame_records(tel, check) -> Records:
     """frames.csv: eoloc's frame centre against the encoder's, per packet."""
     g, c = check.geometry, tel.columns
-    rows = []
-    for i in range(len(tel)):
-        row = {"packet": int(tel.line[i]), "time_s": plain_value(c["time_s"][i]),
-               "encoder_lat_deg": plain_value(c["fc_lat_deg"][i]), "encoder_lon_deg": plain_value(c["fc_lon_deg"][i]),
-               "encoder_h_m": plain_value(c["fc_h_m"][i]), "eoloc_lat_deg": plain_value(g.centre.lat_deg[i]),
-               "eoloc_lon_deg": plain_value(g.centre.lon_deg[i]), "eoloc_h_m": plain_value(g.centre.h_m[i]),
-               "centre_distance_m": plain_value(check.centre_m[i]), "range_difference_m": plain_value(check.range_m[i])}
-        row.update({f"corner{k + 1}_distance_m": plain_value(check.corners_m[i, k]) for k in range(4)})
-        rows.append(row)
-    return rows
+    return Records({"packet": np.asarray(tel.line), "time_s": c["time_s"], "encoder_lat_deg": c["fc_lat_deg"],
+                    "encoder_lon_deg": c["fc_lon_deg"], "encoder_h_m": c["fc_h_m"],
+                    "eoloc_lat_deg": g.centre.lat_deg, "eoloc_lon_deg": g.centre.lon_deg, "eoloc_h_m": g.centre.h_m,
+                    "centre_distance_m": check.centre_m, "range_difference_m": check.range_m,
+                    **{f"corner{k + 1}_distance_m": check.corners_m[:, k] for k in range(4)}})
 
 
 def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
@@ -91,18 +86,17 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     """telemetry.csv, frames.csv, footprints, fixes (in ``formats``), eoloc.kml with every layer,
     map.html and, with ``klv_out``, the stream re-encoded with its fixes. Returns (paths, a note
     when there was nothing to draw on a map)."""
-    from ..io.export import write_csv
     from ..io.kml import write_kml
     from ..io.mapview import drawable, write_map
     from ..io.writers import write_layer
 
     out = Path(out)
-    written = [write_csv(out / "telemetry.csv", telemetry_rows(job.telemetry)),
-               write_csv(out / "frames.csv", frame_rows(job.telemetry, job.check))]
+    written = [*write_layer(out, "telemetry", telemetry_records(job.telemetry), ["csv"]),
+               *write_layer(out, "frames", frame_records(job.telemetry, job.check), ["csv"])]
     prints = job.layers["footprints"]
     written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson"], features=prints)
-    if job.rows:
-        written += write_layer(out, "fixes", job.rows, [f for f in formats if f != "kml"])
+    if len(job.records):
+        written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"])
         if klv_out:
             written.append(write_klv_stream(Path(klv_out), job))
     written.append(write_kml(out / "eoloc.kml", job.layers, name=job.path.name))

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.export import fix_rows, with_utc
+from ..io.export import fix_records, with_utc
+from ..io.records import Records
 from ..io.table import Issue
 from ..pipeline import Located, locate_tables
 from ..result import Status
@@ -21,12 +22,12 @@ NONLINEARITY_LIMIT = 0.1  # past it the first-order covariance does not describe
 
 @dataclass
 class LocateJob:
-    """Rows (one per target, every record kept), the Located arrays, the issues of the inputs and
+    """Records (one per target, every one kept), the Located arrays, the issues of the inputs and
     the notes (whole-run warnings) in the order to show them."""
 
-    rows: list[dict]
+    records: Records
     located: Located
-    extra: dict  # the per-target descriptive columns of the rows (located.extra with time_utc when known)
+    extra: dict  # the per-target descriptive columns of the records (located.extra with time_utc when known)
     issues: list[Issue] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     compensation_summary: str | None = None
@@ -71,7 +72,7 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule
     if nothing:
         notes.append(nothing)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
-    return LocateJob(fix_rows(located.fixes, extra, after), located, extra, inputs.issues + located.issues, notes,
+    return LocateJob(fix_records(located.fixes, extra, after), located, extra, inputs.issues + located.issues, notes,
                      summary)
 
 

@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..io.export import fix_rows
+from ..io.export import fix_records
+from ..io.records import Records
 from ..io.table import Issue
 from ..result import Fixes
 from .inputs import read_inputs
@@ -20,7 +21,7 @@ SCATTER_LIMIT = 3.0  # scatter ratio (mean chi^2 / 2 per frame, 1 expected) past
 def located_detections(cfg, config_path, telemetry, detections, rule, **kw) -> LocateJob:
     """Every detection located (with its covariance when the config has [accuracy.budget]); an
     InputError when none could be."""
-    from ..io.config import error_budget
+    from .setup import error_budget
 
     budget = error_budget(cfg, config_path) if cfg.accuracy is not None else None
     job = locate_files(cfg, telemetry, detections, rule, budget=budget, **kw)
@@ -36,11 +37,11 @@ def located_detections(cfg, config_path, telemetry, detections, rule, **kw) -> L
 
 @dataclass
 class TrackJob:
-    """Tracks (eoloc.sequence.track.Tracks), one row per detection (its fix, track and filtered
+    """Tracks (eoloc.sequence.track.Tracks), one record per detection (its fix, track and filtered
     state), the track features (LineStrings with coordTimes) and how many fixes joined no track."""
 
     tracks: object
-    rows: list[dict]
+    records: Records
     features: list[dict]
     unassigned: int
 
@@ -57,10 +58,10 @@ def track_job(job: LocateJob, *, associate: bool, accel_psd: float, meas_sigma_m
                      config=TrackerConfig(accel_psd=accel_psd, meas_sigma_m=meas_sigma_m, max_coast_s=max_coast_s),
                      progress=progress)
     left = int(np.sum((ts.assigned == "") & np.ravel(located.fixes.ok)))
-    return TrackJob(ts, _track_rows(ts, job), track_features(ts), left)
+    return TrackJob(ts, _track_records(ts, job), track_features(ts), left)
 
 
-def _track_rows(ts, job: LocateJob) -> list[dict]:
+def _track_records(ts, job: LocateJob) -> Records:
     """Per detection: its fix, the track it joined and the filtered state there."""
     located = job.located
     n = len(located.fixes)
@@ -77,7 +78,7 @@ def _track_rows(ts, job: LocateJob) -> list[dict]:
         cols["speed_mps"][first] = cols["speed_sigma_mps"][first] = cols["heading_deg"][first] = np.nan
         cols["sigma_e_m"][idx], cols["sigma_n_m"][idx] = np.sqrt(P[:, 0, 0]), np.sqrt(P[:, 1, 1])
     extra = dict(job.extra, track_id=ts.assigned)
-    return fix_rows(located.fixes, extra, cols)
+    return fix_records(located.fixes, extra, cols)
 
 
 def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, window: int) -> list[dict]:

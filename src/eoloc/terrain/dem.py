@@ -102,25 +102,6 @@ class DEM:
     def n_voids(self) -> int:
         return int(np.isnan(self.grid.z).sum())
 
-    def write_geotiff(self, path: str | Path) -> Path:
-        """Write the posts as a float32 GeoTIFF in EPSG:4326, ellipsoidal heights (read it back with
-        ``open_dem(path, vertical="ellipsoid")``); voids become the nodata value -32768."""
-        import rasterio
-        from rasterio.transform import from_origin
-
-        g = self.grid
-        if g.dlon <= 0 or g.dlat >= 0:
-            raise ValueError("write_geotiff needs a north-up grid (dlat < 0, dlon > 0)")
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        z = np.where(np.isnan(g.z), -32768.0, g.z).astype(np.float32)
-        with rasterio.open(path, "w", driver="GTiff", width=z.shape[1], height=z.shape[0], count=1, dtype="float32",
-                           crs="EPSG:4326", nodata=-32768.0, compress="deflate",
-                           transform=from_origin(g.lon0 - 0.5 * g.dlon, g.lat0 - 0.5 * g.dlat, g.dlon, -g.dlat)) as ds:
-            ds.write(z, 1)
-            ds.update_tags(1, VERTICAL="WGS-84 ellipsoidal heights, metres", SOURCE=self.source)
-        return path
-
     def __repr__(self) -> str:
         w, s, e, n = self.bounds
         lo, hi = self.height_range
