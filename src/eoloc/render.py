@@ -36,7 +36,8 @@ def print_issues(issues, err_console: Console, limit: int = 15) -> None:
     """The per-line problems of the inputs (file:line: message), the first ``limit`` of them."""
     issues = list(issues)
     for issue in issues[:limit]:
-        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False)
+        # one line each, never wrapped: a file:line reference stays whole for the eye, grep and editors
+        err_console.print(f"[yellow]warning:[/] {escape(str(issue))}", highlight=False, soft_wrap=True)
     if len(issues) > limit:
         err_console.print(f"[yellow]... and {len(issues) - limit} more issues[/]")
 

@@ -21,7 +21,8 @@ err_console = Console(stderr=True)
 
 def fail(message: str) -> None:
     """A usage mistake found by a command itself: one line on stderr, exit code 2."""
-    err_console.print(f"[bold red]error:[/] {escape(message)}")  # messages name config sections: [accuracy]
+    # messages name config sections ([accuracy]): escaped; one line, never wrapped, so paths stay whole
+    err_console.print(f"[bold red]error:[/] {escape(message)}", soft_wrap=True)
     sys.exit(2)
 
 
@@ -31,7 +32,7 @@ def report_issues(issues, limit: int = 15) -> None:
 
 
 def warn(message: str, label: str = "warning") -> None:
-    err_console.print(f"[yellow]{label}:[/] {escape(message)}", highlight=False)
+    err_console.print(f"[yellow]{label}:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 class Main(click.Group):

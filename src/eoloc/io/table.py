@@ -83,6 +83,9 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     data = path.read_bytes()
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise TableError(f"{what} file {str(path)!r} is UTF-16 text: save it as UTF-8 (with or without a BOM)")
+    if b"\x00" in data[:65536]:
+        raise TableError(f"{what} file {str(path)!r} is not text (it holds NUL bytes: a binary file?): give the CSV "
+                         "file, saved as UTF-8")
     if data[:3] == b"\xef\xbb\xbf":
         data = b" " * 3 + data[3:]  # same byte offsets; the header's names are stripped anyway
     src = str(path)
