@@ -159,23 +159,6 @@ def _spoil(kind: str, d: Path) -> tuple[Path, str]:
 SPOILS = ["missing", "folder", "utf16", "empty", "header-only", "wrong-columns", "binary"]
 
 
-@pytest.mark.parametrize("kind", SPOILS)
-@pytest.mark.parametrize("command", READS_TELEMETRY)
-def test_a_spoilt_telemetry_file_is_named_with_its_problem(files, tmp_path, command, kind):
-    bad, words = _spoil(kind, tmp_path)
-    r = _run(_args(command, files, tmp_path / "out", tel=bad))
-    assert r.exit_code == 2 and words in r.output and bad.name in r.output, (command, kind, r.output)
-
-
-@pytest.mark.parametrize("kind", SPOILS)
-@pytest.mark.parametrize("command, name", [("locate", "det"), ("track", "det"), ("triangulate", "det"),
-                                           ("calibrate", "gcps"), ("compensate-train", "obs")])
-def test_a_spoilt_second_file_is_named_with_its_problem(files, tmp_path, command, name, kind):
-    bad, words = _spoil(kind, tmp_path)
-    r = _run(_args(command, files, tmp_path / "out", **{name: bad}))
-    assert r.exit_code == 2 and words in r.output and bad.name in r.output, (command, kind, r.output)
-
-
 # -- a spoilt config -----------------------------------------------------------------------------
 
 def _bad_config(kind: str, d: Path) -> tuple[Path, str]:
@@ -217,11 +200,19 @@ CONFIG_SPOILS = ["missing", "folder", "latin1", "not-toml", "bool-width", "strin
                  "nan-bias", "nan-distortion"]
 
 
-@pytest.mark.parametrize("kind", CONFIG_SPOILS)
-@pytest.mark.parametrize("command", READS_CONFIG)
-def test_a_spoilt_config_is_named_with_its_key_and_fix(files, tmp_path, command, kind):
-    bad, words = _bad_config(kind, tmp_path)
-    r = _run(_args(command, files, tmp_path / "out", cfg=bad))
+SPOILT = ([(command, "tel", kind) for command in READS_TELEMETRY for kind in SPOILS]
+          + [(command, slot, kind) for command, slot in (("locate", "det"), ("track", "det"), ("triangulate", "det"),
+                                                         ("calibrate", "gcps"), ("compensate-train", "obs"))
+             for kind in SPOILS]
+          + [(command, "cfg", kind) for command in READS_CONFIG for kind in CONFIG_SPOILS])
+
+
+@pytest.mark.parametrize("command, slot, kind", SPOILT)
+def test_a_spoilt_input_is_named_with_its_problem(files, tmp_path, command, slot, kind):
+    """Telemetry, the second file (detections, GCPs, observations) and the config, each spoilt
+    in every way above, in every command that reads it."""
+    bad, words = (_bad_config if slot == "cfg" else _spoil)(kind, tmp_path)
+    r = _run(_args(command, files, tmp_path / "out", **{slot: bad}))
     assert r.exit_code == 2 and words in r.output and bad.name in r.output, (command, kind, r.output)
 
 

@@ -292,9 +292,7 @@ def _arrow_clean(data: bytes, offset: int, width: int, index: dict[str, int],
     raw = _arrow_columns(body, width, index, text, 1 << 16, handler)
     if wrong or not raw:
         return None
-    n = _size(raw)
-    if n != data.count(b"\n", offset) + (0 if data.endswith(b"\n") or offset >= len(data) else 1):
-        return None
+    n = _size(raw)  # with empty lines kept as rows and short or long ones caught above, one row per line
     empty = np.ones(n, dtype=bool)  # a blank or comma-only line is a row with every cell empty
     for name, v in raw.items():
         empty &= (v == "") if name in text else v[1]
@@ -343,7 +341,7 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
                 cells = pc.utf8_trim_whitespace(col.fill_null("")).to_numpy(zero_copy_only=False).astype(object)
                 out[name] = _numbers(cells)
         else:
-            out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64),  # nulls -> NaN
+            out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False),  # nulls -> NaN
                          col.is_null().to_numpy(zero_copy_only=False))
     return out
 
