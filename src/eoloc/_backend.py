@@ -84,55 +84,64 @@ def few_targets() -> Iterator[None]:
         yield
 
 
-# The numba drivers take a rotation as 9 flat arguments; the numpy kernels take it as one 9-tuple.
-_NUMPY_FLAT = {
-    "camera_frame": lambda *a: _kernels.camera_frame(int(a[0]), *a[1:4], a[4:13], a[13:22], a[22:31], *a[31:]),
-    "ray_direction": lambda *a: _kernels.ray_direction(a[:9], *a[9:]),
-    "project_point": lambda *a: _kernels.project_point(a[:9], *a[9:]),
-    "flat_target": lambda *a: _kernels.flat_target(a[:9], *a[9:]),
-}
-
-
-# Outputs of each kernel as the drivers see them (rotations flattened); the last of a stop rule
-# is its int8 status.
-N_OUT = {"geodetic_to_ecef": 3, "ecef_to_geodetic": 3, "camera_frame": 12, "ray_direction": 3,
-         "project_point": 3, "stop_at_range": 5, "stop_at_ellipsoid": 5, "flat_target": 5}
-STATUS_OUT = frozenset({"stop_at_range", "stop_at_ellipsoid", "flat_target"})
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
 
 
 def run(name: str, *args):
-    """Run kernel ``name`` on inputs that broadcast; returns a tuple of arrays of the broadcast shape.
+    """Run kernel ``name`` (declared in ``eoloc._kernels.SIGNATURES``) on inputs that broadcast;
+    returns its outputs as arrays of the broadcast shape (a rotation as a 9-tuple of them).
 
-    Both backends see flat inputs: a scalar stays a scalar, an array is broadcast to the full
-    shape and flattened (a copy only where it really broadcasts).
+    A rotation argument is a 9-tuple or an array with 9 in its first axis; constants (the
+    ellipsoid, the gimbal kind) are scalars. Both backends see flat inputs: a scalar stays a
+    scalar, an array is broadcast to the full shape and flattened (a copy only where it really
+    broadcasts).
     """
-    arrays = [np.asarray(a, dtype=np.float64) for a in args]
+    sig = _kernels.SIGNATURES[name]
+    if len(args) != len(sig.params):
+        raise TypeError(f"{name} takes {len(sig.params)} arguments ({', '.join(sig.params)}), got {len(args)}")
+    flat_args: list = []
+    for param, a in zip(sig.params, args, strict=True):
+        if param in sig.ints:
+            flat_args.append(int(a))
+        elif param in sig.constants:
+            flat_args.append(float(a))
+        elif sig.width(param) == 9:
+            if len(a) != 9:
+                raise ValueError(f"{name}: rotation {param} needs 9 components, got {len(a)}")
+            flat_args.extend(np.asarray(c, dtype=np.float64) for c in a)
+        else:
+            flat_args.append(np.asarray(a, dtype=np.float64))
+    arrays = [a for a in flat_args if isinstance(a, np.ndarray)]
     shape = np.broadcast_shapes(*(a.shape for a in arrays))
     n = int(np.prod(shape))
-    flat_in = [
-        float(a) if a.ndim == 0 else np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1)
-        for a in arrays
-    ]
-    outs = [np.empty(n) for _ in range(N_OUT[name])]
-    if name in STATUS_OUT:
-        outs[-1] = np.empty(n, dtype=np.int8)
+    flat_in = [a if not isinstance(a, np.ndarray) else float(a) if a.ndim == 0
+               else np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1) for a in flat_args]
+    outs = []
+    for o in sig.outputs:
+        outs.extend(np.empty(n, dtype=np.int8 if o == "status" else np.float64) for _ in range(sig.width(o)))
     if get_backend() == "numba":
         from . import _nb
 
         getattr(_nb, name)(n, *flat_in, *outs)
     else:
-        _run_numpy(name, n, flat_in, outs)
-    return tuple(o.reshape(shape) for o in outs)
+        _run_numpy(sig, n, flat_in, outs)
+    shaped = iter([o.reshape(shape) for o in outs])
+    return tuple(tuple(next(shaped) for _ in range(9)) if sig.width(o) == 9 else next(shaped) for o in sig.outputs)
 
 
-def _run_numpy(name: str, n: int, flat_in: list, outs: list[np.ndarray]) -> None:
-    fn = _NUMPY_FLAT.get(name) or getattr(_kernels, name)
+def _run_numpy(sig, n: int, flat_in: list, outs: list[np.ndarray]) -> None:
+    """The kernel itself on chunks of the flat inputs, rotations regrouped as 9-tuples."""
+    fn = getattr(_kernels, sig.name)
     with np.errstate(all="ignore"):
         for i in range(0, n, CHUNK):
-            part = fn(*(x if isinstance(x, float) else x[i:i + CHUNK] for x in flat_in))
+            part = [x if not isinstance(x, np.ndarray) else x[i:i + CHUNK] for x in flat_in]
+            args, k = [], 0
+            for param in sig.params:
+                w = sig.width(param) if param not in sig.constants else 1
+                args.append(tuple(part[k:k + 9]) if w == 9 else part[k])
+                k += w
             flat = []
-            for o in part:  # numpy kernels return rotations as nested 9-tuples
+            for o in fn(*args):
                 flat.extend(o if isinstance(o, tuple) else (o,))
             for out, value in zip(outs, flat, strict=True):
                 out[i:i + CHUNK] = value

@@ -17,6 +17,9 @@ Rotations are *active*: ``mat_vec(R_a_b, v_b)`` gives the vector expressed in fr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from enum import IntEnum
+
 import numpy as np
 
 # Status codes (mirrors eoloc.result.Status; kept here as ints so kernels stay free of Python
@@ -30,10 +33,32 @@ BELOW_SURFACE = 6
 OUT_OF_IMAGE = 7
 UNDECIDED = -1  # internal: the fast M3 path could not certify its answer; the exact path decides
 
-# Gimbal kinds (eoloc.sensor.gimbal.GimbalKind names them; plain ints here for numba)
-GIMBAL_AZEL = 0
-GIMBAL_ROLLPITCH = 1
-GIMBAL_FIXED = 2
+
+
+class GimbalKind(IntEnum):
+    """The gimbal models (:func:`r_body_cam`); the classes of :mod:`eoloc.sensor.gimbal` carry
+    one each. The kernels compare plain ints, which numba compiles to constants."""
+
+    AZ_EL = 0
+    ROLL_PITCH = 1
+    FIXED = 2
+
+
+GIMBAL_AZEL = int(GimbalKind.AZ_EL)
+GIMBAL_ROLLPITCH = int(GimbalKind.ROLL_PITCH)
+GIMBAL_FIXED = int(GimbalKind.FIXED)
+
+
+def compiled(inline: bool = False):
+    """Mark a kernel for the numba backend, which compiles every marked function of a module for
+    scalars (:mod:`eoloc._nb`); ``inline``: always inlined by LLVM (a call left in a driver's loop
+    stops it from vectorising). The function itself is returned unchanged for numpy."""
+
+    def mark(fn):
+        fn.eoloc_compiled = "inline" if inline else "call"
+        return fn
+
+    return mark
 
 
 
@@ -42,6 +67,7 @@ def pick(cond, a, b):
     return np.where(cond, a, b)
 
 
+@compiled(inline=True)
 def _finite(s):
     """True where ``s`` is finite: ``inf - inf`` and ``nan - nan`` are NaN, which is not 0."""
     return (s - s) == 0.0
@@ -145,6 +171,7 @@ def atan2_poly(y, x):
 # ---------------------------------------------------------------- 3x3 algebra on 9-tuples
 
 
+@compiled(inline=True)
 def mat_mul(A, B):
     """Product of two rotations given as row-major 9-tuples."""
     a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
@@ -162,6 +189,7 @@ def mat_mul(A, B):
     )
 
 
+@compiled(inline=True)
 def mat_vec(A, x, y, z):
     """``A @ (x, y, z)``."""
     return (
@@ -171,6 +199,7 @@ def mat_vec(A, x, y, z):
     )
 
 
+@compiled(inline=True)
 def mat_t_vec(A, x, y, z):
     """``A.T @ (x, y, z)`` (the inverse rotation)."""
     return (
@@ -180,6 +209,7 @@ def mat_t_vec(A, x, y, z):
     )
 
 
+@compiled(inline=True)
 def rot_x(t):
     """Active rotation by ``t`` about x (y turns toward z)."""
     s, c = sincos(t)
@@ -187,6 +217,7 @@ def rot_x(t):
     return (o + 1.0, o, o, o, c, -s, o, s, c)
 
 
+@compiled(inline=True)
 def rot_y(t):
     """Active rotation by ``t`` about y (z turns toward x)."""
     s, c = sincos(t)
@@ -194,6 +225,7 @@ def rot_y(t):
     return (c, o, s, o, o + 1.0, o, -s, o, c)
 
 
+@compiled(inline=True)
 def rot_z(t):
     """Active rotation by ``t`` about z (x turns toward y)."""
     s, c = sincos(t)
@@ -201,6 +233,7 @@ def rot_z(t):
     return (c, -s, o, s, c, o, o, o, o + 1.0)
 
 
+@compiled(inline=True)
 def r_ned_body(yaw, pitch, roll):
     """R_ned_body = Rz(yaw) Ry(pitch) Rx(roll), written out (ZYX, active)."""
     sy, cy = sincos(yaw)
@@ -219,6 +252,7 @@ def r_ned_body(yaw, pitch, roll):
     )
 
 
+@compiled(inline=True)
 def r_ecef_ned(lat, lon):
     """R_ecef_ned: columns are the north, east and down unit vectors in ECEF."""
     sl, cl = sincos(lat)
@@ -226,6 +260,7 @@ def r_ecef_ned(lat, lon):
     return (-sl * co, -so, -cl * co, -sl * so, co, -cl * so, cl, 0.0 * lat, -sl)
 
 
+@compiled(inline=True)
 def r_body_cam_azel(az, el, sensor_roll, skew):
     """Azimuth-elevation turret: G = Rz(az) Rx(skew) Ry(el) Rx(sensor_roll); camera z = G x, x = G y,
     y = G z. ``skew``: non-orthogonality of the elevation axis to the azimuth axis (0 for a perfect turret)."""
@@ -233,6 +268,7 @@ def r_body_cam_azel(az, el, sensor_roll, skew):
     return (g[1], g[2], g[0], g[4], g[5], g[3], g[7], g[8], g[6])
 
 
+@compiled(inline=True)
 def r_body_cam_rollpitch(frame_roll, frame_pitch, sensor_roll, skew):
     """Roll-pitch framed camera ([Q]): S = Rx(roll) Rz(skew) Ry(pitch) Rz(sensor_roll), camera = S C
     (``skew``: non-orthogonality of the pitch axis to the roll axis, 0 for a perfect gimbal).
@@ -247,6 +283,7 @@ def r_body_cam_rollpitch(frame_roll, frame_pitch, sensor_roll, skew):
 # ---------------------------------------------------------------- geodesy
 
 
+@compiled(inline=True)
 def geodetic_to_ecef(lat, lon, h, a, e2):
     """Geodetic (rad, rad, m ellipsoidal) to ECEF metres."""
     sl, cl = sincos(lat)
@@ -256,6 +293,7 @@ def geodetic_to_ecef(lat, lon, h, a, e2):
     return r * co, r * so, (n * (1.0 - e2) + h) * sl
 
 
+@compiled(inline=True)
 def bowring(x, y, z, a, b, e2, ep2, steps):
     """Sine and cosine of the geodetic latitude, p = sqrt(x² + y²) and h, without any atan2.
 
@@ -282,6 +320,7 @@ def bowring(x, y, z, a, b, e2, ep2, steps):
     return sl, cl, p, h
 
 
+@compiled(inline=True)
 def ecef_to_geodetic(x, y, z, a, b, e2, ep2):
     """ECEF metres to geodetic (rad, rad, m ellipsoidal); longitude 0 on the polar axis."""
     sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, 2)
@@ -291,6 +330,7 @@ def ecef_to_geodetic(x, y, z, a, b, e2, ep2):
 # ---------------------------------------------------------------- pose and rays
 
 
+@compiled(inline=True)
 def pose_frame(lat, lon, h, yaw, pitch, roll, R_body_cam, lx, ly, lz, a, e2):
     """Camera pose in ECEF: (R_ecef_cam 9-tuple, camera origin x, y, z).
 
@@ -305,12 +345,14 @@ def pose_frame(lat, lon, h, yaw, pitch, roll, R_body_cam, lx, ly, lz, a, e2):
     return R_ecef_cam, px + dx, py + dy, pz + dz
 
 
+@compiled(inline=True)
 def ray_direction(R_ecef_cam, xn, yn):
     """Unit ECEF direction of the ray through normalised image point (xn, yn) = ((u-cx)/fx, (v-cy)/fy)."""
     k = 1.0 / np.sqrt(xn * xn + yn * yn + 1.0)
     return mat_vec(R_ecef_cam, xn * k, yn * k, k)
 
 
+@compiled(inline=True)
 def project_point(R_ecef_cam, ox, oy, oz, px, py, pz):
     """Ground to image: normalised image point (xn, yn) and depth along the boresight (m)."""
     cx, cy, cz = mat_t_vec(R_ecef_cam, px - ox, py - oy, pz - oz)
@@ -328,6 +370,7 @@ _BROWN_NEWTON_STEPS = 12
 _RATIO_FIXED_POINT_STEPS = 30
 
 
+@compiled()
 def distort_brown(x, y, k1, k2, p1, p2, k3):
     """OpenCV's Brown-Conrady model: ideal normalised (x, y) -> distorted normalised."""
     r2 = x * x + y * y
@@ -337,6 +380,7 @@ def distort_brown(x, y, k1, k2, p1, p2, k3):
             y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy)
 
 
+@compiled()
 def undistort_brown(xd, yd, k1, k2, p1, p2, k3):
     """Inverse of :func:`distort_brown` by Newton's method on the 2x2 Jacobian (to ~1e-15)."""
     x = xd
@@ -357,6 +401,7 @@ def undistort_brown(xd, yd, k1, k2, p1, p2, k3):
     return x, y
 
 
+@compiled()
 def ppoly_eval(x, dp, i0, n):
     """Piecewise cubic at x: breakpoints dp[i0 : i0 + n], then 4 coefficients per interval
     (highest power first, in powers of x - breakpoint); the end pieces extrapolate."""
@@ -368,11 +413,13 @@ def ppoly_eval(x, dp, i0, n):
     return ((dp[c] * s + dp[c + 1]) * s + dp[c + 2]) * s + dp[c + 3]
 
 
+@compiled()
 def distortion_ratio(r, dp):
     """[Z15]'s distortion ratio D at distorted normalised image height r (field w = atan(r) / w0)."""
     return ppoly_eval(np.arctan(r) / dp[0], dp, 2, int(dp[1]))
 
 
+@compiled()
 def undistort(kind, dp, xd, yd):
     """Distorted normalised image coordinates -> ideal ones, for distortion model ``kind``."""
     if kind == DIST_BROWN:
@@ -388,12 +435,14 @@ def undistort(kind, dp, xd, yd):
 IMAGE_MARGIN_PX = 0.5
 
 
+@compiled()
 def pixel_in_image(u, v, width, height):
     """True where pixel (u, v) lies in a width x height image, IMAGE_MARGIN_PX beyond its outer edges included."""
     m = 0.5 + IMAGE_MARGIN_PX
     return (u >= -m) & (u <= width - 1.0 + m) & (v >= -m) & (v <= height - 1.0 + m)
 
 
+@compiled()
 def undistort_ok(kind, dp, xd, yd, x, y):
     """True where ideal (x, y) is THE undistortion of distorted (xd, yd): the model maps it back
     (to 1e-9) on the branch where the model is one-to-one (Brown-Conrady: positive Jacobian, so
@@ -419,6 +468,7 @@ def undistort_ok(kind, dp, xd, yd, x, y):
     return (x - x) == 0.0
 
 
+@compiled()
 def distort(kind, dp, x, y):
     """Ideal normalised image coordinates -> distorted ones, for distortion model ``kind``."""
     if kind == DIST_BROWN:
@@ -451,6 +501,7 @@ _PAD_REL = 2.0e-6  # the inflated ellipsoid (a+H, b+H) is within 1.42e-6 |H| of 
 # geodetic height H (measured against pyproj from -20 km to +2000 km): padded by this, it bounds it
 
 
+@compiled(inline=True)
 def ray_valid(ox, oy, oz, dx, dy, dz):
     """True where a ray is usable: finite, a unit direction, an origin within MAX_ORIGIN_M."""
     dd = dx * dx + dy * dy + dz * dz
@@ -458,6 +509,7 @@ def ray_valid(ox, oy, oz, dx, dy, dz):
     return _finite(oo + dd) & (np.abs(dd - 1.0) <= UNIT_TOL) & (oo <= MAX_ORIGIN_M * MAX_ORIGIN_M)
 
 
+@compiled(inline=True)
 def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
     """M1: the point at slant range ``rng`` (m, 0 < rng <= MAX_RANGE_M) along the ray
     -> (lat, lon, h, range, status)."""
@@ -467,6 +519,7 @@ def stop_at_range(ox, oy, oz, dx, dy, dz, rng, a, b, e2, ep2):
     return lat, lon, h, r, pick(valid, OK, INVALID_INPUT)
 
 
+@compiled(inline=True)
 def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     """Both ray parameters (t1 <= t2, NaN if none) where the ray meets the inflated ellipsoid
     (a + ht, b + ht): within 1.42e-6 |ht| of the surface of geodetic height ht."""
@@ -482,6 +535,7 @@ def inflated_roots(ox, oy, oz, dx, dy, dz, ht, a, b):
     return (-qb - sq) / qa, (-qb + sq) / qa
 
 
+@compiled(inline=True)
 def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2, steps):
     """(geodetic height of (x, y, z), its derivative along the unit direction d = up . d, sin lat,
     cos lat) by ``steps`` Bowring steps: the gradient of geodetic height is the unit ellipsoid normal."""
@@ -490,10 +544,12 @@ def _height_slope(x, y, z, dx, dy, dz, a, b, e2, ep2, steps):
     return h, cl_p * (x * dx + y * dy) + sl * dz, sl, cl
 
 
+@compiled(inline=True)
 def _m3_domain(ox, oy, oz, dx, dy, dz, ht):
     return ray_valid(ox, oy, oz, dx, dy, dz) & _finite(ht) & (ht >= MIN_HEIGHT_M) & (ht <= MAX_HEIGHT_M)
 
 
+@compiled(inline=True)
 def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     """M3, the certified fast path -> (lat, lon, h, range, status), status UNDECIDED where it
     cannot prove its answer.
@@ -536,6 +592,7 @@ def ellipsoid_fast(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
             pick(ok, t, np.nan), st)
 
 
+@compiled()
 def ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b):
     """M3, for a valid ray the fast path did not certify: BELOW_SURFACE where the camera is
     certainly under the surface (inside the inflated ellipsoid padded down), NO_INTERSECTION where
@@ -553,6 +610,7 @@ def ellipsoid_classify(ox, oy, oz, dx, dy, dz, ht, a, b):
     return pick(below, BELOW_SURFACE, pick(miss, NO_INTERSECTION, UNDECIDED))
 
 
+@compiled()
 def ellipsoid_exact(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     """M3, the exact path -> (lat, lon, h, range, status): Newton steps on the convex g(t) from
     the left (from the camera, or from where the ray enters the outer inflated ellipsoid), which
@@ -617,6 +675,7 @@ def stop_at_ellipsoid(ox, oy, oz, dx, dy, dz, ht, a, b, e2, ep2):
     return tuple(o[()] if o.ndim == 0 else o for o in out)
 
 
+@compiled()
 def flat_plane(R_ecef_cam, ox, oy, oz, xn0, yn0, rng0, a, b, e2, ep2):
     """M2 ([Z15]) ground plane: through the main target at slant range ``rng0`` (m) on the ray
     through normalised (xn0, yn0), perpendicular to the local vertical there.
@@ -637,6 +696,7 @@ def flat_plane(R_ecef_cam, ox, oy, oz, xn0, yn0, rng0, a, b, e2, ep2):
     return nx, ny, nz, r * (dx * nx + dy * ny + dz * nz)
 
 
+@compiled(inline=True)
 def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
     """M2: the ray through normalised (xn, yn) to the plane of :func:`flat_plane`.
 
@@ -656,6 +716,7 @@ def flat_target(R_ecef_cam, ox, oy, oz, nx, ny, nz, H, xn, yn, a, b, e2, ep2):
 # ---------------------------------------------------------------- whole chain, one call
 
 
+@compiled(inline=True)
 def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew):
     """R_body_cam = R_mount . gimbal(g1, g2, g3) . R_bore for gimbal ``kind`` (``skew``: gimbal axes
     non-orthogonality, rad; 0 for a perfect gimbal, ignored by a fixed mount).
@@ -673,6 +734,7 @@ def r_body_cam(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew):
     return mat_mul(R_mount, mat_mul(G, R_bore))
 
 
+@compiled(inline=True)
 def camera_frame(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew, lat, lon, h, yaw, pitch, roll, lx, ly, lz, a, e2):
     """The camera's pose in ECEF from the aircraft pose and gimbal angles (radians, metres):
     :func:`r_body_cam` then :func:`pose_frame`, one pass -> (R_ecef_cam 9-tuple, origin x, y, z)."""
@@ -680,6 +742,7 @@ def camera_frame(kind, g1, g2, g3, R_mount, R_fixed, R_bore, skew, lat, lon, h, 
     return pose_frame(lat, lon, h, yaw, pitch, roll, R_body_cam, lx, ly, lz, a, e2)
 
 
+@compiled()
 def _tuple9(p, i):
     return (p[i], p[i + 1], p[i + 2], p[i + 3], p[i + 4], p[i + 5], p[i + 6], p[i + 7], p[i + 8])
 
@@ -691,6 +754,7 @@ STOP_RANGE = 0
 STOP_ELLIPSOID = 1
 
 
+@compiled()
 def params_camera_frame(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3):
     """:func:`camera_frame` of a pose (radians, metres) with the sensor's constants read from its
     packed parameter vector (layout above) -> (R_ecef_cam 9-tuple, origin x, y, z)."""
@@ -699,6 +763,7 @@ def params_camera_frame(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3):
                         params[P_LEVER + 1], params[P_LEVER + 2], params[P_ELL], params[P_ELL + 2])
 
 
+@compiled()
 def locate_one(params, lat, lon, h, yaw, pitch, roll, g1, g2, g3, u, v, stop_kind, stop_value):
     """Pixel (u, v) of one pose to ground, everything in degrees/metres at the edges.
 
@@ -729,6 +794,7 @@ def _floor_index(x, hi):
     return np.clip(np.floor(x), 0, hi).astype(np.int64)
 
 
+@compiled()
 def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     """Bilinear height of a lat/lon grid at (lat, lon) in degrees -> (height, inside).
 
@@ -751,6 +817,7 @@ def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     return pick(inside, h, np.nan), inside
 
 
+@compiled()
 def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
     """First s in [s_lo, s_hi] where a straight ray meets one cell's bilinear surface; NaN if none.
 
@@ -777,3 +844,48 @@ def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
     ok2 = (r2 >= s_lo) & (r2 <= s_hi)
     first = pick(ok1 & ok2, np.minimum(r1, r2), pick(ok1, r1, pick(ok2, r2, np.nan)))
     return pick(g_lo <= 0.0, s_lo, first)
+
+
+# ---------------------------------------------------------------- declarations
+
+
+@dataclass(frozen=True)
+class Signature:
+    """How the backends drive a kernel over many elements (:func:`eoloc._backend.run`): its
+    parameters in order (read off the function), which are the same for every element
+    (``constants``; ``ints`` among them are integers) and its outputs. A name starting with
+    ``R_`` is a rotation: 9 numbers, given as one argument (a 9-tuple or an array with 9 in its
+    first axis) and returned as a 9-tuple; a driver sees it as 9 flat arrays. An output named
+    ``status`` is int8."""
+
+    name: str
+    params: tuple[str, ...]
+    outputs: tuple[str, ...]
+    constants: frozenset[str] = frozenset()
+    ints: frozenset[str] = frozenset()
+
+    @staticmethod
+    def width(name: str) -> int:
+        return 9 if name.startswith("R_") else 1
+
+    @property
+    def n_flat_outputs(self) -> int:
+        return sum(self.width(o) for o in self.outputs)
+
+
+def declare(fn, outputs: str, constants: str = "", ints: str = "") -> Signature:
+    code = fn.__code__
+    return Signature(fn.__name__, code.co_varnames[:code.co_argcount], tuple(outputs.split()),
+                     frozenset(constants.split()) | frozenset(ints.split()), frozenset(ints.split()))
+
+
+SIGNATURES = {s.name: s for s in (
+    declare(geodetic_to_ecef, "x y z", "a e2"),
+    declare(ecef_to_geodetic, "lat lon h", "a b e2 ep2"),
+    declare(camera_frame, "R_ecef_cam ox oy oz", "a e2", ints="kind"),
+    declare(ray_direction, "dx dy dz"),
+    declare(project_point, "xn yn depth"),
+    declare(stop_at_range, "lat lon h t status", "a b e2 ep2"),
+    declare(stop_at_ellipsoid, "lat lon h t status", "a b e2 ep2"),
+    declare(flat_target, "lat lon h t status", "a b e2 ep2"),
+)}

@@ -39,6 +39,7 @@ from ._kernels import (
     atan2,
     bowring,
     cell_first_root,
+    compiled,
     ecef_to_geodetic,
     grid_height,
     inflated_roots,
@@ -94,6 +95,7 @@ def _grid_point(x, y, z, a, b, e2, ep2, lat0, lon0, dlat, dlon):
     return (lat / _D2R - lat0) / dlat, (lon / _D2R - lon0) / dlon, h
 
 
+@compiled()
 def _surface_gap(ox, oy, oz, dx, dy, dz, t, z, a, b, e2, ep2, lat0, lon0, dlat, dlon):
     """Geodetic height of the ray point at t minus the bilinear DEM height below it."""
     lat, lon, h = ecef_to_geodetic(ox + t * dx, oy + t * dy, oz + t * dz, a, b, e2, ep2)
@@ -101,6 +103,7 @@ def _surface_gap(ox, oy, oz, dx, dy, dz, t, z, a, b, e2, ep2, lat0, lon0, dlat, 
     return h - hz
 
 
+@compiled()
 def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
     """Grid walk from a to b (fractional row/col, linear): (status, s) of the first crossing.
 
@@ -151,6 +154,7 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
         s_lo = s_hi
 
 
+@compiled()
 def _coarse_clear(bmax, nr_cells, nc_cells, fr_a, fc_a, fr_b, fc_b, h_low):
     """True when the step's bounding box lies on the grid (``nr_cells`` x ``nc_cells`` cells) and
     every block under it is lower than h_low."""
@@ -176,6 +180,7 @@ def _coarse_clear(bmax, nr_cells, nc_cells, fr_a, fc_a, fr_b, fc_b, h_low):
     return True
 
 
+@compiled()
 def _band_fast(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b):
     """(t_start, t_end, camera inside the band) from inflated ellipsoids only (no trigonometry).
 
@@ -194,6 +199,7 @@ def _band_fast(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b):
     return t_start, t_end, inside
 
 
+@compiled()
 def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_near):
     """Exact grid coordinates of the ray point at t and their derivatives per metre along the ray.
 
@@ -220,11 +226,13 @@ def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_n
     return fr, fc, h, d_north / m_plus_h / _D2R / dlat, d_east * inv_p / _D2R / dlon, d_up, p
 
 
+@compiled()
 def _knot_length(p):
     """Knot spacing (m): cubic Hermite between exact knots is then < 1 µm off (README "M4")."""
     return min(_KNOT_M, max(0.002 * p, 1.0))
 
 
+@compiled()
 def _hermite(t, tk, length, k0, k1):
     """(fr, fc, h) at t by cubic Hermite interpolation between knots k0 (at tk) and k1 (tk + length)."""
     s = (t - tk) / length
@@ -239,6 +247,7 @@ def _hermite(t, tk, length, k0, k1):
             w00 * k0[2] + w10 * k0[5] + w01 * k1[2] + w11 * k1[5])
 
 
+@compiled()
 def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin,
               a, b, e2, ep2):
     """First crossing of one ray with the DEM -> (lat rad, lon rad, h, t, status).
@@ -292,6 +301,7 @@ def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hma
     return np.nan, np.nan, np.nan, np.nan, NO_INTERSECTION
 
 
+@compiled()
 def _polish(ox, oy, oz, dx, dy, dz, t, dhdt, z, a, b, e2, ep2, lat0, lon0, dlat, dlon):
     """One secant step on the exact gap around the linearised root, then the point."""
     eps = 0.01

@@ -80,7 +80,7 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
                                             np.asarray(main_range_m, dtype=np.float64), *ell)
     u, v = split_pixels(pixels, sensor.camera)
     xn, yn = sensor.camera.pixel_to_normalized(u, v)
-    out = run("flat_target", *frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
+    out = run("flat_target", frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
     return to_fixes(out, frame.invalid, sensor.camera.outside(u, v, xn, yn))
 
 

@@ -19,22 +19,12 @@ carry the constant part.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
-
-
-class GimbalKind(IntEnum):
-    """The gimbal models as the kernels know them (``eoloc._kernels.r_body_cam``)."""
-
-    AZ_EL = _kernels.GIMBAL_AZEL
-    ROLL_PITCH = _kernels.GIMBAL_ROLLPITCH
-    FIXED = _kernels.GIMBAL_FIXED
-
+from .._kernels import GimbalKind
 
 _IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 

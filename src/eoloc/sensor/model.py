@@ -188,18 +188,18 @@ class SensorModel:
         g1, g2, g3 = self.gimbal.angles(pose.gimbal_deg)
         R_mount = self._R_mount9 if mount_misalignment_deg is None else _rot9(mount_misalignment_deg)
         R_bore = self._R_bore9 if boresight_misalignment_deg is None else _rot9(boresight_misalignment_deg)
-        out = run("camera_frame", self.gimbal.kind, g1, g2, g3, *R_mount, *self.gimbal.R_fixed9, *R_bore,
+        R, ox, oy, oz = run("camera_frame", self.gimbal.kind, g1, g2, g3, R_mount, self.gimbal.R_fixed9, R_bore,
                   np.radians(_f64(gimbal_skew_deg)), np.radians(pose.lat_deg), np.radians(pose.lon_deg), pose.h_m,
                   np.radians(pose.yaw_deg), np.radians(pose.pitch_deg), np.radians(pose.roll_deg),
                   *self.lever_arm_m, self.ellipsoid.a, self.ellipsoid.e2)
         invalid = pose.invalid()
-        return CameraFrame(out[:9], out[9], out[10], out[11], invalid)
+        return CameraFrame(R, ox, oy, oz, invalid)
 
     def rays_from(self, frame: CameraFrame, xn: ArrayLike, yn: ArrayLike, out_of_image: ArrayLike = False) -> Rays:
         """Rays of normalised, undistorted image points (xn, yn) from camera frame(s) ``frame``
         (``out_of_image``: where the pixels are not to be located, see :meth:`Camera.outside`;
         Monte Carlo leaves it False: a perturbed pixel may stray past the edge)."""
-        dx, dy, dz = run("ray_direction", *frame.R, xn, yn)
+        dx, dy, dz = run("ray_direction", frame.R, xn, yn)
         shape = dx.shape
         return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
                     np.broadcast_to(frame.oz, shape), dx, dy, dz, frame.invalid, out_of_image)
@@ -224,7 +224,7 @@ class SensorModel:
         if p.shape[-1:] != (3,):
             raise ValueError(f"p_ecef must have 3 components in its last axis, got shape {p.shape}")
         frame = self.camera_frame(pose)
-        xn, yn, _depth = run("project_point", *frame.R, frame.ox, frame.oy, frame.oz, p[..., 0], p[..., 1], p[..., 2])
+        xn, yn, _depth = run("project_point", frame.R, frame.ox, frame.oy, frame.oz, p[..., 0], p[..., 1], p[..., 2])
         u, v = self.camera.normalized_to_pixel(xn, yn)
         bad = np.broadcast_to(frame.invalid, u.shape)
         return np.where(bad, np.nan, u), np.where(bad, np.nan, v)
