@@ -868,10 +868,6 @@ class Signature:
     def width(name: str) -> int:
         return 9 if name.startswith("R_") else 1
 
-    @property
-    def n_flat_outputs(self) -> int:
-        return sum(self.width(o) for o in self.outputs)
-
 
 def declare(fn, outputs: str, constants: str = "", ints: str = "") -> Signature:
     code = fn.__code__

@@ -93,7 +93,7 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
     import pyarrow as pa
     from pyarrow import csv as pacsv
 
-    recs = records if isinstance(records, Records) else Records.from_rows(records)
+    recs = Records.of(records)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = recs.names or list(FIX_COLUMNS)
@@ -154,8 +154,7 @@ def _fmt(key: str, v) -> str:
 
 def fix_features(records: Records | Sequence[Mapping]) -> list[dict]:
     """GeoJSON Point features of fix records (RFC 7946: lon, lat, h); failed fixes have a null geometry."""
-    recs = records if isinstance(records, Records) else Records.from_rows(records)
-    return [_point_feature(row) for row in recs.rows()]
+    return [_point_feature(row) for row in Records.of(records).rows()]
 
 
 def _point_feature(row: dict) -> dict:

@@ -37,8 +37,15 @@ class Records:
     def __getitem__(self, name: str) -> np.ndarray:
         return self.columns[name]
 
-    def get(self, name: str, default=None):
-        return self.columns.get(name, default)
+    @classmethod
+    def of(cls, records: Records | Sequence[Mapping]) -> Records:
+        """Records as they are, or the columns of dict rows (:meth:`from_rows`)."""
+        return records if isinstance(records, Records) else cls.from_rows(records)
+
+    @property
+    def has_points(self) -> bool:
+        """Whether the records carry coordinates (a point layer) rather than a plain table."""
+        return "lat_deg" in self.columns and "lon_deg" in self.columns
 
     @classmethod
     def from_rows(cls, rows: Sequence[Mapping]) -> Records:

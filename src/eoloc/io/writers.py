@@ -23,21 +23,13 @@ def _csv(path: Path, records: Records, features: list[dict] | None, name: str) -
     return write_csv(path.with_suffix(".csv"), records)
 
 
-def _points(records: Records) -> bool:
-    return "lat_deg" in records.columns and "lon_deg" in records.columns
-
-
-def _geojson(path: Path, records: Records, features: list[dict] | None, name: str) -> Path | None:
-    if features is None and not _points(records):
-        return None  # a table without geometry (statistics, residuals) is CSV only
+def _geojson(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
     if features is None:
         return write_fix_geojson(path.with_suffix(".geojson"), records)
     return write_feature_collection(path.with_suffix(".geojson"), features, indent=1)
 
 
-def _kml(path: Path, records: Records, features: list[dict] | None, name: str) -> Path | None:
-    if features is None and not _points(records):
-        return None
+def _kml(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
     from .kml import write_kml
 
     return write_kml(path.with_suffix(".kml"), {name: fix_features(records) if features is None else features},
@@ -45,9 +37,9 @@ def _kml(path: Path, records: Records, features: list[dict] | None, name: str) -
 
 
 def _cot(path: Path, records: Records, features: list[dict] | None, name: str) -> Path | None:
-    if (features is None and not _points(records)) or (features is not None and not all(
-            f.get("geometry") is None or f["geometry"]["type"] == "Point" for f in features)):
-        return None  # CoT events here are points: footprints and tracks go to KML/GeoJSON, tables to CSV
+    if features is not None and not all(f.get("geometry") is None or f["geometry"]["type"] == "Point"
+                                        for f in features):
+        return None  # CoT events here are points: footprints and tracks go to KML/GeoJSON
     from .cot import write_cot
 
     return write_cot(path.with_name(path.name + ".cot.zip"), records.rows(), name=name)[0]
@@ -66,7 +58,9 @@ def write_layer(out_dir: str | Path, stem: str, records: Records | Sequence[Mapp
     Point features unless ``features`` are given; records without lat_deg/lon_deg are a table
     (CSV only). Returns the paths written (a format that does not apply to the layer, CoT for
     polygons, GeoJSON for a table, writes nothing)."""
-    recs = records if isinstance(records, Records) else Records.from_rows(records)
+    recs = Records.of(records)
+    if features is None and not recs.has_points:
+        formats = [f for f in formats if f == "csv"]  # a table without geometry (statistics, residuals)
     base = Path(out_dir) / stem
     written = []
     for fmt in dict.fromkeys(formats):

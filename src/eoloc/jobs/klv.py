@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import KLVError
-from ..io.export import fix_features, fix_records, with_utc
+from ..io.export import fix_features, fix_records, utc_times, with_utc
 from ..io.records import Records
 
 
@@ -65,8 +65,7 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
 
 def telemetry_records(tel) -> Records:
     """telemetry.csv: every packet in eoloc's conventions."""
-    iso = with_utc({"time_s": tel.columns["time_s"]}, "unix")["time_utc"]
-    return Records({"packet": np.asarray(tel.line), "time_utc": iso,
+    return Records({"packet": np.asarray(tel.line), "time_utc": utc_times(tel.columns["time_s"], "unix"),
                     **{k: np.asarray(v) for k, v in tel.columns.items() if k != "frame"}})
 
 
