@@ -119,7 +119,7 @@ def test_truncated_packet_does_not_swallow_the_next_one():
     data = b"".join(packets[:5]) + cut + b"".join(packets[6:]) + b"\x00garbage"
     s = decode_klv_bytes(data, "cut.bin")
     assert s.n_good == 18
-    assert [p.uas.packet.raw for p in s.packets] == packets[:5] + packets[6:]
+    assert [p.raw for p in s.packets] == packets[:5] + packets[6:]
     kinds = sorted(i.kind for i in s.issues)
     assert kinds == ["checksum", "skipped bytes"] or kinds == ["malformed", "skipped bytes"]
     bad = next(i for i in s.issues if i.packet is not None)
@@ -148,7 +148,7 @@ def test_fuzzed_stream_never_crashes_and_keeps_every_untouched_packet(data):
     bounds = np.cumsum([0] + [len(p) for p in packets])
     span = (pos, pos + (1 if kind == "flip" else len(junk)))
     untouched = [p for k, p in enumerate(packets) if bounds[k + 1] <= span[0] or bounds[k] >= span[1]]
-    kept = [p.uas.packet.raw for p in s.packets]
+    kept = [p.raw for p in s.packets]
     originals = set(packets)
     assert all(k in originals for k in kept)  # never a packet that was not in the stream
     assert set(untouched) <= set(kept)
@@ -184,7 +184,7 @@ def test_mpegts_from_libavformat_gives_the_same_packets_with_pts(tmp_path):
     _ts_with_pyav(ts, packets)
     s = read_klv(ts)
     assert s.container == "mpegts" and s.n_good == 19 and s.issues == []
-    assert [p.uas.packet.raw for p in s.packets] == packets
+    assert [p.raw for p in s.packets] == packets
     assert [p.pts_s for p in s.packets] == pytest.approx([i / 10 for i in range(19)], abs=1e-6)
     raw = klv_telemetry(read_klv(DATA / "realflight.bin")).columns
     np.testing.assert_array_equal(klv_telemetry(s).columns["yaw_deg"], raw["yaw_deg"])
@@ -200,7 +200,7 @@ def test_mpegts_with_a_lost_transport_packet_keeps_the_rest(tmp_path):
     damaged = tmp_path / "damaged.ts"
     damaged.write_bytes(data[:drop * 188] + data[(drop + 1) * 188:])
     s = read_klv(damaged)
-    kept = [p.uas.packet.raw for p in s.packets]
+    kept = [p.raw for p in s.packets]
     assert set(kept) <= set(packets) and len(kept) >= 17  # at most the KLV packets in that TS packet's PES lost
 
 
@@ -313,7 +313,7 @@ def test_truck_klv_frame_centres_agree_with_the_encoder():
 
 
 def test_no_klv_in_file_is_a_clear_error(tmp_path):
-    from eoloc.io.klv import KLVError
+    from eoloc.errors import KLVError
 
     p = tmp_path / "x.klv"
     p.write_bytes(b"")

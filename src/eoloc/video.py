@@ -143,7 +143,9 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     base = base or misb_sensor()
     n = len(det)
     frames = det.columns["frame"].astype(np.int64)
-    row = np.clip(np.searchsorted(tel.line, frames), 0, max(len(tel) - 1, 0))  # tel.line: packet numbers, ascending
+    by_packet = np.argsort(tel.line, kind="stable")  # rows are grouped by stream and in time order
+    pos = np.clip(np.searchsorted(tel.line[by_packet], frames), 0, max(len(tel) - 1, 0))
+    row = by_packet[pos] if len(tel) else pos
     found = tel.line[row] == frames if len(tel) else np.zeros(n, bool)
     d, c = det.columns, tel.columns
     hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])

@@ -128,7 +128,7 @@ def write_klv_stream(path: Path, job: KLVJob) -> Path:
     geoid = default_geoid()
     out = bytearray()
     for i, p in enumerate(job.stream.packets):
-        raw = p.uas.packet.raw
+        raw = p.raw
         j = first.get(p.index)
         if j is not None:
             h = float(f.h_m[j]) if hae[i] else float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))

@@ -1,0 +1,77 @@
+"""KLV out: ST 0601 packets for synthetic streams and re-encoded fixes (stanag4609's encoder, which
+writes the standard strictly), and a raw builder for test streams that break it on purpose."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from .localset import encode_items, encode_length
+from .reader import UAS_KEY
+
+
+def encode_uas_packet(values: dict[int, Any]) -> bytes:
+    """One ST 0601 packet from {tag: value} in the standard's units (degrees, metres, datetime
+    for tag 2); the checksum is computed. Tag 65 (LS version) defaults to 19."""
+    from stanag4609.st0601 import encode_uas_local_set
+
+    return encode_uas_local_set({65: 19, **values})
+
+
+def uas_items(packet: bytes) -> list[tuple[int, bytes]]:
+    """The (tag, value) items of a well-formed ST 0601 packet, checksum item left out."""
+    from .localset import parse_items
+    from .reader import packet_end
+
+    end, start, why = packet_end(packet, 0)
+    if end is None:
+        raise ValueError(why)
+    items, _ = parse_items(packet, start, end)
+    return [(t, v) for t, v in items if t != 1]
+
+
+def build_uas_packet(items: Iterable[tuple[int, bytes]], *, long_form: bool = False) -> bytes:
+    """An ST 0601 packet from raw (tag, value) items exactly as given (order, duplicates, long-form
+    lengths: for test streams that depart from the standard), with a valid checksum."""
+    body = encode_items(items, long_form=long_form) + b"\x01\x02"
+    head = UAS_KEY + encode_length(len(body) + 2)
+    pkt = head + body
+    total = ((sum(pkt[0::2]) << 8) + sum(pkt[1::2])) & 0xFFFF
+    return pkt + total.to_bytes(2, "big")
+
+
+def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height: int, *,
+                hfov_deg: float | None = None, vfov_deg: float | None = None) -> bytes:
+    """An ST 0903 VMTI local set (for ST 0601 tag 74) with one VTarget per (id, u_px, v_px)
+    (eoloc pixel convention; written as 1-based centroid pixel number and row/column)."""
+    from stanag4609.st0903 import VTargetData, encode_vmti_local_set
+
+    packs = []
+    for tid, u, v in targets:
+        col, row = round(u) + 1, round(v) + 1
+        if not (1 <= col <= width and 1 <= row <= height):
+            continue
+        packs.append(VTargetData(int(tid), {1: (row - 1) * width + col, 19: row, 20: col}))
+    values: dict[int, Any] = {4: 5, 8: int(width), 9: int(height)}
+    if hfov_deg is not None:
+        values[11] = float(hfov_deg)
+    if vfov_deg is not None:
+        values[12] = float(vfov_deg)
+    return encode_vmti_local_set(values, targets=packs)
+
+
+def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: float, *, ce90_m: float | None = None,
+                         le90_m: float | None = None) -> bytes:
+    """The packet re-encoded with a fix in the target location tags: 40 lat, 41 lon, 42 elevation
+    (``h_m`` must be in tag 42's datum: HAE when the packet stream sends tag 78, else MSL), 45
+    CE90 and 46 LE90 (m). Every other item is kept byte for byte; the checksum is recomputed."""
+    from stanag4609.st0601 import update_uas_local_set
+
+    upd: dict[int, Any] = {40: float(lat_deg), 41: float(lon_deg), 42: float(h_m)}
+    if ce90_m is not None and np.isfinite(ce90_m):
+        upd[45] = float(min(ce90_m, 4095.0))
+    if le90_m is not None and np.isfinite(le90_m):
+        upd[46] = float(min(le90_m, 4095.0))
+    return update_uas_local_set(packet, upd)

@@ -1,0 +1,136 @@
+"""KLV local sets read the way receivers in the field read them: item by item, keeping every item
+that can be read and noting every departure from the standard instead of refusing the set.
+
+A local set is a run of (BER-OID tag, BER length, value) items (SMPTE ST 336). What a strict
+decoder rejects and this one keeps, with a :class:`Note`: a length in long form where the short
+form would do, a tag sent twice (the last one counts, as report-on-change receivers do), items out
+of the standard's order. What cannot be kept is named too: an item whose length runs past the end
+of its set ends the set there (the items before it are kept).
+
+Written here rather than taken from stanag4609, whose parser is (rightly, for a validator) strict:
+it refuses the whole set on any of the above (README: "Real KLV").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class Note:
+    """A departure from the standard met while decoding, kept with the item it concerns.
+
+    kind: "long-form length" | "duplicate tag" | "out of order" | "truncated item" | "field";
+    tag: the item's tag, dotted for nested sets ("74.101.3" is item 3 of a VMTI target).
+    """
+
+    kind: str
+    tag: str
+    message: str
+
+
+class SetError(Exception):
+    """The bytes cannot be read as a local set at all (raised only by :func:`ber_length`)."""
+
+
+def ber_length(data: bytes, pos: int, end: int) -> tuple[int, int, bool]:
+    """(length, position after it, long form where short would do) of the BER length at ``pos``."""
+    if pos >= end:
+        raise SetError("the set ends before an item's length")
+    first = data[pos]
+    if first < 0x80:
+        return first, pos + 1, False
+    n = first & 0x7F
+    if n == 0 or n > 8:
+        raise SetError(f"invalid BER length byte 0x{first:02X}")
+    if pos + 1 + n > end:
+        raise SetError("the set ends inside an item's BER length")
+    length = int.from_bytes(data[pos + 1:pos + 1 + n], "big")
+    return length, pos + 1 + n, length < 0x80 or data[pos + 1] == 0
+
+
+def ber_oid(data: bytes, pos: int, end: int) -> tuple[int, int]:
+    """(value, position after it) of the BER-OID integer at ``pos`` (at most 4 bytes)."""
+    value = 0
+    for i in range(pos, min(pos + 4, end)):
+        b = data[i]
+        value = (value << 7) | (b & 0x7F)
+        if not b & 0x80:
+            return value, i + 1
+    raise SetError("an item's tag is unterminated or longer than 4 bytes")
+
+
+def encode_length(n: int) -> bytes:
+    """Minimal definite-form BER length."""
+    if n < 0x80:
+        return bytes((n,))
+    width = (n.bit_length() + 7) // 8
+    return bytes((0x80 | width,)) + n.to_bytes(width, "big")
+
+
+def encode_oid(tag: int) -> bytes:
+    """BER-OID encoding of a tag."""
+    groups = [tag & 0x7F]
+    tag >>= 7
+    while tag:
+        groups.append(0x80 | (tag & 0x7F))
+        tag >>= 7
+    return bytes(reversed(groups))
+
+
+def encode_items(items, *, long_form: bool = False) -> bytes:
+    """A local set from (tag, value bytes) pairs, in the given order (duplicates allowed: tests
+    build non-standard sets with it). long_form: every length in 4-byte long form."""
+    out = bytearray()
+    for tag, value in items:
+        out += encode_oid(tag)
+        out += (b"\x84" + len(value).to_bytes(4, "big")) if long_form else encode_length(len(value))
+        out += value
+    return bytes(out)
+
+
+def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: str = "",
+                one_byte_tags: bool = False) -> tuple[list[tuple[int, bytes]], list[Note]]:
+    """Every readable (tag, value) item of the set data[start:end], in order, and the notes.
+
+    Duplicates are returned as sent (the caller keeps the last); a long-form length is noted once
+    per tag; an item running past the end stops the parse with a "truncated item" note.
+    """
+    end = len(data) if end is None else end
+    items: list[tuple[int, bytes]] = []
+    notes: list[Note] = []
+    pos = start
+    while pos < end:
+        try:
+            if one_byte_tags:
+                tag, p = data[pos], pos + 1
+            else:
+                tag, p = ber_oid(data, pos, end)
+            length, p, needless = ber_length(data, p, end)
+        except SetError as exc:
+            notes.append(Note("truncated item", prefix.rstrip(".") or "set",
+                              f"{exc} at byte {pos - start} of the set; the rest of the set is not read"))
+            break
+        if p + length > end:
+            notes.append(Note("truncated item", f"{prefix}{tag}",
+                              f"declares {length} bytes but only {end - p} remain in the set; the rest of the "
+                              "set is not read"))
+            break
+        if needless:
+            notes.append(Note("long-form length", f"{prefix}{tag}", "length in BER long form where the short form "
+                              "would do (read as is)"))
+        items.append((tag, data[p:p + length]))
+        pos = p + length
+    return items, notes
+
+
+def last_of_each(items: list[tuple[int, bytes]], prefix: str = "") -> tuple[dict[int, bytes], list[Note]]:
+    """tag -> value with the last of a repeated tag kept, and a note per repeated tag."""
+    out: dict[int, bytes] = {}
+    notes: list[Note] = []
+    for tag, value in items:
+        if tag in out:
+            notes.append(Note("duplicate tag", f"{prefix}{tag}", "sent more than once in a set; the last one is "
+                              "used"))
+        out[tag] = value
+    return out, notes

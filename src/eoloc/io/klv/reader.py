@@ -1,0 +1,366 @@
+"""MISB KLV in: ST 0601 (and the older EG 0104) packets from raw KLV files or MPEG-TS, one stream
+per KLV PID, every decodable value kept.
+
+What is ours and what is not:
+
+- **MPEG-TS demultiplexing** is stanag4609's transport layer (README: why it).
+- **Framing** is ours: the bytes are scanned for the ST 0601 and EG 0104 keys, every packet is
+  decoded on its own, and after a corrupt or truncated packet the scan resumes at the next key
+  *inside* the bad bytes, so a truncated packet never swallows the good packet that follows it.
+  A packet is refused only for its framing (a length that runs past the data) or its ST 0601
+  checksum; every bad packet and every skipped run of bytes is reported with its byte offset.
+- **Item decoding** is ours and tolerant (:mod:`.localset`, :mod:`.st0601`, :mod:`.st0903`):
+  duplicated tags, long-form lengths, items out of order, ST 1607 sets that break its rules, VMTI
+  sets missing mandatory items — decoded, and each departure counted per stream and tag with the
+  first packet it was seen in. ``strict=True`` has stanag4609 enforce the standard instead: a
+  packet it refuses is dropped and named.
+- **Streams**: each KLV PID of a transport stream is its own stream (``"PID 497"``); a raw KLV
+  file is one stream (``""``). :mod:`.telemetry` keeps report-on-change state per stream.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import KLVError
+from .eg0104 import EG0104_KEY, decode_eg0104
+from .localset import Note, parse_items
+from .st0601 import decode_values
+
+UAS_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
+TS_PACKET = 188
+
+
+@dataclass(frozen=True)
+class KLVIssue:
+    """A packet (or run of bytes) that could not be used, with its place in the file."""
+
+    path: str
+    packet: int | None  # packet number in the file (good and bad counted), None for skipped bytes
+    offset: int  # byte offset in the file (raw KLV) or in the PID's KLV stream (MPEG-TS)
+    kind: str  # "checksum" | "truncated" | "malformed" | "non-standard" | "skipped bytes"
+    message: str
+
+    def __str__(self) -> str:
+        where = f"packet {self.packet} at byte {self.offset}" if self.packet is not None else f"byte {self.offset}"
+        return f"{self.path}: {where}: {self.kind}: {self.message}"
+
+
+@dataclass(frozen=True)
+class KLVPacket:
+    """One good packet: its number in the file, byte offset, transport PTS (s, MPEG-TS only), raw
+    bytes, decoded values (ST 0601 tag -> value), stream and standard."""
+
+    index: int
+    offset: int
+    pts_s: float | None
+    raw: bytes
+    fields: dict[int, Any]
+    stream: str = ""
+    standard: str = "ST 0601"
+
+    def values(self) -> dict[int, Any]:
+        """ST 0601 tag -> decoded value (the last one for a repeated tag)."""
+        return self.fields
+
+
+@dataclass(frozen=True)
+class StreamNote:
+    """A departure from the standard, counted over a stream: kind, item tag, the first message,
+    how many packets showed it and the first of them."""
+
+    stream: str
+    kind: str
+    tag: str
+    message: str
+    count: int
+    first_packet: int
+
+    def __str__(self) -> str:
+        where = f"{self.stream}: " if self.stream else ""
+        return (f"{where}tag {self.tag}: {self.kind}: {self.message} ({self.count} packet(s), first packet "
+                f"{self.first_packet})")
+
+
+@dataclass
+class KLVStream:
+    """Everything read from one file: the good packets (of every stream), the bad ones, and the
+    departures from the standard counted per stream and tag."""
+
+    path: str
+    container: str  # "klv" or "mpegts"
+    packets: list[KLVPacket]
+    issues: list[KLVIssue] = field(default_factory=list)
+    notes: list[StreamNote] = field(default_factory=list)
+
+    @property
+    def n_good(self) -> int:
+        return len(self.packets)
+
+    @property
+    def n_bad(self) -> int:
+        return sum(1 for i in self.issues if i.packet is not None)
+
+    @property
+    def field_warnings(self) -> list[str]:
+        return [str(n) for n in self.notes]
+
+    @property
+    def streams(self) -> list[str]:
+        """Stream names in order of first packet."""
+        return list(dict.fromkeys(p.stream for p in self.packets))
+
+    def counts(self) -> dict[str, int]:
+        """How many packets or byte runs of each problem kind, plus the good packets."""
+        c = Counter(i.kind for i in self.issues)
+        return {"good": self.n_good, **c}
+
+    def summary(self) -> str:
+        bad = ", ".join(f"{n} {k}" for k, n in self.counts().items() if k != "good") or "none bad"
+        kinds = Counter(p.standard for p in self.packets)
+        what = (f"{self.n_good} good {next(iter(kinds), 'ST 0601')} packets" if len(kinds) < 2 else
+                f"{self.n_good} good packets ({', '.join(f'{n} {k}' for k, n in kinds.items())})")
+        return f"{self.path} ({self.container}): {what}; {bad}"
+
+
+# -- reading ------------------------------------------------------------------------------------
+
+
+def read_klv(path: str | Path, *, strict: bool = False) -> KLVStream:
+    """Read every ST 0601 / EG 0104 packet of a raw KLV file (.klv/.bin) or an MPEG-TS file.
+
+    The container is recognised from the content (0x47 sync bytes every 188 bytes), not the name.
+    Raises :class:`KLVError` only when nothing can be read; bad packets are reported in
+    ``issues``, departures from the standard in ``notes``, and every good packet kept.
+    """
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise KLVError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not data:
+        raise KLVError(f"{path} is empty")
+    if looks_like_ts(data):
+        stream = read_ts_bytes(data, str(path), strict=strict)
+    else:
+        stream = decode_klv_bytes(data, str(path), strict=strict)
+    if not stream.packets and stream.n_bad == 0:
+        raise KLVError(f"{path}: no MISB ST 0601 packet found (key {UAS_KEY.hex(' ')}), nor an EG 0104 one; is this "
+                       "a KLV stream or an MPEG-TS file with a KLV data stream?")
+    return stream
+
+
+class _Notes:
+    """Departures counted per (stream, kind, tag), with the first message and packet."""
+
+    def __init__(self) -> None:
+        self.seen: dict[tuple[str, str, str], list] = {}
+
+    def add(self, stream: str, packet: int, notes: list[Note]) -> None:
+        for n in notes:
+            rec = self.seen.setdefault((stream, n.kind, n.tag), [n.message, 0, packet])
+            rec[1] += 1
+
+    def result(self) -> list[StreamNote]:
+        return [StreamNote(s, k, t, m, c, f) for (s, k, t), (m, c, f) in self.seen.items()]
+
+
+def _checksum_ok(raw: bytes) -> tuple[bool, str]:
+    """ST 0601 bcc-16: the checksum item (01 02 hi lo) ends the packet and sums the bytes before
+    its value as big-endian 16-bit words."""
+    if len(raw) < 20 or raw[-4:-2] != b"\x01\x02":
+        return False, "no checksum item (tag 1, 2 bytes) at the end of the packet"
+    body = raw[:-2]
+    total = ((sum(body[0::2]) << 8) + sum(body[1::2])) & 0xFFFF
+    expected = int.from_bytes(raw[-2:], "big")
+    if total != expected:
+        return False, f"ST 0601 checksum mismatch: expected 0x{expected:04X}, computed 0x{total:04X}"
+    return True, ""
+
+
+def decode_packet(raw: bytes, value_start: int) -> tuple[str, dict[int, Any], list[Note]]:
+    """(standard, tag -> value, notes) of one framed packet; raises ValueError (with the reason)
+    only when its checksum fails."""
+    if raw[:16] == EG0104_KEY:
+        values, notes = decode_eg0104(raw[value_start:])
+        return "EG 0104", values, notes
+    ok, why = _checksum_ok(raw)
+    if not ok:
+        raise ValueError(why)
+    items, notes = parse_items(raw, value_start, len(raw) - 4)
+    if items and items[0][0] != 2 and any(t == 2 for t, _ in items):
+        notes.append(Note("out of order", "2", "Precision Time Stamp is not the first item (read anyway)"))
+    values, more = decode_values(items)
+    return "ST 0601", values, notes + more
+
+
+def _strict_check(raw: bytes) -> str | None:
+    """Why stanag4609 refuses the packet under the standard's rules, or None."""
+    from stanag4609.st0601 import decode_uas_local_set
+
+    if raw[:16] == EG0104_KEY:
+        return "EG 0104 is not ST 0601 (obsolete; read only without --strict)"
+    try:
+        decode_uas_local_set(raw)
+    except Exception as exc:  # stanag4609's verdict, whatever its exception type
+        return one_line(exc)
+    return None
+
+
+class _Keys:
+    """Next position of either packet key at or after a position (each key searched once per hit)."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.next = {UAS_KEY: data.find(UAS_KEY), EG0104_KEY: data.find(EG0104_KEY)}
+
+    def find(self, pos: int) -> int:
+        for key, at in self.next.items():
+            if 0 <= at < pos:
+                self.next[key] = self.data.find(key, pos)
+        hits = [a for a in self.next.values() if a >= 0]
+        return min(hits) if hits else -1
+
+
+def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int, float | None]] | None = None,
+                     container: str = "klv", stream: str = "", first_index: int = 0,
+                     strict: bool = False) -> KLVStream:
+    """Frame and decode a byte string of concatenated KLV packets (see the module notes).
+
+    pts: optional (byte offset, PTS seconds) marks: a packet takes the PTS of the last mark at or
+    before its key. first_index: the number of the first packet (streams of one file count on).
+    """
+    packets: list[KLVPacket] = []
+    issues: list[KLVIssue] = []
+    notes = _Notes()
+    marks = np.array([m[0] for m in pts], dtype=np.int64) if pts else None
+    keys = _Keys(data)
+    n = first_index
+    pos = 0
+    size = len(data)
+    after_bad = False  # bytes up to the next key after a bad packet belong to that packet: not reported twice
+    while pos < size:
+        k = keys.find(pos)
+        if k < 0:
+            if size - pos and not after_bad:
+                issues.append(KLVIssue(path, None, pos, "skipped bytes", f"{size - pos} bytes after the last packet "
+                                       "are not a KLV packet"))
+            break
+        if k > pos and not after_bad:
+            issues.append(KLVIssue(path, None, pos, "skipped bytes",
+                                   f"{k - pos} bytes before the next packet key are not a packet"))
+        after_bad = True
+        end, start, why = packet_end(data, k)
+        if end is None:
+            issues.append(KLVIssue(path, n, k, "truncated", why))
+            n += 1
+            pos = k + 1  # the next key may sit inside what the bad length claimed
+            continue
+        raw = data[k:end]
+        try:
+            standard, values, pnotes = decode_packet(raw, start - k)
+        except ValueError as exc:
+            issues.append(KLVIssue(path, n, k, "checksum", str(exc)))
+            n += 1
+            pos = k + 1
+            continue
+        if strict and (why := _strict_check(raw)) is not None:
+            issues.append(KLVIssue(path, n, k, "non-standard", why))
+            n += 1
+            pos = end
+            after_bad = False
+            continue
+        notes.add(stream, n, pnotes)
+        pts_s = None
+        if marks is not None:
+            j = int(np.searchsorted(marks, k, side="right")) - 1
+            pts_s = pts[max(j, 0)][1]
+        packets.append(KLVPacket(n, k, pts_s, raw, values, stream, standard))
+        n += 1
+        pos = end
+        after_bad = False
+    return KLVStream(path, container, packets, issues, notes.result())
+
+
+def packet_end(data: bytes, k: int) -> tuple[int | None, int, str]:
+    """(end offset, value start, "") of the packet whose key starts at ``k``, or (None, 0, why)."""
+    i = k + 16
+    if i >= len(data):
+        return None, 0, "the stream ends inside the packet's key or length"
+    first = data[i]
+    if first < 0x80:
+        length, used = first, 1
+    else:
+        nbytes = first & 0x7F
+        if nbytes == 0 or nbytes > 8:
+            return None, 0, f"invalid BER length byte 0x{first:02X}"
+        if i + 1 + nbytes > len(data):
+            return None, 0, "the stream ends inside the packet's BER length"
+        length, used = int.from_bytes(data[i + 1:i + 1 + nbytes], "big"), 1 + nbytes
+    end = i + used + length
+    if end > len(data):
+        return None, 0, (f"the packet declares {length} bytes of value but only {len(data) - i - used} remain "
+                         "(cut short, or a corrupt length)")
+    return end, i + used, ""
+
+
+def one_line(exc: BaseException) -> str:
+    text = str(exc).strip().replace("\n", " ")
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def looks_like_ts(data: bytes) -> bool:
+    n = min(len(data) // TS_PACKET, 5)
+    return n >= 2 and all(data[i * TS_PACKET] == 0x47 for i in range(n))
+
+
+def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
+    """KLV packets from every KLV elementary stream (PID) of an MPEG-TS file, with their PTS; each
+    PID is its own stream ("PID n").
+
+    Asynchronous carriage (stream_type 0x06, 'KLVA') and synchronous carriage (0x15, metadata
+    access units) both end up as one byte stream per PID, framed like a raw KLV file. Transport
+    errors (lost sync, bad continuity) are recovered by the demultiplexer and reported.
+    """
+    from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+    from stanag4609.transport.metadata import parse_metadata_au_cells
+
+    demux = TransportDemuxer(recover_transport=True)
+    issues: list[KLVIssue] = []
+    per_pid: dict[int, tuple[bytearray, list]] = {}
+    try:
+        events = demux.feed(data) + demux.finish()
+    except Exception as exc:
+        raise KLVError(f"{path}: the MPEG-TS transport cannot be read: {one_line(exc)}") from None
+    for ev in events:
+        if not isinstance(ev, PESStreamEvent) or ev.kind is not StreamKind.KLV:
+            continue
+        buf, marks = per_pid.setdefault(ev.pid, (bytearray(), []))
+        payload = ev.pes.payload
+        if ev.stream.stream_type == 0x15:  # synchronous metadata: access-unit cells wrap the KLV
+            try:
+                payload = b"".join(cell.data for cell in parse_metadata_au_cells(payload))
+            except Exception as exc:
+                issues.append(KLVIssue(path, None, int(ev.pes.offset or 0), "malformed",
+                                       f"PID {ev.pid}: metadata access unit cannot be read: {one_line(exc)}"))
+                continue
+        marks.append((len(buf), ev.pes.pts_seconds))
+        buf.extend(payload)
+    if not per_pid:
+        raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
+    packets: list[KLVPacket] = []
+    notes: list[StreamNote] = []
+    n = 0
+    for pid, (buf, marks) in sorted(per_pid.items()):
+        s = decode_klv_bytes(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
+                             first_index=n, strict=strict)
+        n += len(s.packets) + s.n_bad
+        packets += s.packets
+        issues += s.issues
+        notes += s.notes
+    return KLVStream(path, "mpegts", packets, issues, notes)

@@ -1,0 +1,204 @@
+"""MISB ST 0601 (UAS Datalink Local Set) values, decoded item by item.
+
+The table below holds the ST 0601.19 items eoloc uses (time, platform and sensor pose, fields of
+view, frame centre and corners, target location, flags, heights) with the standard's mappings;
+``tests/test_klv_tolerant.py`` checks every entry against stanag4609's definition of the same tag
+and every decoded value against stanag4609's decoder. Items eoloc does not use are kept as their
+raw bytes. An item that cannot be decoded (wrong length, reserved value, bad text) is left out
+with a note; the rest of the packet is used. ST 0903 VMTI (tag 74) is decoded by
+:mod:`.st0903`; ST 1607 segment and amend sets (tags 100, 101) are decoded here, as far as they
+are valid, into :class:`Nested` values.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+from fractions import Fraction
+from typing import Any
+
+from .localset import Note, last_of_each, parse_items
+
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+MULTIPLE = frozenset({100, 101})  # ST 1607 segment and amend sets may repeat
+
+
+class Special(enum.Enum):
+    """ST 0601 special values of mapped items (read as NaN by the telemetry columns)."""
+
+    OUT_OF_RANGE = "out of range"
+    OFF_EARTH = "off earth"
+    RESERVED = "reserved"
+    UNKNOWN = "unknown"  # a zero-length item: the value is no longer known
+
+
+class FieldError(ValueError):
+    """An item's value cannot be decoded (message says why); the item is left out with a note."""
+
+
+@dataclass(frozen=True)
+class Mapped:
+    """A fixed-length integer mapped linearly onto [lo, hi] (ST 0601 §6.5), with an optional special raw value."""
+
+    length: int
+    lo: Fraction
+    hi: Fraction
+    signed: bool = False
+    special: Special | None = None
+
+    def domain(self) -> tuple[int, int, int | None]:
+        bits = 8 * self.length
+        if not self.signed:
+            return 0, (1 << bits) - 1, None
+        low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+        return (low + 1, high, low) if self.special is not None else (low, high, None)
+
+    def decoder(self):
+        rmin, rmax, special_raw = self.domain()
+        span = self.hi - self.lo
+        # value = lo + (r - rmin) span / (rmax - rmin), as one correctly rounded int / int division
+        den = self.lo.denominator * span.denominator * (rmax - rmin)
+        a = self.lo.numerator * span.denominator * (rmax - rmin)
+        b = span.numerator * self.lo.denominator
+        length, signed, special = self.length, self.signed, self.special
+
+        def decode(raw: bytes):
+            if len(raw) != length:
+                raise FieldError(f"{length} byte(s) expected, {len(raw)} sent")
+            r = int.from_bytes(raw, "big", signed=signed)
+            if r == special_raw:
+                return special
+            return (a + (r - rmin) * b) / den
+        return decode
+
+
+def _uint(lo: int | None = None, hi: int | None = None):
+    def decode(raw: bytes) -> int:
+        if not raw or len(raw) > 8:
+            raise FieldError(f"1 to 8 bytes expected, {len(raw)} sent")
+        v = int.from_bytes(raw, "big")
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise FieldError(f"value {v} outside {lo}..{hi}")
+        return v
+    return decode
+
+
+def _timestamp(raw: bytes) -> datetime:
+    if len(raw) != 8:
+        raise FieldError(f"8 bytes expected, {len(raw)} sent")
+    return EPOCH + timedelta(microseconds=int.from_bytes(raw, "big"))
+
+
+def _text(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8").rstrip("\x00")
+    except UnicodeDecodeError:
+        raise FieldError("not UTF-8 text") from None
+
+
+F = Fraction
+_LAT = Mapped(4, F(-90), F(90), True, Special.RESERVED)
+_LON = Mapped(4, F(-180), F(180), True, Special.RESERVED)
+_LAT_FC = Mapped(4, F(-90), F(90), True, Special.OFF_EARTH)
+_LON_FC = Mapped(4, F(-180), F(180), True, Special.OFF_EARTH)
+_ALT = Mapped(2, F(-900), F(19000))
+_OFFSET = Mapped(2, F(-3, 40), F(3, 40), True, Special.OFF_EARTH)
+_FULL_ANGLE = Mapped(4, F(-90), F(90), True, Special.OUT_OF_RANGE)
+
+#: tag -> (name, mapping or decoder): the ST 0601.19 items eoloc reads
+FIELDS: dict[int, tuple[str, Any]] = {
+    2: ("Precision Time Stamp", _timestamp),
+    3: ("Mission ID", _text), 4: ("Platform Tail Number", _text),
+    5: ("Platform Heading Angle", Mapped(2, F(0), F(360))),
+    6: ("Platform Pitch Angle", Mapped(2, F(-20), F(20), True, Special.OUT_OF_RANGE)),
+    7: ("Platform Roll Angle", Mapped(2, F(-50), F(50), True, Special.OUT_OF_RANGE)),
+    10: ("Platform Designation", _text), 11: ("Image Source Sensor", _text), 12: ("Image Coordinate System", _text),
+    13: ("Sensor Latitude", _LAT), 14: ("Sensor Longitude", _LON), 15: ("Sensor True Altitude", _ALT),
+    16: ("Sensor Horizontal Field of View", Mapped(2, F(0), F(180))),
+    17: ("Sensor Vertical Field of View", Mapped(2, F(0), F(180))),
+    18: ("Sensor Relative Azimuth Angle", Mapped(4, F(0), F(360))),
+    19: ("Sensor Relative Elevation Angle", Mapped(4, F(-180), F(180), True, Special.RESERVED)),
+    20: ("Sensor Relative Roll Angle", Mapped(4, F(0), F(360))),
+    21: ("Slant Range", Mapped(4, F(0), F(5_000_000))),
+    22: ("Target Width", Mapped(2, F(0), F(10_000))),
+    23: ("Frame Center Latitude", _LAT_FC), 24: ("Frame Center Longitude", _LON_FC),
+    25: ("Frame Center Elevation", _ALT),
+    **{t: (f"Offset Corner {'Latitude' if t % 2 == 0 else 'Longitude'} Point {(t - 24) // 2}", _OFFSET)
+       for t in range(26, 34)},
+    40: ("Target Location Latitude", _LAT_FC), 41: ("Target Location Longitude", _LON_FC),
+    42: ("Target Location Elevation", _ALT),
+    45: ("Target Error Estimate - CE90", Mapped(2, F(0), F(4095))),
+    46: ("Target Error Estimate - LE90", Mapped(2, F(0), F(4095))),
+    47: ("Generic Flag Data", _uint(0, 63)),
+    65: ("UAS Datalink LS Version Number", _uint()),
+    75: ("Sensor Ellipsoid Height", _ALT), 78: ("Frame Center Height Above Ellipsoid", _ALT),
+    **{t: (f"Corner {'Latitude' if t % 2 == 0 else 'Longitude'} Point {(t - 80) // 2} (Full)",
+           _LAT_FC if t % 2 == 0 else _LON_FC) for t in range(82, 90)},
+    90: ("Platform Pitch Angle (Full)", _FULL_ANGLE), 91: ("Platform Roll Angle (Full)", _FULL_ANGLE),
+}
+DECODERS = {tag: (spec.decoder() if isinstance(spec, Mapped) else spec) for tag, (_, spec) in FIELDS.items()}
+
+
+@dataclass
+class Nested:
+    """An ST 1607 segment (tag 100) or amend (tag 101) set: its decoded values by tag (metadata
+    substream id 143 as raw bytes) and nested children."""
+
+    kind: str  # "segment" | "amend"
+    values: dict[int, Any] = field(default_factory=dict)
+    children: list[Nested] = field(default_factory=list)
+
+
+def decode_values(items: list[tuple[int, bytes]], prefix: str = "", *, depth: int = 0
+                  ) -> tuple[dict[int, Any], list[Note]]:
+    """tag -> value for the items of one ST 0601 set (the last of a repeated tag), and notes."""
+    from .st0903 import decode_vmti
+
+    single = [(t, v) for t, v in items if t not in MULTIPLE]
+    last, notes = last_of_each(single, prefix)
+    values: dict[int, Any] = {}
+    for tag, raw in last.items():
+        dec = DECODERS.get(tag)
+        try:
+            if dec is not None:
+                values[tag] = dec(raw) if raw else Special.UNKNOWN
+            elif tag == 74:
+                vm, vm_notes = decode_vmti(raw, prefix=f"{prefix}74.")
+                notes += vm_notes
+                values[74] = vm
+            else:
+                values[tag] = raw
+        except FieldError as exc:
+            notes.append(Note("field", f"{prefix}{tag}", f"{FIELDS[tag][0]}: {exc}; left out"))
+    nested = [(t, v) for t, v in items if t in MULTIPLE]
+    for tag, raw in nested:
+        child, child_notes = decode_nested(raw, "segment" if tag == 100 else "amend", f"{prefix}{tag}.", depth + 1)
+        notes += child_notes
+        values.setdefault(tag, []).append(child)
+    return values, notes
+
+
+def decode_nested(raw: bytes, kind: str, prefix: str, depth: int) -> tuple[Nested, list[Note]]:
+    """An ST 1607 child set, as far as it is valid: every decodable item is kept and every
+    departure (both segment and amend children, a segment inside an amend, no substream id,
+    a checksum item, too deep) is a note, never an error for the packet."""
+    items, notes = parse_items(raw, prefix=prefix)
+    if depth > 16:
+        return Nested(kind), [*notes, Note("field", prefix.rstrip("."), "ST 1607 sets nested deeper than 16; "
+                                                                          "not read")]
+    tags = [t for t, _ in items]
+    where = prefix.rstrip(".")
+    if tags.count(143) != 1:
+        notes.append(Note("field", where, f"ST 1607 {kind} set has {tags.count(143)} metadata substream ids "
+                                          "(143), 1 expected; read anyway"))
+    if 100 in tags and 101 in tags:
+        notes.append(Note("field", where, f"ST 1607 {kind} set holds both segment and amend children; both "
+                                          "read"))
+    if kind == "amend" and 100 in tags:
+        notes.append(Note("field", where, "ST 1607 amend set holds a segment child; read anyway"))
+    if 1 in tags:
+        notes.append(Note("field", where, "ST 1607 child set carries a checksum item (1); ignored"))
+    values, more = decode_values([(t, v) for t, v in items if t != 1], prefix, depth=depth)
+    children = [*values.pop(100, []), *values.pop(101, [])]
+    return Nested(kind, values, children), notes + more

@@ -1,0 +1,200 @@
+"""MISB ST 0903 VMTI (Video Moving Target Indicator) local sets, decoded from what is there.
+
+Real encoders leave out items ST 0903.6 makes mandatory (the LS version, the number of targets
+reported) and send the frame size only in some packets; stanag4609 (a validator) then refuses
+the whole set and every target in it is lost. This decoder keeps every target pack and every item
+that can be read, with a note for what could not (a truncated pack, an item of the wrong length).
+The tag table is ST 0903.6's (Tables 2 and 5); ``tests/test_klv_tolerant.py`` decodes sets built
+by stanag4609's encoder and compares every value.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+from typing import Any
+
+from .localset import Note, SetError, ber_length, ber_oid, encode_items, encode_length, encode_oid, last_of_each, \
+    parse_items
+from .st0601 import EPOCH, FieldError
+
+
+def imapb(lo: float, hi: float, length: int):
+    """ST 1201 IMAPB decoder for [lo, hi] in ``length`` bytes; special code words give NaN."""
+    b_pow = math.ceil(math.log2(hi - lo))
+    d_pow = 8 * length - 1
+    s_f = 2.0 ** (d_pow - b_pow)
+    s_r = 2.0 ** (b_pow - d_pow)
+    z = s_f * lo - math.floor(s_f * lo) if lo < 0 < hi else 0.0
+    top = 1 << d_pow
+    exact_top = (hi - lo) == 2.0 ** b_pow  # interval a power of two: the MSB-only word is the maximum
+
+    def decode(raw: bytes) -> float:
+        if len(raw) != length:
+            raise FieldError(f"{length} bytes expected, {len(raw)} sent")
+        y = int.from_bytes(raw, "big")
+        if y >= top and not (exact_top and y == top):
+            return math.nan
+        return s_r * (y - z) + lo
+    return decode
+
+
+_FOV = imapb(0.0, 180.0, 2)
+_OFFSET = imapb(-19.2, 19.2, 3)
+_HAE = imapb(-900.0, 19000.0, 2)
+_LAT, _LON, _SIGMA = imapb(-90.0, 90.0, 4), imapb(-180.0, 180.0, 4), imapb(0.0, 650.0, 2)
+
+
+def _uint(raw: bytes) -> int:
+    if not raw or len(raw) > 8:
+        raise FieldError(f"1 to 8 bytes expected, {len(raw)} sent")
+    return int.from_bytes(raw, "big")
+
+
+def _text(raw: bytes) -> str:
+    return raw.decode("utf-8", errors="replace").rstrip("\x00")
+
+
+def _time(raw: bytes) -> datetime:
+    if len(raw) != 8:
+        raise FieldError(f"8 bytes expected, {len(raw)} sent")
+    return EPOCH + timedelta(microseconds=int.from_bytes(raw, "big"))
+
+
+@dataclass(frozen=True)
+class Location:
+    """ST 0903 Location pack (target location, tag 17): degrees, metres HAE (as the standard
+    says; some encoders write MSL: the KLV check reports which)."""
+
+    lat_deg: float
+    lon_deg: float
+    h_m: float
+    sigma_east_m: float = math.nan
+    sigma_north_m: float = math.nan
+    sigma_up_m: float = math.nan
+
+
+def _location(raw: bytes) -> Location:
+    if len(raw) not in (10, 16, 22):
+        raise FieldError(f"10, 16 or 22 bytes expected, {len(raw)} sent")
+    sig = [_SIGMA(raw[i:i + 2]) for i in range(10, 16, 2)] if len(raw) >= 16 else []
+    return Location(_LAT(raw[0:4]), _LON(raw[4:8]), _HAE(raw[8:10]), *sig)
+
+
+#: ST 0903.6 VMTI local set items: tag -> (name, decoder); 101 (targets) is read separately
+VMTI_FIELDS: dict[int, tuple[str, Any]] = {
+    2: ("precisionTimeStamp", _time), 3: ("vmtiSystemName", _text), 4: ("vmtiLsVersionNum", _uint),
+    5: ("totalNumTargetsDetected", _uint), 6: ("numTargetsReported", _uint), 7: ("frameNumber", _uint),
+    8: ("frameWidth", _uint), 9: ("frameHeight", _uint), 10: ("vmtiSourceSensor", _text),
+    11: ("vmtiHorizontalFov", _FOV), 12: ("vmtiVerticalFov", _FOV),
+}
+#: ST 0903.6 VTarget pack items eoloc reads
+VTARGET_FIELDS: dict[int, tuple[str, Any]] = {
+    1: ("targetCentroid", _uint), 2: ("boundingBoxTopLeft", _uint), 3: ("boundingBoxBottomRight", _uint),
+    4: ("targetPriority", _uint), 5: ("targetConfidenceLevel", _uint), 6: ("targetHistory", _uint),
+    7: ("percentageOfTargetPixels", _uint), 9: ("targetIntensity", _uint),
+    10: ("targetLocationOffsetLat", _OFFSET), 11: ("targetLocationOffsetLon", _OFFSET), 12: ("targetHae", _HAE),
+    13: ("boundingBoxTopLeftLatOffset", _OFFSET), 14: ("boundingBoxTopLeftLonOffset", _OFFSET),
+    15: ("boundingBoxBottomRightLatOffset", _OFFSET), 16: ("boundingBoxBottomRightLonOffset", _OFFSET),
+    17: ("targetLocation", _location), 19: ("centroidPixRow", _uint), 20: ("centroidPixCol", _uint),
+    22: ("algorithmId", _uint), 23: ("detectionStatus", _uint),
+}
+
+
+@dataclass
+class VTarget:
+    """One VTarget pack: its id and decoded items (others kept as raw bytes)."""
+
+    target_id: int
+    values: dict[int, Any] = field(default_factory=dict)
+
+    def value(self, tag: int, default: Any = None) -> Any:
+        return self.values.get(tag, default)
+
+
+@dataclass
+class VMTISet:
+    """A VMTI local set: decoded items by tag and the target packs."""
+
+    values: dict[int, Any] = field(default_factory=dict)
+    targets: list[VTarget] = field(default_factory=list)
+
+    def value(self, tag: int, default: Any = None) -> Any:
+        return self.values.get(tag, default)
+
+
+def _decode_fields(items, table, prefix: str) -> tuple[dict[int, Any], list[Note]]:
+    last, notes = last_of_each(items, prefix)
+    values: dict[int, Any] = {}
+    for tag, raw in last.items():
+        spec = table.get(tag)
+        if spec is None:
+            values[tag] = raw
+            continue
+        try:
+            values[tag] = spec[1](raw)
+        except FieldError as exc:
+            notes.append(Note("field", f"{prefix}{tag}", f"{spec[0]}: {exc}; left out"))
+    return values, notes
+
+
+def decode_vmti(raw: bytes, *, prefix: str = "") -> tuple[VMTISet, list[Note]]:
+    """An embedded VMTI local set (the value of ST 0601 tag 74), from what is there."""
+    items, notes = parse_items(raw, prefix=prefix)
+    series = [v for t, v in items if t == 101]
+    values, more = _decode_fields([(t, v) for t, v in items if t not in (1, 101)], VMTI_FIELDS, prefix)
+    notes += more
+    targets: list[VTarget] = []
+    for s in series[-1:]:
+        t, n = decode_targets(s, prefix=f"{prefix}101.")
+        targets, notes = t, notes + n
+    if len(series) > 1:
+        notes.append(Note("duplicate tag", f"{prefix}101", "VTarget series sent more than once; the last is used"))
+    if 4 not in values:
+        notes.append(Note("field", f"{prefix}4", "vmtiLsVersionNum (mandatory in ST 0903.6) missing; set read anyway"))
+    reported = values.get(6)
+    if isinstance(reported, int) and reported != len(targets):
+        notes.append(Note("field", f"{prefix}6", f"numTargetsReported says {reported}, the series holds "
+                                                  f"{len(targets)} targets; all read"))
+    return VMTISet(values, targets), notes
+
+
+def decode_targets(raw: bytes, *, prefix: str = "") -> tuple[list[VTarget], list[Note]]:
+    """A VTarget series: BER-length-prefixed packs of (target id, items)."""
+    targets: list[VTarget] = []
+    notes: list[Note] = []
+    pos, end = 0, len(raw)
+    while pos < end:
+        try:
+            length, p, _ = ber_length(raw, pos, end)
+            if p + length > end:
+                raise SetError(f"a VTarget pack declares {length} bytes but only {end - p} remain")
+            tid, q = ber_oid(raw, p, p + length)
+        except SetError as exc:
+            notes.append(Note("truncated item", prefix.rstrip("."), f"{exc}; the targets before it are kept"))
+            break
+        items, n = parse_items(raw, q, p + length, prefix=f"{prefix}{tid}.")
+        values, m = _decode_fields(items, VTARGET_FIELDS, f"{prefix}{tid}.")
+        targets.append(VTarget(tid, values))
+        notes += n + m
+        pos = p + length
+    return targets, notes
+
+
+# -- encoding (test streams, any subset of items) ------------------------------------------------
+
+
+def encode_target(target_id: int, items: dict[int, bytes]) -> bytes:
+    """One VTarget pack from raw item values."""
+    body = encode_oid(target_id) + encode_items(items.items())
+    return encode_length(len(body)) + body
+
+
+def encode_vmti_set(items: dict[int, bytes], targets: list[bytes]) -> bytes:
+    """A VMTI local set (for ST 0601 tag 74) from raw item values and encoded target packs; the
+    items are written as given, so sets without ST 0903's mandatory items can be built."""
+    pairs = list(items.items())
+    if targets:
+        pairs.append((101, b"".join(targets)))
+    return encode_items(pairs)
