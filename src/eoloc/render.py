@@ -72,6 +72,7 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
         det = job.detections
         console.print(f"VMTI: {len(det)} detections of {len(set(det.columns['target_id']))} targets located on "
                       f"{job.surface}: {job.vmti.fixes.status_counts()}"
-                      + ("" if "ce90_m" in job.vmti.uncertainty else escape(" (no [accuracy.budget] given: no uncertainty)")))
+                      + ("" if "ce90_m" in job.vmti.uncertainty else
+                         escape(" (no [accuracy.budget] given: no uncertainty)")))
     else:
         console.print("no VMTI detections (tag 74) in this stream: frame centres and footprints only")

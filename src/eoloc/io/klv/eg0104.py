@@ -123,7 +123,7 @@ def encode_eg0104(values: dict[str, Any]) -> bytes:
         elif kind == "f32":
             raw = struct.pack(">f", v)
         elif kind == "time":
-            raw = int(round((v - EPOCH) / timedelta(microseconds=1))).to_bytes(8, "big")
+            raw = ((v - EPOCH) // timedelta(microseconds=1)).to_bytes(8, "big")
         else:
             raw = str(v).encode("ascii")
         body += bytes.fromhex("060E2B3401010101") + label + encode_length(len(raw)) + raw

@@ -15,8 +15,17 @@ from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Any
 
-from .localset import Note, SetError, ber_length, ber_oid, encode_items, encode_length, encode_oid, last_of_each, \
-    parse_items
+from .localset import (
+    Note,
+    SetError,
+    ber_length,
+    ber_oid,
+    encode_items,
+    encode_length,
+    encode_oid,
+    last_of_each,
+    parse_items,
+)
 from .st0601 import EPOCH, FieldError
 
 
