@@ -43,31 +43,44 @@ def print_issues(issues, err_console: Console, limit: int = 15) -> None:
 
 
 def print_klv_job(job, console: Console, err_console: Console) -> None:
-    """What `eoloc klv` says about a stream: packets, issues, field notes, the span, the frame
-    check against the encoder and the VMTI summary."""
+    """What `eoloc klv` says about a stream: packets, issues, departures from the standard, then per
+    stream its span and the frame check against the encoder, the VMTI summary and the convention
+    check."""
     stream, tel, check = job.stream, job.telemetry, job.check
     console.print(escape(stream.summary()))
     print_issues(stream.issues, err_console)
-    for w in stream.field_warnings:
-        err_console.print(f"[yellow]note:[/] {escape(w)}", highlight=False)
+    for w in stream.notes:
+        err_console.print(f"[yellow]note:[/] {escape(str(w))}", highlight=False, soft_wrap=True)
+    print_issues(job.issues, err_console)
+    if job.assume:
+        console.print(f"read under: {', '.join(job.assume)} (--assume)")
     c = tel.columns
-    t = c["time_s"][np.isfinite(c["time_s"])]
-    if t.size and np.isfinite(c["h_m"]).any() and np.isfinite(c["hfov_deg"]).any():
-        console.print(f"{len(tel)} packets over {t[-1] - t[0]:.1f} s; sensor at {np.nanmin(c['h_m']):.0f}-"
-                      f"{np.nanmax(c['h_m']):.0f} m ellipsoidal; HFOV {np.nanmin(c['hfov_deg']):.2f}-"
-                      f"{np.nanmax(c['hfov_deg']):.2f}°")
+    names = list(dict.fromkeys(c["stream"]))
     surface = "the DEM" if job.dem is not None else "the ellipsoid at the encoder's frame-centre elevation"
-    table = RichTable(title=f"eoloc vs the encoder: horizontal distance (m), ours on {surface}")
-    for col in ("", "packets", "median", "p90", "max"):
-        table.add_column(col, justify="right")
-    for name, n, med, p90, mx in check.stats():
-        table.add_row(name, str(n), *(f"{x:.1f}" if np.isfinite(x) else "-" for x in (med, p90, mx)))
-    console.print(table)
+    for name in names:
+        rows = c["stream"] == name
+        label = f"{name}: " if name else ""
+        t = c["time_s"][rows & np.isfinite(c["time_s"])]
+        h, fov = c["h_m"][rows], c["hfov_deg"][rows]
+        span = f" over {t[-1] - t[0]:.1f} s" if t.size > 1 else ""
+        if not np.isfinite(h).any():
+            console.print(f"{label}{int(rows.sum())} packets{span}; no sensor position or height: nothing to locate "
+                          "from this stream")
+            continue
+        fovs = (f"; HFOV {np.nanmin(fov):.2f}-{np.nanmax(fov):.2f}°" if np.isfinite(fov).any() else
+                "; no field of view (tag 16)")
+        console.print(f"{label}{int(rows.sum())} packets{span}; sensor at {np.nanmin(h):.0f}-{np.nanmax(h):.0f} m "
+                      f"ellipsoidal{fovs}")
+        table = RichTable(title=f"{label}eoloc vs the encoder: horizontal distance (m), ours on {surface}")
+        for col in ("", "packets", "median", "p90", "max"):
+            table.add_column(col, justify="right")
+        for what, n, med, p90, mx in check.stats(rows):
+            table.add_row(what, str(n), *(f"{x:.1f}" if np.isfinite(x) else "-" for x in (med, p90, mx)))
+        console.print(table)
     if job.dem is not None:
         console.print("[dim]On a DEM the corners are compared with the encoder's own surface for them (often a level "
                       "plane through the frame centre, or a coarser terrain model): far corners of an oblique view "
                       "differ by the terrain, not the pointing. Leave out --dem to compare the pointing alone.[/]")
-    print_issues(job.issues, err_console)
     if job.vmti is not None:
         det = job.detections
         console.print(f"VMTI: {len(det)} detections of {len(set(det.columns['target_id']))} targets located on "
@@ -76,3 +89,20 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
                          escape(" (no [accuracy.budget] given: no uncertainty)")))
     else:
         console.print("no VMTI detections (tag 74) in this stream: frame centres and footprints only")
+    print_diagnoses(job.diagnoses, console)
+
+
+def print_diagnoses(diagnoses, console: Console) -> None:
+    """The convention check: one sentence per quantity, and the trials when the encoder departs."""
+    for dg in diagnoses:
+        console.print(escape("convention check: " + dg.sentence()))
+        if dg.follows is None:
+            continue
+        table = RichTable(title=f"{dg.what}: eoloc vs the encoder under each reading (m)")
+        for col in ("reading", "stop", "n", "median", "p90"):
+            table.add_column(col, justify="right" if col in ("n", "median", "p90") else "left")
+        for t in dg.trials:
+            mark = " <" if t is dg.follows else ""
+            table.add_row(t.label + mark, t.stop, str(t.n),
+                          *(f"{x:.1f}" if np.isfinite(x) else "-" for x in (t.median_m, t.p90_m)))
+        console.print(table)

@@ -33,12 +33,15 @@ class FrameCheck:
     corners_m: np.ndarray  # (F, 4)
     range_m: np.ndarray  # (F,) our slant range to the centre minus tag 21's
 
-    def stats(self) -> list[tuple[str, int, float, float, float]]:
-        """(what, n, median, p90, max) for the centre, each corner and |slant range difference|."""
-        rows = [("frame centre", self.centre_m)] + [(f"corner {k + 1}", self.corners_m[:, k]) for k in range(4)]
-        rows.append(("slant range (|ours - tag 21|)", np.abs(self.range_m)))
+    def stats(self, rows: np.ndarray | None = None) -> list[tuple[str, int, float, float, float]]:
+        """(what, n, median, p90, max) for the centre, each corner and |slant range difference|,
+        over all packets or the boolean ``rows`` (one stream)."""
+        sel = slice(None) if rows is None else rows
+        cols = [("frame centre", self.centre_m[sel])] + [(f"corner {k + 1}", self.corners_m[sel, k])
+                                                          for k in range(4)]
+        cols.append(("slant range (|ours - tag 21|)", np.abs(self.range_m[sel])))
         out = []
-        for name, d in rows:
+        for name, d in cols:
             d = d[np.isfinite(d)]
             out.append((name, int(d.size), *(
                 (float(np.median(d)), float(np.percentile(d, 90)), float(d.max())) if d.size else (np.nan,) * 3)))

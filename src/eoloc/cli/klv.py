@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import textwrap
+
 import click
 
+from ..io.klv.conventions import CONVENTIONS
 from .common import load_config, open_dem
 from .main import console, err_console, warn
 from .options import config_option, dem_options, formats_option, out_option
@@ -13,10 +16,15 @@ geolocate its VMTI targets and write everything out.
 
 \b
 eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMap] [--write-klv OUT.klv]
-  Flags as elsewhere: --target-height H stops the VMTI rays at H instead of the frame-centre
+  Flags as elsewhere: --dem stops the VMTI rays on the terrain instead of at the frame-centre
   elevation; --format picks the fix formats (default csv, geojson, cot).
-  1. Decodes every packet (checksums verified). Corrupt and truncated packets are counted,
-     named with their byte offset and skipped; every good packet is kept.
+  1. Decodes every packet: MISB ST 0601 (and the older EG 0104), with ST 0903 VMTI and ST 1607
+     sets. A packet is refused only for a bad checksum or a length that runs past the data
+     (named with its byte offset); items that depart from the standard (a duplicated tag, a
+     long-form length, items out of order, a VMTI set missing mandatory items, a bad nested
+     set) are decoded and counted per stream and tag. Each KLV PID of an MPEG-TS is its own
+     stream, with its own report-on-change state, in its own time order (a stream column in
+     every table; out-of-order packets and time jumps reported).
   2. Recomputes each packet's frame centre and four corners with eoloc's model and prints how far
      they are from what the encoder wrote (median, p90, max): on the ellipsoid at the encoder's
      own frame-centre elevation (so only the pointing model is compared), or on --dem.
@@ -29,6 +37,13 @@ eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMa
      package, one event per fix), map.html
      (self-contained, works offline). --write-klv re-encodes the stream with each packet's first
      fix in the target location tags 40-42, 45, 46.
+  5. Convention check: when eoloc's frame centres or VMTI locations disagree with the
+     encoder's, tries the alternative readings below and says which one the encoder follows,
+     with the agreement under each (also in conventions.csv); --assume NAME applies one.
+
+\b
+--assume NAME (encoders seen in the field):
+{assume_list}
 
 \b
 ST 0601 conventions: platform heading/pitch/roll (5, 90|6, 91|7) are eoloc's yaw/pitch/roll; the
@@ -36,6 +51,11 @@ sensor relative azimuth/elevation/roll (18, 19, 20) are the az-el turret's angle
 the platform's: R_ned_cam = Rz(5) Ry(6) Rx(7) . Rz(18) Ry(19) Rx(20). Heights: HAE tags (75, 78)
 when sent, else MSL (15, 25) + EGM96 undulation. A tag missing from a packet keeps its last value.
 """
+
+
+KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
+    textwrap.fill(text, 100, initial_indent=f"  {name:22s}", subsequent_indent=" " * 24)
+    for name, text in CONVENTIONS.items()))
 
 
 @click.command(help=KLV_HELP)
@@ -51,8 +71,14 @@ when sent, else MSL (15, 25) + EGM96 undulation. A tag missing from a packet kee
               help="Write the stream back with the fixes in tags 40-46.")
 @click.option("--footprint-every", type=click.IntRange(1), default=1, show_default=True,
               help="Draw one footprint every N packets.")
+@click.option("--strict", is_flag=True, help="Enforce MISB ST 0601 as written (stanag4609 validates each packet): "
+                                             "packets that break it are dropped and named. Default: decode what is "
+                                             "there and note every departure.")
+@click.option("--assume", "assume", multiple=True, type=click.Choice(list(CONVENTIONS)),
+              help="Read the stream under an encoder's own convention (repeatable); the convention check prints "
+                   "which one the encoder follows. See the list below.")
 def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, make_map, tiles, write_klv,
-        footprint_every) -> None:
+        footprint_every, strict, assume) -> None:
     from ..jobs.klv import klv_job, write_klv_products
     from ..render import print_klv_job
 
@@ -67,10 +93,14 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
         sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
         budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
     with err_console.status("decoding and locating..."):
-        job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every)
+        job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every, strict=strict,
+                      assume=assume)
     print_klv_job(job, console, err_console)
     written, note = write_klv_products(job, out_dir, formats=formats, make_map=make_map, tiles=tiles,
                                        klv_out=write_klv)
     if note:
         warn(note, "note")
+    if job.unwritten_fixes:
+        warn(f"--write-klv: {job.unwritten_fixes} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; they "
+             "were written as they came, without their fix", "note")
     err_console.print("wrote " + ", ".join(str(p) for p in written))

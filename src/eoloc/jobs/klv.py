@@ -11,13 +11,15 @@ import numpy as np
 from ..errors import KLVError
 from ..io.export import fix_features, fix_records, utc_times, with_utc
 from ..io.records import Records
+from ..io.table import Table
 
 
 @dataclass
 class KLVJob:
-    """Everything `eoloc klv` computes: the decoded stream, its telemetry table, the frame check,
-    the VMTI detections and their fixes (None without VMTI), fix records, and the GeoJSON layers
-    (aircraft, footprints, encoder footprints, fixes)."""
+    """Everything `eoloc klv` computes: the decoded stream, its telemetry table (under the assumed
+    conventions), the frame check, the VMTI detections and their fixes (None without VMTI), fix
+    records, the GeoJSON layers (aircraft, footprints, encoder footprints, fixes) and the
+    convention check."""
 
     path: Path
     stream: object
@@ -29,38 +31,59 @@ class KLVJob:
     layers: dict[str, list[dict]]
     dem: object | None = None
     issues: list = field(default_factory=list)
+    diagnoses: list = field(default_factory=list)
+    assume: tuple[str, ...] = ()
+    unwritten_fixes: int = 0  # packets --write-klv passed on without their fix (non-standard, not re-encodable)
 
     @property
     def surface(self) -> str:
         return "the DEM" if self.dem is not None else "the frame-centre elevation"
 
 
-def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1) -> KLVJob:
+def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, strict: bool = False,
+            assume=()) -> KLVJob:
     """Decode ``path`` (raw KLV or MPEG-TS), recompute every frame's centre and corners, locate the
-    VMTI detections on ``dem`` or the frame-centre elevation (with uncertainty from ``budget``)."""
+    VMTI detections on ``dem`` or the frame-centre elevation (with uncertainty from ``budget``),
+    and check which conventions the encoder follows. strict: packets that break ST 0601 are
+    dropped (named); assume: convention names (:data:`eoloc.io.klv.conventions.CONVENTIONS`)
+    applied to the stream before anything is computed."""
     from ..io.klv import klv_telemetry, read_klv, vmti_detections
+    from ..io.klv.conventions import apply_to_telemetry
     from ..misb import misb_sensor
     from ..video import aircraft_feature, check_frames, dem_footprint_features, footprint_features, locate_vmti
+    from .diagnose import diagnose_frames, diagnose_vmti
 
-    stream = read_klv(path)
+    assume = tuple(dict.fromkeys(assume))
+    stream = read_klv(path, strict=strict)
     if not stream.packets:
         raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate",
                        [str(i) for i in stream.issues])
     sensor = sensor or misb_sensor()
-    tel = klv_telemetry(stream)
+    raw_tel = klv_telemetry(stream)
+    tel = apply_to_telemetry(raw_tel, assume)
     check = check_frames(tel, dem, sensor=sensor)
-    det = vmti_detections(stream)
+    from_0 = "vmti-pixels-from-0" in assume
+    det = vmti_detections(stream, pixels_from=0 if from_0 else 1)
     prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
               footprint_features(tel, check.geometry, every=footprint_every))
     layers = {"aircraft": [aircraft_feature(tel)], "footprints": prints,
               "encoder footprints": footprint_features(tel, None, every=footprint_every)}
     records = Records({})
+    diagnoses = [diagnose_frames(raw_tel, sensor)]
     v = None
     if len(det):
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
-        records = fix_records(v.fixes, with_utc(v.extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
+        extra = {"stream": det.columns["stream"], **v.extra}
+        records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
         layers["fixes"] = fix_features(records)
-    return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, list(det.issues))
+        if np.isfinite(det.columns["encoder_lat_deg"]).any():
+            step = -1.0 if from_0 else 1.0  # the other pixel numbering: one pixel the other way
+            shifted = Table(det.path, {**det.columns, "u_px": det.columns["u_px"] + step,
+                                       "v_px": det.columns["v_px"] + step}, det.line, [])
+            other = locate_vmti(tel, shifted, dem, base=sensor).fixes
+            diagnoses += diagnose_vmti(det, v.fixes, other, assume=assume)
+    return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, [*tel.issues, *det.issues],
+                  diagnoses, assume)
 
 
 def telemetry_records(tel) -> Records:
@@ -72,7 +95,8 @@ def telemetry_records(tel) -> Records:
 def frame_records(tel, check) -> Records:
     """frames.csv: eoloc's frame centre against the encoder's, per packet."""
     g, c = check.geometry, tel.columns
-    return Records({"packet": np.asarray(tel.line), "time_s": c["time_s"], "encoder_lat_deg": c["fc_lat_deg"],
+    return Records({"packet": np.asarray(tel.line), "stream": c["stream"], "time_s": c["time_s"],
+                    "encoder_lat_deg": c["fc_lat_deg"],
                     "encoder_lon_deg": c["fc_lon_deg"], "encoder_h_m": c["fc_h_m"],
                     "eoloc_lat_deg": g.centre.lat_deg, "eoloc_lon_deg": g.centre.lon_deg, "eoloc_h_m": g.centre.h_m,
                     "centre_distance_m": check.centre_m, "range_difference_m": check.range_m,
@@ -92,6 +116,10 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     out = Path(out)
     written = [*write_layer(out, "telemetry", telemetry_records(job.telemetry), ["csv"]),
                *write_layer(out, "frames", frame_records(job.telemetry, job.check), ["csv"])]
+    if job.diagnoses:
+        from .diagnose import diagnosis_records
+
+        written += write_layer(out, "conventions", diagnosis_records(job.diagnoses), ["csv"])
     prints = job.layers["footprints"]
     written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson"], features=prints)
     if len(job.records):
@@ -112,6 +140,8 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
 
 def write_klv_stream(path: Path, job: KLVJob) -> Path:
     """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46."""
+    from stanag4609.errors import Stanag4609Error
+
     from ..io.klv import with_target_location
     from ..terrain.geoid import default_geoid
 
@@ -127,13 +157,21 @@ def write_klv_stream(path: Path, job: KLVJob) -> Path:
     hae = tel.columns["target_elevation_hae"] > 0  # the datum the reader gives tag 42 in each packet
     geoid = default_geoid()
     out = bytearray()
-    for i, p in enumerate(job.stream.packets):
+    row_of = {int(k): i for i, k in enumerate(tel.line)}  # rows are grouped by stream, in time order
+    unchanged = 0
+    for p in job.stream.packets:
         raw = p.raw
-        j = first.get(p.index)
+        j = first.get(p.index) if p.standard == "ST 0601" else None
         if j is not None:
-            h = float(f.h_m[j]) if hae[i] else float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))
-            raw = with_target_location(raw, float(f.lat_deg[j]), float(f.lon_deg[j]), h, ce90_m=ce[j], le90_m=le[j])
+            h = float(f.h_m[j]) if hae[row_of[p.index]] else \
+                float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))
+            try:
+                raw = with_target_location(raw, float(f.lat_deg[j]), float(f.lon_deg[j]), h, ce90_m=ce[j],
+                                           le90_m=le[j])
+            except Stanag4609Error:  # a packet stanag4609 cannot re-encode (non-standard): passed on as it came
+                unchanged += 1
         out += raw
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(bytes(out))
+    job.unwritten_fixes = unchanged
     return path
