@@ -114,20 +114,18 @@ def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Di
     return _verdict("frame centre", trials, threshold_m)
 
 
-def diagnose_vmti(det, fixes, relocated, *, assume=(), threshold_m: float = 5.0) -> list[Diagnosis]:
-    """eoloc's VMTI fixes against the encoder's own target locations: horizontally for pixel numbers
-    from 1 (``fixes``) and from 0 (``relocated``: the same detections located one pixel further
-    right and down), and vertically for the location datum HAE and MSL."""
-    d = det.columns
-    lat, lon = d["encoder_lat_deg"], d["encoder_lon_deg"]
+def diagnose_vmti(det, fixes, other_det, other_fixes, *, assume=(), threshold_m: float = 0.5) -> list[Diagnosis]:
+    """eoloc's VMTI fixes against the encoder's own target locations: horizontally for the pixel
+    numbering in use (``det``/``fixes``) and the other one (``other_det``/``other_fixes``: ST 0903
+    pixel numbers read from 0 instead of 1, or back), and vertically for the location datum HAE and
+    MSL."""
     base = tuple(a for a in assume if a not in ("vmti-pixels-from-0", "vmti-msl"))
     from_0 = "vmti-pixels-from-0" in assume
     pix = []
-    for f, zero in ((fixes, from_0), (relocated, not from_0)):
-        if f is None:
-            continue
+    for d, f, zero in ((det, fixes, from_0), (other_det, other_fixes, not from_0)):
         ok = np.asarray(f.ok)
-        dist = horizontal_distance_m(np.where(ok, f.lat_deg, np.nan), f.lon_deg, lat, lon)
+        dist = horizontal_distance_m(np.where(ok, f.lat_deg, np.nan), f.lon_deg, d.columns["encoder_lat_deg"],
+                                     d.columns["encoder_lon_deg"])
         pix.append(Trial(base + (("vmti-pixels-from-0",) if zero else ()), "as located", *_stats(dist)))
     ok = np.asarray(fixes.ok)
     heights = []

@@ -11,7 +11,6 @@ import numpy as np
 from ..errors import KLVError
 from ..io.export import fix_features, fix_records, utc_times, with_utc
 from ..io.records import Records
-from ..io.table import Table
 
 
 @dataclass
@@ -76,12 +75,10 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
         extra = {"stream": det.columns["stream"], **v.extra}
         records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
         layers["fixes"] = fix_features(records)
-        if np.isfinite(det.columns["encoder_lat_deg"]).any():
-            step = -1.0 if from_0 else 1.0  # the other pixel numbering: one pixel the other way
-            shifted = Table(det.path, {**det.columns, "u_px": det.columns["u_px"] + step,
-                                       "v_px": det.columns["v_px"] + step}, det.line, [])
-            other = locate_vmti(tel, shifted, dem, base=sensor).fixes
-            diagnoses += diagnose_vmti(det, v.fixes, other, assume=assume)
+        if np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's own locations: check conventions
+            other = vmti_detections(stream, pixels_from=1 if from_0 else 0)
+            diagnoses += diagnose_vmti(det, v.fixes, other, locate_vmti(tel, other, dem, base=sensor).fixes,
+                                       assume=assume)
     return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, [*tel.issues, *det.issues],
                   diagnoses, assume)
 

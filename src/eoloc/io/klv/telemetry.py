@@ -82,7 +82,7 @@ def stream_order(packets: list[KLVPacket], path: str) -> tuple[list[KLVPacket], 
         step = float(np.median(dt[dt > 0])) if (dt > 0).any() else 0.0
         jumps = np.flatnonzero(dt > max(20 * step, 1.0))
         if jumps.size:
-            issues.append(Issue(where, 0, f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
+            issues.append(Issue(where, int(packets[0].index), f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
                                           f"{dt[jumps].max():.1f} s, typical interval {step:.3f} s)"))
     return [packets[i] for i in order], issues
 
@@ -119,7 +119,7 @@ def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = Tru
         issues += found
         lacking = missing_pose(pk)
         if lacking:
-            issues.append(Issue(f"{stream.path}{f' [{name}]' if name else ''}", 0,
+            issues.append(Issue(f"{stream.path}{f' [{name}]' if name else ''}", pk[0].index,
                                 f"this stream never sends {', '.join(lacking)}: it carries no pose, so its "
                                 f"{len(pk)} packet(s) give no frame centre, footprint or fix"))
         parts.append(_stream_columns(ordered, geoid, report_on_change))
