@@ -11,6 +11,7 @@ import bench_accuracy
 import bench_compensation
 import bench_csv
 import bench_geodesy
+import bench_klv
 import bench_locate
 import bench_startup
 import bench_terrain
@@ -21,5 +22,5 @@ if __name__ == "__main__":
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
                  + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)
-                 + bench_csv.main()):
+                 + bench_csv.main() + bench_klv.main(3000)):
         print(line, flush=True)

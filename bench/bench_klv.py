@@ -1,0 +1,116 @@
+"""KLV decoding: packets per second for eoloc's tolerant reader against stanag4609 (strict, the
+library eoloc's encoder and --strict use) and klvdata (0.0.3, the other pure-Python decoder), on
+the same bytes in one run. Two streams: pose packets as a real encoder sends them (the tags of
+the Esri Truck clip: 2, 5-7, 13-33, 47, 65) and the same packets with a 20-target ST 0903 VMTI set;
+raw KLV and the same packets in an MPEG-TS written by libavformat.
+
+    python bench/bench_klv.py [--n 3000]
+"""
+
+from __future__ import annotations
+
+import tempfile
+from datetime import UTC, datetime, timedelta
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from _common import best_time, row
+
+
+def pose_packets(n: int, *, vmti: bool = False, seed: int = 0) -> list[bytes]:
+    from eoloc.io.klv import encode_uas_packet, encode_vmti
+
+    rng = np.random.default_rng(seed)
+    t0 = datetime(2026, 1, 1, tzinfo=UTC)
+    out = []
+    for k in range(n):
+        v = {2: t0 + timedelta(seconds=k / 30), 3: "BENCH", 4: "N123", 5: float(rng.uniform(0, 360)),
+             6: float(rng.uniform(-10, 10)), 7: float(rng.uniform(-30, 30)), 10: "C208", 11: "EO", 12: "WGS-84",
+             13: 41.09 + 1e-4 * k, 14: -104.85, 15: 2950.0, 16: 2.5, 17: 1.4, 18: float(rng.uniform(0, 360)),
+             19: float(rng.uniform(-60, -10)), 20: 0.0, 21: 2000.0, 22: 90.0, 23: 41.08, 24: -104.86, 25: 1890.0,
+             **{t: 0.001 for t in range(26, 34)}, 47: 1}
+        if vmti:
+            v[74] = encode_vmti([(j + 1, 30.0 * j, 20.0 * j) for j in range(20)], 1280, 720)
+        out.append(encode_uas_packet(v))
+    return out
+
+
+def ts_file(path: Path, packets: list[bytes]) -> Path:
+    import av
+
+    with av.open(str(path), "w", format="mpegts") as out:
+        s = out.add_data_stream(codec_name="klv")
+        for i, p in enumerate(packets):
+            pkt = av.Packet(p)
+            pkt.stream = s
+            pkt.pts = pkt.dts = i * 3000
+            pkt.time_base = Fraction(1, 90000)
+            out.mux(pkt)
+    return path
+
+
+def stanag_decode(data: bytes) -> int:
+    from stanag4609.klv.stream import KLVStreamParser
+    from stanag4609.st0601 import ST0601_KEY, FieldDecodingMode, decode_uas_local_set
+
+    parser = KLVStreamParser(key_prefix=ST0601_KEY, max_value_length=1 << 20)
+    packets = parser.feed(data) + parser.finish()
+    return sum(bool(decode_uas_local_set(p, field_decoding=FieldDecodingMode.PRESERVE).fields) for p in packets)
+
+
+def stanag_ts(data: bytes) -> int:
+    from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+
+    demux = TransportDemuxer(recover_transport=True)
+    buf = b"".join(ev.pes.payload for ev in demux.feed(data) + demux.finish()
+                   if isinstance(ev, PESStreamEvent) and ev.kind is StreamKind.KLV)
+    return stanag_decode(buf)
+
+
+def klvdata_decode(data: bytes) -> int:
+    import klvdata
+
+    return sum(bool(p.MetadataList()) for p in klvdata.StreamParser(data))
+
+
+def main(n: int = 3000) -> list[str]:
+    from eoloc.io.klv import decode_klv_bytes, read_klv
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for vmti in (False, True):
+            packets = pose_packets(n, vmti=vmti)
+            data = b"".join(packets)
+            assert decode_klv_bytes(data).n_good == n and stanag_decode(data) == n
+            what = f"{n} ST 0601 packets{' + 20-target VMTI' if vmti else ''}"
+            t_e = best_time(lambda d=data: decode_klv_bytes(d), repeat=3)
+            t_s = best_time(lambda d=data: stanag_decode(d), repeat=3)
+            rows.append(row(f"KLV decode, raw: {what}", f"{n / t_e:,.0f} packets/s", f"stanag4609 {n / t_s:,.0f}/s",
+                            t_s / t_e))
+            if not vmti:  # klvdata has no ST 0903
+                assert klvdata_decode(data) == n
+                t_k = best_time(lambda d=data: klvdata_decode(d), repeat=3)
+                rows.append(row(f"KLV decode, raw: {what}", f"{n / t_e:,.0f} packets/s", f"klvdata {n / t_k:,.0f}/s",
+                                t_k / t_e))
+            ts = ts_file(Path(tmp) / f"s{int(vmti)}.ts", packets)
+            raw = ts.read_bytes()
+            assert read_klv(ts).n_good == n and stanag_ts(raw) == n
+            t_e = best_time(lambda p=ts: read_klv(p), repeat=3)
+            t_s = best_time(lambda d=raw: stanag_ts(d), repeat=3)
+            rows.append(row(f"KLV decode, MPEG-TS: {what}", f"{n / t_e:,.0f} packets/s",
+                            f"stanag4609 demux + decode {n / t_s:,.0f}/s", t_s / t_e))
+    return rows
+
+
+if __name__ == "__main__":
+    import argparse
+
+    from _common import HEADER, machine
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, default=3000, help="packets per stream (default 3000)")
+    print(machine())
+    print(HEADER)
+    print("\n".join(main(ap.parse_args().n)))
