@@ -116,6 +116,19 @@ def test_vmti_decoder_reads_stanag4609s_sets():
     assert ours.targets[1].value(12) == pytest.approx(float(ref.targets[1].value(12)), abs=1e-9)
 
 
+def test_vtarget_series_example_bytes():
+    """The two-target VTarget series of jMISB's VTargetSeriesTest (MIT): target 1 priority 27;
+    target 2 HAE 10 000 m (IMAPB 0x2A94), centroid row 872, column 1137."""
+    from eoloc.io.klv.st0903 import decode_targets
+
+    raw = bytes([4, 1, 0x04, 0x01, 0x1B, 13, 2, 0x0C, 0x02, 0x2A, 0x94, 0x13, 0x02, 0x03, 0x68, 0x14, 0x02, 0x04,
+                 0x71])
+    targets, notes = decode_targets(raw)
+    assert notes == [] and [t.target_id for t in targets] == [1, 2]
+    assert targets[0].value(4) == 27
+    assert targets[1].value(12) == 10000.0 and (targets[1].value(19), targets[1].value(20)) == (872, 1137)
+
+
 def test_eg0104_published_example():
     """The EG 0104.5 message of jMISB's test suite (tests/data/klv/SOURCES.md): every element lands
     on the ST 0601 tag with its universal key, values as jMISB reads them."""

@@ -88,12 +88,15 @@ def _verdict(what: str, trials: list[Trial], threshold_m: float) -> Diagnosis:
 
 
 def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Diagnosis:
-    """eoloc's frame centres against the encoder's (tags 23/24) under every combination of the frame
-    conventions, stopped at the encoder's frame-centre elevation and at the slant range."""
+    """eoloc's frame centres against the encoder's (tags 23/24): the standard reading, and when it is
+    off by more than ``threshold_m`` every combination of the frame conventions, stopped at the
+    encoder's frame-centre elevation and at the slant range."""
     sensor = sensor or misb_sensor()
     c = tel.columns
-    trials = []
+    trials: list[Trial] = []
     for k in range(len(FRAME_CONVENTIONS) + 1):
+        if k == 1 and not (trials and trials[0].n and trials[0].median_m > threshold_m):
+            break  # the standard reading agrees (or nothing to compare): no alternative is tried
         for assume in combinations(FRAME_CONVENTIONS, k):
             t = apply_to_telemetry(tel, assume)
             tc = t.columns
@@ -114,19 +117,23 @@ def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Di
     return _verdict("frame centre", trials, threshold_m)
 
 
-def diagnose_vmti(det, fixes, other_det, other_fixes, *, assume=(), threshold_m: float = 0.5) -> list[Diagnosis]:
+def diagnose_vmti(det, fixes, other, *, assume=(), threshold_m: float = 0.5) -> list[Diagnosis]:
     """eoloc's VMTI fixes against the encoder's own target locations: horizontally for the pixel
-    numbering in use (``det``/``fixes``) and the other one (``other_det``/``other_fixes``: ST 0903
-    pixel numbers read from 0 instead of 1, or back), and vertically for the location datum HAE and
-    MSL."""
+    numbering in use (``det``/``fixes``) and, when that is off by more than ``threshold_m``, the
+    other one (``other()`` -> (detections, fixes) with ST 0903 pixel numbers read from 0 instead
+    of 1, or back); vertically for the location datum HAE and MSL."""
     base = tuple(a for a in assume if a not in ("vmti-pixels-from-0", "vmti-msl"))
     from_0 = "vmti-pixels-from-0" in assume
-    pix = []
-    for d, f, zero in ((det, fixes, from_0), (other_det, other_fixes, not from_0)):
+
+    def trial(d, f, zero: bool) -> Trial:
         ok = np.asarray(f.ok)
         dist = horizontal_distance_m(np.where(ok, f.lat_deg, np.nan), f.lon_deg, d.columns["encoder_lat_deg"],
                                      d.columns["encoder_lon_deg"])
-        pix.append(Trial(base + (("vmti-pixels-from-0",) if zero else ()), "as located", *_stats(dist)))
+        return Trial(base + (("vmti-pixels-from-0",) if zero else ()), "as located", *_stats(dist))
+
+    pix = [trial(det, fixes, from_0)]
+    if pix[0].n and pix[0].median_m > threshold_m:
+        pix.append(trial(*other(), not from_0))
     ok = np.asarray(fixes.ok)
     heights = []
     for msl in (False, True):

@@ -76,9 +76,11 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
         records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
         layers["fixes"] = fix_features(records)
         if np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's own locations: check conventions
-            other = vmti_detections(stream, pixels_from=1 if from_0 else 0)
-            diagnoses += diagnose_vmti(det, v.fixes, other, locate_vmti(tel, other, dem, base=sensor).fixes,
-                                       assume=assume)
+            def other_numbering():
+                d = vmti_detections(stream, pixels_from=1 if from_0 else 0)
+                return d, locate_vmti(tel, d, dem, base=sensor).fixes
+
+            diagnoses += diagnose_vmti(det, v.fixes, other_numbering, assume=assume)
     return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, [*tel.issues, *det.issues],
                   diagnoses, assume)
 

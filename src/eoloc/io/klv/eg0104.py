@@ -18,8 +18,7 @@ import struct
 from datetime import timedelta
 from typing import Any
 
-from .localset import Note, encode_length, last_of_each
-from .st0601 import EPOCH, FieldError
+from .localset import EPOCH, FieldError, Note, encode_length, last_of_each
 
 EG0104_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 _PREFIX = bytes.fromhex("060E2B34")

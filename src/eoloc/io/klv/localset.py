@@ -14,6 +14,9 @@ it refuses the whole set on any of the above (README: "Real KLV").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from datetime import UTC, datetime
+
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)  # MISB time stamps: microseconds since (ST 0603)
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,6 +30,10 @@ class Note:
     kind: str
     tag: str
     message: str
+
+
+class FieldError(ValueError):
+    """An item's value cannot be decoded (message says why); the item is left out with a note."""
 
 
 class SetError(Exception):

@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 from fractions import Fraction
 from typing import Any
 
-from .localset import Note, last_of_each, parse_items
+from .localset import EPOCH, FieldError, Note, last_of_each, parse_items
+from .st0903 import decode_vmti
 
-EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 MULTIPLE = frozenset({100, 101})  # ST 1607 segment and amend sets may repeat
 
 
@@ -31,10 +31,6 @@ class Special(enum.Enum):
     OFF_EARTH = "off earth"
     RESERVED = "reserved"
     UNKNOWN = "unknown"  # a zero-length item: the value is no longer known
-
-
-class FieldError(ValueError):
-    """An item's value cannot be decoded (message says why); the item is left out with a note."""
 
 
 @dataclass(frozen=True)
@@ -153,8 +149,6 @@ class Nested:
 def decode_values(items: list[tuple[int, bytes]], prefix: str = "", *, depth: int = 0
                   ) -> tuple[dict[int, Any], list[Note]]:
     """tag -> value for the items of one ST 0601 set (the last of a repeated tag), and notes."""
-    from .st0903 import decode_vmti
-
     single = [(t, v) for t, v in items if t not in MULTIPLE]
     last, notes = last_of_each(single, prefix)
     values: dict[int, Any] = {}

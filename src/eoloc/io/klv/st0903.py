@@ -16,6 +16,8 @@ from datetime import datetime, timedelta
 from typing import Any
 
 from .localset import (
+    EPOCH,
+    FieldError,
     Note,
     SetError,
     ber_length,
@@ -26,7 +28,6 @@ from .localset import (
     last_of_each,
     parse_items,
 )
-from .st0601 import EPOCH, FieldError
 
 
 def imapb(lo: float, hi: float, length: int):

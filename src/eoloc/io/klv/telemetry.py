@@ -82,8 +82,9 @@ def stream_order(packets: list[KLVPacket], path: str) -> tuple[list[KLVPacket], 
         step = float(np.median(dt[dt > 0])) if (dt > 0).any() else 0.0
         jumps = np.flatnonzero(dt > max(20 * step, 1.0))
         if jumps.size:
-            issues.append(Issue(where, int(packets[0].index), f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
-                                          f"{dt[jumps].max():.1f} s, typical interval {step:.3f} s)"))
+            issues.append(Issue(where, int(packets[0].index),
+                                f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
+                                f"{dt[jumps].max():.1f} s, typical interval {step:.3f} s)"))
     return [packets[i] for i in order], issues
 
 
