@@ -64,17 +64,21 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
         h, fov = c["h_m"][rows], c["hfov_deg"][rows]
         span = f" over {t[-1] - t[0]:.1f} s" if t.size > 1 else ""
         if not np.isfinite(h).any():
-            console.print(f"{label}{int(rows.sum())} packets{span}; no sensor position or height: nothing to locate "
+            console.print(f"{label}{_packets(int(rows.sum()))}{span}; no sensor position or height: nothing to locate "
                           "from this stream")
             continue
         fovs = (f"; HFOV {np.nanmin(fov):.2f}-{np.nanmax(fov):.2f}°" if np.isfinite(fov).any() else
                 "; no field of view (tag 16)")
-        console.print(f"{label}{int(rows.sum())} packets{span}; sensor at {np.nanmin(h):.0f}-{np.nanmax(h):.0f} m "
+        console.print(f"{label}{_packets(int(rows.sum()))}{span}; sensor at {np.nanmin(h):.0f}-{np.nanmax(h):.0f} m "
                       f"ellipsoidal{fovs}")
+        stats = check.stats(rows)
+        if not any(n for _, n, *_ in stats):
+            console.print(f"{label}nothing to compare with the encoder (no frame centre, corner or slant range sent)")
+            continue
         table = RichTable(title=f"{label}eoloc vs the encoder: horizontal distance (m), ours on {surface}")
         for col in ("", "packets", "median", "p90", "max"):
             table.add_column(col, justify="right")
-        for what, n, med, p90, mx in check.stats(rows):
+        for what, n, med, p90, mx in stats:
             table.add_row(what, str(n), *(f"{x:.1f}" if np.isfinite(x) else "-" for x in (med, p90, mx)))
         console.print(table)
     if job.dem is not None:
@@ -92,11 +96,15 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
     print_diagnoses(job.diagnoses, console)
 
 
+def _packets(n: int) -> str:
+    return f"{n} packet{'s' if n != 1 else ''}"
+
+
 def print_diagnoses(diagnoses, console: Console) -> None:
     """The convention check: one sentence per quantity, and the trials when the encoder departs."""
     for dg in diagnoses:
         console.print(escape("convention check: " + dg.sentence()))
-        if dg.follows is None:
+        if dg.follows is None and not dg.disagrees:
             continue
         table = RichTable(title=f"{dg.what}: eoloc vs the encoder under each reading (m)")
         for col in ("reading", "stop", "n", "median", "p90"):

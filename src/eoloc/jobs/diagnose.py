@@ -12,7 +12,7 @@ distance is under half the standard reading's and the standard reading is off by
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import combinations
 
 import numpy as np
@@ -51,15 +51,28 @@ class Diagnosis:
     best: Trial | None = None
     standard: Trial | None = None
     follows: Trial | None = None
-    notes: list[str] = field(default_factory=list)
+    threshold_m: float = THRESHOLD_M
+
+    @property
+    def disagrees(self) -> bool:
+        """The standard reading is further from the encoder than the threshold."""
+        s = self.standard
+        return s is not None and s.n > 0 and s.median_m > self.threshold_m
 
     def sentence(self) -> str:
         s = self.standard
         if s is None or s.n == 0:
             return f"{self.what}: nothing to compare (the encoder sends none)"
-        if self.follows is None:
+        if self.follows is None and not self.disagrees:
             return (f"{self.what}: the encoder agrees with the standard reading (median {s.median_m:.1f} m over "
                     f"{s.n})")
+        if self.follows is None:
+            b = self.best
+            other = (f"; the closest alternative, {b.label}, still gives {b.median_m:.1f} m" if b is not None and
+                     b is not s else "")
+            return (f"{self.what}: the encoder is {s.median_m:.1f} m from eoloc (median over {s.n}) under the "
+                    f"standard reading, and no documented alternative explains it{other}: check the installation "
+                    "angles, the time alignment of the tags and the encoder's own model")
         f = self.follows
         how = " ".join(f"--assume {a}" for a in f.assume)
         stop = " along the slant range" if f.stop == "slant range" else ""
@@ -81,10 +94,10 @@ def _verdict(what: str, trials: list[Trial], threshold_m: float) -> Diagnosis:
     best = usable[0] if usable else None
     follows = None
     if best is not None and standard is not None and standard.n and best is not standard \
-            and standard.median_m > threshold_m and best.median_m < 0.5 * standard.median_m:
-        follows = best
+            and standard.median_m > threshold_m and best.median_m < max(threshold_m, 0.1 * standard.median_m):
+        follows = best  # it explains the disagreement, not merely shrinks it
     order = sorted(trials, key=lambda t: (not t.n, t.median_m if t.n else 0.0))
-    return Diagnosis(what, order, best, standard, follows)
+    return Diagnosis(what, order, best, standard, follows, threshold_m)
 
 
 def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Diagnosis:

@@ -123,7 +123,8 @@ class KLVStream:
     def summary(self) -> str:
         bad = ", ".join(f"{n} {k}" for k, n in self.counts().items() if k != "good") or "none bad"
         kinds = Counter(p.standard for p in self.packets)
-        what = (f"{self.n_good} good {next(iter(kinds), 'ST 0601')} packets" if len(kinds) < 2 else
+        what = (f"{self.n_good} good {next(iter(kinds), 'ST 0601')} packet{'s' if self.n_good != 1 else ''}"
+                if len(kinds) < 2 else
                 f"{self.n_good} good packets ({', '.join(f'{n} {k}' for k, n in kinds.items())})")
         return f"{self.path} ({self.container}): {what}; {bad}"
 
