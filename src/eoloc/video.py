@@ -83,7 +83,7 @@ def footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int
         ok = bool(np.all(np.isfinite(lat) & np.isfinite(lon)))
         geometry = polygon_geometry(lon, lat, np.where(np.isfinite(h), h, 0.0)) if ok else None
         feats.append({"type": "Feature", "geometry": geometry,
-                      "properties": {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}})
+                      "properties": _frame_properties(tel, i)})
     return feats
 
 
@@ -110,19 +110,31 @@ def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, e
                                                                    edge_samples=edge_samples)]
         for i, g in zip(idx, geometry, strict=True):
             feats[i] = {"type": "Feature", "geometry": g,
-                        "properties": {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}}
+                        "properties": _frame_properties(tel, i)}
     return [feats[i] for i in rows]
 
 
-def aircraft_feature(tel: Table) -> dict:
-    """The aircraft path as one GeoJSON LineString (lon, lat, ellipsoidal h) with coordTimes."""
+def aircraft_features(tel: Table) -> list[dict]:
+    """One aircraft path per stream (a KLV PID; the whole table when it has no stream column)."""
+    if "stream" not in tel.columns:
+        return [aircraft_feature(tel)]
+    s = tel.columns["stream"]
+    return [aircraft_feature(tel, s == name, name) for name in dict.fromkeys(s)]
+
+
+def aircraft_feature(tel: Table, rows: np.ndarray | None = None, stream: str | None = None) -> dict:
+    """The aircraft path as one GeoJSON LineString (lon, lat, ellipsoidal h) with coordTimes, over
+    all rows or the boolean ``rows`` of one ``stream``."""
     c = tel.columns
     ok = np.isfinite(c["lat_deg"]) & np.isfinite(c["lon_deg"]) & np.isfinite(c["h_m"])
+    if rows is not None:
+        ok &= rows
     coords = [[float(a), float(b), float(z)] for a, b, z in zip(c["lon_deg"][ok], c["lat_deg"][ok], c["h_m"][ok],
                                                                 strict=True)]
     geom = {"type": "LineString", "coordinates": coords} if len(coords) > 1 else None
     return {"type": "Feature", "geometry": geom,
-            "properties": {"what": "aircraft", "coordTimes": [_finite(t) for t in c["time_s"][ok]]}}
+            "properties": {"what": "aircraft", **({"stream": stream} if stream else {}),
+                           "coordTimes": [_finite(t) for t in c["time_s"][ok]]}}
 
 
 @dataclass(frozen=True)
@@ -185,6 +197,14 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
              "u_px": d["u_px"], "v_px": d["v_px"]}
     return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc)
+
+
+def _frame_properties(tel: Table, i: int) -> dict:
+    c = tel.columns
+    props = {"frame": int(tel.line[i]), "time_s": _finite(c["time_s"][i])}
+    if "stream" in c and c["stream"][i]:
+        props["stream"] = str(c["stream"][i])
+    return props
 
 
 def _finite(x) -> float | None:

@@ -49,7 +49,7 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     from ..io.klv import klv_telemetry, read_klv, vmti_detections
     from ..io.klv.conventions import apply_to_telemetry
     from ..misb import misb_sensor
-    from ..video import aircraft_feature, check_frames, dem_footprint_features, footprint_features, locate_vmti
+    from ..video import aircraft_features, check_frames, dem_footprint_features, footprint_features, locate_vmti
     from .diagnose import diagnose_frames, diagnose_vmti
 
     assume = tuple(dict.fromkeys(assume))
@@ -65,7 +65,7 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     det = vmti_detections(stream, pixels_from=0 if from_0 else 1)
     prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
               footprint_features(tel, check.geometry, every=footprint_every))
-    layers = {"aircraft": [aircraft_feature(tel)], "footprints": prints,
+    layers = {"aircraft": aircraft_features(tel), "footprints": prints,
               "encoder footprints": footprint_features(tel, None, every=footprint_every)}
     records = Records({})
     diagnoses = [diagnose_frames(raw_tel, sensor)]
