@@ -7,11 +7,10 @@ stream and the CLI writes the files.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .accuracy.budget import ErrorBudget
-from .accuracy.covariance import covariance_columns
 from .footprint import polygon_geometry
 from .geodesy import horizontal_distance_m
 from .io.table import Table
@@ -21,6 +20,9 @@ from .result import Fixes, Status
 from .rules import surface_rule
 from .sensor.camera import Camera
 from .sensor.model import SensorModel
+
+if TYPE_CHECKING:
+    from .accuracy.budget import ErrorBudget
 
 
 @dataclass(frozen=True)
@@ -192,6 +194,8 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
                                                  (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m))
         status[idx] = st
         if cov is not None:
+            from .accuracy.covariance import covariance_columns  # scipy (1.2 s): only when a budget asks for it
+
             for k, v in covariance_columns(cov, ok).items():
                 unc.setdefault(k, np.full(n, np.nan))[idx] = v
     extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
