@@ -102,7 +102,7 @@ def test_real_flight_full_range_angles_hae_and_special_values():
     s = read_klv(DATA / "realflight.bin")
     assert s.n_good == len(packets) == 19 and s.issues == []
     c = klv_telemetry(s).columns
-    v0 = s.packets[0].values()
+    v0 = s.packets[0].fields
     assert c["pitch_deg"][0] == v0[90] and c["roll_deg"][0] == v0[91]
     assert c["h_m"][0] == v0[75] and np.isnan(c["h_msl_m"][0])
     assert np.isnan(c["corner1_lat_deg"][0]) and np.isfinite(c["corner3_lat_deg"][0])

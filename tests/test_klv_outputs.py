@@ -118,7 +118,7 @@ def test_reencoded_stream_carries_the_fixes_in_tags_40_to_46(run):
     checked = 0
     for i, p in enumerate(s.packets):
         r = by_frame.get(original[i])
-        v = p.values()
+        v = p.fields
         if r is None:
             assert 40 not in v
             continue

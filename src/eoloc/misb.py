@@ -87,13 +87,18 @@ def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_de
     height per packet such as the encoder's own frame-centre elevation). With ``range_m`` the
     centre is placed at that slant range along the boresight instead (M1, laser)."""
     tx, ty = _half_tangents(hfov_deg, vfov_deg)
-    zero = np.zeros_like(tx)[..., None]
-    centre_rays = packet_rays(sensor, pose, zero, zero)
-    if range_m is not None:
-        centre = AtRange(np.asarray(range_m, dtype=np.float64)[..., None]).stop(centre_rays, sensor.ellipsoid)
-    else:
-        centre = stop_on(centre_rays, surface, sensor)
+    centre = frame_centre(sensor, pose, surface, range_m=range_m)
     corner_rays = packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None])
     corners = stop_on(corner_rays, surface, sensor)
     kind = "DEM" if isinstance(surface, DEM) else "ellipsoid at the frame-centre elevation"
-    return FrameGeometry(centre.flat(), corners, kind)
+    return FrameGeometry(centre, corners, kind)
+
+
+def frame_centre(sensor: SensorModel, pose: Pose, surface, *, range_m: ArrayLike | None = None) -> Fixes:
+    """Each packet's boresight (F,) stopped on ``surface`` (a DEM or an ellipsoidal height per
+    packet), or at ``range_m`` along it when given."""
+    zero = np.zeros((*np.shape(pose.lat_deg), 1))
+    rays = packet_rays(sensor, pose, zero, zero)
+    if range_m is not None:
+        return AtRange(np.asarray(range_m, dtype=np.float64)[..., None]).stop(rays, sensor.ellipsoid).flat()
+    return stop_on(rays, surface, sensor).flat()

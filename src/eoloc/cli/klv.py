@@ -96,11 +96,8 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
         job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every, strict=strict,
                       assume=assume)
     print_klv_job(job, console, err_console)
-    written, note = write_klv_products(job, out_dir, formats=formats, make_map=make_map, tiles=tiles,
-                                       klv_out=write_klv)
-    if note:
+    written, notes = write_klv_products(job, out_dir, formats=formats, make_map=make_map, tiles=tiles,
+                                        klv_out=write_klv)
+    for note in notes:
         warn(note, "note")
-    if job.unwritten_fixes:
-        warn(f"--write-klv: {job.unwritten_fixes} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; they "
-             "were written as they came, without their fix", "note")
     err_console.print("wrote " + ", ".join(str(p) for p in written))

@@ -20,7 +20,7 @@ import numpy as np
 from ..geodesy import horizontal_distance_m
 from ..io.klv.conventions import CONVENTIONS, FRAME_CONVENTIONS, apply_to_telemetry, encoder_heights_hae
 from ..io.records import Records
-from ..misb import frame_geometry, misb_sensor, packet_pose
+from ..misb import frame_centre, misb_sensor, packet_pose
 
 THRESHOLD_M = 50.0
 
@@ -121,11 +121,10 @@ def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Di
                         rng = np.where(tc["range_m"] > 0, tc["range_m"], np.nan)
                     if not np.isfinite(rng).any():
                         continue
-                    geom = frame_geometry(sensor, packet_pose(t), tc["hfov_deg"], tc["vfov_deg"], tc["fc_h_m"],
-                                          range_m=rng)
+                    centre = frame_centre(sensor, packet_pose(t), None, range_m=rng)
                 else:
-                    geom = frame_geometry(sensor, packet_pose(t), tc["hfov_deg"], tc["vfov_deg"], tc["fc_h_m"])
-                d = horizontal_distance_m(geom.centre.lat_deg, geom.centre.lon_deg, c["fc_lat_deg"], c["fc_lon_deg"])
+                    centre = frame_centre(sensor, packet_pose(t), tc["fc_h_m"])
+                d = horizontal_distance_m(centre.lat_deg, centre.lon_deg, c["fc_lat_deg"], c["fc_lon_deg"])
                 trials.append(Trial(assume, stop, *_stats(d)))
     return _verdict("frame centre", trials, threshold_m)
 

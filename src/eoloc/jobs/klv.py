@@ -32,7 +32,6 @@ class KLVJob:
     issues: list = field(default_factory=list)
     diagnoses: list = field(default_factory=list)
     assume: tuple[str, ...] = ()
-    unwritten_fixes: int = 0  # packets --write-klv passed on without their fix (non-standard, not re-encodable)
 
     @property
     def surface(self) -> str:
@@ -104,10 +103,10 @@ def frame_records(tel, check) -> Records:
 
 def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
                       make_map: bool = True, tiles: str | None = None,
-                      klv_out: str | Path | None = None) -> tuple[list[Path], str | None]:
-    """telemetry.csv, frames.csv, footprints, fixes (in ``formats``), eoloc.kml with every layer,
-    map.html and, with ``klv_out``, the stream re-encoded with its fixes. Returns (paths, a note
-    when there was nothing to draw on a map)."""
+                      klv_out: str | Path | None = None) -> tuple[list[Path], list[str]]:
+    """telemetry.csv, frames.csv, conventions.csv, footprints, fixes (in ``formats``), eoloc.kml
+    with every layer, map.html and, with ``klv_out``, the stream re-encoded with its fixes.
+    Returns (paths, notes: no map drawn, packets written back without their fix)."""
     from ..io.kml import write_kml
     from ..io.mapview import drawable, write_map
     from ..io.writers import write_layer
@@ -123,22 +122,27 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson"], features=prints)
     if len(job.records):
         written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"])
-        if klv_out:
-            written.append(write_klv_stream(Path(klv_out), job))
+    notes = []
+    if len(job.records) and klv_out:
+        path, unchanged = write_klv_stream(Path(klv_out), job)
+        written.append(path)
+        if unchanged:
+            notes.append(f"--write-klv: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
+                         "they were written as they came, without their fix")
     written.append(write_kml(out / "eoloc.kml", job.layers, name=job.path.name))
-    note = None
     lay = job.layers
     if make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
-        note = "no map: the stream has no aircraft position, footprint or fix to draw"
+        notes.append("no map: the stream has no aircraft position, footprint or fix to draw")
     elif make_map:
         written.append(write_map(out / "map.html", aircraft=lay["aircraft"], footprints=prints,
                                  encoder_footprints=lay["encoder footprints"], targets=lay.get("fixes"), dem=job.dem,
                                  tiles=tiles, title=f"eoloc: {job.path.name}"))
-    return written, note
+    return written, notes
 
 
-def write_klv_stream(path: Path, job: KLVJob) -> Path:
-    """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46."""
+def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
+    """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46; and how
+    many packets had to be passed on without theirs (stanag4609 cannot re-encode them)."""
     from stanag4609.errors import Stanag4609Error
 
     from ..io.klv import with_target_location
@@ -172,5 +176,4 @@ def write_klv_stream(path: Path, job: KLVJob) -> Path:
         out += raw
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(bytes(out))
-    job.unwritten_fixes = unchanged
-    return path
+    return path, unchanged

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import struct
 from datetime import timedelta
+from functools import partial
 from typing import Any
 
-from .localset import EPOCH, FieldError, Note, encode_length, last_of_each
+from .localset import EPOCH, FieldError, Note, SetError, ber_length, decode_table, encode_length
 
 EG0104_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 _PREFIX = bytes.fromhex("060E2B34")
@@ -69,13 +70,14 @@ def _value(kind: str, raw: bytes) -> Any:
     return raw.decode("ascii", errors="replace").rstrip("\x00")
 
 
+#: ST 0601 tag -> (EG 0104 element name, decoder) for :func:`.localset.decode_table`
+TABLE = {tag: (name, partial(_value, kind)) for tag, kind, name in LABELS.values()}
+
+
 def decode_eg0104(value: bytes) -> tuple[dict[int, Any], list[Note]]:
     """The items of one EG 0104 universal set (the bytes after its key and length) as ST 0601
     tag -> value, and notes (unknown labels are skipped silently, as ST 0601's unknown tags are)."""
-    from .localset import SetError, ber_length
-
     items: list[tuple[int, bytes]] = []
-    kinds: dict[int, tuple[str, str]] = {}
     notes: list[Note] = []
     pos, end = 0, len(value)
     while pos < end:
@@ -92,22 +94,11 @@ def decode_eg0104(value: bytes) -> tuple[dict[int, Any], list[Note]]:
         spec = LABELS.get(label[8:])
         if spec is not None:
             items.append((spec[0], value[p:p + length]))
-            kinds[spec[0]] = (spec[1], spec[2])
         pos = p + length
-    last, dup = last_of_each(items, "EG 0104 ")
-    notes += dup
-    out: dict[int, Any] = {}
-    for tag, raw in last.items():
-        kind, name = kinds[tag]
-        try:
-            v = _value(kind, raw)
-        except FieldError as exc:
-            notes.append(Note("field", f"EG 0104 {tag}", f"{name}: {exc}; left out"))
-            continue
-        if tag == 19 and isinstance(v, float) and v > 180.0:
-            v -= 360.0  # obliquity sent as 0-360: ST 0601's elevation is (-180, 180]
-        out[tag] = v
-    return out, notes
+    out, more = decode_table(items, TABLE, "EG 0104 ")
+    if isinstance(out.get(19), float) and out[19] > 180.0:
+        out[19] -= 360.0  # obliquity sent as 0-360: ST 0601's elevation is (-180, 180]
+    return out, notes + more
 
 
 def encode_eg0104(values: dict[str, Any]) -> bytes:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .localset import encode_items, encode_length
-from .reader import UAS_KEY
+from .reader import UAS_KEY, bcc16
 
 
 def encode_uas_packet(values: dict[int, Any]) -> bytes:
@@ -35,11 +35,13 @@ def uas_items(packet: bytes) -> list[tuple[int, bytes]]:
 def build_uas_packet(items: Iterable[tuple[int, bytes]], *, long_form: bool = False) -> bytes:
     """An ST 0601 packet from raw (tag, value) items exactly as given (order, duplicates, long-form
     lengths: for test streams that depart from the standard), with a valid checksum."""
-    body = encode_items(items, long_form=long_form) + b"\x01\x02"
-    head = UAS_KEY + encode_length(len(body) + 2)
-    pkt = head + body
-    total = ((sum(pkt[0::2]) << 8) + sum(pkt[1::2])) & 0xFFFF
-    return pkt + total.to_bytes(2, "big")
+    return frame_uas_packet(encode_items(items, long_form=long_form))
+
+
+def frame_uas_packet(body: bytes) -> bytes:
+    """Key, length, the given item bytes and a checksum item with a valid bcc-16."""
+    pkt = UAS_KEY + encode_length(len(body) + 4) + body + b"\x01\x02"
+    return pkt + bcc16(pkt).to_bytes(2, "big")
 
 
 def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height: int, *,

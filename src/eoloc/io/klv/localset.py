@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)  # MISB time stamps: microseconds since (ST 0603)
 
@@ -96,8 +97,8 @@ def encode_items(items, *, long_form: bool = False) -> bytes:
     return bytes(out)
 
 
-def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: str = "",
-                one_byte_tags: bool = False) -> tuple[list[tuple[int, bytes]], list[Note]]:
+def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: str = ""
+                ) -> tuple[list[tuple[int, bytes]], list[Note]]:
     """Every readable (tag, value) item of the set data[start:end], in order, and the notes.
 
     Duplicates are returned as sent (the caller keeps the last); a long-form length is noted once
@@ -109,10 +110,7 @@ def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: 
     pos = start
     while pos < end:
         try:
-            if one_byte_tags:
-                tag, p = data[pos], pos + 1
-            else:
-                tag, p = ber_oid(data, pos, end)
+            tag, p = ber_oid(data, pos, end)
             length, p, needless = ber_length(data, p, end)
         except SetError as exc:
             notes.append(Note("truncated item", prefix.rstrip(".") or "set",
@@ -141,3 +139,21 @@ def last_of_each(items: list[tuple[int, bytes]], prefix: str = "") -> tuple[dict
                               "used"))
         out[tag] = value
     return out, notes
+
+
+def decode_table(items: list[tuple[int, bytes]], table: dict, prefix: str = "") -> tuple[dict[int, Any], list[Note]]:
+    """tag -> value of a set's items, the last of a repeated tag kept: decoded by ``table[tag] =
+    (name, decoder)``, kept as raw bytes where the table has no entry; an item its decoder refuses
+    (:class:`FieldError`) is left out with a note. The one item loop of ST 0601, ST 0903 and EG 0104."""
+    last, notes = last_of_each(items, prefix)
+    values: dict[int, Any] = {}
+    for tag, raw in last.items():
+        spec = table.get(tag)
+        if spec is None:
+            values[tag] = raw
+            continue
+        try:
+            values[tag] = spec[1](raw)
+        except FieldError as exc:
+            notes.append(Note("field", f"{prefix}{tag}", f"{spec[0]}: {exc}; left out"))
+    return values, notes

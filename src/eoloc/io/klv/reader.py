@@ -29,7 +29,7 @@ import numpy as np
 
 from ...errors import KLVError
 from .eg0104 import EG0104_KEY, decode_eg0104
-from .localset import Note, parse_items
+from .localset import Note, SetError, ber_length, parse_items
 from .st0601 import decode_values
 
 UAS_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
@@ -63,10 +63,6 @@ class KLVPacket:
     fields: dict[int, Any]
     stream: str = ""
     standard: str = "ST 0601"
-
-    def values(self) -> dict[int, Any]:
-        """ST 0601 tag -> decoded value (the last one for a repeated tag)."""
-        return self.fields
 
 
 @dataclass(frozen=True)
@@ -105,10 +101,6 @@ class KLVStream:
     @property
     def n_bad(self) -> int:
         return sum(1 for i in self.issues if i.packet is not None)
-
-    @property
-    def field_warnings(self) -> list[str]:
-        return [str(n) for n in self.notes]
 
     @property
     def streams(self) -> list[str]:
@@ -171,28 +163,27 @@ class _Notes:
         return [StreamNote(s, k, t, m, c, f) for (s, k, t), (m, c, f) in self.seen.items()]
 
 
-def _checksum_ok(raw: bytes) -> tuple[bool, str]:
-    """ST 0601 bcc-16: the checksum item (01 02 hi lo) ends the packet and sums the bytes before
-    its value as big-endian 16-bit words."""
+def bcc16(data: bytes) -> int:
+    """ST 0601 bcc-16: the bytes as big-endian 16-bit words, summed modulo 2^16."""
+    return ((sum(data[0::2]) << 8) + sum(data[1::2])) & 0xFFFF
+
+
+def checksum_problem(raw: bytes) -> str | None:
+    """Why an ST 0601 packet fails its checksum (the item 01 02 hi lo ending the packet, over every
+    byte before its value), or None."""
     if len(raw) < 20 or raw[-4:-2] != b"\x01\x02":
-        return False, "no checksum item (tag 1, 2 bytes) at the end of the packet"
-    body = raw[:-2]
-    total = ((sum(body[0::2]) << 8) + sum(body[1::2])) & 0xFFFF
-    expected = int.from_bytes(raw[-2:], "big")
+        return "no checksum item (tag 1, 2 bytes) at the end of the packet"
+    expected, total = int.from_bytes(raw[-2:], "big"), bcc16(raw[:-2])
     if total != expected:
-        return False, f"ST 0601 checksum mismatch: expected 0x{expected:04X}, computed 0x{total:04X}"
-    return True, ""
+        return f"ST 0601 checksum mismatch: expected 0x{expected:04X}, computed 0x{total:04X}"
+    return None
 
 
 def decode_packet(raw: bytes, value_start: int) -> tuple[str, dict[int, Any], list[Note]]:
-    """(standard, tag -> value, notes) of one framed packet; raises ValueError (with the reason)
-    only when its checksum fails."""
+    """(standard, tag -> value, notes) of one framed packet whose checksum (ST 0601) was checked."""
     if raw[:16] == EG0104_KEY:
         values, notes = decode_eg0104(raw[value_start:])
         return "EG 0104", values, notes
-    ok, why = _checksum_ok(raw)
-    if not ok:
-        raise ValueError(why)
     items, notes = parse_items(raw, value_start, len(raw) - 4)
     if items and items[0][0] != 2 and any(t == 2 for t, _ in items):
         notes.append(Note("out of order", "2", "Precision Time Stamp is not the first item (read anyway)"))
@@ -263,13 +254,12 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
             pos = k + 1  # the next key may sit inside what the bad length claimed
             continue
         raw = data[k:end]
-        try:
-            standard, values, pnotes = decode_packet(raw, start - k)
-        except ValueError as exc:
-            issues.append(KLVIssue(path, n, k, "checksum", str(exc)))
+        if raw[:16] == UAS_KEY and (why := checksum_problem(raw)) is not None:
+            issues.append(KLVIssue(path, n, k, "checksum", why))
             n += 1
             pos = k + 1
             continue
+        standard, values, pnotes = decode_packet(raw, start - k)
         if strict and (why := _strict_check(raw)) is not None:
             issues.append(KLVIssue(path, n, k, "non-standard", why))
             n += 1
@@ -290,24 +280,14 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
 
 def packet_end(data: bytes, k: int) -> tuple[int | None, int, str]:
     """(end offset, value start, "") of the packet whose key starts at ``k``, or (None, 0, why)."""
-    i = k + 16
-    if i >= len(data):
-        return None, 0, "the stream ends inside the packet's key or length"
-    first = data[i]
-    if first < 0x80:
-        length, used = first, 1
-    else:
-        nbytes = first & 0x7F
-        if nbytes == 0 or nbytes > 8:
-            return None, 0, f"invalid BER length byte 0x{first:02X}"
-        if i + 1 + nbytes > len(data):
-            return None, 0, "the stream ends inside the packet's BER length"
-        length, used = int.from_bytes(data[i + 1:i + 1 + nbytes], "big"), 1 + nbytes
-    end = i + used + length
-    if end > len(data):
-        return None, 0, (f"the packet declares {length} bytes of value but only {len(data) - i - used} remain "
+    try:
+        length, start, _ = ber_length(data, k + 16, len(data))
+    except SetError as exc:
+        return None, 0, f"{exc} (the packet's own length)"
+    if start + length > len(data):
+        return None, 0, (f"the packet declares {length} bytes of value but only {len(data) - start} remain "
                          "(cut short, or a corrupt length)")
-    return end, i + used, ""
+    return start + length, start, ""
 
 
 def one_line(exc: BaseException) -> str:

@@ -18,7 +18,7 @@ from datetime import datetime, timedelta
 from fractions import Fraction
 from typing import Any
 
-from .localset import EPOCH, FieldError, Note, last_of_each, parse_items
+from .localset import EPOCH, FieldError, Note, decode_table, parse_items
 from .st0903 import decode_vmti
 
 MULTIPLE = frozenset({100, 101})  # ST 1607 segment and amend sets may repeat
@@ -133,7 +133,16 @@ FIELDS: dict[int, tuple[str, Any]] = {
            _LAT_FC if t % 2 == 0 else _LON_FC) for t in range(82, 90)},
     90: ("Platform Pitch Angle (Full)", _FULL_ANGLE), 91: ("Platform Roll Angle (Full)", _FULL_ANGLE),
 }
-DECODERS = {tag: (spec.decoder() if isinstance(spec, Mapped) else spec) for tag, (_, spec) in FIELDS.items()}
+
+
+def _known_or_unknown(decode):
+    """A zero-length item means the value is no longer known (ST 0601 §6.2)."""
+    return lambda raw: decode(raw) if raw else Special.UNKNOWN
+
+
+#: tag -> (name, decoder) for :func:`.localset.decode_table`
+TABLE = {tag: (name, _known_or_unknown(spec.decoder() if isinstance(spec, Mapped) else spec))
+         for tag, (name, spec) in FIELDS.items()}
 
 
 @dataclass
@@ -149,22 +158,10 @@ class Nested:
 def decode_values(items: list[tuple[int, bytes]], prefix: str = "", *, depth: int = 0
                   ) -> tuple[dict[int, Any], list[Note]]:
     """tag -> value for the items of one ST 0601 set (the last of a repeated tag), and notes."""
-    single = [(t, v) for t, v in items if t not in MULTIPLE]
-    last, notes = last_of_each(single, prefix)
-    values: dict[int, Any] = {}
-    for tag, raw in last.items():
-        dec = DECODERS.get(tag)
-        try:
-            if dec is not None:
-                values[tag] = dec(raw) if raw else Special.UNKNOWN
-            elif tag == 74:
-                vm, vm_notes = decode_vmti(raw, prefix=f"{prefix}74.")
-                notes += vm_notes
-                values[74] = vm
-            else:
-                values[tag] = raw
-        except FieldError as exc:
-            notes.append(Note("field", f"{prefix}{tag}", f"{FIELDS[tag][0]}: {exc}; left out"))
+    values, notes = decode_table([(t, v) for t, v in items if t not in MULTIPLE], TABLE, prefix)
+    if 74 in values:  # kept raw by the table: the VMTI set is read item by item too
+        values[74], more = decode_vmti(values[74], prefix=f"{prefix}74.")
+        notes += more
     nested = [(t, v) for t, v in items if t in MULTIPLE]
     for tag, raw in nested:
         child, child_notes = decode_nested(raw, "segment" if tag == 100 else "amend", f"{prefix}{tag}.", depth + 1)

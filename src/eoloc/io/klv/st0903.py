@@ -22,10 +22,10 @@ from .localset import (
     SetError,
     ber_length,
     ber_oid,
+    decode_table,
     encode_items,
     encode_length,
     encode_oid,
-    last_of_each,
     parse_items,
 )
 
@@ -134,31 +134,16 @@ class VMTISet:
         return self.values.get(tag, default)
 
 
-def _decode_fields(items, table, prefix: str) -> tuple[dict[int, Any], list[Note]]:
-    last, notes = last_of_each(items, prefix)
-    values: dict[int, Any] = {}
-    for tag, raw in last.items():
-        spec = table.get(tag)
-        if spec is None:
-            values[tag] = raw
-            continue
-        try:
-            values[tag] = spec[1](raw)
-        except FieldError as exc:
-            notes.append(Note("field", f"{prefix}{tag}", f"{spec[0]}: {exc}; left out"))
-    return values, notes
-
-
 def decode_vmti(raw: bytes, *, prefix: str = "") -> tuple[VMTISet, list[Note]]:
     """An embedded VMTI local set (the value of ST 0601 tag 74), from what is there."""
     items, notes = parse_items(raw, prefix=prefix)
     series = [v for t, v in items if t == 101]
-    values, more = _decode_fields([(t, v) for t, v in items if t not in (1, 101)], VMTI_FIELDS, prefix)
+    values, more = decode_table([(t, v) for t, v in items if t not in (1, 101)], VMTI_FIELDS, prefix)
     notes += more
     targets: list[VTarget] = []
-    for s in series[-1:]:
-        t, n = decode_targets(s, prefix=f"{prefix}101.")
-        targets, notes = t, notes + n
+    if series:
+        targets, more = decode_targets(series[-1], prefix=f"{prefix}101.")
+        notes += more
     if len(series) > 1:
         notes.append(Note("duplicate tag", f"{prefix}101", "VTarget series sent more than once; the last is used"))
     if 4 not in values:
@@ -185,7 +170,7 @@ def decode_targets(raw: bytes, *, prefix: str = "") -> tuple[list[VTarget], list
             notes.append(Note("truncated item", prefix.rstrip("."), f"{exc}; the targets before it are kept"))
             break
         items, n = parse_items(raw, q, p + length, prefix=f"{prefix}{tid}.")
-        values, m = _decode_fields(items, VTARGET_FIELDS, f"{prefix}{tid}.")
+        values, m = decode_table(items, VTARGET_FIELDS, f"{prefix}{tid}.")
         targets.append(VTarget(tid, values))
         notes += n + m
         pos = p + length
