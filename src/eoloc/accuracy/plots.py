@@ -144,3 +144,125 @@ def plot_compensation(oblique_deg: np.ndarray, before_en: np.ndarray, after_en: 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     return path
+
+
+# -- accuracy against surveyed points (eoloc evaluate / eoloc report) ------------------------------
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    """Write a figure as PNG (creating the folder)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def figure_png(fig) -> bytes:
+    """A figure as PNG bytes (for pages that carry their pictures inline)."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def error_figure(enu_m: np.ndarray, summary, *, title: str = "errors against the surveyed points"):
+    """East/north scatter of the errors with the CEP and CE90 circles about the true point and the
+    mean (bias); beside it the vertical errors' histogram with ±LE90. ``summary``: an
+    :class:`eoloc.accuracy.evaluation.Summary` of the same errors."""
+    fig = _figure(10.5, 4.6)
+    ax, bx = fig.subplots(1, 2, width_ratios=(1.1, 1.0))
+    enu = np.asarray(enu_m, dtype=np.float64).reshape(-1, 3)
+    ax.scatter(enu[:, 0], enu[:, 1], s=9, c="tab:blue", alpha=0.6, label=f"fixes (n={summary.n})", rasterized=True)
+    v = summary.value
+    for key, colour, label in (("cep50_m", "tab:green", "CEP"), ("ce90_m", "tab:red", "CE90")):
+        if np.isfinite(v[key]):
+            _circle(ax, v[key], color=colour, lw=1.6, label=f"{label} {v[key]:.2f} m")
+    if np.isfinite(v["bias_e_m"]):
+        ax.plot([v["bias_e_m"]], [v["bias_n_m"]], marker="x", ms=11, mew=2.5, color="k",
+                label=f"mean ({v['bias_e_m']:+.2f}, {v['bias_n_m']:+.2f}) m")
+    ax.axhline(0, color="0.7", lw=0.8)
+    ax.axvline(0, color="0.7", lw=0.8)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("east error (m)")
+    ax.set_ylabel("north error (m)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    up = enu[np.isfinite(enu[:, 2]), 2]
+    if up.size:
+        bx.hist(up, bins=max(5, min(40, up.size // 3)), color="tab:purple", alpha=0.75)
+        if np.isfinite(v["le90_m"]):
+            for s in (-1, 1):
+                bx.axvline(s * v["le90_m"], color="tab:red", lw=1.5, label="±LE90" if s > 0 else None)
+            bx.legend(fontsize=8)
+        bx.set_xlabel("vertical error (m)")
+        bx.set_ylabel("fixes")
+    else:
+        bx.text(0.5, 0.5, "no heights: no vertical errors", ha="center", va="center", transform=bx.transAxes)
+        bx.set_axis_off()
+    bx.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    return fig
+
+
+def factor_figure(factors: dict, horizontal_m: np.ndarray, bins: dict, tle=None, *,
+                  title: str = "horizontal error against the geometry"):
+    """One panel per factor (name -> (label, values)): each fix's horizontal error against the
+    factor, the median and 90 % error per bin and, on slant range, the linear TLE model with the
+    points Cook's distance removed marked."""
+    names = list(factors)
+    cols = min(3, len(names))
+    rows = -(-len(names) // cols)
+    fig = _figure(4.2 * cols, 3.5 * rows)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    r = np.asarray(horizontal_m, dtype=np.float64)
+    for ax, name in zip(axes, names, strict=False):
+        label, x = factors[name]
+        x = np.asarray(x, dtype=np.float64)
+        ax.scatter(x, r, s=7, c="0.45", alpha=0.55, rasterized=True, label="fixes")
+        b = bins.get(name) or []
+        if b:
+            mid = [(q.lo + q.hi) / 2 for q in b]
+            ax.plot(mid, [q.cep50_m for q in b], "o-", color="tab:green", label="median per bin")
+            ax.plot(mid, [q.ce90_m for q in b], "s--", color="tab:red", label="90 % per bin")
+        if name == "range_m" and tle is not None:
+            xs = np.linspace(np.nanmin(x), np.nanmax(x), 50)
+            ax.plot(xs, tle.intercept + tle.slope * xs, color="tab:blue", lw=2,
+                    label=f"TLE {tle.intercept:.2f} m + {tle.slope * 1000:.3f} m/km")
+            out = np.isfinite(tle.cooks) & ~tle.kept
+            if out.any():
+                ax.scatter(x[out], r[out], s=40, facecolors="none", edgecolors="tab:orange",
+                           label=f"Cook's D > {tle.threshold:.3g} ({int(out.sum())})")
+        ax.set_xlabel(label)
+        ax.set_ylabel("horizontal error (m)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    for ax in axes[len(names):]:
+        ax.set_axis_off()
+    fig.suptitle(title)
+    return fig
+
+
+def coverage_figure(cov, *, title: str = "predicted against observed: is the uncertainty honest?"):
+    """Calibration plot of a :class:`eoloc.accuracy.evaluation.Coverage`: the share of truth points
+    inside each fix's own p-ellipse against p, with its 95 % Clopper-Pearson band; the CE50/CE90
+    circles and LE90 as points. An honest uncertainty follows the diagonal."""
+    fig = _figure(6.0, 5.0)
+    ax = fig.subplots()
+    ax.plot([0, 1], [0, 1], color="0.5", lw=1, ls="--", label="honest")
+    ax.fill_between(cov.nominal, cov.low, cov.high, color="tab:blue", alpha=0.2, label="95 % interval")
+    ax.plot(cov.nominal, cov.observed, "o-", color="tab:blue", ms=4, label=f"inside own ellipse (n={cov.n})")
+    marks = {"CE50": "s", "CE90": "D", "LE90": "^"}
+    for name, (p, obs, lo, hi, _n) in cov.circles.items():
+        if np.isfinite(obs):
+            ax.errorbar([p], [obs], yerr=[[obs - lo], [hi - obs]], fmt=marks.get(name, "o"), ms=8, capsize=3,
+                        label=f"inside own {name}: {obs:.0%}")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.set_xlabel("predicted probability")
+    ax.set_ylabel("observed share of truth points inside")
+    ax.set_aspect("equal")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_title(f"{title}\nsigma scale factor {cov.scale:.2f} (1 = honest)", fontsize=10)
+    return fig

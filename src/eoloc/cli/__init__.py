@@ -20,6 +20,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("klv", "klv"),
     ("map", "map_command"),
     ("compensate", "compensate"),
+    ("evaluate", "evaluate"),
     ("rectify", "rectify"),
     ("demo", "demo"),
 )

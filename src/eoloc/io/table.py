@@ -64,11 +64,14 @@ class Table:
         return Table(self.path, {k: v[mask] for k, v in self.columns.items()}, self.line[mask], self.issues)
 
 
-def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple[str, ...]) -> Table:
+def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple[str, ...],
+               keep_other: bool = False) -> Table:
     """Read a CSV with a header into a :class:`Table`.
 
     ``key``: the columns of which at least one must parse for a record to be kept (e.g. time or
-    frame) — without it the record cannot be matched to anything.
+    frame) — without it the record cannot be matched to anything; an empty ``key`` keeps every
+    record (the caller judges them). ``keep_other``: the columns not declared are kept too, as
+    text, under their header names (lower case).
 
     The lines are sorted out first, vectorised over the file's bytes (comments, blank lines, lines
     of only commas, wrong field counts, bytes that are not UTF-8: each bad line reported with its
@@ -94,6 +97,10 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     header = fast[0] if fast is not None else lines.header
     if header is None:
         raise TableError(f"{what} file {src!r} is empty: it needs a header line naming its columns")
+    if keep_other:  # every column the declared ones do not claim, as text
+        claimed = {n for c in columns for n in (c.name, *c.aliases)}
+        columns = [*columns, *(Column(h, text=True, required=False) for h in dict.fromkeys(header)
+                               if h and h not in claimed)]
     index = _map_columns(header, columns, src, what)
     wanted = [c for c in columns if c.name in index]
     cols = {c.name: index[c.name] for c in wanted}
@@ -115,7 +122,7 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
             continue
         arrays[col.name] = _check_column(values, col, order, cell_issues)
     present = [k for k in key if k in arrays]
-    key_ok = np.zeros(n, dtype=bool)
+    key_ok = np.zeros(n, dtype=bool) if key else np.ones(n, dtype=bool)  # no key: every record kept
     for k in present:
         key_ok |= ~np.isnan(arrays[k])
     by_record: dict[int, list[str]] = {}
