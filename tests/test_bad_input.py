@@ -41,12 +41,13 @@ COMMANDS = {
     "accuracy": ["accuracy", "{cfg}", "-n", "200", "--no-sensitivity", "--no-plots", "--out", "{out}"],
     "klv": ["klv", "{klv}", "--out", "{out}"],
     "map": ["map", "--telemetry", "{tel}", "-o", "{out}/map.html"],
+    "evaluate": ["evaluate", "{fixes}", "--truth", "{truth}", "--bootstrap", "50", "--no-plots", "--out", "{out}"],
 }
 READS_TELEMETRY = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify"]
 READS_CONFIG = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "compensate-train",
                 "accuracy"]
 WRITES_OUT = ["locate", "footprint", "track", "track-static", "triangulate", "calibrate", "rectify",
-              "compensate-train", "accuracy", "klv"]
+              "compensate-train", "accuracy", "klv", "evaluate"]
 READS_DEM = ["locate-dem"]
 CONFIG = (DEMO / "camera.toml").read_text(encoding="utf-8")
 ACCURACY = """
@@ -107,7 +108,12 @@ def files(tmp_path_factory):
     r = CliRunner().invoke(main, ["compensate", "simulate", "--config", str(cfg), "--flights", "2",
                                   "--test-flights", "0", "--looks", "20", "--out", str(sim)])
     assert r.exit_code == 0, r.output
+    fixes = d / "fixes.csv"
+    r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config",
+                                  str(cfg), "--target-height", "600", "--out", str(d)])
+    assert r.exit_code == 0, r.output
     return {"tel": DEMO / "telemetry.csv", "det": DEMO / "detections.csv", "cfg": cfg, "gcps": gcps, "img": img,
+            "fixes": fixes, "truth": DEMO / "truth.csv",
             "obs": sim / "train.csv", "dem": sim / "dem.tif",
             "klv": KLV / "realflight.bin" if (KLV / "realflight.bin").exists() else next(KLV.glob("*.bin"))}
 
@@ -202,7 +208,8 @@ CONFIG_SPOILS = ["missing", "folder", "latin1", "not-toml", "bool-width", "strin
 
 SPOILT = ([(command, "tel", kind) for command in READS_TELEMETRY for kind in SPOILS]
           + [(command, slot, kind) for command, slot in (("locate", "det"), ("track", "det"), ("triangulate", "det"),
-                                                         ("calibrate", "gcps"), ("compensate-train", "obs"))
+                                                         ("calibrate", "gcps"), ("compensate-train", "obs"),
+                                                         ("evaluate", "fixes"), ("evaluate", "truth"))
              for kind in SPOILS]
           + [(command, "cfg", kind) for command in READS_CONFIG for kind in CONFIG_SPOILS])
 

@@ -129,10 +129,12 @@ def _read_csv(path: Path, cols: tuple[str, ...] | None, what: str) -> Points:
                                lo=-12_000, hi=100_000, unit="m"))
     t = read_table(path, declared, what=what, key=(), keep_other=True)
     src = str(path)
-    missing = [n for n, c in zip(names, ("lat_deg", "lon_deg"), strict=False) if c not in t.columns]
+    missing = [c for c in declared[:2] if c.name not in t.columns]
     if missing:
-        raise TableError(f"{what} file {src!r} has no {' or '.join(repr(m) for m in missing)} column: name the "
-                         f"latitude, longitude and height columns (e.g. --{what.split()[0]}-columns LAT,LON,H)")
+        names = ", ".join(c.name + (f" (or {', '.join(a for a in c.aliases if a != c.name)})" if c.aliases else "")
+                          for c in missing)
+        raise TableError(f"{what} file {src!r} lacks required column(s) {names}: name its latitude, longitude and "
+                         f"height columns with --{what.split()[0]}-columns LAT,LON,H")
     lat, lon = t.columns.pop("lat_deg"), t.columns.pop("lon_deg")
     h = t.columns.pop("h_m", np.full(len(t), np.nan))
     other = {k: _typed(v) for k, v in t.columns.items()}

@@ -233,7 +233,7 @@ def evaluate_job(fixes_path, truth_path, *, fix_columns: tuple[str, ...] | None 
     fixes = read_points(fixes_path, columns=fix_columns, what="fix")
     truth = read_points(truth_path, columns=truth_columns, what="truth")
     if len(fixes) == 0:
-        raise InputError(f"{fixes_path}: no located fix to evaluate"
+        raise InputError(f"{fixes_path}: no usable fix to evaluate"
                          + (f" ({sum(fixes.not_located.values())} not located)" if fixes.not_located else ""),
                          fixes.issues)
     ev = evaluate_points(fixes, truth, **kwargs)
