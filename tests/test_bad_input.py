@@ -42,12 +42,13 @@ COMMANDS = {
     "klv": ["klv", "{klv}", "--out", "{out}"],
     "map": ["map", "--telemetry", "{tel}", "-o", "{out}/map.html"],
     "evaluate": ["evaluate", "{fixes}", "--truth", "{truth}", "--bootstrap", "50", "--no-plots", "--out", "{out}"],
+    "report": ["report", "{obs}", "--config", "{cfg}", "--bootstrap", "50", "--out", "{out}"],
 }
 READS_TELEMETRY = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify"]
 READS_CONFIG = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "compensate-train",
-                "accuracy"]
+                "accuracy", "report"]
 WRITES_OUT = ["locate", "footprint", "track", "track-static", "triangulate", "calibrate", "rectify",
-              "compensate-train", "accuracy", "klv", "evaluate"]
+              "compensate-train", "accuracy", "klv", "evaluate", "report"]
 READS_DEM = ["locate-dem"]
 CONFIG = (DEMO / "camera.toml").read_text(encoding="utf-8")
 ACCURACY = """
@@ -209,7 +210,8 @@ CONFIG_SPOILS = ["missing", "folder", "latin1", "not-toml", "bool-width", "strin
 SPOILT = ([(command, "tel", kind) for command in READS_TELEMETRY for kind in SPOILS]
           + [(command, slot, kind) for command, slot in (("locate", "det"), ("track", "det"), ("triangulate", "det"),
                                                          ("calibrate", "gcps"), ("compensate-train", "obs"),
-                                                         ("evaluate", "fixes"), ("evaluate", "truth"))
+                                                         ("evaluate", "fixes"), ("evaluate", "truth"),
+                                                         ("report", "obs"))
              for kind in SPOILS]
           + [(command, "cfg", kind) for command in READS_CONFIG for kind in CONFIG_SPOILS])
 

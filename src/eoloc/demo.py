@@ -107,13 +107,15 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     console.print("wrote " + ", ".join(str(p) for p in written))
     run_mountain_demo(out_dir, console=console, data=data / "mountain")
     run_klv_demo(out_dir / "klv", console=console, data=data / "mountain")
-    run_compensation_demo(out_dir / "compensation", console=console, sensor=sensor)
+    flights = run_compensation_demo(out_dir / "compensation", console=console, sensor=sensor)
+    run_report_demo(out_dir / "report", console=console, config_path=data / "camera.toml", flights=flights)
     run_rectify_demo(out_dir / "rectify", console=console, data=data / "mountain")
 
 
-def run_compensation_demo(out_dir: Path, *, console: Console, sensor) -> None:
+def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
     """[P]: synthetic calibration flights with installation errors; the model learnt on 6 flights
-    corrects 3 others; CEP by oblique band before and after, and [P] Fig. 1 as a PNG."""
+    corrects 3 others; CEP by oblique band before and after, and [P] Fig. 1 as a PNG. Returns the
+    training flights (the accuracy report's observations)."""
     from .accuracy import compensation as C
     from .accuracy.calflight import calibration_flights
     from .accuracy.plots import plot_compensation
@@ -137,6 +139,31 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor) -> None:
     png = plot_compensation(o_te.features.oblique_deg, before, {"compensated": after}, rows,
                             out_dir / "compensation.png", title="held-out flights, before and after compensation")
     console.print(f"wrote {out_dir / 'compensation.json'} and {png}")
+    return tr
+
+
+def run_report_demo(out_dir: Path, *, console: Console, config_path: Path, flights) -> None:
+    """`eoloc report` on the calibration flights: their observations and station DEM written as a
+    user would have them, then the accuracy report (HTML + CSV) made from those files."""
+    from .io.raster import write_dem
+    from .io.records import Records
+    from .jobs.report import report_job, write_report
+    from .terrain import open_dem
+
+    console.rule("Flight-test accuracy report (eoloc report)")
+    (obs,) = write_layer(out_dir, "observations", Records(dict(flights.columns)), ["csv"])
+    dem_path = write_dem(flights.dem, out_dir / "dem.tif")
+    dem = open_dem([dem_path], vertical="ellipsoid")
+    job = report_job(load_config(config_path), config_path, obs, dem=dem, estimate=("mount", "heading"),
+                     compensation=True, n_boot=1000,
+                     command=f"eoloc report {obs} --config {config_path} --dem {dem_path} --vertical ellipsoid "
+                             "--estimate mount,heading --compensation --bootstrap 1000")
+    for stage in job.stages:
+        v = stage.evaluation.overall
+        console.print(f"{stage.name:>30}: CEP {v.value['cep50_m']:.2f} m ({v.low['cep50_m']:.2f}–"
+                      f"{v.high['cep50_m']:.2f}), CE90 {v.value['ce90_m']:.2f} m, LE90 {v.value['le90_m']:.2f} m")
+    written = write_report(job, out_dir)
+    console.print("wrote " + ", ".join(str(p) for p in written))
 
 
 def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:

@@ -116,73 +116,13 @@ def print_diagnoses(diagnoses, console: Console) -> None:
         console.print(table)
 
 
-def _ci(v: float, lo: float, hi: float) -> tuple[str, str]:
-    f = (lambda x: "—" if not np.isfinite(x) else f"{x:.2f}")
-    return f(v), ("—" if not (np.isfinite(lo) and np.isfinite(hi)) else f"{lo:.2f} – {hi:.2f}")
 
-
-def evaluation_tables(ev) -> list[RichTable]:
-    """The tables of an evaluation (:class:`eoloc.jobs.evaluate.Evaluation`): the statistics with
-    their intervals, by group, the TLE model and the coverage of the predicted uncertainty."""
-    from .accuracy.evaluation import STATISTICS
-
-    s = ev.overall
-    pct = f"{s.level:.0%}"
-    t = RichTable(title=f"accuracy of {s.n} fixes against the surveyed points",
-                  caption=f"metres; {pct} percentile-bootstrap intervals ({s.n_boot} resamples, seed {s.seed}); "
-                          "errors are fix minus truth")
-    for c in ("statistic", "value", f"{pct} interval", "what it is"):
-        t.add_column(c, justify="right" if c in ("value", f"{pct} interval") else "left")
-    for k, (label, what) in STATISTICS.items():
-        t.add_row(label, *_ci(s.value[k], s.low[k], s.high[k]), what)
-    t.add_row("CEP (bivariate normal)", f"{s.cep_parametric_m:.2f}" if np.isfinite(s.cep_parametric_m) else "—", "",
-              f"[Z15]: sigma E {s.sigma_e_m:.2f}, N {s.sigma_n_m:.2f}, rho {s.rho_en:+.2f}")
-    out = [t]
-    if len(ev.summaries) > 2:
-        g = RichTable(title=f"by {ev.group_column}", caption="metres; intervals in evaluation_summary.csv")
-        for c in ("group", "n", "CEP", "CE90", "LE90", "MAE h", "RMSE h", "bias E", "bias N", "bias U"):
-            g.add_column(c, justify="left" if c == "group" else "right")
-        for label, x in ev.summaries.items():
-            if label == "all":
-                continue
-            v = x.value
-            g.add_row(label, str(x.n), *(f"{v[k]:.2f}" for k in ("cep50_m", "ce90_m", "le90_m", "mae_h_m",
-                                                                   "rmse_h_m", "bias_e_m", "bias_n_m", "bias_u_m")))
-        out.append(g)
-    fits = {k: f for k, f in ev.tle.items() if f is not None}
-    if fits:
-        m = RichTable(title="linear target-location-error model: horizontal error = a + b × slant range",
-                      caption="outliers removed once by Cook's distance; ± one standard error")
-        for c in ("group", "n", "removed", "a (m)", "b (m/km)", "R²", "p (slope)", "residual sd (m)"):
-            m.add_column(c, justify="left" if c == "group" else "right")
-        for label, f in fits.items():
-            m.add_row(label, str(f.n), str(f.n_removed), f"{f.intercept:.2f} ± {f.intercept_se:.2f}",
-                      f"{f.slope * 1000:.3f} ± {f.slope_se * 1000:.3f}", f"{f.r2:.3f}", f"{f.p_slope:.2g}",
-                      f"{f.residual_sd:.2f}")
-        out.append(m)
-    c = ev.coverage
-    if c is not None:
-        v = RichTable(title=f"is the predicted uncertainty honest? ({c.n} fixes with a covariance)",
-                      caption=f"95 % Clopper-Pearson intervals; sigma scale factor {c.scale:.2f} (1 = honest)")
-        for col in ("region", "predicted", "observed inside", "interval", "verdict"):
-            v.add_column(col, justify="left" if col in ("region", "verdict") else "right")
-        for name, (p, obs, lo, hi, _n) in c.circles.items():
-            v.add_row(f"own {name}", f"{p:.0%}", f"{obs:.1%}", f"{lo:.1%} – {hi:.1%}", c.verdict(obs, lo, hi, p))
-        for p in (0.5, 0.9):
-            i = int(np.argmin(np.abs(c.nominal - p)))
-            v.add_row(f"own {p:.0%} ellipse", f"{p:.0%}", f"{c.observed[i]:.1%}",
-                      f"{c.low[i]:.1%} – {c.high[i]:.1%}", c.verdict(c.observed[i], c.low[i], c.high[i], p))
-        out.append(v)
-    return out
-
-
-def evaluation_notes(ev) -> list[str]:
-    """What the tables do not say: matching, what was left out and why, small samples."""
-    notes = []
-    if ev.match != "paired":
-        notes.append(f"matched by {ev.match}: {ev.overall.n} of {ev.n_fixes} fixes"
-                     + (f"; {ev.unmatched} unmatched, e.g. {ev.unmatched_example}" if ev.unmatched else ""))
-    if ev.not_located:
-        notes.append(f"{sum(ev.not_located.values())} records were not located and are not in the statistics ("
-                     + ", ".join(f"{k} {v}" for k, v in ev.not_located.most_common()) + ")")
-    return notes + list(ev.notes)
+def rich_table(t) -> RichTable:
+    """A table given as data (title, header, rows of strings, caption, alignment()) as a rich
+    table: the jobs say what a table holds, the CLI and the HTML report how it looks."""
+    r = RichTable(title=t.title, caption=t.caption or None)
+    for h, a in zip(t.header, t.alignment(), strict=True):
+        r.add_column(h, justify="left" if a == "l" else "right")
+    for row in t.rows:
+        r.add_row(*(escape(str(c)) for c in row))
+    return r

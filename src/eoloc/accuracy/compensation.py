@@ -114,25 +114,44 @@ class Observed:
     groups: np.ndarray
 
 
-def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], *, dem=None,
-                        height_m: float | None = None, range_m: float | None = None) -> Observed:
-    """Locate every calibration observation (columns of the observations CSV: pose, pixel,
-    gcp_lat/lon/h) with one stop rule: ``dem`` (M4), ``height_m`` (M3) or ``range_m`` (M1), or
-    none: each GCP's own surveyed height (M3), which isolates the angular errors."""
-    from ..rules import AtHeight, rule_from_options
-
+def observation_pose(columns: dict[str, np.ndarray]) -> tuple[Pose, tuple[np.ndarray, np.ndarray]]:
+    """The reported pose (fields (N,)) and the pixels (u, v) of calibration observations."""
     c = columns
     g3 = c.get("sensor_roll_deg")
     g3 = np.zeros_like(c["u_px"]) if g3 is None else np.nan_to_num(g3, nan=0.0)
     pose = Pose(c["lat_deg"], c["lon_deg"], c["h_m"], c["yaw_deg"], c["pitch_deg"], c["roll_deg"],
                 (c["gimbal1_deg"], c["gimbal2_deg"], g3))
-    uv = (c["u_px"], c["v_px"])
+    return pose, (c["u_px"], c["v_px"])
+
+
+def observation_truth(columns: dict[str, np.ndarray]) -> np.ndarray:
+    """(N, 3) surveyed lat, lon, h of each observation's point."""
+    return np.stack([columns["gcp_lat_deg"], columns["gcp_lon_deg"], columns["gcp_h_m"]], -1)
+
+
+def observation_rule(columns: dict[str, np.ndarray], *, dem=None, height_m: float | None = None,
+                     range_m: float | None = None):
+    """The stop rule observations are located with: ``dem`` (M4), ``height_m`` (M3), ``range_m``
+    (M1), or none of them: each point's own surveyed height (M3)."""
+    from ..rules import AtHeight, rule_from_options
+
     if sum(x is not None for x in (dem, height_m, range_m)) > 1:
         raise ValueError("give at most one stop rule (dem, height_m or range_m)")
-    rule = (AtHeight(c["gcp_h_m"]) if dem is None and height_m is None and range_m is None
-            else rule_from_options(range_m=range_m, height_m=height_m, dem=dem))
+    if dem is None and height_m is None and range_m is None:
+        return AtHeight(columns["gcp_h_m"])
+    return rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
+
+
+def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], *, dem=None,
+                        height_m: float | None = None, range_m: float | None = None) -> Observed:
+    """Locate every calibration observation (columns of the observations CSV: pose, pixel,
+    gcp_lat/lon/h) with one stop rule: ``dem`` (M4), ``height_m`` (M3) or ``range_m`` (M1), or
+    none: each GCP's own surveyed height (M3), which isolates the angular errors."""
+    c = columns
+    pose, uv = observation_pose(c)
+    rule = observation_rule(c, dem=dem, height_m=height_m, range_m=range_m)
     fixes = rule.locate(sensor, pose, uv)
-    truth = np.stack([c["gcp_lat_deg"], c["gcp_lon_deg"], c["gcp_h_m"]], -1)
+    truth = observation_truth(c)
     groups = c.get("flight", np.full(c["u_px"].shape, "all", dtype=object))
     return Observed(fixes, error_features(sensor, pose, fixes, uv), error_enu(fixes, truth), np.asarray(groups))
 

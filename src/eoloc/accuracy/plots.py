@@ -109,7 +109,13 @@ def plot_sweep(points: Sequence[SweepPoint], path: str | Path, *, metric: str = 
 
 def plot_compensation(oblique_deg: np.ndarray, before_en: np.ndarray, after_en: dict[str, np.ndarray], rows,
                       path: str | Path, *, title: str = "location error against oblique angle") -> Path:
-    """PNG of [P] Fig. 1 with and without compensation: each fix's horizontal error against its
+    """PNG of :func:`compensation_figure`."""
+    return save_figure(compensation_figure(oblique_deg, before_en, after_en, rows, title=title), path)
+
+
+def compensation_figure(oblique_deg: np.ndarray, before_en: np.ndarray, after_en: dict[str, np.ndarray], rows, *,
+                        title: str = "location error against oblique angle"):
+    """[P] Fig. 1 with and without compensation: each fix's horizontal error against its
     oblique angle (left), and CEP50 by oblique band before and after (right, log scale). ``rows``:
     :func:`eoloc.accuracy.compensation.band_table` rows."""
     fig = _figure(11.0, 4.4)
@@ -140,10 +146,7 @@ def plot_compensation(oblique_deg: np.ndarray, before_en: np.ndarray, after_en: 
     bx.grid(True, axis="y", which="both", alpha=0.3)
     bx.legend(fontsize=8)
     fig.suptitle(title)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
+    return fig
 
 
 # -- accuracy against surveyed points (eoloc evaluate / eoloc report) ------------------------------

@@ -21,6 +21,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("map", "map_command"),
     ("compensate", "compensate"),
     ("evaluate", "evaluate"),
+    ("report", "report"),
     ("rectify", "rectify"),
     ("demo", "demo"),
 )

@@ -84,8 +84,8 @@ def _columns(text: str | None, option: str) -> tuple[str, ...] | None:
 def evaluate(fixes, truth_path, match, max_distance, fix_columns, truth_columns, fix_id, truth_id, group, factors,
              config_path, n_boot, level, seed, cooks_threshold, plots, as_json, out_dir) -> None:
     from ..io.export import json_safe
-    from ..jobs.evaluate import evaluate_job, report_dict, write_evaluation
-    from ..render import evaluation_notes, evaluation_tables
+    from ..jobs.evaluate import evaluate_job, evaluation_notes, evaluation_tables, report_dict, write_evaluation
+    from ..render import rich_table
 
     centre = None
     if config_path is not None:
@@ -102,7 +102,7 @@ def evaluate(fixes, truth_path, match, max_distance, fix_columns, truth_columns,
     report_issues(ev.issues)
     out_console = err_console if as_json else console
     for t in evaluation_tables(ev):
-        out_console.print(t)
+        out_console.print(rich_table(t))
     for note in evaluation_notes(ev):
         warn(note, "note")
     written = write_evaluation(ev, out_dir, plots=plots)

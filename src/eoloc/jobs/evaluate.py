@@ -305,3 +305,82 @@ def figures(ev: Evaluation, *, title: str = "") -> dict:
     if ev.coverage is not None:
         out["coverage"] = coverage_figure(ev.coverage)
     return out
+
+
+@dataclass(frozen=True)
+class TableData:
+    """A table as data: what the CLI prints (eoloc.render.rich_table) and the report writes."""
+
+    title: str
+    header: list[str]
+    rows: list[list[str]]
+    caption: str = ""
+    align: str = ""  # per column "l" or "r"; default: the first left, the rest right
+
+    def alignment(self) -> str:
+        return (self.align or "l").ljust(len(self.header), "r")
+
+
+def _num(x: float, fmt: str = ".2f") -> str:
+    return "—" if not np.isfinite(x) else format(x, fmt)
+
+
+def _interval(lo: float, hi: float) -> str:
+    return "—" if not (np.isfinite(lo) and np.isfinite(hi)) else f"{lo:.2f} – {hi:.2f}"
+
+
+def statistics_table(s: E.Summary, title: str) -> TableData:
+    pct = f"{s.level:.0%}"
+    rows = [[label, _num(s.value[k]), _interval(s.low[k], s.high[k]), what]
+            for k, (label, what) in E.STATISTICS.items()]
+    rows.append(["CEP (bivariate normal)", _num(s.cep_parametric_m), "",
+                 f"[Z15]: sigma E {_num(s.sigma_e_m)}, N {_num(s.sigma_n_m)}, rho {_num(s.rho_en, '+.2f')}"])
+    return TableData(title, ["statistic", "value (m)", f"{pct} interval", "what it is"], rows,
+                     f"{pct} percentile-bootstrap intervals ({s.n_boot} resamples, seed {s.seed}); errors are fix "
+                     "minus truth", align="lrrl")
+
+
+def evaluation_tables(ev: Evaluation, title: str = "") -> list[TableData]:
+    """The evaluation's tables: statistics with intervals, by group, the TLE model, the coverage."""
+    prefix = f"{title}: " if title else ""
+    out = [statistics_table(ev.overall, f"{prefix}accuracy of {ev.overall.n} fixes against the surveyed points")]
+    groups = {k: v for k, v in ev.summaries.items() if k != "all"}
+    if groups:
+        keys = ("cep50_m", "ce90_m", "le90_m", "mae_h_m", "rmse_h_m", "bias_e_m", "bias_n_m", "bias_u_m")
+        out.append(TableData(f"{prefix}by {ev.group_column}", ["group", "n", "CEP", "CE90", "LE90", "MAE h", "RMSE h",
+                                                              "bias E", "bias N", "bias U"],
+                             [[k, str(x.n), *(_num(x.value[q]) for q in keys)] for k, x in groups.items()],
+                             "metres; every interval in the summary CSV"))
+    fits = {k: f for k, f in ev.tle.items() if f is not None}
+    if fits:
+        out.append(TableData(f"{prefix}linear target-location-error model: horizontal error = a + b × slant range",
+                             ["group", "n", "removed", "a (m)", "b (m/km)", "R²", "p (slope)", "residual sd (m)"],
+                             [[k, str(f.n), str(f.n_removed), f"{f.intercept:.2f} ± {f.intercept_se:.2f}",
+                               f"{f.slope * 1000:.3f} ± {f.slope_se * 1000:.3f}", f"{f.r2:.3f}", f"{f.p_slope:.2g}",
+                               _num(f.residual_sd)] for k, f in fits.items()],
+                             "least squares after removing the points whose Cook's distance exceeds "
+                             f"{fits.get('all', next(iter(fits.values()))).threshold:.3g}; ± one standard error"))
+    c = ev.coverage
+    if c is not None:
+        rows = [[f"own {name}", f"{p:.0%}", f"{obs:.1%}", f"{lo:.1%} – {hi:.1%}", c.verdict(obs, lo, hi, p)]
+                for name, (p, obs, lo, hi, _n) in c.circles.items()]
+        for p in (0.5, 0.9):
+            i = int(np.argmin(np.abs(c.nominal - p)))
+            rows.append([f"own {p:.0%} ellipse", f"{p:.0%}", f"{c.observed[i]:.1%}",
+                         f"{c.low[i]:.1%} – {c.high[i]:.1%}", c.verdict(c.observed[i], c.low[i], c.high[i], p)])
+        out.append(TableData(f"{prefix}is the predicted uncertainty honest? ({c.n} fixes with a covariance)",
+                             ["region", "predicted", "observed inside", "95 % interval", "verdict"], rows,
+                             f"Clopper-Pearson intervals; sigma scale factor {c.scale:.2f} (1 = honest)", "lrrrl"))
+    return out
+
+
+def evaluation_notes(ev: Evaluation) -> list[str]:
+    """What the tables do not say: matching, what was left out and why, small samples."""
+    notes = []
+    if ev.match != "paired":
+        notes.append(f"matched by {ev.match}: {ev.overall.n} of {ev.n_fixes} fixes"
+                     + (f"; {ev.unmatched} unmatched, e.g. {ev.unmatched_example}" if ev.unmatched else ""))
+    if ev.not_located:
+        notes.append(f"{sum(ev.not_located.values())} records were not located and are not in the statistics ("
+                     + ", ".join(f"{k} {v}" for k, v in ev.not_located.most_common()) + ")")
+    return notes + list(ev.notes)
