@@ -7,7 +7,6 @@ import csv
 import json
 import math
 import re
-import shutil
 import xml.etree.ElementTree as ET
 from importlib import resources
 from pathlib import Path
@@ -17,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 import eoloc
+from browser import chromium
 from eoloc.cli import main
 from eoloc.io.klv import klv_telemetry, read_klv
 from eoloc.terrain.geoid import default_geoid
@@ -131,26 +131,6 @@ def test_reencoded_stream_carries_the_fixes_in_tags_40_to_46(run):
     assert checked >= 30
 
 
-CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-               "--disable-background-networking", "--disable-component-update", "--disable-sync",
-               "--disable-dev-shm-usage")
-
-
-def _chromium():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.options import Options
-    from selenium.webdriver.chrome.service import Service
-
-    browser, driver = shutil.which("chromium"), shutil.which("chromedriver")
-    assert browser and driver, "the map test needs Debian's chromium and chromium-driver: `make test` installs them"
-    opts = Options()
-    for a in CHROME_ARGS:
-        opts.add_argument(a)
-    opts.binary_location = browser
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=Service(driver), options=opts)
-
-
 def test_map_loads_offline_in_chromium_with_every_marker(run):
     out, _, rows = run
     html = (out / "map.html").read_text()
@@ -158,7 +138,7 @@ def test_map_loads_offline_in_chromium_with_every_marker(run):
     prints = json.loads((out / "footprints.geojson").read_text())["features"]
     n_prints = sum(f["geometry"] is not None for f in prints)
     n_ok = sum(r["status"] == "OK" for r in rows)
-    d = _chromium()
+    d = chromium()
     try:
         d.get((out / "map.html").as_uri())
         d.implicitly_wait(2)

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_klv_outputs import _chromium
 
 import eoloc
+from browser import chromium
 from eoloc.cli import main
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
@@ -39,7 +39,7 @@ def test_report_renders_in_chromium_with_every_plot(report):
     names = re.findall(r'data-figure="([^"]+)"', html)
     assert names == ["located-errors", "located-factors", "located-coverage", "stage1-errors", "stage2-errors",
                      "compensation"]
-    d = _chromium()
+    d = chromium()
     try:
         d.get((out / "report.html").as_uri())
         state = d.execute_script(

@@ -22,6 +22,7 @@ Hyndman & Fan's type 7, which is also R's default (so R scripts give the same nu
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -414,7 +415,7 @@ def binned(x: ArrayLike, horizontal_m: ArrayLike, vertical_m: ArrayLike | None =
     if edges.size < 2:
         edges = np.array([x.min(), x.max()])
     out = []
-    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+    for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
         m = (x >= lo) & ((x < hi) if i < edges.size - 2 else (x <= hi))
         if m.any():
             vv = v[m][np.isfinite(v[m])]

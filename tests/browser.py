@@ -1,0 +1,25 @@
+"""A real headless Chromium for the tests of pages (Debian's chromium and chromium-driver, which
+`make test` installs)."""
+
+from __future__ import annotations
+
+import shutil
+
+CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+               "--disable-background-networking", "--disable-component-update", "--disable-sync",
+               "--disable-dev-shm-usage")
+
+
+def chromium():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    browser, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    assert browser and driver, "the map test needs Debian's chromium and chromium-driver: `make test` installs them"
+    opts = Options()
+    for a in CHROME_ARGS:
+        opts.add_argument(a)
+    opts.binary_location = browser
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(driver), options=opts)
