@@ -23,3 +23,17 @@ def chromium():
     opts.binary_location = browser
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(driver), options=opts)
+
+
+def page_state(path, script: str):
+    """Load a local page in headless Chromium and run ``script`` (a function body returning a
+    value) in it: (that value, the console's errors)."""
+    d = chromium()
+    try:
+        d.get(path.as_uri())
+        d.implicitly_wait(2)
+        value = d.execute_script(script)
+        errors = [e for e in d.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    finally:
+        d.quit()
+    return value, errors

@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 import eoloc
-from browser import chromium
+from browser import page_state
 from eoloc.cli import main
 from eoloc.io.klv import klv_telemetry, read_klv
 from eoloc.terrain.geoid import default_geoid
@@ -138,18 +138,12 @@ def test_map_loads_offline_in_chromium_with_every_marker(run):
     prints = json.loads((out / "footprints.geojson").read_text())["features"]
     n_prints = sum(f["geometry"] is not None for f in prints)
     n_ok = sum(r["status"] == "OK" for r in rows)
-    d = chromium()
-    try:
-        d.get((out / "map.html").as_uri())
-        d.implicitly_wait(2)
-        counts = d.execute_script(
-            "const n = s => document.querySelectorAll(s).length;"
-            "return {leaflet: window.L && L.version, targets: n('path.eoloc-target'), cep: n('path.eoloc-cep'),"
-            " footprints: n('path.eoloc-footprint'), aircraft: n('path.eoloc-aircraft'),"
-            " terrain: n('img.leaflet-image-layer'), title: document.getElementById('eoloc-title').textContent};")
-        errors = [e for e in d.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
-    finally:
-        d.quit()
+    counts, errors = page_state(
+        out / "map.html",
+        "const n = s => document.querySelectorAll(s).length;"
+        "return {leaflet: window.L && L.version, targets: n('path.eoloc-target'), cep: n('path.eoloc-cep'),"
+        " footprints: n('path.eoloc-footprint'), aircraft: n('path.eoloc-aircraft'),"
+        " terrain: n('img.leaflet-image-layer'), title: document.getElementById('eoloc-title').textContent};")
     assert errors == []
     assert counts == {"leaflet": "1.9.4", "targets": n_ok, "cep": n_ok, "footprints": n_prints, "aircraft": 1,
                       "terrain": 1, "title": "eoloc: flight.klv"}

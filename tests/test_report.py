@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 import eoloc
-from browser import chromium
+from browser import page_state
 from eoloc.cli import main
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
@@ -39,17 +39,12 @@ def test_report_renders_in_chromium_with_every_plot(report):
     names = re.findall(r'data-figure="([^"]+)"', html)
     assert names == ["located-errors", "located-factors", "located-coverage", "stage1-errors", "stage2-errors",
                      "compensation"]
-    d = chromium()
-    try:
-        d.get((out / "report.html").as_uri())
-        state = d.execute_script(
-            "const imgs = [...document.images];"
-            "return {n: imgs.length, loaded: imgs.filter(i => i.complete && i.naturalWidth > 300).length,"
-            " declared: +document.body.dataset.figures, tables: document.querySelectorAll('table').length,"
-            " h1: document.querySelector('h1').textContent};")
-        errors = [e for e in d.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
-    finally:
-        d.quit()
+    state, errors = page_state(
+        out / "report.html",
+        "const imgs = [...document.images];"
+        "return {n: imgs.length, loaded: imgs.filter(i => i.complete && i.naturalWidth > 300).length,"
+        " declared: +document.body.dataset.figures, tables: document.querySelectorAll('table').length,"
+        " h1: document.querySelector('h1').textContent};")
     assert errors == []
     assert state["n"] == state["loaded"] == state["declared"] == len(names)
     assert state["tables"] >= 8 and state["h1"] == "eoloc accuracy report: train.csv"

@@ -7,7 +7,7 @@ import json
 import click
 
 from .main import console, err_console, fail, report_issues, warn
-from .options import json_option, out_option
+from .options import evaluation_options, json_option, out_option
 
 EVALUATE_HELP = """Accuracy of fixes against surveyed points (GCPs): CEP, CE90, LE90, MAE, RMSE and the
 mean bias east/north/up, each with a bootstrap confidence interval; by group; error against slant
@@ -71,13 +71,7 @@ def _columns(text: str | None, option: str) -> tuple[str, ...] | None:
               help="Also plot the error against this numeric column of the fixes; repeat for several.")
 @click.option("--config", "config_path", default=None, type=click.Path(dir_okay=False), metavar="CONFIG.toml",
               help="Camera config: its principal point gives each pixel's distance from the image centre.")
-@click.option("--bootstrap", "n_boot", type=click.IntRange(0, 1_000_000), default=2000, show_default=True,
-              metavar="N", help="Bootstrap resamples for the intervals (0: none).")
-@click.option("--level", type=click.FloatRange(0.5, 0.999), default=0.95, show_default=True,
-              help="Confidence level of the intervals.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the bootstrap.")
-@click.option("--cooks-threshold", type=click.FloatRange(0.0, min_open=True), default=None, metavar="D",
-              help="Cook's distance above which a point is left out of the TLE model [default: 4/n].")
+@evaluation_options
 @click.option("--plots/--no-plots", default=True, show_default=True, help="Write the PNGs.")
 @json_option("Print the evaluation as one JSON document on stdout (tables and notes go to stderr).")
 @out_option("evaluation_points.csv, evaluation_summary.csv, evaluation.json and the PNGs", default="eoloc-evaluate")

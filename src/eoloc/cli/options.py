@@ -189,3 +189,17 @@ def float_list(text: str) -> list[float]:
     except ValueError:
         raise click.BadParameter(f"give finite numbers like 10,25,50 or start:stop:step (step > 0, stop >= start), "
                                  f"got {text!r}") from None
+
+
+def evaluation_options(fn):
+    """The statistics options of `eoloc evaluate` and `eoloc report`: bootstrap, level, seed and the
+    TLE model's Cook's-distance threshold."""
+    return _apply([
+        click.option("--bootstrap", "n_boot", type=click.IntRange(0, 1_000_000), default=2000, show_default=True,
+                     metavar="N", help="Bootstrap resamples for the intervals (0: none)."),
+        click.option("--level", type=click.FloatRange(0.5, 0.999), default=0.95, show_default=True,
+                     help="Confidence level of the intervals."),
+        click.option("--seed", type=int, default=0, show_default=True, help="Seed of the bootstrap."),
+        click.option("--cooks-threshold", type=click.FloatRange(0.0, min_open=True), default=None, metavar="D",
+                     help="Cook's distance above which a point is left out of the TLE model [default: 4/n]."),
+    ])(fn)

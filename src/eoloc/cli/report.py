@@ -9,7 +9,7 @@ import click
 
 from .common import load_config, open_dem, progress
 from .main import console, err_console, report_issues, warn
-from .options import config_option, dem_options, out_option, target_height_option
+from .options import config_option, dem_options, evaluation_options, out_option, target_height_option
 
 REPORT_HELP = """A flight-test accuracy report from observations of surveyed points: locate, evaluate,
 calibrate (before/after), optionally cross-validate the learned compensation — one
@@ -43,13 +43,7 @@ eoloc report OBSERVATIONS.csv --config CAMERA.toml [--dem F | --target-height H]
               help="Installation parameters to calibrate, comma-separated: mount, boresight, heading; 'none' to "
                    "skip the calibration.")
 @click.option("--compensation", is_flag=True, help="Also cross-validate the learned compensation by flight.")
-@click.option("--bootstrap", "n_boot", type=click.IntRange(0, 1_000_000), default=2000, show_default=True,
-              metavar="N", help="Bootstrap resamples for the intervals (0: none).")
-@click.option("--level", type=click.FloatRange(0.5, 0.999), default=0.95, show_default=True,
-              help="Confidence level of the intervals.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the bootstrap.")
-@click.option("--cooks-threshold", type=click.FloatRange(0.0, min_open=True), default=None, metavar="D",
-              help="Cook's distance above which a point is left out of the TLE model [default: 4/n].")
+@evaluation_options
 @out_option("report.html, report_points.csv and report_summary.csv", default="eoloc-report")
 def report(observations, config_path, dem_paths, vertical, geoid, dem_crs, target_height, estimate, compensation,
            n_boot, level, seed, cooks_threshold, out_dir) -> None:
