@@ -274,3 +274,15 @@ def test_evaluate_on_the_demo_klv_fixes_with_their_covariance(tmp_path):
     assert ev.match == "nearest" and ev.overall.n >= 50
     assert ev.coverage is not None and ev.coverage.n == ev.overall.n
     assert "range_m" in ev.factors and ev.tle["all"] is not None
+
+
+def test_named_columns_win_over_eolocs_and_blank_ids_match_nothing(tmp_path):
+    """--fix-columns picks the named columns even when the file also has lat_deg/lon_deg; a fix
+    without an id is unmatched, never paired with a truth point that has none either."""
+    p = _write_csv(tmp_path / "both.csv", ["lat_deg", "lon_deg", "Lat2", "Lon2", "id"],
+                   [(0.0, 0.0, 46.52, 7.41, "G1"), (0.0, 0.0, 46.5213, 7.4125, "")])
+    pts = read_points(p, columns=("Lat2", "Lon2"))
+    np.testing.assert_allclose(pts.lat_deg, [46.52, 46.5213])
+    assert np.isnan(pts.h_m).all()
+    m = E.match_ids(pts.column("id"), np.array(["G1", "", "G2"], dtype=object))
+    assert m.index.tolist() == [0, -1]

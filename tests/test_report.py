@@ -65,6 +65,9 @@ def test_report_csv_holds_every_observation_and_stage(report):
     located = np.array([float(r["located_horizontal_m"]) for r in rows if r["located_horizontal_m"]])
     assert float(overall["cep50_m"]) == pytest.approx(np.median(located), abs=1e-3)
     assert "flight held out" in text
+    # progress off a terminal: each step said as it starts
+    for step in ("locating...", "calibrating with each flight held out...", "cross-validating the compensation..."):
+        assert step in text, step
 
 
 def test_held_out_calibration_recovers_a_mount_error(tmp_path):

@@ -97,11 +97,12 @@ def error_features(sensor: SensorModel, pose: Pose, fixes: Fixes, pixels=None) -
 
 
 def error_enu(fixes: Fixes, truth_lat_lon_h: ArrayLike) -> np.ndarray:
-    """(..., 3) error of each fix (fix minus truth) in east, north, up metres at the truth."""
+    """(..., 3) error of each fix (fix minus truth) in east, north, up metres at the truth
+    (:func:`eoloc.accuracy.evaluation.error_enu` of the fixes' positions)."""
+    from .evaluation import error_enu as enu_of
+
     t = np.asarray(truth_lat_lon_h, dtype=np.float64)
-    p_true = np.stack(geodesy.geodetic_to_ecef(t[..., 0], t[..., 1], t[..., 2]), -1)
-    R = geodesy.R_ecef_enu(t[..., 0], t[..., 1])
-    return np.einsum("...ji,...j->...i", R, fixes.p_ecef() - p_true)
+    return enu_of(fixes.lat_deg, fixes.lon_deg, fixes.h_m, t[..., 0], t[..., 1], t[..., 2])
 
 
 @dataclass(frozen=True)

@@ -76,7 +76,7 @@ class Match:
     ambiguous: np.ndarray
 
 
-def _unit_ground(lat_deg, lon_deg) -> np.ndarray:
+def _on_ellipsoid(lat_deg, lon_deg) -> np.ndarray:
     return np.stack(geodesy.geodetic_to_ecef(lat_deg, lon_deg, np.zeros(np.shape(lat_deg))), -1)
 
 
@@ -87,8 +87,8 @@ def match_nearest(fix_lat_deg: ArrayLike, fix_lon_deg: ArrayLike, truth_lat_deg:
     10 km). Fixes with none that close get index -1."""
     from scipy.spatial import cKDTree
 
-    f = _unit_ground(np.asarray(fix_lat_deg, dtype=np.float64), np.asarray(fix_lon_deg, dtype=np.float64))
-    t = _unit_ground(np.asarray(truth_lat_deg, dtype=np.float64), np.asarray(truth_lon_deg, dtype=np.float64))
+    f = _on_ellipsoid(np.asarray(fix_lat_deg, dtype=np.float64), np.asarray(fix_lon_deg, dtype=np.float64))
+    t = _on_ellipsoid(np.asarray(truth_lat_deg, dtype=np.float64), np.asarray(truth_lon_deg, dtype=np.float64))
     n = f.shape[0]
     index = np.full(n, -1, dtype=np.intp)
     d1 = np.full(n, np.nan)
@@ -114,7 +114,8 @@ def match_ids(fix_ids: ArrayLike, truth_ids: ArrayLike) -> Match:
     not among the truth points. Truth ids must be unique (the first of a repeated id is used)."""
     lookup: dict[str, int] = {}
     for i, t in enumerate(np.asarray(truth_ids, dtype=object).ravel()):
-        lookup.setdefault(str(t).strip(), i)
+        if t is not None and str(t).strip():  # a blank id names nothing
+            lookup.setdefault(str(t).strip(), i)
     fids = np.asarray(fix_ids, dtype=object).ravel()
     index = np.array([lookup.get(str(x).strip(), -1) if x is not None else -1 for x in fids], dtype=np.intp)
     nan = np.full(index.shape, np.nan)

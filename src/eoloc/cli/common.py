@@ -76,12 +76,16 @@ class LineProgress:
         t["done"] += advance
         self._line(t)
 
-    def update(self, task: int, completed=None, total=None, **_) -> None:
+    def update(self, task: int, completed=None, total=None, description: str | None = None, **_) -> None:
         t = self.tasks[task]
         if total is not None:
             t["total"] = total
         if completed is not None:
             t["done"] = completed
+        if description is not None and description != t["description"]:  # a new step: said at once
+            t["description"] = description
+            err_console.print(f"{description}...", highlight=False)
+            return
         self._line(t)
 
     def _line(self, t: dict, force: bool = False) -> None:

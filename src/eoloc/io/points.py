@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import xml.etree.ElementTree as ET
 import zipfile
 from collections import Counter
@@ -48,8 +49,9 @@ UNKNOWN_COT = 9999999.0
 @dataclass
 class Points:
     """Points of one file. ``where``: 1-based line (CSV) or feature/placemark/event number, named
-    by ``unit``; ``columns``: every other column, numbers as float64 (NaN where empty), the rest as
-    str objects; ``not_located``: records whose status says they have no position, by status."""
+    by ``unit``; ``columns``: every other column as read, as text (str objects, "" where empty;
+    :meth:`numeric` gives a column as numbers); ``not_located``: records whose status says they
+    have no position, by status."""
 
     path: str
     lat_deg: np.ndarray
@@ -65,8 +67,9 @@ class Points:
         return int(self.lat_deg.size)
 
     def place(self, i: int) -> str:
-        return f"{self.path}:{int(self.where[i])}" if self.unit == "line" else f"{self.path} {self.unit} " \
-                                                                                f"{int(self.where[i])}"
+        """Where point ``i`` came from, as messages name it (file:line, or file feature n)."""
+        n = int(self.where[i])
+        return f"{self.path}:{n}" if self.unit == "line" else f"{self.path} {self.unit} {n}"
 
     def has_heights(self) -> bool:
         return bool(np.isfinite(self.h_m).any())
@@ -75,9 +78,25 @@ class Points:
         return self.columns.get(name.lower())
 
     def numeric(self, name: str) -> np.ndarray | None:
-        """A column as float64 (None when absent or not numeric)."""
+        """A column as float64, NaN where empty (None when absent or when a cell is not a number)."""
         v = self.column(name)
-        return v if v is not None and v.dtype.kind == "f" else None
+        return None if v is None else numbers(v)
+
+
+def numbers(text: np.ndarray) -> np.ndarray | None:
+    """Text cells as float64 (NaN where blank), or None when a non-blank cell is not a number."""
+    t = np.asarray(text, dtype=str)
+    blank = np.char.strip(t) == ""
+    try:
+        return np.where(blank, "nan", t).astype(np.float64)
+    except ValueError:
+        return None
+
+
+def _text(values) -> np.ndarray:
+    """Cells of any kind (str, numbers, None) as str objects, "" for None."""
+    vals = np.asarray(values, dtype=object)
+    return np.where(np.equal(vals, None), "", vals).astype(str).astype(object)
 
 
 def read_points(path: str | Path, *, columns: tuple[str, ...] | None = None, what: str = "points") -> Points:
@@ -118,43 +137,22 @@ def _kind(path: Path) -> str:
 
 
 def _read_csv(path: Path, cols: tuple[str, ...] | None, what: str) -> Points:
-    names = cols or ("lat_deg", "lon_deg", "h_m")
-    aliases = ((), (), ()) if cols else (LAT_NAMES[1:], LON_NAMES[1:], H_NAMES[1:])
-    declared = [Column("lat_deg", (names[0],) + aliases[0] if names[0] != "lat_deg" else aliases[0],
-                       required=False, lo=-90, hi=90, unit="deg"),
-                Column("lon_deg", (names[1],) + aliases[1] if names[1] != "lon_deg" else aliases[1],
-                       required=False, lo=-180, hi=360, unit="deg")]
-    if len(names) > 2:
-        declared.append(Column("h_m", (names[2],) + aliases[2] if names[2] != "h_m" else aliases[2], required=False,
-                               lo=-12_000, hi=100_000, unit="m"))
+    """The user's column names (``cols``) or eoloc's with the usual other names."""
+    spec = (("lat_deg", LAT_NAMES[1:], -90, 90, "deg"), ("lon_deg", LON_NAMES[1:], -180, 360, "deg"),
+            ("h_m", H_NAMES[1:], -12_000, 100_000, "m"))
+    declared = [Column(cols[i] if cols else name, () if cols else aliases, required=False, lo=lo, hi=hi, unit=unit)
+                for i, (name, aliases, lo, hi, unit) in enumerate(spec) if not cols or i < len(cols)]
     t = read_table(path, declared, what=what, key=(), keep_other=True)
     src = str(path)
     missing = [c for c in declared[:2] if c.name not in t.columns]
     if missing:
-        names = ", ".join(c.name + (f" (or {', '.join(a for a in c.aliases if a != c.name)})" if c.aliases else "")
-                          for c in missing)
+        names = ", ".join(c.name + (f" (or {', '.join(c.aliases)})" if c.aliases else "") for c in missing)
         raise TableError(f"{what} file {src!r} lacks required column(s) {names}: name its latitude, longitude and "
                          f"height columns with --{what.split()[0]}-columns LAT,LON,H")
-    lat, lon = t.columns.pop("lat_deg"), t.columns.pop("lon_deg")
-    h = t.columns.pop("h_m", np.full(len(t), np.nan))
-    other = {k: _typed(v) for k, v in t.columns.items()}
-    return _finish(src, lat, lon, h, other, np.asarray(t.line), "line", list(t.issues))
-
-
-def _typed(values: np.ndarray) -> np.ndarray:
-    """A text column as float64 when every non-empty cell is a number, else as str objects."""
-    vals = np.asarray(values, dtype=object)
-    out = np.full(vals.size, np.nan)
-    for i, v in enumerate(vals):
-        if v is None or (isinstance(v, str) and not v.strip()):
-            continue
-        if isinstance(v, bool):
-            return vals
-        try:
-            out[i] = float(v)
-        except (TypeError, ValueError):
-            return np.array(["" if x is None else str(x) for x in vals], dtype=object)
-    return out
+    lat, lon = t.columns.pop(declared[0].name), t.columns.pop(declared[1].name)
+    h = t.columns.pop(declared[2].name) if len(declared) > 2 and declared[2].name in t.columns else np.nan
+    other = {k: _text(v) for k, v in t.columns.items()}
+    return _finish(src, lat, lon, np.broadcast_to(h, lat.shape), other, np.asarray(t.line), "line", list(t.issues))
 
 
 def _finish(src: str, lat, lon, h, other: dict, where, unit: str, issues: list[Issue]) -> Points:
@@ -164,7 +162,7 @@ def _finish(src: str, lat, lon, h, other: dict, where, unit: str, issues: list[I
     has = np.isfinite(lat) & np.isfinite(lon)
     status = other.get("status")
     not_located: Counter = Counter()
-    if status is not None and status.dtype == object:
+    if status is not None:
         failed = (status != "OK") & (status != "")
         not_located.update(str(s) for s in status[failed & ~has])
         has &= ~failed
@@ -183,7 +181,7 @@ def _from_records(src: str, records: list[tuple[int, dict, tuple[float, float, f
     """Points from (number, properties, (lat, lon, h) of the geometry or None) records."""
     names = list(dict.fromkeys(k.lower() for _, props, _ in records for k in props))
     lower = [{k.lower(): v for k, v in props.items()} for _, props, _ in records]
-    other = {k: _typed(np.array([p.get(k) for p in lower], dtype=object)) for k in names}
+    other = {k: _text([p.get(k) for p in lower]) for k in names}
     where = np.array([n for n, _, _ in records], dtype=np.int64)
     n = len(records)
     if cols:
@@ -191,17 +189,18 @@ def _from_records(src: str, records: list[tuple[int, dict, tuple[float, float, f
         if missing:
             raise TableError(f"{what} file {src!r} has no propert{'y' if len(missing) == 1 else 'ies'} "
                              f"{', '.join(repr(m) for m in missing)}; it has {names}")
-        bad = [c for c in cols if other[c].dtype != np.float64]
+        values = [numbers(other[c]) for c in cols]
+        bad = [c for c, v in zip(cols, values, strict=True) if v is None]
         if bad:
             raise TableError(f"{what} file {src!r}: property {bad[0]!r} is not numeric in every record")
-        lat, lon = other[cols[0]], other[cols[1]]
-        h = other[cols[2]] if len(cols) > 2 else np.full(n, np.nan)
+        lat, lon = values[0], values[1]
+        h = values[2] if len(cols) > 2 else np.full(n, np.nan)
     else:
         geo = np.array([g if g is not None else (math.nan,) * 3 for _, _, g in records], dtype=np.float64)
         geo = geo.reshape(n, 3)
         lat, lon, h = geo[:, 0], geo[:, 1], geo[:, 2]
-        prop_h = other.get("h_m")
-        if prop_h is not None and prop_h.dtype == np.float64:  # eoloc's own ellipsoidal height column
+        prop_h = numbers(other["h_m"]) if "h_m" in other else None
+        if prop_h is not None:  # eoloc's own ellipsoidal height column
             h = np.where(np.isfinite(prop_h), prop_h, h)
     with np.errstate(invalid="ignore"):
         wild = (np.abs(lat) > 90) | (lon < -180) | (lon > 360)
@@ -373,8 +372,7 @@ def _cot_documents(path: Path, what: str) -> list[tuple[str, bytes]]:
 
 
 def _events(data: bytes, src: str, what: str) -> list[ET.Element]:
-    text = data.decode("utf-8", errors="replace")
-    body = "".join(line for line in text.splitlines(keepends=True) if not line.lstrip().startswith("<?xml"))
+    body = re.sub(r"<\?xml[^>]*\?>", "", data.decode("utf-8", errors="replace"))  # declarations of each event
     root = _xml(f"<eoloc-root>{body}</eoloc-root>".encode(), src, what, "CoT")
     return [e for e in root.iter() if _local(e.tag) == "event"]
 

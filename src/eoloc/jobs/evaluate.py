@@ -5,7 +5,7 @@ slant range, and the honesty of the fixes' own uncertainty. No printing here: th
 
 from __future__ import annotations
 
-import math
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -126,27 +126,26 @@ def evaluate_points(fixes: Points, truth: Points, *, match: str = "auto", max_di
     for name, pts, given in ((fid, fixes, fix_id), (tid, truth, truth_id)):
         if given and pts.column(name) is None:
             raise InputError(f"{pts.path} has no column {given!r} (its columns: {', '.join(pts.columns)})")
+    by_id = E.match_ids(fixes.column(fid), truth.column(tid)) if fid and tid else None
     how = match
     auto_note = ""
     if match == "auto":
-        how = "id" if fid and tid else "nearest"
-        if how == "id" and not set(np.asarray(fixes.column(fid), dtype=object).astype(str).tolist()) & set(
-                np.asarray(truth.column(tid), dtype=object).astype(str).tolist()):
-            how = "nearest"
+        how = "id" if by_id is not None and (by_id.index >= 0).any() else "nearest"
+        if by_id is not None and how == "nearest":
             auto_note = (f"no fix id ({fid!r}) equals a truth id ({tid!r}): matched each fix to the nearest truth "
                          f"point within {max_distance_m:g} m instead (--match id to insist)")
     if how == "id":
-        if not (fid and tid):
+        if by_id is None:
             which = fixes.path if not fid else truth.path
             raise InputError(f"--match id: {which} has no id column (looked for "
                              f"{', '.join(FIX_IDS if not fid else TRUTH_IDS)}); name it with --fix-id/--truth-id "
                              "or use --match nearest")
-        t_ids = np.asarray(truth.column(tid), dtype=object).astype(str)
-        dup = [k for k, c in Counter(t_ids.tolist()).items() if c > 1]
+        counts = Counter(str(x).strip() for x in truth.column(tid))
+        dup = [k for k, c in counts.items() if c > 1]
         if dup:
-            raise InputError(f"{truth.path}: truth id {dup[0]!r} is used by {Counter(t_ids.tolist())[dup[0]]} points; "
+            raise InputError(f"{truth.path}: truth id {dup[0]!r} is used by {counts[dup[0]]} points; "
                              "ids must be unique to match by id (or use --match nearest)")
-        m = E.match_ids(np.asarray(fixes.column(fid), dtype=object).astype(str), t_ids)
+        m = by_id
     else:
         if not max_distance_m > 0:
             raise InputError(f"--max-distance must be > 0 m, got {max_distance_m!r}")
@@ -168,28 +167,25 @@ def evaluate_points(fixes: Points, truth: Points, *, match: str = "auto", max_di
     idx = m.index[ok]
     enu = E.error_enu(fixes.lat_deg[ok], fixes.lon_deg[ok], fixes.h_m[ok], truth.lat_deg[idx], truth.lon_deg[idx],
                       truth.h_m[idx])
-    columns = {"fix": np.array([fixes.place(i) for i in np.flatnonzero(ok)], dtype=object)}
+    columns = {f"fix_{fixes.unit}": fixes.where[ok]}
     if fid:
-        columns["fix_id"] = np.asarray(fixes.column(fid))[ok]
-    columns["truth"] = np.asarray(truth.column(tid))[idx] if tid else idx + 1
+        columns["fix_id"] = fixes.column(fid)[ok]
+    columns["truth"] = truth.column(tid)[idx] if tid else idx + 1
     if how == "nearest":
         columns["match_distance_m"] = m.distance_m[ok]
         columns["ambiguous"] = m.ambiguous[ok]
     groups = None
     if group:
-        gcol = fixes.column(group) if fixes.column(group) is not None else None
-        if gcol is not None:
-            groups = np.asarray(gcol, dtype=object)[ok]
+        if fixes.column(group) is not None:
+            groups = fixes.column(group)[ok]
         elif truth.column(group) is not None:
-            groups = np.asarray(truth.column(group), dtype=object)[idx]
+            groups = truth.column(group)[idx]
         else:
             raise InputError(f"--group {group!r}: neither {fixes.path} nor {truth.path} has that column "
                              f"(the fixes have {', '.join(fixes.columns)})")
-        groups = np.array(["" if (isinstance(x, float) and math.isnan(x)) else
-                           (f"{x:g}" if isinstance(x, float) else str(x)) for x in groups], dtype=object)
     factors = _factors(fixes, ok, extra_factors, image_centre_px)
-    cov = {k: fixes.numeric(k)[ok] for k in ("sigma_e_m", "sigma_n_m", "rho_en", "sigma_u_m", "cep50_m", "ce90_m",
-                                             "le90_m") if fixes.numeric(k) is not None}
+    cov = {k: v[ok] for k in ("sigma_e_m", "sigma_n_m", "rho_en", "sigma_u_m", "cep50_m", "ce90_m", "le90_m")
+           if (v := fixes.numeric(k)) is not None}
     ev = evaluate_errors(enu, groups=groups, group_column=group, factors=factors, covariance=cov or None,
                          columns=columns, n_boot=n_boot, level=level, seed=seed, cooks_threshold=cooks_threshold)
     ev.match, ev.n_fixes, ev.unmatched, ev.unmatched_example = how, len(fixes), unmatched, example
@@ -211,7 +207,7 @@ def evaluate_points(fixes: Points, truth: Points, *, match: str = "auto", max_di
 def _factors(fixes: Points, ok: np.ndarray, extra: tuple[str, ...], centre) -> dict[str, tuple[str, np.ndarray]]:
     out = {}
     for name, (label, names) in FACTORS.items():
-        col = next((fixes.numeric(n) for n in names if fixes.numeric(n) is not None), None)
+        col = next((v for n in names if (v := fixes.numeric(n)) is not None), None)
         if col is not None:
             out[name] = (label, col[ok])
     if "pixel_radius_px" not in out and centre is not None:
@@ -260,7 +256,7 @@ def report_dict(ev: Evaluation) -> dict:
            "level": ev.overall.level, "bootstrap": {"replicates": ev.overall.n_boot, "seed": ev.overall.seed,
                                                     "method": "percentile"},
            "summary": summary_rows(ev),
-           "bins": {k: [b.__dict__ for b in v] for k, v in ev.bins.items()}, "notes": ev.notes}
+           "bins": {k: [dataclasses.asdict(b) for b in v] for k, v in ev.bins.items()}, "notes": ev.notes}
     if ev.coverage is not None:
         c = ev.coverage
         out["coverage"] = {"n": c.n, "scale": c.scale, "nominal": c.nominal.tolist(), "observed": c.observed.tolist(),

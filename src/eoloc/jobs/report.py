@@ -46,13 +46,6 @@ class ReportJob:
     notes: list[str] = field(default_factory=list)
 
 
-def _take(pose, mask):
-    """The observations ``mask`` of a pose whose fields are (N,) arrays."""
-    return dataclasses.replace(pose, **{f.name: (tuple(np.asarray(g)[mask] for g in getattr(pose, f.name))
-                                                 if f.name == "gimbal_deg" else np.asarray(getattr(pose, f.name))[mask])
-                                        for f in dataclasses.fields(pose)})
-
-
 def _locate(sensor, pose, uv, rule, budget):
     """(fixes, covariance columns or None)."""
     if budget is None:
@@ -105,19 +98,22 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
 
     own_height = dem is None and target_height is None  # the vertical error is zero by construction
 
-    def stage(name: str, fx, covariance) -> Stage:
-        enu = C.error_enu(fx, truth)
+    def judge(name: str, enu: np.ndarray, covariance=None) -> Stage:
+        """A stage from the errors of every observation (NaN where not located)."""
         if own_height:
             enu[:, 2] = np.nan
-        ok = np.asarray(fx.ok) & np.all(np.isfinite(enu[:, :2]), -1)
+        ok = np.all(np.isfinite(enu[:, :2]), -1)
         if not ok.any():
-            raise InputError(f"{observations}: no observation could be located ({fx.status_counts()})", issues)
+            raise InputError(f"{observations}: no observation could be located ({name})", issues)
         ev = evaluate_errors(enu[ok], groups=flights[ok], group_column="flight",
                              factors={k: (lab, v[ok]) for k, (lab, v) in factor_values.items()},
                              covariance=None if covariance is None else {k: v[ok] for k, v in covariance.items()},
                              columns={k: v[ok] for k, v in ids.items()}, **kw)
         ev.n_fixes = len(t)
-        return Stage(name, np.where(ok[:, None], enu, np.nan), ev)
+        return Stage(name, enu, ev)
+
+    def stage(name: str, fx, covariance) -> Stage:
+        return judge(name, np.where(np.asarray(fx.ok)[:, None], C.error_enu(fx, truth), np.nan), covariance)
 
     stages = [stage("as located", fixes, cov)]
     notes = []
@@ -130,7 +126,8 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
     cal = None
     if estimate:
         step("calibrating")
-        cal = calibrate(sensor, np.c_[uv[0], uv[1]], truth, pose=pose, estimate=tuple(estimate))
+        pixels = np.c_[uv[0], uv[1]]
+        cal = calibrate(sensor, pixels, truth, pose=pose, estimate=tuple(estimate))
         notes += cal.warnings[:5]
         pose_after = dataclasses.replace(pose, yaw_deg=np.asarray(pose.yaw_deg) - cal.heading_bias_deg)
         fx, cv = _locate(cal.sensor, pose_after, uv, rule, budget)
@@ -141,22 +138,14 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
             held = np.full((len(t), 3), np.nan)
             for f in names:
                 m = flights == f
-                cal_f = calibrate(sensor, np.c_[uv[0], uv[1]][~m], truth[~m], pose=_take(pose, ~m),
-                                  estimate=tuple(estimate))
-                p_f = _take(pose, m)
-                p_f = dataclasses.replace(p_f, yaw_deg=np.asarray(p_f.yaw_deg) - cal_f.heading_bias_deg)
+                cal_f = calibrate(sensor, pixels[~m], truth[~m], pose=pose.take(~m), estimate=tuple(estimate))
+                p_f = pose.take(m)
+                p_f = dataclasses.replace(p_f, yaw_deg=p_f.yaw_deg - cal_f.heading_bias_deg)
                 rule_f = C.observation_rule({k: np.asarray(v)[m] for k, v in c.items()}, dem=dem,
                                             height_m=target_height)
                 fx_f = rule_f.locate(cal_f.sensor, p_f, (uv[0][m], uv[1][m]))
                 held[m] = np.where(np.asarray(fx_f.ok)[:, None], C.error_enu(fx_f, truth[m]), np.nan)
-            if own_height:
-                held[:, 2] = np.nan
-            ok = np.all(np.isfinite(held[:, :2]), -1)
-            ev = evaluate_errors(held[ok], groups=flights[ok], group_column="flight",
-                                 factors={k: (lab, v[ok]) for k, (lab, v) in factor_values.items()},
-                                 columns={k: v[ok] for k, v in ids.items()}, **kw)
-            ev.n_fixes = len(t)
-            stages.append(Stage("calibrated (flight held out)", held, ev))
+            stages.append(judge("calibrated (flight held out)", held))
         elif len(names) < 2:
             notes.append("one flight only: the calibration is judged on the observations it was fitted to (in "
                          "sample); observations from a second flight would show how well it carries over")
@@ -166,8 +155,8 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
         comp_rows, comp_fig = _compensation(C, feats, stages[0].enu_m, flights, fixes.ok, notes)
     step("writing the report")
     points = _points(ids, stages, factor_values)
-    page = _page(observations, config_path, cfg, t, stages, cal, estimate, comp_rows, comp_fig, rule, dem,
-                 target_height, budget, issues, notes, command, level)
+    page = _page(observations, config_path, t, stages, cal, estimate, comp_rows, comp_fig, dem, target_height,
+                 budget, issues, notes, command, level)
     return ReportJob(stages, cal, comp_rows, page, points, issues, notes)
 
 
@@ -199,11 +188,8 @@ def _points(ids, stages: list[Stage], factors) -> Records:
 
 
 def _sha256(path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def _versions() -> list[list[str]]:
@@ -218,7 +204,7 @@ def _versions() -> list[list[str]]:
     return rows
 
 
-def _page(observations, config_path, cfg, table, stages, cal, estimate, comp_rows, comp_fig, rule, dem, target_height,
+def _page(observations, config_path, table, stages, cal, estimate, comp_rows, comp_fig, dem, target_height,
           budget, issues, notes, command, level) -> Page:
     from ..accuracy.plots import figure_png
 
