@@ -211,6 +211,28 @@ def test_statistics_invariants(errors, angle):
     assert s["bias_e_m"] == pytest.approx(enu[:, 0].mean(), abs=1e-9)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-500, 500), st.floats(-500, 500), st.floats(-100, 100)), min_size=1,
+                max_size=40), st.integers(0, 2**32 - 1), st.integers(1, 9))
+def test_bootstrap_counts_give_the_statistics_of_the_resampled_copies(errors, seed, b):
+    """The bootstrap holds each resample as counts per value; its quantiles, means and maximum are
+    those of :func:`statistics` on the same resample written out value by value (np.repeat)."""
+    enu = np.array(errors, dtype=np.float64)
+    en, up = enu[:, :2], enu[:, 2]
+    reps = E.bootstrap_statistics(en, up, n_boot=b, seed=seed, max_elements=len(en) * 3)
+    rng = np.random.default_rng(seed)
+    order_h, order_v = np.argsort(np.hypot(en[:, 0], en[:, 1])), np.argsort(np.abs(up))
+    for start in range(0, b, 3):  # the batches the function drew, in its order: horizontal, then vertical
+        k = min(3, b - start)
+        ch, cv = E.resample_counts(rng, len(en), k), E.resample_counts(rng, len(up), k)
+        for i in range(k):
+            copy_en = np.repeat(en[order_h], ch[i].astype(int), axis=0)
+            copy_up = np.repeat(up[order_v], cv[i].astype(int))
+            ref = E.statistics(copy_en, copy_up)
+            for name, value in ref.items():
+                assert reps[name][start + i] == pytest.approx(value, abs=1e-9, rel=1e-12), name
+
+
 def test_every_format_eoloc_writes_reads_back(tmp_path):
     """Fixes written as CSV, GeoJSON, KML (MSL heights) and a CoT data package come back with the
     same positions: < 1e-8° and < 1 cm (CoT carries hae to the centimetre), ids and sigmas intact."""

@@ -6,7 +6,8 @@ Every function takes arrays and returns arrays or small frozen results; no file 
 - :func:`match_nearest` / :func:`match_ids`: which surveyed point each fix is a fix of.
 - :func:`statistics`: CEP (median horizontal error), CE90, LE90, MAE, RMSE, mean bias E/N/U and
   the largest error, vectorised over leading axes so that :func:`summarize` draws all bootstrap
-  resamples of a batch at once (percentile bootstrap, seeded) for their confidence intervals.
+  resamples of a batch at once (percentile bootstrap, seeded; each resample held as counts per
+  value, see :func:`bootstrap_statistics`) for their confidence intervals.
 - :func:`tle_fit`: the linear target-location-error model in slant range (OpenAthena publishes
   one per drone model): intercept and slope with their standard errors, R², the slope's p-value;
   outliers removed once by Cook's distance (default threshold 4/n).
@@ -178,22 +179,81 @@ class Summary:
         return out
 
 
+def resample_counts(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
+    """(b, n) float counts: how often each of ``n`` values is drawn in each of ``b`` resamples of
+    size ``n`` with replacement (uniform indices, counted with one ``bincount``)."""
+    idx = rng.integers(0, n, size=(b, n))
+    idx += np.arange(b)[:, None] * n
+    return np.bincount(idx.ravel(), minlength=b * n).reshape(b, n).astype(np.float64)
+
+
+def weighted_quantiles(sorted_x: np.ndarray, counts: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
+    """Quantiles (type 7, as :func:`np.quantile`) of each resample given as ``counts`` (b, n) over
+    the ascending values ``sorted_x`` (n,): the j-th order statistic of a resample is the value at
+    the first position whose running count exceeds j - one ``searchsorted`` over all rows, whose
+    running counts are offset row by row to make one ascending array. O(n) per resample, no sort."""
+    b, n = counts.shape
+    running = np.cumsum(counts, axis=1)
+    running += (np.arange(b, dtype=np.float64) * (n + 1))[:, None]
+    flat = running.ravel()
+    row0 = np.arange(b) * n
+
+    def order_statistic(j: int) -> np.ndarray:
+        at = np.searchsorted(flat, j + np.arange(b, dtype=np.float64) * (n + 1), side="right") - row0
+        return sorted_x[at]
+
+    out = []
+    for q in qs:
+        h = (n - 1) * q
+        lo = math.floor(h)
+        x_lo = order_statistic(lo)
+        out.append(x_lo + (h - lo) * (order_statistic(min(lo + 1, n - 1)) - x_lo) if h > lo else x_lo)
+    return out
+
+
 def bootstrap_statistics(en_m: np.ndarray, up_m: np.ndarray, *, n_boot: int, seed: int,
                          max_elements: int = 4_000_000) -> dict[str, np.ndarray]:
     """``n_boot`` percentile-bootstrap replicates (n_boot,) of every statistic: the horizontal and
     the vertical errors each resampled with replacement (numpy Generator ``seed``), in batches of
-    at most ``max_elements`` resampled values so that memory stays bounded at any N."""
+    at most ``max_elements`` resampled values so that memory stays bounded at any N.
+
+    A resample is held as counts per value rather than as a copy of the values: the means are one
+    matrix product with the counts, the quantiles and the maximum are read off the running counts
+    over the values sorted once (:func:`weighted_quantiles`) - the same numbers as
+    :func:`statistics` of the resampled copies, without sorting or partitioning each one."""
     rng = np.random.default_rng(seed)
+    en_m, up_m = np.asarray(en_m, dtype=np.float64), np.asarray(up_m, dtype=np.float64)
     n, m = en_m.shape[0], up_m.shape[0]
+    r = np.hypot(en_m[:, 0], en_m[:, 1])
+    order_h, order_v = np.argsort(r), np.argsort(np.abs(up_m))
+    r_s, en_s, up_s = r[order_h], en_m[order_h], up_m[order_v]
+    a_s = np.abs(up_s)
+    cols_h = np.column_stack([r_s, r_s * r_s, en_s[:, 0], en_s[:, 1]])
+    cols_v = np.column_stack([a_s, up_s * up_s, up_s])
     batch = max(1, max_elements // max(n, m, 1))
     out: dict[str, list[np.ndarray]] = {k: [] for k in STATISTICS}
     for start in range(0, n_boot, batch):
         b = min(batch, n_boot - start)
-        ih = rng.integers(0, n, size=(b, n)) if n else np.zeros((b, 0), dtype=np.intp)
-        iv = rng.integers(0, m, size=(b, m)) if m else np.zeros((b, 0), dtype=np.intp)
-        s = statistics(en_m[ih], up_m[iv])
+        nan = np.full(b, np.nan)
+        if n:
+            c = resample_counts(rng, n, b)
+            mean_h = c @ cols_h / n
+            cep, ce90, top = weighted_quantiles(r_s, c, (0.5, 0.9, 1.0))
+            del c
+            h = {"cep50_m": cep, "ce90_m": ce90, "mae_h_m": mean_h[:, 0], "rmse_h_m": np.sqrt(mean_h[:, 1]),
+                 "bias_e_m": mean_h[:, 2], "bias_n_m": mean_h[:, 3], "max_h_m": top}
+        else:
+            h = dict.fromkeys(HORIZONTAL, nan)
+        if m:
+            c = resample_counts(rng, m, b)
+            mean_v = c @ cols_v / m
+            (le90,) = weighted_quantiles(a_s, c, (0.9,))
+            del c
+            v = {"le90_m": le90, "mae_v_m": mean_v[:, 0], "rmse_v_m": np.sqrt(mean_v[:, 1]), "bias_u_m": mean_v[:, 2]}
+        else:
+            v = dict.fromkeys(VERTICAL, nan)
         for k in STATISTICS:
-            out[k].append(s[k])
+            out[k].append(h[k] if k in h else v[k])
     return {k: np.concatenate(v) if v else np.empty(0) for k, v in out.items()}
 
 
