@@ -66,7 +66,7 @@ def test_missing_columns_and_files_are_clear_errors(tmp_path):
     with pytest.raises(TableError, match="does not exist"):
         read_telemetry(tmp_path / "nope.csv")
     p = _write(tmp_path / "t.csv", "time_s,lat_deg,lon_deg\n0,1,2\n")
-    with pytest.raises(TableError, match=r"lacks required column\(s\) h_m"):
+    with pytest.raises(TableError, match=r"has no height column: give h_m \(ellipsoidal, m\) or h_msl_m"):
         read_telemetry(p)
     with pytest.raises(TableError, match="empty"):
         read_telemetry(_write(tmp_path / "e.csv", "# nothing\n"))

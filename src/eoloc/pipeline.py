@@ -70,7 +70,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         range_source = (tel.path, tel.line)
     else:
         if interpolate:
-            record, pose, more = _interpolated(tel, det, max_gap_s, time_offset_s)
+            record, pose, more = _interpolated(tel, det, max_gap_s, time_offset_s, sensor.camera)
         else:
             matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
             record, more = matched.record, matched.issues
@@ -82,7 +82,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         range_source = (det.path, det.line)
     has_pose = record >= 0
     if not (interpolate and det is not None):
-        pose = telemetry_pose(tel, np.where(has_pose, record, 0))
+        pose = telemetry_pose(tel, np.where(has_pose, record, 0), sensor.camera)
     if isinstance(rule, str):  # RANGE_FROM_FILES: M1 with each target's own range
         rule = AtRange(np.asarray(file_range))
         path, lines = range_source
@@ -110,7 +110,7 @@ def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule,
     return rule.locate(sensor, pose, pixels), None
 
 
-def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float):
+def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float, camera):
     """(index of the telemetry record at or before each detection or -1, interpolated poses, issues)."""
     tt, td = tel.columns["time_s"], det.columns["time_s"]
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
@@ -118,7 +118,7 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
                          "(frame numbers alone give no time to interpolate at)")
     from .sequence.interp import interpolate_poses
 
-    ip = interpolate_poses(tt, telemetry_pose(tel), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
+    ip = interpolate_poses(tt, telemetry_pose(tel, camera=camera), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
     q = td + time_offset_s
     issues = []
     t0, t1 = ip.span_s

@@ -106,13 +106,14 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
         g = [g[0] + z("gimbal1_deg"), g[1] + z("gimbal2_deg"), g[2] + z("sensor_roll_deg")]
     perturbed = Pose(lat, lon, h, pose.yaw_deg + z("yaw_deg") + z("vibration_yaw_deg"),
                      pose.pitch_deg + z("pitch_deg") + z("vibration_pitch_deg"),
-                     pose.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g))
+                     pose.roll_deg + z("roll_deg") + z("vibration_roll_deg"), tuple(g), pose.focal_scale)
     mount = _angles(sensor.mount_misalignment_deg, d, "mount", ("x", "y", "z"), lead)
     bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), lead)
     frame = sensor.camera_frame(perturbed, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
                                 gimbal_skew_deg=z("gimbal_skew_deg"))
     xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
-                                               principal_point_error_px=(z("cx_px"), z("cy_px")))
+                                               principal_point_error_px=(z("cx_px"), z("cy_px")),
+                                               focal_scale=pose.focal_scale)
     f = rule.stop(sensor.rays_from(frame, xn, yn), sensor.ellipsoid, errors=z)
     shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies
     return Fixes(*(np.broadcast_to(x, shape) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))

@@ -30,6 +30,9 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml
   TELEMETRY.csv columns: time_s and/or frame, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg,
     roll_deg, gimbal1_deg, gimbal2_deg (or azimuth_deg, elevation_deg / frame_roll_deg,
     frame_pitch_deg), optional sensor_roll_deg, optional range_m (laser slant range).
+    Instead of h_m: h_msl_m (EGM96). Instead of yaw/pitch/roll: qw,qx,qy,qz (body->NED,
+    scalar first) or dcm_11..dcm_33 (R_ned_body). A zoom lens: hfov_deg, focal_px or
+    focal_mm per record. (README: Input formats.)
   DETECTIONS.csv columns: time_s or frame, target_id, u_px, v_px, optional range_m.
   Without DETECTIONS the image centre of every record is located.
   --range alone takes each target's range_m from the files; --range R uses R metres for all;

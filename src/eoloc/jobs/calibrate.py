@@ -50,12 +50,12 @@ def calibrate_job(cfg, telemetry, gcps, *, groups: tuple[str, ...], pixel_sigma_
         if not (np.isfinite(tt).any() and np.isfinite(to).all()):
             raise InputError("interpolation / the time offset needs time_s in both the telemetry and the GCP file",
                              issues)
-        kw = {"telemetry": TelemetryTrack(tt, telemetry_pose(tel), max_gap_s), "time_s": to}
+        kw = {"telemetry": TelemetryTrack(tt, telemetry_pose(tel, camera=sensor.camera), max_gap_s), "time_s": to}
     else:
         m = match_detections(tel, obs, time_tolerance_s=time_tolerance_s)
         issues += m.issues
         keep = m.record >= 0
-        kw = {"pose": telemetry_pose(tel, m.record[keep])}
+        kw = {"pose": telemetry_pose(tel, m.record[keep], sensor.camera)}
     c = obs.columns
     uv = np.c_[c["u_px"], c["v_px"]][keep]
     llh = np.c_[c["lat_deg"], c["lon_deg"], c["h_m"]][keep]

@@ -45,7 +45,7 @@ def footprint_job(cfg, telemetry, surface, *, edge_samples: int = 16, chunk: int
     prints: list[Footprint] = []
     for start in range(0, len(tel), chunk):
         idx = np.arange(start, min(start + chunk, len(tel)))
-        prints += footprints(sensor, telemetry_pose(tel, idx), surface, edge_samples=edge_samples)
+        prints += footprints(sensor, telemetry_pose(tel, idx, sensor.camera), surface, edge_samples=edge_samples)
         if progress is not None:
             progress(idx.size)
     c = tel.columns

@@ -67,8 +67,8 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg)
     tel = inputs.telemetry
     k = record_of(tel, telemetry, frame, time_s)
-    pose = telemetry_pose(tel, k)
     sensor = cfg.sensor()
+    pose = telemetry_pose(tel, k, sensor.camera)
     img = read_image(image)
     try:
         ortho = R.orthorectify(img, sensor, pose, surface, crs=crs, gsd_m=gsd_m, resampling=resampling, nodata=nodata,

@@ -144,8 +144,9 @@ def triangulate_job(cfg, telemetry, detections, *, ray_sigma_deg: float, min_ang
     tel, det = inputs.telemetry, inputs.other
     matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
     has = matched.record >= 0
-    pose = telemetry_pose(tel, np.where(has, matched.record, 0))
-    rays = cfg.sensor().rays(pose, (det.columns["u_px"], det.columns["v_px"]))
+    sensor = cfg.sensor()
+    pose = telemetry_pose(tel, np.where(has, matched.record, 0), sensor.camera)
+    rays = sensor.rays(pose, (det.columns["u_px"], det.columns["v_px"]))
     ids = np.asarray(det.columns["target_id"]).astype(str)
     rows = []
     for tid in sorted(set(ids.tolist())):

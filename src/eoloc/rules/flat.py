@@ -74,19 +74,19 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
         return _flat_frame_numba(sensor, pose, float(main_range_m), pixels, main_pixel)
     ell = sensor.ellipsoid.constants
     frame = sensor.camera_frame(pose)
-    xn0, yn0 = sensor.normalized(main_pixel)
+    xn0, yn0 = sensor.normalized(main_pixel, pose.focal_scale)
     with np.errstate(all="ignore"):
         nx, ny, nz, H = _kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
                                             np.asarray(main_range_m, dtype=np.float64), *ell)
     u, v = split_pixels(pixels, sensor.camera)
-    xn, yn = sensor.camera.pixel_to_normalized(u, v)
+    xn, yn = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
     out = run("flat_target", frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
-    return to_fixes(out, frame.invalid, sensor.camera.outside(u, v, xn, yn))
+    return to_fixes(out, frame.invalid, sensor.camera.outside(u, v, xn, yn, focal_scale=pose.focal_scale))
 
 
 def _one_frame(pose: Pose, main_range_m, main_pixel) -> bool:
     fields = (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, *pose.gimbal_deg)
-    return (all(np.ndim(f) == 0 for f in fields) and np.ndim(main_range_m) == 0
+    return (all(np.ndim(f) == 0 for f in fields) and pose.focal_scale == 1.0 and np.ndim(main_range_m) == 0
             and (main_pixel is None or np.size(main_pixel) == 2))
 
 

@@ -29,6 +29,7 @@ class Camera:
     cx: float
     cy: float
     distortion: Distortion | None = None
+    pixel_um: float | None = None  # the pixel pitch when the camera was given by focal length in mm
 
     def __post_init__(self) -> None:
         if not (int(self.width) == self.width > 0 and int(self.height) == self.height > 0):
@@ -52,7 +53,7 @@ class Camera:
             raise ValueError(f"focal_mm and pixel_um must be > 0, got {focal_mm!r} and {pixel_um!r}")
         f_px = focal_mm * 1e3 / pixel_um
         fy = focal_mm * 1e3 / (pixel_um_y or pixel_um)
-        return cls(width, height, f_px, fy, *_centre(width, height, cx, cy))
+        return cls(width, height, f_px, fy, *_centre(width, height, cx, cy), pixel_um=float(pixel_um))
 
     @classmethod
     def from_hfov(cls, hfov_deg: float, width: int, height: int, *, vfov_deg: float | None = None,
@@ -106,15 +107,17 @@ class Camera:
 
     def pixel_to_normalized(self, u: ArrayLike, v: ArrayLike, *, focal_error_px: ArrayLike = 0.0,
                             principal_point_error_px: tuple[ArrayLike, ArrayLike] = (0.0, 0.0),
-                            ) -> tuple[np.ndarray, np.ndarray]:
+                            focal_scale: ArrayLike = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """Pixels to ideal (undistorted) normalised image coordinates ((u - cx) / fx, (v - cy) / fy).
 
+        ``focal_scale``: this image's focal length over the camera's (a zoom lens, per record);
         ``focal_error_px`` (added to fx, fy scaled alike) and ``principal_point_error_px`` (added to
-        cx, cy) let Monte Carlo perturb the intrinsics per sample; they broadcast with the pixels.
+        cx, cy) let Monte Carlo perturb the intrinsics per sample; all broadcast with the pixels.
+        The lens distortion is taken as fixed in normalised coordinates across the zoom range.
         """
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        scale = 1.0 + np.asarray(focal_error_px, dtype=np.float64) / self.fx
+        scale = np.asarray(focal_scale, dtype=np.float64) + np.asarray(focal_error_px, dtype=np.float64) / self.fx
         dcx, dcy = principal_point_error_px
         xn = (u - (self.cx + dcx)) / (self.fx * scale)
         yn = (v - (self.cy + dcy)) / (self.fy * scale)
@@ -122,7 +125,8 @@ class Camera:
             xn, yn = self.distortion.undistort(xn, yn)
         return xn, yn
 
-    def outside(self, u: ArrayLike, v: ArrayLike, xn: ArrayLike, yn: ArrayLike) -> np.ndarray:
+    def outside(self, u: ArrayLike, v: ArrayLike, xn: ArrayLike, yn: ArrayLike, *,
+                focal_scale: ArrayLike = 1.0) -> np.ndarray:
         """True where finite pixels (u, v) are not to be located: outside the image (beyond
         ``IMAGE_MARGIN_PX`` = 0.5 px past the outer edges of the edge pixels) or where the lens
         model does not map them to one ray (their undistortion ``(xn, yn)`` from
@@ -137,15 +141,18 @@ class Camera:
             usable = _kernels.pixel_in_image(u, v, float(self.width), float(self.height))
             if self.distortion is not None:
                 d = self.distortion
-                usable = usable & _kernels.undistort_ok(d.kind, d.packed, (u - self.cx) / self.fx,
-                                                        (v - self.cy) / self.fy, np.asarray(xn), np.asarray(yn))
+                k = np.asarray(focal_scale, dtype=np.float64)
+                usable = usable & _kernels.undistort_ok(d.kind, d.packed, (u - self.cx) / (self.fx * k),
+                                                        (v - self.cy) / (self.fy * k), np.asarray(xn), np.asarray(yn))
             return np.isfinite(u + v) & ~usable
 
-    def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Ideal normalised image coordinates to (distorted) pixels."""
+    def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike, *,
+                            focal_scale: ArrayLike = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Ideal normalised image coordinates to (distorted) pixels (``focal_scale``: the zoom)."""
         if self.distortion is not None:
             xn, yn = self.distortion.distort(xn, yn)
-        return np.asarray(xn) * self.fx + self.cx, np.asarray(yn) * self.fy + self.cy
+        k = np.asarray(focal_scale, dtype=np.float64)
+        return np.asarray(xn) * (self.fx * k) + self.cx, np.asarray(yn) * (self.fy * k) + self.cy
 
     def pixel_to_los_cam(self, u: ArrayLike, v: ArrayLike) -> np.ndarray:
         """Unit line-of-sight vectors (..., 3) in the camera frame for pixels (u, v)."""

@@ -35,7 +35,9 @@ class Pose:
 
     lat_deg, lon_deg: WGS-84 geodetic degrees of the INS reference point; h_m: its ellipsoidal
     height (m); yaw_deg (heading, clockwise from true north), pitch_deg (nose up +), roll_deg
-    (right wing down +); gimbal_deg: the gimbal model's angles in its order, degrees.
+    (right wing down +); gimbal_deg: the gimbal model's angles in its order, degrees;
+    focal_scale: the image's focal length over the camera's (zoom lenses: 2 = zoomed in twice as
+    far as the configured focal length; 1 = the camera as configured).
     """
 
     lat_deg: ArrayLike
@@ -45,9 +47,10 @@ class Pose:
     pitch_deg: ArrayLike = 0.0
     roll_deg: ArrayLike = 0.0
     gimbal_deg: tuple = ()
+    focal_scale: ArrayLike = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg"):
+        for name in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "focal_scale"):
             object.__setattr__(self, name, _f64(getattr(self, name)))
         g = self.gimbal_deg
         if not isinstance(g, (tuple, list)):
@@ -60,14 +63,17 @@ class Pose:
             return x[()] if x.ndim == 0 else x[index]
 
         return Pose(pick(self.lat_deg), pick(self.lon_deg), pick(self.h_m), pick(self.yaw_deg), pick(self.pitch_deg),
-                    pick(self.roll_deg), tuple(pick(g) for g in self.gimbal_deg))
+                    pick(self.roll_deg), tuple(pick(g) for g in self.gimbal_deg), pick(self.focal_scale))
 
     def invalid(self) -> np.ndarray:
-        """True where the pose cannot be used: NaN/inf anywhere, |lat| > 90°."""
+        """True where the pose cannot be used: NaN/inf anywhere, |lat| > 90°, a focal scale <= 0."""
         fields = (self.lat_deg, self.lon_deg, self.h_m, self.yaw_deg, self.pitch_deg, self.roll_deg, *self.gimbal_deg)
         with np.errstate(invalid="ignore"):
             total = sum(fields)
-            return ~np.isfinite(total) | (np.abs(self.lat_deg) > 90.0)
+            bad = ~np.isfinite(total) | (np.abs(self.lat_deg) > 90.0)
+            if self.focal_scale.ndim or self.focal_scale != 1.0:
+                bad = bad | ~(np.isfinite(self.focal_scale) & (self.focal_scale > 0.0))
+            return bad
 
 
 @dataclass(frozen=True)
@@ -204,18 +210,20 @@ class SensorModel:
         return Rays(np.broadcast_to(frame.ox, shape), np.broadcast_to(frame.oy, shape),
                     np.broadcast_to(frame.oz, shape), dx, dy, dz, frame.invalid, out_of_image)
 
-    def normalized(self, pixels: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point."""
+    def normalized(self, pixels: ArrayLike | None, focal_scale: ArrayLike = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (u, v) -> normalised, undistorted image coordinates; None = principal point;
+        ``focal_scale``: the pose's (zoom)."""
         u, v = split_pixels(pixels, self.camera)
-        return self.camera.pixel_to_normalized(u, v)
+        return self.camera.pixel_to_normalized(u, v, focal_scale=focal_scale)
 
     def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
         """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point).
         Pixels outside the image (see :meth:`Camera.outside`) are marked ``out_of_image``: every
         stop rule gives them OUT_OF_IMAGE."""
         u, v = split_pixels(pixels, self.camera)
-        xn, yn = self.camera.pixel_to_normalized(u, v)
-        return self.rays_from(self.camera_frame(pose), xn, yn, self.camera.outside(u, v, xn, yn))
+        xn, yn = self.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
+        return self.rays_from(self.camera_frame(pose), xn, yn,
+                              self.camera.outside(u, v, xn, yn, focal_scale=pose.focal_scale))
 
     def ground_to_image(self, pose: Pose, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Project ECEF points (..., 3) into the image: pixels (u, v); NaN where the point is behind
@@ -225,7 +233,7 @@ class SensorModel:
             raise ValueError(f"p_ecef must have 3 components in its last axis, got shape {p.shape}")
         frame = self.camera_frame(pose)
         xn, yn, _depth = run("project_point", frame.R, frame.ox, frame.oy, frame.oz, p[..., 0], p[..., 1], p[..., 2])
-        u, v = self.camera.normalized_to_pixel(xn, yn)
+        u, v = self.camera.normalized_to_pixel(xn, yn, focal_scale=pose.focal_scale)
         bad = np.broadcast_to(frame.invalid, u.shape)
         return np.where(bad, np.nan, u), np.where(bad, np.nan, v)
 

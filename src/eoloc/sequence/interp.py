@@ -77,7 +77,7 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
         raise ValueError(f"time_s must be 1-D, got shape {t.shape}")
     fields = [np.broadcast_to(np.asarray(x, dtype=np.float64), t.shape)
               for x in (pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg,
-                        *pose.gimbal_deg)]
+                        *pose.gimbal_deg, pose.focal_scale)]
     good = np.isfinite(t)
     for f in fields:
         good &= np.isfinite(f)
@@ -87,7 +87,7 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
     order, ts = order[keep], ts[keep]
     if ts.size < 2:
         raise InputError(f"pose interpolation needs at least two usable telemetry records, got {ts.size}")
-    lat, lon, h, yaw, pitch, roll, *gim = (f[order] for f in fields)
+    lat, lon, h, yaw, pitch, roll, *gim, zoom = (f[order] for f in fields)
     gaps = [Gap(int(order[i]), int(order[i + 1]), float(ts[i]), float(ts[i + 1]))
             for i in np.flatnonzero(np.diff(ts) > max_gap_s)]
 
@@ -110,8 +110,10 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
         warnings.simplefilter("ignore")
         yaw_q, pitch_q, roll_q = euler_from_R_ned_body(R_ned)
     g_q = tuple(np.interp(qq, ts, _unwrap_deg(g)) for g in gim)
+    zoom_q = np.interp(qq, ts, zoom)  # a zoom lens's focal length, linear between records
     nan = np.float64("nan")
-    out = [np.where(ok, x, nan) for x in (lat_q, lon_q, h_q, yaw_q, pitch_q, roll_q, *g_q)]
+    out = [np.where(ok, x, nan) for x in (lat_q, lon_q, h_q, yaw_q, pitch_q, roll_q, *g_q, zoom_q)]
     reason = np.where(ok, 0, np.where(in_gap, InterpolatedPoses.IN_GAP, InterpolatedPoses.OUTSIDE)).astype(np.int8)
     record = np.where(ok, order[seg], -1)
-    return InterpolatedPoses(Pose(*out[:6], tuple(out[6:])), ok, reason, record, (float(ts[0]), float(ts[-1])), gaps)
+    return InterpolatedPoses(Pose(*out[:6], tuple(out[6:-1]), out[-1]), ok, reason, record,
+                             (float(ts[0]), float(ts[-1])), gaps)
