@@ -6,7 +6,15 @@ import click
 
 from .common import ground, load_config, open_dem, progress
 from .main import console, err_console, report_issues
-from .options import CONVENTIONS, config_option, dem_options, formats_option, out_option, target_height_option
+from .options import (
+    CONVENTIONS,
+    config_option,
+    dem_options,
+    formats_option,
+    grid_option,
+    out_option,
+    target_height_option,
+)
 
 FOOTPRINT_HELP = """Frame footprints: the ground outline of every telemetry record's image.
 
@@ -30,8 +38,9 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--target-height H | --dem FI
               help="Points per image side.")
 @out_option("footprints.*")
 @formats_option()
+@grid_option()
 def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir,
-              formats) -> None:
+              formats, grid) -> None:
     from ..io.writers import write_layer
     from ..jobs.footprints import footprint_job
 
@@ -42,7 +51,7 @@ def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid,
         job = footprint_job(cfg, telemetry, surface, edge_samples=edge_samples,
                             progress=lambda k: bar.advance(task, k))
     report_issues(job.issues)
-    written = write_layer(out_dir, "footprints", job.rows, formats, features=job.features)
+    written = write_layer(out_dir, "footprints", job.rows, formats, features=job.features, grid=grid)
     console.print(f"{len(job.prints)} footprints: " + ", ".join(f"{k} {v}" for k, v in job.status_counts().items())
                   + f"; {job.clipped} clipped at the horizon or the DEM edge")
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))

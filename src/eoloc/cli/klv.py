@@ -9,7 +9,7 @@ import click
 from ..io.klv.conventions import CONVENTIONS
 from .common import load_config, open_dem
 from .main import console, err_console, warn
-from .options import config_option, dem_options, formats_option, out_option
+from .options import config_option, dem_options, formats_option, grid_option, out_option
 
 KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV data stream), check it,
 geolocate its VMTI targets and write everything out.
@@ -65,6 +65,7 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
                                          "(uncertainty).")
 @out_option("the products")
 @formats_option(default=("csv", "geojson", "cot"))
+@grid_option()
 @click.option("--map/--no-map", "make_map", default=True, show_default=True, help="Write map.html.")
 @click.option("--tiles", default=None, help="Web map tiles under the map (e.g. OpenStreetMap; needs a network).")
 @click.option("--write-klv", "write_klv", type=click.Path(dir_okay=False), default=None,
@@ -77,7 +78,7 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @click.option("--assume", "assume", multiple=True, type=click.Choice(list(CONVENTIONS)),
               help="Read the stream under an encoder's own convention (repeatable); the convention check prints "
                    "which one the encoder follows. See the list below.")
-def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, make_map, tiles, write_klv,
+def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, tiles, write_klv,
         footprint_every, strict, assume) -> None:
     from ..jobs.klv import klv_job, write_klv_products
     from ..render import print_klv_job
@@ -96,7 +97,7 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
         job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every, strict=strict,
                       assume=assume)
     print_klv_job(job, console, err_console)
-    written, notes = write_klv_products(job, out_dir, formats=formats, make_map=make_map, tiles=tiles,
+    written, notes = write_klv_products(job, out_dir, formats=formats, grid=grid, make_map=make_map, tiles=tiles,
                                         klv_out=write_klv)
     for note in notes:
         warn(note, "note")

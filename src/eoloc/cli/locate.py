@@ -15,6 +15,7 @@ from .options import (
     CONVENTIONS,
     config_option,
     formats_option,
+    grid_option,
     json_option,
     out_option,
     pairing_options,
@@ -80,6 +81,7 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
 @json_option()
 @out_option("fixes.* (file mode)")
 @formats_option()
+@grid_option()
 @pairing_options
 @click.option("--covariance", is_flag=True,
               help="Add each fix's first-order uncertainty from the config's [accuracy.budget].")
@@ -88,7 +90,7 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
                    "model's trained range and report it per fix (default: the config's [compensation] model).")
 def locate(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, height,
            lat, lon, yaw, pitch, roll, gimbal, gimbal_angles, sensor_roll, pixel, as_json, out_dir, formats,
-           time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path) -> None:
+           grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path) -> None:
     budget = None
     if covariance:
         if config_path is None:
@@ -125,7 +127,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
         job = locate_files(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance, budget=budget,
                            interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model)
     report_issues(job.issues)
-    written = write_layer(out_dir, "fixes", job.records, formats)
+    written = write_layer(out_dir, "fixes", job.records, formats, grid=grid)
     if as_json:
         click.echo(json.dumps(json_safe({"status_counts": job.status_counts, "written": [str(p) for p in written],
                                          "fixes": job.records.rows()}), allow_nan=False))

@@ -139,7 +139,16 @@ def formats_option(default=("csv", "geojson")):
                         show_default=True,
                         help="Output format of every layer; repeat for several: csv, geojson (RFC 7946), kml "
                              "(heights as MSL for Google Earth), cot (a TAK data package, one event per located "
-                             "point).")
+                             "point), geoparquet (GeoParquet 1.1, EPSG:4979), gpkg (GeoPackage).")
+
+
+def grid_option():
+    """--grid mgrs|utm (repeatable): grid-reference columns beside lat/lon in every point layer."""
+    from ..io.gridref import GRIDS
+
+    return click.option("--grid", "grid", type=click.Choice(GRIDS), multiple=True,
+                        help="Add grid references to every point layer; repeat for both: mgrs (1 m MGRS string), "
+                             "utm (utm_zone, utm_easting_m, utm_northing_m).")
 
 
 def json_option(help_text: str = "Print the result as one JSON document on stdout (tables and notes go to "

@@ -7,7 +7,15 @@ from rich.table import Table as RichTable
 
 from .common import load_config, open_dem, progress, stop_rule
 from .main import console, err_console, fail, report_issues, warn
-from .options import CONVENTIONS, config_option, formats_option, out_option, pairing_options, stop_rule_options
+from .options import (
+    CONVENTIONS,
+    config_option,
+    formats_option,
+    grid_option,
+    out_option,
+    pairing_options,
+    stop_rule_options,
+)
 
 TRACK_HELP = """Filter detections over time: moving targets into tracks (M7), or static targets by RLS (M6).
 
@@ -36,6 +44,7 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
 @pairing_options
 @out_option("the tracks or static targets")
 @formats_option()
+@grid_option()
 @click.option("--static", is_flag=True, help="Static targets: RLS per target id instead of tracks.")
 @click.option("--associate", is_flag=True, help="Tracks: ignore target ids, associate fixes to tracks (gated GNN).")
 @click.option("--forgetting", type=click.FloatRange(0.0, 1.0, min_open=True), default=1.0, show_default=True,
@@ -49,8 +58,8 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
 @click.option("--max-coast", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
               help="Tracks: seconds without a detection before a track ends.")
 def track(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs,
-          time_tolerance, interpolate, max_gap, time_offset, out_dir, formats, static, associate, forgetting, window,
-          accel_psd, meas_sigma, max_coast) -> None:
+          time_tolerance, interpolate, max_gap, time_offset, out_dir, formats, grid, static, associate, forgetting,
+          window, accel_psd, meas_sigma, max_coast) -> None:
     from ..io.writers import write_layer
     from ..jobs.sequence import located_detections, static_targets, track_job
 
@@ -71,7 +80,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
         for r in rows:
             if r.get("warning"):
                 warn(f"target {r['target_id']}: {r['warning']}")
-        written = write_layer(out_dir, "static_targets", rows, formats)
+        written = write_layer(out_dir, "static_targets", rows, formats, grid=grid)
     else:
         with progress() as bar:
             task = bar.add_task("tracking", total=None)
@@ -89,7 +98,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
         if tj.unassigned:
             warn(f"{tj.unassigned} located detections joined no confirmed track (clutter, or a target seen fewer "
                  "than 3 times)")
-        written = write_layer(out_dir, "track_fixes", tj.records, [f for f in formats if f != "geojson"])
+        written = write_layer(out_dir, "track_fixes", tj.records, [f for f in formats if f != "geojson"], grid=grid)
         written += write_layer(out_dir, "tracks", [f["properties"] for f in tj.features],
                                [f for f in formats if f in ("geojson", "kml")] or ["geojson"], features=tj.features)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))

@@ -7,7 +7,7 @@ from rich.table import Table as RichTable
 
 from .common import load_config
 from .main import console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, formats_option, out_option
+from .options import CONVENTIONS, config_option, formats_option, grid_option, out_option
 
 TRIANGULATE_HELP = """Multi-view triangulation (M8): each target seen from two or more poses, located
 without a range or a terrain model by intersecting its rays.
@@ -33,8 +33,9 @@ eoloc triangulate TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml [--ray-sigma
               help="Max |Δt| (s) pairing a detection with a telemetry record.")
 @out_option("triangulated.*")
 @formats_option()
+@grid_option()
 def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, time_tolerance, out_dir,
-                formats) -> None:
+                formats, grid) -> None:
     from ..io.writers import write_layer
     from ..jobs.sequence import triangulate_job
 
@@ -54,5 +55,5 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
     for r in job.rows:
         if r.get("warning"):
             warn(f"target {r['target_id']}: {r['warning']}")
-    written = write_layer(out_dir, "triangulated", job.rows, formats)
+    written = write_layer(out_dir, "triangulated", job.rows, formats, grid=grid)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))

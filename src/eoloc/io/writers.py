@@ -5,7 +5,9 @@ A layer is point records (:class:`Records`, or dict rows; one per target, ``lat_
 ``h_m``/``status``; failed fixes kept, with no geometry) or GeoJSON features (footprints, tracks)
 with their records.
 Formats: CSV (every row), GeoJSON (RFC 7946, rings counter-clockwise), KML (simplekml, heights
-converted to MSL), CoT (TAK data package of one event per located point; point layers only).
+converted to MSL), CoT (TAK data package of one event per located point; point layers only),
+GeoParquet and GeoPackage (:mod:`eoloc.io.geotable`: WKB geometry, EPSG:4979).
+Grid references (MGRS, UTM) are added as columns on request (:mod:`eoloc.io.gridref`).
 """
 
 from __future__ import annotations
@@ -45,20 +47,37 @@ def _cot(path: Path, records: Records, features: list[dict] | None, name: str) -
     return write_cot(path.with_name(path.name + ".cot.zip"), records.rows(), name=name)[0]
 
 
+def _geoparquet(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
+    from .geotable import write_geoparquet
+
+    return write_geoparquet(path.with_suffix(".parquet"), records, features)
+
+
+def _gpkg(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
+    from .geotable import write_gpkg
+
+    return write_gpkg(path.with_suffix(".gpkg"), records, features, layer=name)
+
+
 WRITERS: dict[str, Callable[[Path, Records, list[dict] | None, str], Path | None]] = {
-    "csv": _csv, "geojson": _geojson, "kml": _kml, "cot": _cot,
+    "csv": _csv, "geojson": _geojson, "kml": _kml, "cot": _cot, "geoparquet": _geoparquet, "gpkg": _gpkg,
 }
 FORMATS = tuple(WRITERS)
 
 
 def write_layer(out_dir: str | Path, stem: str, records: Records | Sequence[Mapping],
                 formats: Iterable[str] = DEFAULT_FORMATS, *, features: list[dict] | None = None,
-                name: str | None = None) -> list[Path]:
+                name: str | None = None, grid: Iterable[str] = ()) -> list[Path]:
     """Write one layer as ``out_dir/stem.<ext>`` in each format; point records become GeoJSON
     Point features unless ``features`` are given; records without lat_deg/lon_deg are a table
-    (CSV only). Returns the paths written (a format that does not apply to the layer, CoT for
-    polygons, GeoJSON for a table, writes nothing)."""
+    (CSV only). ``grid``: grid-reference columns to add to point records (``mgrs``, ``utm``).
+    Returns the paths written (a format that does not apply to the layer, CoT for polygons,
+    GeoJSON for a table, writes nothing)."""
     recs = Records.of(records)
+    if grid:
+        from .gridref import with_grid_columns
+
+        recs = with_grid_columns(recs, grid)
     if features is None and not recs.has_points:
         formats = [f for f in formats if f == "csv"]  # a table without geometry (statistics, residuals)
     base = Path(out_dir) / stem

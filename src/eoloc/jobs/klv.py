@@ -102,7 +102,7 @@ def frame_records(tel, check) -> Records:
 
 
 def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
-                      make_map: bool = True, tiles: str | None = None,
+                      grid=(), make_map: bool = True, tiles: str | None = None,
                       klv_out: str | Path | None = None) -> tuple[list[Path], list[str]]:
     """telemetry.csv, frames.csv, conventions.csv, footprints, fixes (in ``formats``), eoloc.kml
     with every layer, map.html and, with ``klv_out``, the stream re-encoded with its fixes.
@@ -119,9 +119,11 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
 
         written += write_layer(out, "conventions", diagnosis_records(job.diagnoses), ["csv"])
     prints = job.layers["footprints"]
-    written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson"], features=prints)
+    tables = [f for f in formats if f in ("geoparquet", "gpkg")]
+    written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson", *tables],
+                           features=prints)
     if len(job.records):
-        written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"])
+        written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"], grid=grid)
     notes = []
     if len(job.records) and klv_out:
         path, unchanged = write_klv_stream(Path(klv_out), job)

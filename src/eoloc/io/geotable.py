@@ -1,0 +1,122 @@
+"""Layers as Arrow tables with a WKB geometry column: GeoParquet and GeoPackage.
+
+One table per layer: every record column as it is (floats with nulls where there is no value,
+integers, booleans, text) plus ``geometry`` (WKB, longitude/latitude/ellipsoidal height: a
+``Point Z`` per located fix, null for a fix that failed; polygons and lines for footprint and
+track features). Geometries are built by shapely in vectorised calls.
+
+GeoParquet: GeoParquet 1.1 metadata (``geo`` key: encoding, geometry types, bbox, and the CRS as
+PROJJSON - EPSG:4979, WGS 84 with ellipsoidal heights, or EPSG:4326 for 2-D layers), written by
+pyarrow; read back by geopandas and by DuckDB's spatial extension (tested). GeoPackage: the same
+table through pyogrio/GDAL (``write_arrow``), one layer per file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .records import Records
+
+GEOPARQUET_VERSION = "1.1.0"
+GEOMETRY_TYPES = {0: "Point", 1: "LineString", 3: "Polygon", 4: "MultiPoint", 5: "MultiLineString", 6: "MultiPolygon",
+                  7: "GeometryCollection"}
+
+
+def _column(v: np.ndarray):
+    import pyarrow as pa
+
+    if v.dtype.kind == "f":
+        return pa.array(v, mask=np.isnan(v))
+    if v.dtype.kind in "iub":
+        return pa.array(v)
+    try:  # text and None (ids, status, ISO times)
+        return pa.array(v, type=pa.string(), from_pandas=True)
+    except (pa.ArrowInvalid, pa.ArrowTypeError):
+        return pa.array([None if x is None or (isinstance(x, float) and math.isnan(x)) else str(x) for x in v.tolist()],
+                        type=pa.string())
+
+
+def point_geometries(records: Records):
+    """Shapely points (N,) of point records: Point Z where h_m is known, Point where only the
+    horizontal position is, None where there is no position."""
+    import shapely
+
+    lon = np.asarray(records["lon_deg"], dtype=np.float64)
+    lat = np.asarray(records["lat_deg"], dtype=np.float64)
+    h = np.asarray(records["h_m"], dtype=np.float64) if "h_m" in records.columns else np.full(lon.shape, np.nan)
+    geoms = np.full(lon.shape, None, dtype=object)
+    where = np.isfinite(lon) & np.isfinite(lat)
+    z = where & np.isfinite(h)
+    geoms[z] = shapely.points(lon[z], lat[z], h[z])
+    flat = where & ~z
+    geoms[flat] = shapely.points(lon[flat], lat[flat])
+    return geoms
+
+
+def feature_geometries(features: list[dict]):
+    import shapely
+
+    return np.array([None if f.get("geometry") is None else shapely.from_geojson(json.dumps(f["geometry"]))
+                     for f in features], dtype=object)
+
+
+def geo_table(records: Records, features: list[dict] | None = None):
+    """(pyarrow table with a WKB ``geometry`` column, the GeoParquet column metadata)."""
+    import pyarrow as pa
+    import shapely
+    from pyproj import CRS
+
+    geoms = point_geometries(records) if features is None else feature_geometries(features)
+    if features is not None and len(records) != len(features):
+        raise ValueError(f"geo_table: {len(records)} records for {len(features)} features")
+    present = np.array([g is not None for g in geoms], dtype=bool)
+    sub = geoms[present]
+    kinds = shapely.get_type_id(sub) if sub.size else np.zeros(0, dtype=int)
+    zs = shapely.has_z(sub) if sub.size else np.zeros(0, dtype=bool)
+    has_z = bool(zs.any())
+    wkb = np.full(geoms.shape, None, dtype=object)
+    if sub.size:
+        wkb[present] = shapely.to_wkb(sub, output_dimension=3 if has_z else 2, flavor="iso")
+    gtypes = sorted({GEOMETRY_TYPES[int(t)] + (" Z" if z else "") for t, z in zip(kinds, zs, strict=True)})
+    bounds = shapely.total_bounds(sub) if sub.size else [math.nan] * 4
+    crs = CRS.from_epsg(4979 if has_z else 4326)
+    meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": crs.to_json_dict(), "edges": "planar"}
+    if np.all(np.isfinite(bounds)):
+        meta["bbox"] = [float(b) for b in bounds]
+    cols = {k: _column(v) for k, v in records.columns.items() if k != "geometry"}
+    cols["geometry"] = pa.array(wkb.tolist(), type=pa.binary())
+    return pa.table(cols), meta
+
+
+def write_geoparquet(path: str | Path, records: Records, features: list[dict] | None = None) -> Path:
+    """One layer as a GeoParquet file (zstd)."""
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table, meta = geo_table(records, features)
+    geo = {"version": GEOPARQUET_VERSION, "primary_column": "geometry", "columns": {"geometry": meta}}
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"geo": json.dumps(geo).encode()})
+    pq.write_table(table, path, compression="zstd")
+    return path
+
+
+def write_gpkg(path: str | Path, records: Records, features: list[dict] | None = None, *, layer: str) -> Path:
+    """One layer as a GeoPackage (GDAL through pyogrio); the file is replaced."""
+    import pyogrio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table, meta = geo_table(records, features)
+    if path.exists():
+        path.unlink()
+    kinds = {t.removesuffix(" Z") for t in meta["geometry_types"]}
+    gtype = "Unknown" if len(kinds) != 1 else next(iter(kinds)) + (" Z" if any(" Z" in t for t in meta[
+        "geometry_types"]) else "")
+    pyogrio.write_arrow(table, path, layer=layer, driver="GPKG", geometry_name="geometry", geometry_type=gtype,
+                        crs="EPSG:4979" if meta["crs"]["id"]["code"] == 4979 else "EPSG:4326")
+    return path

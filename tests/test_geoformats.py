@@ -1,0 +1,165 @@
+"""The formats GIS people use: GeoParquet (read back by geopandas and by DuckDB's spatial
+extension), GeoPackage (GDAL through geopandas/pyogrio), MGRS and UTM columns (the mgrs package's
+GeoTrans conversion against pyproj's UTM, both ways)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+import eoloc
+from eoloc.cli import main
+from eoloc.io.gridref import mgrs_column, utm_columns, utm_zone_numbers
+from eoloc.io.records import Records
+from eoloc.io.writers import write_layer
+
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+
+
+@pytest.fixture(scope="module")
+def located(tmp_path_factory):
+    out = tmp_path_factory.mktemp("geo")
+    r = CliRunner().invoke(main, ["locate", str(MOUNTAIN / "telemetry.csv"), str(MOUNTAIN / "detections.csv"),
+                                  "--config", str(MOUNTAIN / "camera.toml"), "--target-height", "3600", "--out",
+                                  str(out), "-f", "csv", "-f", "geoparquet", "-f", "gpkg", "--grid", "mgrs",
+                                  "--grid", "utm"])
+    assert r.exit_code == 0, r.output
+    with (out / "fixes.csv").open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {x["status"] for x in rows} >= {"OK"}
+    return out, rows
+
+
+def _expected(rows):
+    ok = [x for x in rows if x["status"] == "OK"]
+    return np.array([[float(x["lon_deg"]), float(x["lat_deg"]), float(x["h_m"])] for x in ok])
+
+
+def test_geoparquet_reads_back_in_geopandas_with_points_and_crs(located):
+    import geopandas as gpd
+
+    out, rows = located
+    df = gpd.read_parquet(out / "fixes.parquet")
+    assert len(df) == len(rows)
+    assert df.crs.to_epsg() == 4979
+    ok = (df["status"] == "OK").to_numpy()
+    got = np.c_[df.geometry[ok].x, df.geometry[ok].y, df.geometry[ok].z]
+    np.testing.assert_allclose(got, _expected(rows), atol=1e-8)  # the CSV's 9 decimals
+    assert df.geometry[~ok].isna().all()  # failed fixes: rows kept, no geometry
+    assert list(df["target_id"][:2]) == [rows[0]["target_id"], rows[1]["target_id"]]
+    assert df["mgrs"].iloc[0] == rows[0]["mgrs"]
+    import pyarrow.parquet as pq
+
+    geo = json.loads(pq.read_schema(out / "fixes.parquet").metadata[b"geo"])
+    assert geo["version"] == "1.1.0" and geo["columns"]["geometry"]["geometry_types"] == ["Point Z"]
+    bbox = geo["columns"]["geometry"]["bbox"]
+    assert bbox[0] == pytest.approx(got[:, 0].min()) and bbox[3] == pytest.approx(got[:, 1].max())
+
+
+def test_geoparquet_reads_back_in_duckdb_spatial(located):
+    import duckdb
+    import duckdb_extensions
+
+    out, rows = located
+    con = duckdb.connect()
+    duckdb_extensions.import_extension("spatial", con=con)
+    con.sql("LOAD spatial")
+    got = con.sql(f"SELECT ST_X(geometry), ST_Y(geometry), ST_Z(geometry), status, ST_GeometryType(geometry) "
+                  f"FROM read_parquet('{out / 'fixes.parquet'}')").fetchall()
+    assert len(got) == len(rows)
+    ok = np.array([[x, y, z] for x, y, z, s, _ in got if s == "OK"])
+    np.testing.assert_allclose(ok, _expected(rows), atol=1e-8)
+    assert all(t == "POINT" for *_, s, t in got if s == "OK")
+    assert all(x is None for x, *_, s, _t in got if s != "OK")
+    crs = con.sql(f"SELECT value FROM parquet_kv_metadata('{out / 'fixes.parquet'}') WHERE key = 'geo'").fetchone()
+    assert json.loads(crs[0])["columns"]["geometry"]["crs"]["id"] == {"authority": "EPSG", "code": 4979}
+
+
+def test_geopackage_reads_back_in_gdal(located):
+    import geopandas as gpd
+    import pyogrio
+
+    out, rows = located
+    info = pyogrio.read_info(out / "fixes.gpkg")
+    assert info["geometry_type"] == "Point Z" and info["crs"] == "EPSG:4979" and info["features"] == len(rows)
+    df = gpd.read_file(out / "fixes.gpkg")
+    ok = (df["status"] == "OK").to_numpy()
+    np.testing.assert_allclose(np.c_[df.geometry[ok].x, df.geometry[ok].y, df.geometry[ok].z], _expected(rows),
+                               atol=1e-8)
+
+
+def test_footprint_polygons_as_geoparquet_match_the_geojson(tmp_path):
+    import geopandas as gpd
+    import shapely
+
+    r = CliRunner().invoke(main, ["footprint", str(MOUNTAIN / "telemetry.csv"), "--config",
+                                  str(MOUNTAIN / "camera.toml"), "--target-height", "3600", "--out", str(tmp_path),
+                                  "-f", "geojson", "-f", "geoparquet"])
+    assert r.exit_code == 0, r.output
+    gj = json.loads((tmp_path / "footprints.geojson").read_text(encoding="utf-8"))["features"]
+    df = gpd.read_parquet(tmp_path / "footprints.parquet")
+    assert len(df) == len(gj)
+    for f, g in zip(gj, df.geometry, strict=True):
+        if f["geometry"] is None:
+            assert g is None
+        else:
+            assert shapely.equals_exact(shapely.from_geojson(json.dumps(f["geometry"])), g, tolerance=1e-12)
+
+
+def test_mgrs_and_utm_agree_on_the_demo_fixes(located):
+    _, rows = located
+    for x in rows:
+        if x["status"] != "OK":
+            assert x["mgrs"] == "" and x["utm_zone"] == ""
+            continue
+        assert x["mgrs"][:2] == x["utm_zone"][:-1]
+        e, n = float(x["utm_easting_m"]), float(x["utm_northing_m"])
+        assert int(x["mgrs"][5:10]) == int(e % 100_000) and int(x["mgrs"][10:]) == int(n % 100_000)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-79.9, 83.9), st.floats(-180, 179.999))
+def test_mgrs_is_the_utm_position_everywhere(lat, lon):
+    """GeoTrans's MGRS (mgrs package) and PROJ's UTM (pyproj) give the same zone and, to the
+    metre, the same easting/northing within the 100 km square, anywhere in UTM's range
+    (including Norway's and Svalbard's zone exceptions). Points within 1 cm of a zone or band
+    edge are left out: there the two round to different sides of the same line."""
+    edges = [*np.arange(-180, 181, 6), 3, 9, 12, 21, 33, 42]
+    assume(min(abs(lon - e) for e in edges) > 1e-7 and min(abs(lat - b) for b in (0, 56, 64, 72, 84)) > 1e-7)
+    m = mgrs_column(np.array([lat]), np.array([lon]))[0]
+    u = utm_columns(np.array([lat]), np.array([lon]))
+    zone = int(u["utm_zone"][0][:-1])
+    assert int(m[:2]) == zone == utm_zone_numbers(np.array([lat]), np.array([lon]))[0]
+    e, n = u["utm_easting_m"][0], u["utm_northing_m"][0]
+    de = (int(m[5:10]) - e % 100_000 + 50_000) % 100_000 - 50_000
+    dn = (int(m[10:]) - n % 100_000 + 50_000) % 100_000 - 50_000
+    assert -1.0 - 1e-6 <= de <= 1e-6 and -1.0 - 1e-6 <= dn <= 1e-6  # MGRS truncates to the metre
+
+
+def test_a_table_layer_and_a_point_without_height():
+    recs = Records({"lat_deg": np.array([40.0, np.nan]), "lon_deg": np.array([-105.0, 1.0]),
+                    "status": np.array(["OK", "NO_INTERSECTION"], dtype=object)})
+    from eoloc.io.geotable import geo_table
+
+    table, meta = geo_table(recs)
+    assert meta["geometry_types"] == ["Point"] and meta["crs"]["id"]["code"] == 4326
+    assert table["geometry"].null_count == 1
+
+
+def test_gpkg_and_geoparquet_through_the_registry(tmp_path):
+    recs = Records({"lat_deg": np.array([40.0]), "lon_deg": np.array([-105.0]), "h_m": np.array([3000.0]),
+                    "status": np.array(["OK"], dtype=object)})
+    paths = write_layer(tmp_path, "x", recs, ["geoparquet", "gpkg"], grid=["utm"])
+    assert [p.name for p in paths] == ["x.parquet", "x.gpkg"]
+    import geopandas as gpd
+
+    df = gpd.read_file(paths[1])
+    # -105° is zone 13's central meridian: the false easting exactly
+    assert df["utm_zone"][0] == "13N" and df["utm_easting_m"][0] == pytest.approx(500_000, abs=1e-6)
