@@ -18,6 +18,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("triangulate", "triangulate"),
     ("calibrate", "calibrate"),
     ("klv", "klv"),
+    ("batch", "batch"),
     ("map", "map_command"),
     ("compensate", "compensate"),
     ("evaluate", "evaluate"),

@@ -87,9 +87,15 @@ def geo_table(records: Records, features: list[dict] | None = None):
     meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": crs.to_json_dict(), "edges": "planar"}
     if np.all(np.isfinite(bounds)):
         meta["bbox"] = [float(b) for b in bounds]
-    cols = {k: _column(v) for k, v in records.columns.items() if k != "geometry"}
-    cols["geometry"] = pa.array(wkb.tolist(), type=pa.binary())
-    return pa.table(cols), meta
+    table = arrow_table(records)
+    return table.append_column("geometry", pa.array(wkb.tolist(), type=pa.binary())), meta
+
+
+def arrow_table(records: Records):
+    """The records as a pyarrow table (no geometry): floats with nulls, integers, booleans, text."""
+    import pyarrow as pa
+
+    return pa.table({k: _column(v) for k, v in records.columns.items() if k != "geometry"})
 
 
 def write_geoparquet(path: str | Path, records: Records, features: list[dict] | None = None) -> Path:

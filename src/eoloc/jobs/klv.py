@@ -84,9 +84,11 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
                   diagnoses, assume)
 
 
-def telemetry_records(tel) -> Records:
-    """telemetry.csv: every packet in eoloc's conventions."""
-    return Records({"packet": np.asarray(tel.line), "time_utc": utc_times(tel.columns["time_s"], "unix"),
+def telemetry_records(tel, time_origin="unix") -> Records:
+    """telemetry.csv: every packet (or telemetry record) in eoloc's conventions; ``time_origin``
+    as the config's [telemetry] time_origin (ST 0601 times are UNIX)."""
+    utc = utc_times(tel.columns["time_s"], time_origin)
+    return Records({"packet": np.asarray(tel.line), **({} if utc is None else {"time_utc": utc}),
                     **{k: np.asarray(v) for k, v in tel.columns.items() if k != "frame"}})
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io.export import fix_records, with_utc
 from ..io.records import Records
-from ..io.table import Issue
+from ..io.table import Issue, Table
 from ..pipeline import Located, locate_tables
 from ..result import Status
 from ..rules import StopRule
@@ -31,6 +31,7 @@ class LocateJob:
     issues: list[Issue] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     compensation_summary: str | None = None
+    telemetry: Table | None = None  # the telemetry as read (its poses, per record)
 
     @property
     def status_counts(self) -> dict[str, int]:
@@ -73,7 +74,7 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule
         notes.append(nothing)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
     return LocateJob(fix_records(located.fixes, extra, after), located, extra, inputs.issues + located.issues, notes,
-                     summary)
+                     summary, inputs.telemetry)
 
 
 def none_located(fixes, rule) -> str | None:

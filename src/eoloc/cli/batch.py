@@ -1,0 +1,84 @@
+"""`eoloc batch`: an archive of recordings into one GeoParquet dataset per layer, here or on Dask."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .common import progress
+from .main import console, err_console, warn
+from .options import config_option, dask_option, dem_options, grid_option, out_option
+
+BATCH_HELP = """Process many recordings, each file an independent task, into one GeoParquet dataset per layer.
+
+\b
+eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask local:N]
+  PATTERN: files, folders (searched recursively) or globs ('flights/**/*.ts'; quote them).
+  Inputs: KLV streams (.klv .bin .ts .m2ts .mpg .mpeg; raw KLV or MPEG-TS), located as
+  `eoloc klv` does (VMTI targets on --dem, else on each packet's frame-centre elevation); and
+  telemetry CSVs (*telemetry*.csv, with the *detections*.csv of the same name beside them, or
+  the image centres without one), located as `eoloc locate` does (needs --config and
+  --target-height H or --dem).
+  Output, under DIR, one GeoParquet dataset per layer (hive-partitioned by file):
+    fixes/       located targets (Point Z: lon, lat, ellipsoidal height; EPSG:4979)
+    packets/     the aircraft per packet or telemetry record
+    frames/      eoloc's frame centre per packet, with its distance to the encoder's
+    footprints/  the frame outlines (polygons)
+    issues/      what was wrong with each file (packet or line, and why)
+  plus batch_status.csv (one row per file). Read a layer with geopandas.read_parquet('DIR/fixes')
+  or DuckDB: SELECT * FROM read_parquet('DIR/fixes/*/*.parquet', hive_partitioning = true).
+  Resumable: files already done with the same settings are skipped; a changed file is redone;
+  --redo does everything again. One bad file never stops the batch: it is listed as failed with
+  the reason (exit code 2 at the end); a bug in eoloc is listed with its traceback in DIR/_logs.
+  Workers read the files themselves: only paths and small summaries go through Dask.
+"""
+
+
+@click.command(help=BATCH_HELP)
+@click.argument("patterns", nargs=-1, required=True)
+@out_option("the datasets", default="eoloc-batch")
+@dem_options("Terrain for every file: DEM file(s); repeat for several tiles.")
+@config_option(required=False, help_text="TOML: the camera (needed for telemetry CSVs), [installation] and "
+                                         "[accuracy.budget] (uncertainty columns).")
+@click.option("--target-height", "target_height", type=float, default=None, metavar="H",
+              help="Telemetry CSVs: stop the rays at this ellipsoidal height (m) instead of a DEM.")
+@grid_option()
+@click.option("--footprint-every", type=click.IntRange(1), default=1, show_default=True,
+              help="KLV: one footprint every N packets.")
+@click.option("--strict", is_flag=True, help="KLV: drop packets that break MISB ST 0601 as written.")
+@click.option("--redo", is_flag=True, help="Do every file again, even those already done.")
+@dask_option
+def batch(patterns, out_dir, dem_paths, vertical, geoid, dem_crs, config_path, target_height, grid,
+          footprint_every, strict, redo, dask_address) -> None:
+    from ..io.writers import write_layer
+    from ..jobs.accuracy import mapper
+    from ..jobs.batch import BatchSettings, batch_job, find_tasks, status_records
+    from ..render import batch_table
+
+    settings = BatchSettings(out_dir, tuple(dem_paths), vertical, geoid, dem_crs, config_path, target_height,
+                             footprint_every, tuple(grid), strict)
+    tasks = find_tasks(patterns)
+    if dem_paths:  # open it once here, so that a DEM that cannot be read is one message, not one per file
+        from .common import open_dem
+
+        open_dem(dem_paths, vertical, geoid, dem_crs)
+    if config_path:
+        from .common import load_config
+
+        load_config(config_path)
+    with mapper(dask_address) as m, progress() as bar:
+        task = bar.add_task(f"{len(tasks)} files", total=len(tasks))
+        job = batch_job(tasks, settings, mapper=m, redo=redo, on_done=lambda: bar.advance(task, 1))
+    console.print(batch_table(job))
+    for note in job.notes:
+        warn(note, "note")
+    written = write_layer(job.out_dir, "batch_status", status_records(job), ["csv"])
+    err_console.print("wrote " + ", ".join(str(p) for p in written) + f" and the datasets under {job.out_dir}")
+    counts = job.counts()
+    if counts.get("bug"):
+        err_console.print(f"[bold red]{counts['bug']} file(s) hit a bug in eoloc[/]: the traceback of each is in "
+                          f"{job.out_dir / '_logs'}; please report it")
+        sys.exit(1)
+    if counts.get("failed"):
+        sys.exit(2)

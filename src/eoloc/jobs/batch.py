@@ -1,0 +1,356 @@
+"""The `eoloc batch` job: many recordings, each an independent task, into one GeoParquet dataset
+per layer.
+
+A task is one file: a KLV stream (raw KLV or MPEG-TS: ``.klv``, ``.bin``, ``.ts``, ``.m2ts``,
+``.mpg``, ``.mpeg``) or a telemetry CSV with its detections beside it (``X_telemetry.csv`` +
+``X_detections.csv``, or ``telemetry.csv`` + ``detections.csv`` in one folder). The task reads the
+file itself (on whichever worker runs it: only its path and the settings travel), writes its
+rows as one partition per layer, ``OUT/<layer>/file=<key>/part-0.parquet``, and returns a small
+summary. Layers: ``fixes`` (located targets), ``packets`` (the aircraft, per packet/record),
+``frames`` (eoloc's frame centre against the encoder's), ``footprints`` (polygons), ``issues``
+(what was wrong with the file, line or packet by line or packet; no geometry).
+
+Resumable: after its partitions are in place a task writes ``OUT/_manifest/<key>.json`` (the file's
+size and modification time, the settings' fingerprint, its figures). A later run skips a file
+whose manifest matches, redoes one that changed (its old partitions are removed first), and
+retries the ones that failed. One bad file never stops the batch: input errors end as
+``failed`` with eoloc's message; anything else (a bug) as ``bug`` with its traceback in
+``OUT/_logs/<key>.txt``.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+import shutil
+import time
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import EolocError, InputError
+from ..io.records import Records
+
+KLV_SUFFIXES = (".klv", ".bin", ".ts", ".m2ts", ".mpg", ".mpeg")
+LAYERS = ("fixes", "packets", "frames", "footprints", "issues")
+MANIFEST = "_manifest"
+LOGS = "_logs"
+
+
+@dataclass(frozen=True)
+class BatchSettings:
+    """What every task needs (pickled to the workers): the output folder and how to locate."""
+
+    out_dir: str
+    dem_paths: tuple[str, ...] = ()
+    vertical: str = "egm96"
+    geoid: str | None = None
+    dem_crs: str | None = None
+    config_path: str | None = None
+    target_height_m: float | None = None
+    footprint_every: int = 1
+    grid: tuple[str, ...] = ()
+    strict: bool = False
+    assume: tuple[str, ...] = ()
+
+    def fingerprint(self) -> str:
+        """What the results depend on besides the file: every setting but the folder, the DEM and
+        config files' sizes and times, and eoloc's version."""
+        from .. import __version__
+
+        def stamp(p: str | None) -> list:
+            if p is None:
+                return []
+            s = os.stat(p)
+            return [os.path.abspath(p), s.st_size, s.st_mtime_ns]
+
+        d = {k: v for k, v in asdict(self).items() if k != "out_dir"}
+        d["files"] = [stamp(p) for p in (*self.dem_paths, self.geoid, self.config_path)]
+        d["eoloc"] = __version__
+        return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Task:
+    """One input: ``path`` (the KLV stream or the telemetry CSV), its detections CSV or None,
+    and ``key``, the name of its partitions."""
+
+    path: str
+    detections: str | None
+    key: str
+
+    @property
+    def kind(self) -> str:
+        return "csv" if self.path.lower().endswith(".csv") else "klv"
+
+
+@dataclass
+class FileResult:
+    """One task's outcome: done, skipped (already done), failed (bad input) or bug."""
+
+    key: str
+    path: str
+    status: str
+    packets: int = 0
+    fixes: int = 0
+    fixes_ok: int = 0
+    issues: int = 0
+    seconds: float = 0.0
+    message: str = ""
+
+    def row(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class BatchJob:
+    results: list[FileResult]
+    out_dir: Path
+    notes: list[str] = field(default_factory=list)
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for r in self.results:
+            out[r.status] = out.get(r.status, 0) + 1
+        return out
+
+
+def task_key(path: str | Path) -> str:
+    """A partition name that is readable and unique: the file's stem and a hash of its full path."""
+    p = Path(path).resolve()
+    stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in p.stem)[:60]
+    return f"{stem}-{hashlib.sha1(str(p).encode()).hexdigest()[:8]}"
+
+
+def find_tasks(patterns: Sequence[str]) -> list[Task]:
+    """The tasks of ``patterns``: files, folders (searched recursively) and glob patterns (``**``
+    allowed). KLV streams by suffix; a telemetry CSV (name containing ``telemetry``) with its
+    detections CSV (the same name with ``detections``) if there is one. A pattern that matches
+    no input is an InputError naming it."""
+    found: dict[str, Task] = {}
+    empty = []
+    for pattern in patterns:
+        paths = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))] or (
+            [Path(pattern)] if Path(pattern).exists() else [])
+        files = []
+        for p in paths:
+            files += sorted(x for x in p.rglob("*") if x.is_file()) if p.is_dir() else [p]
+        n = len(found)
+        for f in files:
+            name = f.name.lower()
+            if name.endswith(KLV_SUFFIXES):
+                found.setdefault(str(f.resolve()), Task(str(f), None, task_key(f)))
+            elif name.endswith(".csv") and "telemetry" in name:
+                det = f.with_name(f.name.replace("telemetry", "detections").replace("Telemetry", "Detections"))
+                found.setdefault(str(f.resolve()), Task(str(f), str(det) if det.is_file() else None, task_key(f)))
+        if len(found) == n:
+            empty.append(pattern)
+    if empty:
+        raise InputError(f"no KLV stream ({', '.join(KLV_SUFFIXES)}) or telemetry CSV (*telemetry*.csv) found in "
+                         + ", ".join(repr(p) for p in empty))
+    return sorted(found.values(), key=lambda t: t.path)
+
+
+# -- one task ------------------------------------------------------------------------------------
+
+@cache
+def _dem(paths: tuple[str, ...], vertical: str, geoid: str | None, dem_crs: str | None):
+    """The DEM, opened once per worker process."""
+    if not paths:
+        return None
+    from ..terrain import open_dem
+
+    return open_dem(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
+
+
+@cache
+def _config(path: str | None):
+    if path is None:
+        return None
+    from ..io.config import load_config
+
+    return load_config(path)
+
+
+def _stamp(path: str) -> dict:
+    s = os.stat(path)
+    return {"size": s.st_size, "mtime_ns": s.st_mtime_ns}
+
+
+def manifest_path(out_dir: str | Path, key: str) -> Path:
+    return Path(out_dir) / MANIFEST / f"{key}.json"
+
+
+def is_done(task: Task, settings: BatchSettings, fingerprint: str) -> FileResult | None:
+    """The recorded result when ``task`` was done with these settings and its files have not changed."""
+    p = manifest_path(settings.out_dir, task.key)
+    try:
+        m = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    inputs = {q: _stamp(q) for q in (task.path, task.detections) if q}
+    if m.get("fingerprint") != fingerprint or m.get("inputs") != inputs or m.get("result", {}).get("status") != "done":
+        return None
+    return FileResult(**{**m["result"], "status": "skipped"})
+
+
+def _layers_klv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Records, list | None]], int]:
+    from ..accuracy.budget import ErrorBudget
+    from ..misb import misb_sensor
+    from .klv import frame_records, klv_job, telemetry_records
+
+    cfg = _config(settings.config_path)
+    sensor = budget = None
+    if cfg is not None:
+        inst = cfg.installation
+        sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
+        budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
+    dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
+    job = klv_job(task.path, dem=dem, sensor=sensor, budget=budget, footprint_every=settings.footprint_every,
+                  strict=settings.strict, assume=settings.assume)
+    frames = frame_records(job.telemetry, job.check).columns
+    frames = {"lat_deg": frames.pop("eoloc_lat_deg"), "lon_deg": frames.pop("eoloc_lon_deg"),
+              "h_m": frames.pop("eoloc_h_m"), **frames}
+    prints = job.layers["footprints"]
+    issues = [str(i) for i in [*job.stream.issues, *job.issues]]
+    layers = {"fixes": (job.records, None), "packets": (telemetry_records(job.telemetry), None),
+              "frames": (Records(frames), None),
+              "footprints": (Records.from_rows([f["properties"] for f in prints]), prints),
+              "issues": (_issue_records(issues), None)}
+    return layers, len(job.telemetry)
+
+
+def _layers_csv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Records, list | None]], int]:
+    from ..rules import rule_from_options
+    from .klv import telemetry_records
+    from .locate import locate_files
+
+    cfg = _config(settings.config_path)
+    if cfg is None:
+        raise InputError(f"{task.path}: a telemetry CSV needs --config (the camera) to be located")
+    dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
+    if (dem is None) == (settings.target_height_m is None):
+        raise InputError(f"{task.path}: a telemetry CSV needs the ground: --target-height H or --dem FILE")
+    rule = rule_from_options(height_m=settings.target_height_m, dem=dem)
+    job = locate_files(cfg, task.path, task.detections, rule)
+    layers = {"fixes": (job.records, None),
+              "packets": (telemetry_records(job.telemetry, cfg.telemetry.time_origin), None),
+              "issues": (_issue_records([*map(str, job.issues), *job.notes]), None)}
+    return layers, len(job.telemetry)
+
+
+def _issue_records(messages: list[str]) -> Records:
+    return Records({"message": np.array(messages, dtype=object)})
+
+
+def _write_partition(out_dir: Path, layer: str, key: str, records: Records, features: list | None,
+                     source: str, grid: tuple[str, ...]) -> None:
+    from ..io.geotable import write_geoparquet
+    from ..io.gridref import with_grid_columns
+
+    if not len(records):
+        return
+    cols = {"source_file": np.full(len(records), source, dtype=object), **records.columns}
+    records = with_grid_columns(Records(cols), grid) if grid else Records(cols)
+    folder = out_dir / layer / f"file={key}"
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / ".part-0.parquet.tmp"
+    if records.has_points or features is not None:
+        write_geoparquet(tmp, records, features)
+    else:
+        import pyarrow.parquet as pq
+
+        from ..io.geotable import arrow_table
+
+        pq.write_table(arrow_table(records), tmp, compression="zstd")
+    os.replace(tmp, folder / "part-0.parquet")
+
+
+def remove_partitions(out_dir: Path, key: str) -> None:
+    for layer in LAYERS:
+        shutil.rmtree(out_dir / layer / f"file={key}", ignore_errors=True)
+
+
+def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileResult:
+    """Run one task where it is called (a worker): read, locate, write the partitions and the
+    manifest; never raises for the file's sake."""
+    out_dir = Path(settings.out_dir)
+    t0 = time.perf_counter()
+    result = FileResult(task.key, task.path, "done")
+    try:
+        inputs = {q: _stamp(q) for q in (task.path, task.detections) if q}
+        remove_partitions(out_dir, task.key)
+        layers, n = (_layers_csv if task.kind == "csv" else _layers_klv)(task, settings)
+        for layer, (records, features) in layers.items():
+            _write_partition(out_dir, layer, task.key, records, features, task.path, settings.grid)
+        fixes = layers["fixes"][0]
+        status = fixes["status"] if len(fixes) else np.zeros(0, dtype=object)
+        result.packets, result.fixes = n, len(fixes)
+        result.fixes_ok, result.issues = int(np.sum(status == "OK")), len(layers["issues"][0])
+    except EolocError as exc:
+        result.status, result.message = "failed", str(exc)
+        inputs = None
+    except OSError as exc:  # unreadable (permissions, a file that vanished, a full disk)
+        result.status, result.message = "failed", f"{exc.filename or task.path}: {exc.strerror or exc}"
+        inputs = None
+    except Exception as exc:  # a bug: the batch goes on, the traceback is kept for the report
+        result.status = "bug"
+        log = out_dir / LOGS / f"{task.key}.txt"
+        log.parent.mkdir(parents=True, exist_ok=True)
+        log.write_text(f"{task.path}\n{traceback.format_exc()}", encoding="utf-8")
+        result.message = f"{type(exc).__name__}: {exc} (traceback in {log})"
+        inputs = None
+    result.seconds = round(time.perf_counter() - t0, 3)
+    if inputs is not None:
+        m = manifest_path(out_dir, task.key)
+        m.parent.mkdir(parents=True, exist_ok=True)
+        tmp = m.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"path": task.path, "inputs": inputs, "fingerprint": fingerprint,
+                                   "result": result.row()}, indent=1), encoding="utf-8")
+        os.replace(tmp, m)
+    return result
+
+
+# -- the batch -----------------------------------------------------------------------------------
+
+def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings, *, mapper=None, redo: bool = False,
+              on_done: Callable[[], None] | None = None) -> BatchJob:
+    """Every task of ``patterns`` (or the given tasks) through ``mapper`` (:mod:`eoloc.accuracy.runners`:
+    here by default, or a Dask cluster); ``redo`` ignores the manifests. ``on_done()`` after each
+    file, skipped ones included (progress)."""
+    from ..accuracy.runners import local_map
+
+    patterns = list(patterns)
+    tasks = patterns if patterns and isinstance(patterns[0], Task) else find_tasks(patterns)
+    out_dir = Path(settings.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fingerprint = settings.fingerprint()
+    results: dict[str, FileResult] = {}
+    todo = []
+    for t in tasks:
+        done = None if redo else is_done(t, settings, fingerprint)
+        if done is not None:
+            results[t.key] = done
+            if on_done is not None:
+                on_done()
+        else:
+            todo.append(t)
+    finished = None if on_done is None else (lambda _i: on_done())
+    for r in (mapper or local_map)(process_file, [(t, settings, fingerprint) for t in todo], finished):
+        results[r.key] = r
+    ordered = [results[t.key] for t in tasks]
+    notes = []
+    if any(r.status == "skipped" for r in ordered):
+        notes.append(f"{sum(r.status == 'skipped' for r in ordered)} file(s) already done with these settings were "
+                     "skipped (--redo to do them again)")
+    return BatchJob(ordered, out_dir, notes)
+
+
+def status_records(job: BatchJob) -> Records:
+    return Records.from_rows([r.row() for r in job.results])
