@@ -140,7 +140,8 @@ def test_mgrs_is_the_utm_position_everywhere(lat, lon):
     e, n = u["utm_easting_m"][0], u["utm_northing_m"][0]
     de = (int(m[5:10]) - e % 100_000 + 50_000) % 100_000 - 50_000
     dn = (int(m[10:]) - n % 100_000 + 50_000) % 100_000 - 50_000
-    assert -1.0 - 1e-6 <= de <= 1e-6 and -1.0 - 1e-6 <= dn <= 1e-6  # MGRS truncates to the metre
+    # MGRS truncates to the metre; GeoTrans's and PROJ's series agree to well under 1 mm
+    assert -1.0 - 1e-3 <= de <= 1e-3 and -1.0 - 1e-3 <= dn <= 1e-3
 
 
 def test_a_table_layer_and_a_point_without_height():

@@ -125,3 +125,12 @@ def test_dask_task_errors_surface(dask_client):
 
     with pytest.raises(RuntimeError, match="bad item"):
         DaskMapper(dask_client)(boom, [(1,), (2,)])
+
+
+def test_one_mapper_maps_the_same_shared_argument_twice(dask_client):
+    """Two calls scattering the same shared value back to back: each keeps its own copy (the
+    first call's release once took the second call's dependency away: 'lost dependencies')."""
+    mapper = DaskMapper(dask_client)
+    shared = {"offset": 10.0, "table": list(range(1000))}
+    for _ in range(3):
+        assert mapper(lambda k, s: k + s["offset"], [(k, shared) for k in range(8)]) == [k + 10.0 for k in range(8)]

@@ -43,7 +43,10 @@ class DaskMapper:
         args_list = [tuple(a) for a in args_list]
         width = len(args_list[0])
         shared = {j for j in range(width) if len(args_list) > 1 and all(a[j] is args_list[0][j] for a in args_list)}
-        sent = {j: self.client.scatter(args_list[0][j], broadcast=True) for j in shared}
+        # hash=False: a key of its own per call (two calls scattering the same value would share one
+        # key, which the first call's release can take away from the second: 'lost dependencies')
+        # (the value goes in a list: scatter takes a dict's keys as data keys, which would collide too)
+        sent = {j: self.client.scatter([args_list[0][j]], broadcast=True, hash=False)[0] for j in shared}
         futures = [self.client.submit(fn, *(sent.get(j, a[j]) for j in range(width)), pure=False)
                    for a in args_list]
         index = {f.key: i for i, f in enumerate(futures)}

@@ -213,7 +213,7 @@ def _layers_klv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Re
         budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
     job = klv_job(task.path, dem=dem, sensor=sensor, budget=budget, footprint_every=settings.footprint_every,
-                  strict=settings.strict, assume=settings.assume)
+                  strict=settings.strict, assume=settings.assume, map_layers=False)
     frames = frame_records(job.telemetry, job.check).columns
     frames = {"lat_deg": frames.pop("eoloc_lat_deg"), "lon_deg": frames.pop("eoloc_lon_deg"),
               "h_m": frames.pop("eoloc_h_m"), **frames}

@@ -39,12 +39,13 @@ class KLVJob:
 
 
 def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, strict: bool = False,
-            assume=()) -> KLVJob:
+            assume=(), map_layers: bool = True) -> KLVJob:
     """Decode ``path`` (raw KLV or MPEG-TS), recompute every frame's centre and corners, locate the
     VMTI detections on ``dem`` or the frame-centre elevation (with uncertainty from ``budget``),
     and check which conventions the encoder follows. strict: packets that break ST 0601 are
     dropped (named); assume: convention names (:data:`eoloc.io.klv.conventions.CONVENTIONS`)
-    applied to the stream before anything is computed."""
+    applied to the stream before anything is computed. map_layers=False leaves out the GeoJSON
+    layers only the map and KML draw (aircraft, encoder footprints, fixes): an archive job's saving."""
     from ..io.klv import klv_telemetry, read_klv, vmti_detections
     from ..io.klv.conventions import apply_to_telemetry
     from ..misb import misb_sensor
@@ -64,8 +65,10 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     det = vmti_detections(stream, pixels_from=0 if from_0 else 1)
     prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
               footprint_features(tel, check.geometry, every=footprint_every))
-    layers = {"aircraft": aircraft_features(tel), "footprints": prints,
-              "encoder footprints": footprint_features(tel, None, every=footprint_every)}
+    layers = {"footprints": prints}
+    if map_layers:
+        layers |= {"aircraft": aircraft_features(tel),
+                   "encoder footprints": footprint_features(tel, None, every=footprint_every)}
     records = Records({})
     diagnoses = [diagnose_frames(raw_tel, sensor)]
     v = None
@@ -73,7 +76,8 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
         extra = {"stream": det.columns["stream"], **v.extra}
         records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
-        layers["fixes"] = fix_features(records)
+        if map_layers:
+            layers["fixes"] = fix_features(records)
         if np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's own locations: check conventions
             def other_numbering():
                 d = vmti_detections(stream, pixels_from=1 if from_0 else 0)
