@@ -8,6 +8,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 
 import bench_accuracy
+import bench_batch
 import bench_compensation
 import bench_csv
 import bench_evaluate
@@ -23,5 +24,6 @@ if __name__ == "__main__":
     print(HEADER)
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
                  + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)
-                 + bench_csv.main() + bench_klv.main(3000) + bench_evaluate.main(1_000_000)):
+                 + bench_csv.main() + bench_klv.main(3000) + bench_evaluate.main(1_000_000)
+                 + bench_batch.main(12_000)):
         print(line, flush=True)

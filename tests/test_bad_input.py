@@ -40,6 +40,7 @@ COMMANDS = {
                          "--out", "{out}", "-o", "{out}/model.json"],
     "accuracy": ["accuracy", "{cfg}", "-n", "200", "--no-sensitivity", "--no-plots", "--out", "{out}"],
     "klv": ["klv", "{klv}", "--out", "{out}"],
+    "batch": ["batch", "{klv}", "--out", "{out}"],
     "map": ["map", "--telemetry", "{tel}", "-o", "{out}/map.html"],
     "evaluate": ["evaluate", "{fixes}", "--truth", "{truth}", "--bootstrap", "50", "--no-plots", "--out", "{out}"],
     "report": ["report", "{obs}", "--config", "{cfg}", "--bootstrap", "50", "--out", "{out}"],
@@ -48,7 +49,7 @@ READS_TELEMETRY = ["locate", "footprint", "track", "triangulate", "calibrate", "
 READS_CONFIG = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "compensate-train",
                 "accuracy", "report"]
 WRITES_OUT = ["locate", "footprint", "track", "track-static", "triangulate", "calibrate", "rectify",
-              "compensate-train", "accuracy", "klv", "evaluate", "report"]
+              "compensate-train", "accuracy", "klv", "batch", "evaluate", "report"]
 READS_DEM = ["locate-dem"]
 CONFIG = (DEMO / "camera.toml").read_text(encoding="utf-8")
 ACCURACY = """
@@ -299,4 +300,23 @@ def _text(p: Path, text: str) -> Path:
 def test_an_unreachable_dask_scheduler_is_named(files, tmp_path):
     r = _run(["accuracy", "--scenario", "s13", "-n", "100", "--no-sensitivity", "--no-plots", "--dask",
               "tcp://127.0.0.1:1", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "127.0.0.1:1" in r.output, r.output
+
+
+def test_batch_names_each_bad_stream_and_keeps_going(files, tmp_path):
+    """The bad streams of the KLV cases above, all in one batch with a good one: each is listed
+    with its reason, the good one is done, exit code 2."""
+    d = tmp_path / "in"
+    d.mkdir()
+    (d / "good.klv").write_bytes(Path(files["klv"]).read_bytes())
+    _text(d / "text.klv", "time_s,lat_deg\n0,45\n")
+    _text(d / "empty.ts", "")
+    r = _run(["batch", str(d), "--out", str(tmp_path / "out")])
+    assert r.exit_code == 2, r.output
+    with (tmp_path / "out" / "batch_status.csv").open(encoding="utf-8") as fh:
+        status = {Path(r["path"]).name: r for r in csv.DictReader(fh)}
+    assert status["good.klv"]["status"] == "done"
+    assert status["text.klv"]["status"] == "failed" and "no MISB ST 0601 packet" in status["text.klv"]["message"]
+    assert status["empty.ts"]["status"] == "failed" and "is empty" in status["empty.ts"]["message"]
+    r = _run(["batch", str(d / "good.klv"), "--out", str(tmp_path / "out2"), "--dask", "tcp://127.0.0.1:1"])
     assert r.exit_code == 2 and "127.0.0.1:1" in r.output, r.output
