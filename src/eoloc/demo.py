@@ -110,6 +110,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     flights = run_compensation_demo(out_dir / "compensation", console=console, sensor=sensor)
     run_report_demo(out_dir / "report", console=console, config_path=data / "camera.toml", flights=flights)
     run_rectify_demo(out_dir / "rectify", console=console, data=data / "mountain")
+    run_batch_demo(out_dir / "archive", console=console, data=data / "mountain")
 
 
 def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
@@ -307,3 +308,25 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     console.print("[dim]Same flight as the CSV run above, through the KLV path: heading sent with 0.0055° steps "
                   "(tag 5), heights as MSL (tag 15, back to ellipsoidal through EGM96), pixels as whole VMTI "
                   f"pixels. Open {out_dir / 'map.html'} in a browser (it works offline).[/]")
+
+
+def run_batch_demo(out_dir: Path, *, console: Console, data: Path) -> None:
+    """An archive: the mountain flight's stream and four generated circling flights, each file a
+    task, into one GeoParquet dataset per layer (eoloc batch), run twice to show the resume."""
+    import shutil
+
+    from .io.klv.synthetic import write_circling_flights
+    from .jobs.batch import BatchSettings, batch_job
+    from .render import batch_table
+
+    console.rule("An archive: every recording a task -> GeoParquet datasets (eoloc batch)")
+    inputs = out_dir / "recordings"
+    write_circling_flights(inputs, 4, 300)
+    shutil.copy(data / "flight.klv", inputs / "mountain.klv")
+    settings = BatchSettings(str(out_dir / "datasets"))
+    job = batch_job([str(inputs)], settings, redo=True)
+    console.print(batch_table(job))
+    again = batch_job([str(inputs)], settings)
+    console.print(f"run again: {again.counts()} (nothing changed, nothing redone). Read the fixes with "
+                  f"geopandas.read_parquet('{settings.out_dir}/fixes') or DuckDB: SELECT * FROM "
+                  f"read_parquet('{settings.out_dir}/fixes/*/*.parquet', hive_partitioning = true)")

@@ -133,15 +133,19 @@ BATCH_STYLE = {"done": "green", "skipped": "dim", "failed": "red", "bug": "bold 
 
 def batch_table(job, limit: int = 40) -> RichTable:
     """`eoloc batch`'s per-file status: the first ``limit`` files, failures first, and the totals."""
+    import os
+
     results = sorted(job.results, key=lambda r: (r.status not in ("bug", "failed"), r.path))
     counts = job.counts()
-    t = RichTable(title=f"{len(job.results)} files: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
+    paths = [os.path.abspath(r.path) for r in results]
+    base = os.path.dirname(os.path.commonpath(paths)) if len(paths) == 1 else os.path.commonpath(paths) if paths else ""
+    t = RichTable(title=f"{len(job.results)} files under {base}: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                   caption=None if len(results) <= limit else f"first {limit} of {len(results)} (all in "
                                                              "batch_status.csv)")
     for col in ("file", "status", "packets", "fixes", "OK", "issues", "s", "message"):
         t.add_column(col, justify="right" if col in ("packets", "fixes", "OK", "issues", "s") else "left",
                      overflow="fold")
-    for r in results[:limit]:
-        t.add_row(escape(r.path), f"[{BATCH_STYLE.get(r.status, '')}]{r.status}[/]", str(r.packets), str(r.fixes),
-                  str(r.fixes_ok), str(r.issues), f"{r.seconds:.2f}", escape(r.message))
+    for r, path in list(zip(results, paths, strict=True))[:limit]:
+        t.add_row(escape(os.path.relpath(path, base)), f"[{BATCH_STYLE.get(r.status, '')}]{r.status}[/]",
+                  str(r.packets), str(r.fixes), str(r.fixes_ok), str(r.issues), f"{r.seconds:.2f}", escape(r.message))
     return t
