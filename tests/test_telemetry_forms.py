@@ -244,3 +244,26 @@ def test_the_cli_locates_quaternion_msl_zoom_telemetry(original, tmp_path):
             pa = pymap3d.geodetic2ecef(float(x["lat_deg"]), float(x["lon_deg"]), float(x["h_m"]))
             pb = pymap3d.geodetic2ecef(float(y["lat_deg"]), float(y["lon_deg"]), float(y["h_m"]))
             assert np.linalg.norm(np.subtract(pa, pb)) < 2e-3  # the CSV's printed precision
+
+
+def test_a_geoid_named_in_the_config_converts_msl_telemetry(original, tmp_path):
+    """[telemetry] msl_geoid (relative to the config file): a grid of N = +30 m everywhere moves
+    every located point's aircraft up by exactly the difference to EGM96 there."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    header, cols = original
+    grid = tmp_path / "grids" / "flat30.tif"
+    grid.parent.mkdir()
+    with rasterio.open(grid, "w", driver="GTiff", width=360, height=180, count=1, dtype="float32", crs="EPSG:4326",
+                       transform=from_origin(-180, 90, 1, 1)) as ds:
+        ds.write(np.full((1, 180, 360), 30.0, dtype=np.float32))
+    cfg_path = tmp_path / "camera.toml"
+    cfg_path.write_text((MOUNTAIN / "camera.toml").read_text(encoding="utf-8")
+                        + '\n[telemetry]\nmsl_geoid = "grids/flat30.tif"\n', encoding="utf-8")
+    cfg = load_config(cfg_path)
+    assert Path(cfg.telemetry.msl_geoid) == grid
+    path = _write(tmp_path / "msl.csv", [("h_msl_m" if h == "h_m" else h) for h in header],
+                  {**cols, "h_msl_m": cols["h_m"]})
+    job = locate_files(cfg, path, MOUNTAIN / "detections.csv", OnDEM(open_dem(MOUNTAIN / "longs_peak_srtmgl3.tif")))
+    np.testing.assert_allclose(job.telemetry.columns["h_m"], cols["h_m"] + 30.0, atol=1e-4)

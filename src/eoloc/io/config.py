@@ -25,6 +25,7 @@
     heading_bias_deg = 0.0   # INS heading minus true heading: subtracted from every yaw read
     time_offset_s = 0.0      # telemetry clock minus video clock (default of --time-offset)
     time_origin = "unix"     # optional: what time_s = 0 is ("unix" or an ISO 8601 instant); adds time_utc
+    msl_geoid = "egm2008.tif"  # optional: geoid grid for h_msl_m telemetry, relative to this file (default EGM96)
 
     [compensation]           # optional: learned error compensation (eoloc compensate train writes the model)
     model = "compensation.json"   # relative to this file; applied by eoloc locate (or --compensate MODEL)
@@ -148,6 +149,7 @@ class TelemetryConfig(_Strict):
     heading_bias_deg: float = Field(0.0, ge=-180.0, le=180.0)
     time_offset_s: float = Field(0.0, ge=-86400.0, le=86400.0)
     time_origin: str | None = None  # "unix", or the ISO 8601 UTC instant of time_s = 0 (adds time_utc columns)
+    msl_geoid: str | None = None  # geoid grid for h_msl_m telemetry (relative to the config file; default EGM96)
 
     @model_validator(mode="after")
     def _origin(self) -> TelemetryConfig:
@@ -243,7 +245,11 @@ def load_config(path: str | Path) -> Config:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
     try:
-        cfg = Config.model_validate(_tuples(raw))
+        raw = _tuples(raw)
+        geoid = raw.get("telemetry", {}).get("msl_geoid") if isinstance(raw.get("telemetry"), dict) else None
+        if isinstance(geoid, str) and not Path(geoid).is_absolute():  # relative to the config file
+            raw["telemetry"] = {**raw["telemetry"], "msl_geoid": str(path.parent / geoid)}
+        cfg = Config.model_validate(raw)
         cfg.sensor()
     except ValidationError as exc:
         lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}" for e in exc.errors()]

@@ -39,7 +39,8 @@ def footprint_job(cfg, telemetry, surface, *, edge_samples: int = 16, chunk: int
                   progress: Callable[[int], None] | None = None) -> FootprintJob:
     """Footprints of every record of ``telemetry`` on ``surface`` (an ellipsoidal height or a DEM),
     in chunks of ``chunk`` frames (``progress(k)`` after each)."""
-    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg)
+    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
+                         msl_geoid=cfg.telemetry.msl_geoid)
     tel = inputs.telemetry
     sensor = cfg.sensor()
     prints: list[Footprint] = []

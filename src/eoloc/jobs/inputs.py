@@ -18,9 +18,16 @@ class Inputs:
     issues: list[Issue] = field(default_factory=list)
 
 
-def read_inputs(telemetry, other=None, *, heading_bias_deg: float = 0.0, reader=read_detections) -> Inputs:
-    """Both tables; an InputError (with the issues that explain it) when either has no usable record."""
-    tel = with_heading_bias(read_telemetry(telemetry), heading_bias_deg)
+def read_inputs(telemetry, other=None, *, heading_bias_deg: float = 0.0, reader=read_detections,
+                msl_geoid: str | None = None) -> Inputs:
+    """Both tables; an InputError (with the issues that explain it) when either has no usable record.
+    ``msl_geoid``: the geoid grid for telemetry heights given as h_msl_m (default EGM96)."""
+    geoid = None
+    if msl_geoid is not None:
+        from ..terrain.geoid import Geoid
+
+        geoid = Geoid(msl_geoid)
+    tel = with_heading_bias(read_telemetry(telemetry, geoid=geoid), heading_bias_deg)
     det = reader(other) if other else None
     issues = list(tel.issues) + (list(det.issues) if det is not None else [])
     if len(tel) == 0:

@@ -43,7 +43,8 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule
                  time_offset_s: float | None = None, compensation=None) -> LocateJob:
     """Locate every detection (or every record's image centre) of the files with the config's
     sensor; ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
-    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg)
+    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg,
+                         msl_geoid=cfg.telemetry.msl_geoid)
     located = locate_tables(cfg.sensor(), inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
                             budget=budget, compensation=compensation, interpolate=interpolate, max_gap_s=max_gap_s,
                             time_offset_s=cfg.telemetry.time_offset_s if time_offset_s is None else time_offset_s)

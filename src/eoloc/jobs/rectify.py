@@ -64,7 +64,8 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     from ..footprint import footprints
     from ..io.telemetry import telemetry_pose
 
-    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg)
+    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
+                         msl_geoid=cfg.telemetry.msl_geoid)
     tel = inputs.telemetry
     k = record_of(tel, telemetry, frame, time_s)
     sensor = cfg.sensor()

@@ -140,7 +140,8 @@ def triangulate_job(cfg, telemetry, detections, *, ray_sigma_deg: float, min_ang
     from ..io.telemetry import match_detections, telemetry_pose
     from ..rules.multiview import triangulate as tri
 
-    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg)
+    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg,
+                         msl_geoid=cfg.telemetry.msl_geoid)
     tel, det = inputs.telemetry, inputs.other
     matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
     has = matched.record >= 0
