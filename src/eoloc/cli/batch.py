@@ -31,7 +31,9 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
   Resumable: files already done with the same settings are skipped; a changed file is redone;
   --redo does everything again. One bad file never stops the batch: it is listed as failed with
   the reason (exit code 2 at the end); a bug in eoloc is listed with its traceback in DIR/_logs.
-  Workers read the files themselves: only paths and small summaries go through Dask.
+  Workers read the files themselves: only paths and small summaries go through Dask, so on a
+  cluster the inputs, DEM, config and DIR must be on a file system every worker sees at the
+  same path.
 """
 
 

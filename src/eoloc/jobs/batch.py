@@ -45,7 +45,9 @@ LOGS = "_logs"
 
 @dataclass(frozen=True)
 class BatchSettings:
-    """What every task needs (pickled to the workers): the output folder and how to locate."""
+    """What every task needs (pickled to the workers): the output folder and how to locate. Paths
+    are made absolute: on a cluster the workers must see them (and the output folder) at the
+    same place, a shared file system."""
 
     out_dir: str
     dem_paths: tuple[str, ...] = ()
@@ -58,6 +60,15 @@ class BatchSettings:
     grid: tuple[str, ...] = ()
     strict: bool = False
     assume: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        def absolute(p: str | None) -> str | None:
+            return None if p is None else os.path.abspath(p)
+
+        object.__setattr__(self, "out_dir", absolute(self.out_dir))
+        object.__setattr__(self, "dem_paths", tuple(absolute(p) for p in self.dem_paths))
+        object.__setattr__(self, "geoid", absolute(self.geoid))
+        object.__setattr__(self, "config_path", absolute(self.config_path))
 
     def fingerprint(self) -> str:
         """What the results depend on besides the file: every setting but the folder, the DEM and
@@ -144,11 +155,12 @@ def find_tasks(patterns: Sequence[str]) -> list[Task]:
         n = len(found)
         for f in files:
             name = f.name.lower()
+            f = f.resolve()  # absolute: a worker on another machine has another working directory
             if name.endswith(KLV_SUFFIXES):
-                found.setdefault(str(f.resolve()), Task(str(f), None, task_key(f)))
+                found.setdefault(str(f), Task(str(f), None, task_key(f)))
             elif name.endswith(".csv") and "telemetry" in name:
                 det = f.with_name(f.name.replace("telemetry", "detections").replace("Telemetry", "Detections"))
-                found.setdefault(str(f.resolve()), Task(str(f), str(det) if det.is_file() else None, task_key(f)))
+                found.setdefault(str(f), Task(str(f), str(det) if det.is_file() else None, task_key(f)))
         if len(found) == n:
             empty.append(pattern)
     if empty:
