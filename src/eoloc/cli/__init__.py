@@ -24,6 +24,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("evaluate", "evaluate"),
     ("report", "report"),
     ("rectify", "rectify"),
+    ("serve", "serve"),
     ("demo", "demo"),
 )
 

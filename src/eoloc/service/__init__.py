@@ -1,0 +1,1 @@
+"""eoloc as a service: the HTTP JSON API (:mod:`.api`)."""

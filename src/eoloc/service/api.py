@@ -1,0 +1,291 @@
+"""eoloc's HTTP JSON API (FastAPI on uvicorn; OpenAPI docs at /docs): ``POST /v1/locate`` and
+``GET /v1/health``.
+
+A request is one observation or a batch (``{"observations": [...]}``). An observation: the pose
+(WGS-84 degrees, ellipsoidal metres, yaw/pitch/roll and the gimbal angles in degrees, SPEC §2),
+the pixels to locate (default: the image centre), the stop rule (exactly one of ``range_m``,
+``target_height_m`` or ``dem``: the name of a DEM given at start-up), and the camera: in the
+request, or the config named at start-up. Every fix comes back with its status; a fix that
+failed has no coordinates (null), never a plausible point. ``"covariance": true`` adds each fix's
+first-order uncertainty from the start-up config's ``[accuracy.budget]``.
+
+Bad requests are answered as JSON naming the field (``observations.0.pose.lat_deg``) with HTTP
+422; bodies over the size limit with 413; too many pixels or observations with 422.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ..errors import EolocError
+from ..io.config import CameraConfig
+
+MAX_BODY_BYTES = 8 * 1024 * 1024
+MAX_PIXELS = 100_000  # per request, over all observations
+MAX_OBSERVATIONS = 10_000
+
+Deg = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class PoseIn(_Strict):
+    lat_deg: float = Field(ge=-90, le=90, description="WGS-84 latitude of the INS reference point, degrees")
+    lon_deg: float = Field(ge=-180, le=360, description="WGS-84 longitude, degrees")
+    h_m: float = Field(ge=-12_000, le=1e7, description="ellipsoidal height, metres")
+    yaw_deg: float = Field(0.0, ge=-360, le=360, description="heading, clockwise from true north")
+    pitch_deg: float = Field(0.0, ge=-90, le=90, description="nose up positive")
+    roll_deg: float = Field(0.0, ge=-180, le=180, description="right wing down positive")
+    gimbal_deg: list[Deg] = Field(default_factory=list, max_length=3,
+                                  description="the gimbal model's angles in its order (az-el: azimuth, elevation[, "
+                                              "sensor roll]; roll-pitch: frame roll, frame pitch[, sensor roll])")
+
+
+class StopIn(_Strict):
+    range_m: float | None = Field(None, gt=0, le=1e7, description="M1: slant range along each ray (laser), m")
+    target_height_m: float | None = Field(None, ge=-12_000, le=1e7,
+                                          description="M3: the ellipsoidal height of the ground, m")
+    dem: str | None = Field(None, description="M4: the name of a DEM given to `eoloc serve --dem NAME=PATH`")
+
+    @model_validator(mode="after")
+    def _one(self) -> StopIn:
+        if sum(x is not None for x in (self.range_m, self.target_height_m, self.dem)) != 1:
+            raise ValueError("give exactly one of range_m, target_height_m or dem")
+        return self
+
+
+class ObservationIn(_Strict):
+    pose: PoseIn
+    gimbal: Literal["az-el", "roll-pitch", "fixed"] | None = Field(
+        None, description="the gimbal model (default: the start-up config's, else az-el)")
+    pixels: list[tuple[Deg, Deg]] | None = Field(None, description="[[u, v], ...] (column, row; the centre of the "
+                                                                  "top-left pixel is (0, 0)); default: the image "
+                                                                  "centre")
+    stop: StopIn
+    camera: CameraConfig | None = Field(None, description="the camera (as the config's [camera]); default: the "
+                                                          "start-up config's")
+    covariance: bool = Field(False, description="add each fix's first-order uncertainty (start-up config's "
+                                                "[accuracy.budget])")
+
+
+class BatchIn(_Strict):
+    observations: list[ObservationIn] = Field(max_length=MAX_OBSERVATIONS)
+
+
+class FixOut(BaseModel):
+    lat_deg: float | None
+    lon_deg: float | None
+    h_m: float | None
+    range_m: float | None
+    status: str
+    u_px: float | None = None
+    v_px: float | None = None
+    uncertainty: dict[str, float | None] | None = None
+
+
+class LocateOut(BaseModel):
+    fixes: list[FixOut]
+
+
+class BatchOut(BaseModel):
+    results: list[LocateOut]
+
+
+class RequestError(EolocError):
+    """A request the API cannot serve, with the field it is about."""
+
+    def __init__(self, field_name: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field_name
+
+
+@dataclass
+class ServiceState:
+    """What the server was started with: the config (camera, gimbal, installation, budget) and the
+    DEMs by name."""
+
+    config: Any = None
+    dems: dict[str, Any] = field(default_factory=dict)
+    started: float = 0.0
+    served: int = 0
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def locate_observation(obs: ObservationIn, state: ServiceState, where: str) -> LocateOut:
+    """One observation through eoloc's chain; RequestError naming the field for what cannot be served."""
+    from ..pipeline import locate_by_rule
+    from ..result import Status
+    from ..rules import rule_from_options
+    from ..sensor import Camera, Pose, SensorModel, gimbal_from_name
+
+    cfg = state.config
+    if obs.camera is not None:
+        sensor = SensorModel(obs.camera.build(), gimbal_from_name(obs.gimbal or (cfg.gimbal.model if cfg else "az-el")))
+    elif cfg is not None:
+        sensor = cfg.sensor()
+        if obs.gimbal is not None and obs.gimbal != sensor.gimbal.name:
+            raise RequestError(f"{where}.gimbal", f"gimbal {obs.gimbal!r} contradicts the server config's "
+                                                    f"{sensor.gimbal.name!r}")
+    elif obs.pixels is not None:
+        raise RequestError(f"{where}.camera", "pixels need a camera: give one in the request or start the "
+                                                "server with --config")
+    else:  # the image centre's ray is the boresight whatever the intrinsics
+        sensor = SensorModel(Camera(1, 1, 1.0, 1.0, 0.0, 0.0), gimbal_from_name(obs.gimbal or "az-el"))
+    names = sensor.gimbal.angle_names
+    g = list(obs.pose.gimbal_deg)
+    need = len(names)
+    if sensor.gimbal.name != "fixed" and len(g) not in (need, need + 1):
+        raise RequestError(f"{where}.pose.gimbal_deg", f"the {sensor.gimbal.name} gimbal needs {need} angles "
+                                                         f"({', '.join(names)}[, sensor roll]), got {len(g)}")
+    angles = tuple(g) if sensor.gimbal.name == "fixed" else (*g, *([0.0] if len(g) == need else []))
+    p = obs.pose
+    pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, angles)
+    dem = None
+    if obs.stop.dem is not None:
+        dem = state.dems.get(obs.stop.dem)
+        if dem is None:
+            known = ", ".join(sorted(state.dems)) or "none (start the server with --dem NAME=PATH)"
+            raise RequestError(f"{where}.stop.dem", f"no DEM named {obs.stop.dem!r}; this server has: {known}")
+    rule = rule_from_options(range_m=obs.stop.range_m, height_m=obs.stop.target_height_m, dem=dem)
+    budget = None
+    if obs.covariance:
+        if cfg is None or cfg.accuracy is None or not cfg.accuracy.budget:
+            raise RequestError(f"{where}.covariance", "covariance needs the server started with a --config that "
+                                                        "has an [accuracy.budget]")
+        from ..accuracy.budget import ErrorBudget
+
+        budget = ErrorBudget.from_mapping(cfg.accuracy.budget)
+    if obs.pixels is None:
+        u = np.array([sensor.camera.cx])
+        v = np.array([sensor.camera.cy])
+    else:
+        px = np.asarray(obs.pixels, dtype=np.float64).reshape(-1, 2)
+        u, v = px[:, 0], px[:, 1]
+    f, cov = locate_by_rule(sensor, pose, (u, v), rule, budget=budget)
+    unc = None
+    if cov is not None:
+        from ..accuracy.covariance import covariance_columns
+
+        unc = covariance_columns(cov, f.ok)
+    out = []
+    for k in range(u.size):
+        ok = bool(f.ok[k])
+        out.append(FixOut(lat_deg=_num(f.lat_deg[k]) if ok else None, lon_deg=_num(f.lon_deg[k]) if ok else None,
+                          h_m=_num(f.h_m[k]) if ok else None, range_m=_num(f.range_m[k]) if ok else None,
+                          status=Status(int(f.status[k])).name, u_px=_num(u[k]), v_px=_num(v[k]),
+                          uncertainty=None if unc is None else {n: _num(c[k]) for n, c in unc.items()}))
+    return LocateOut(fixes=out)
+
+
+def _pixel_count(obs: list[ObservationIn]) -> int:
+    return sum(1 if o.pixels is None else len(o.pixels) for o in obs)
+
+
+def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES):
+    """The ASGI application (FastAPI), wrapped in the request-size limit."""
+    import time
+
+    from fastapi import FastAPI, Request
+    from fastapi.exceptions import RequestValidationError
+    from fastapi.responses import JSONResponse
+
+    from .. import __version__
+
+    state = state or ServiceState()
+    state.started = time.time()
+    app = FastAPI(title="eoloc", version=__version__,
+                  description="Geolocation of targets seen by airborne EO/IR sensors: pose + gimbal + camera + pixel "
+                              "+ a stop rule -> WGS-84 points with a status each (see the README's conventions).")
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError):
+        problems = [{"field": ".".join(str(x) for x in e["loc"] if x != "body") or "(body)", "message": e["msg"]}
+                    for e in exc.errors()]
+        return JSONResponse(status_code=422, content={"error": "invalid request", "problems": problems})
+
+    @app.exception_handler(RequestError)
+    async def _problem(request: Request, exc: RequestError):
+        return JSONResponse(status_code=422, content={"error": "invalid request",
+                                                      "problems": [{"field": exc.field, "message": str(exc)}]})
+
+    @app.exception_handler(EolocError)
+    async def _eoloc(request: Request, exc: EolocError):
+        return JSONResponse(status_code=422, content={"error": "invalid request",
+                                                      "problems": [{"field": "(body)", "message": str(exc)}]})
+
+    @app.get("/v1/health")
+    def health() -> dict:
+        """Alive, with what the server was started with."""
+        return {"status": "ok", "eoloc": __version__, "uptime_s": round(time.time() - state.started, 3),
+                "requests": state.served, "config": state.config is not None, "dems": sorted(state.dems)}
+
+    @app.post("/v1/locate", response_model=LocateOut | BatchOut)
+    def locate(body: ObservationIn | BatchIn) -> LocateOut | BatchOut:
+        """Locate one observation (its pixels, or the image centre) or a batch of them."""
+        observations = body.observations if isinstance(body, BatchIn) else [body]
+        n = _pixel_count(observations)
+        if n > MAX_PIXELS:
+            raise RequestError("pixels", f"{n} pixels in one request; at most {MAX_PIXELS}: split the batch")
+        state.served += 1
+        if isinstance(body, BatchIn):
+            return BatchOut(results=[locate_observation(o, state, f"observations.{i}")
+                                     for i, o in enumerate(observations)])
+        return locate_observation(body, state, "")
+
+    return SizeLimit(app, max_body_bytes)
+
+
+class SizeLimit:
+    """ASGI wrapper: a request body longer than ``limit`` bytes (by its Content-Length, or as it
+    streams in) is answered 413 with a JSON message; nothing past the limit is read."""
+
+    def __init__(self, app, limit: int) -> None:
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        length = dict(scope.get("headers") or {}).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > self.limit:
+            await self._too_large(send, int(length))
+            return
+        seen = 0
+
+        async def limited():
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.limit:
+                    raise _BodyTooLargeError
+            return message
+
+        try:
+            await self.app(scope, limited, send)
+        except _BodyTooLargeError:
+            await self._too_large(send, seen)
+
+    async def _too_large(self, send, n: int) -> None:
+        import json
+
+        body = json.dumps({"error": f"request body of {n} bytes is over this server's limit of {self.limit} bytes: "
+                                    "split the batch"}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+        await send({"type": "http.response.body", "body": body})
+
+
+class _BodyTooLargeError(Exception):
+    pass

@@ -1,0 +1,129 @@
+"""`eoloc serve`: the HTTP API through a real uvicorn server on loopback, spoken to over TCP by
+httpx. Answers are checked against [S13]'s published target and against the library called
+directly; bad requests against the field they name."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pymap3d
+import pytest
+
+import eoloc
+from eoloc.io.config import load_config
+from eoloc.rules import AtHeight, OnDEM
+from eoloc.sensor import Pose
+from eoloc.terrain import open_dem
+
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+S13_TARGET = (42.02058646, 125.03195512, 419.58)  # [S13] Table 3
+S13 = {"pose": {"lat_deg": 42.0, "lon_deg": 125.0, "h_m": 10_000.0, "yaw_deg": 10.0, "pitch_deg": 5.0,
+                "roll_deg": -2.0, "gimbal_deg": [45.0, -75.0]}, "gimbal": "az-el", "stop": {"range_m": 10_200.0}}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def server():
+    """`eoloc serve` as a user starts it, in its own process, with the mountain camera and DEM."""
+    port = _free_port()
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "serve", "--port", str(port), "--config",
+                             str(MOUNTAIN / "camera.toml"), "--dem", f"mountain={MOUNTAIN / 'longs_peak_srtmgl3.tif'}",
+                             "--max-body-mb", "0.5"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    for _ in range(300):
+        try:
+            if httpx.get(url + "/v1/health", timeout=1).status_code == 200:
+                break
+        except httpx.TransportError:
+            time.sleep(0.1)
+    else:
+        proc.kill()
+        raise RuntimeError(proc.stdout.read().decode())
+    yield url
+    proc.terminate()
+    proc.wait(10)
+
+
+def test_health_and_the_openapi_docs(server):
+    h = httpx.get(server + "/v1/health").json()
+    assert h["status"] == "ok" and h["config"] is True and h["dems"] == ["mountain"]
+    docs = httpx.get(server + "/docs")
+    assert docs.status_code == 200 and "swagger" in docs.text.lower()
+    spec = httpx.get(server + "/openapi.json").json()
+    assert "/v1/locate" in spec["paths"]
+
+
+def test_s13_through_the_api_is_the_published_target(server):
+    r = httpx.post(server + "/v1/locate", json={**S13, "camera": {"width": 1, "height": 1, "fx": 1.0}})
+    assert r.status_code == 200, r.text
+    (f,) = r.json()["fixes"]
+    assert f["status"] == "OK"
+    e, n, _ = pymap3d.geodetic2enu(f["lat_deg"], f["lon_deg"], f["h_m"], *S13_TARGET)
+    assert np.hypot(e, n) < 0.01 and abs(f["h_m"] - S13_TARGET[2]) < 0.01
+
+
+def test_a_batch_on_the_dem_equals_the_library(server):
+    cfg = load_config(MOUNTAIN / "camera.toml")
+    dem = open_dem(MOUNTAIN / "longs_peak_srtmgl3.tif")
+    pose = {"lat_deg": 40.23, "lon_deg": -105.66, "h_m": 6500.0, "yaw_deg": 80.0, "pitch_deg": 1.0,
+            "roll_deg": -1.5, "gimbal_deg": [10.0, -35.0]}
+    pixels = [[100.0, 80.0], [640.0, 360.0], [1200.0, 700.0], [5000.0, 5.0]]  # the last: outside the image
+    body = {"observations": [{"pose": pose, "pixels": pixels, "stop": {"dem": "mountain"}},
+                             {"pose": pose, "stop": {"target_height_m": 3000.0}}]}
+    r = httpx.post(server + "/v1/locate", json=body)
+    assert r.status_code == 200, r.text
+    a, b = r.json()["results"]
+    p = Pose(**{k: v for k, v in pose.items() if k != "gimbal_deg"}, gimbal_deg=(10.0, -35.0, 0.0))
+    ref = OnDEM(dem).locate(cfg.sensor(), p, np.array(pixels))
+    for k, fix in enumerate(a["fixes"]):
+        assert fix["status"] == ("OK" if ref.ok[k] else fix["status"])
+        if ref.ok[k]:
+            assert abs(fix["lat_deg"] - ref.lat_deg[k]) < 1e-12 and abs(fix["h_m"] - ref.h_m[k]) < 1e-6
+    assert a["fixes"][3]["status"] == "OUT_OF_IMAGE" and a["fixes"][3]["lat_deg"] is None
+    centre = AtHeight(3000.0).locate(cfg.sensor(), p)
+    assert b["fixes"][0]["u_px"] == cfg.sensor().camera.cx
+    assert abs(b["fixes"][0]["lon_deg"] - float(centre.lon_deg)) < 1e-12
+
+
+def test_a_ray_above_the_horizon_has_a_status_and_no_point(server):
+    up = {**S13, "pose": {**S13["pose"], "gimbal_deg": [0.0, 30.0]}, "stop": {"target_height_m": 0.0}}
+    (f,) = httpx.post(server + "/v1/locate", json=up).json()["fixes"]
+    assert f["status"] == "NO_INTERSECTION" and f["lat_deg"] is None and f["h_m"] is None
+
+
+@pytest.mark.parametrize(("body", "field", "words"), [
+    ({**S13, "pose": {**S13["pose"], "lat_deg": 95.0}}, "pose.lat_deg", "less than or equal to 90"),
+    ({**S13, "stop": {}}, "stop", "exactly one of range_m, target_height_m or dem"),
+    ({**S13, "stop": {"range_m": 10.0, "target_height_m": 0.0}}, "stop", "exactly one"),
+    ({**S13, "stop": {"dem": "alps"}}, "stop.dem", "no DEM named 'alps'; this server has: mountain"),
+    ({**S13, "pose": {**S13["pose"], "gimbal_deg": [45.0]}}, "pose.gimbal_deg", "needs 2 angles"),
+    ({**S13, "gimbal": "roll-pitch"}, "gimbal", "contradicts the server config's 'az-el'"),
+    ({**S13, "covariance": True}, "covariance", "[accuracy.budget]"),
+    ({"observations": [S13, {**S13, "pixels": [[1.0, "x"]]}]}, "observations.1.pixels.0.1", "valid number"),
+    ({**S13, "colour": "red"}, "colour", "Extra inputs are not permitted"),
+])
+def test_a_bad_request_names_its_field(server, body, field, words):
+    r = httpx.post(server + "/v1/locate", json=body)
+    assert r.status_code == 422, r.text
+    problems = r.json()["problems"]
+    assert any(p["field"].endswith(field) and words in p["message"] for p in problems), problems
+
+
+def test_not_json_and_too_large_bodies(server):
+    r = httpx.post(server + "/v1/locate", content=b"{not json", headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["error"] == "invalid request"
+    big = {"observations": [S13] * 6000}  # ~ 1 MB: over the server's 0.5 MB
+    r = httpx.post(server + "/v1/locate", json=big)
+    assert r.status_code == 413 and "over this server's limit" in r.json()["error"]
+    assert httpx.get(server + "/v1/health").json()["status"] == "ok"  # and the server goes on
