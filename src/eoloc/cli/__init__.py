@@ -19,6 +19,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("calibrate", "calibrate"),
     ("klv", "klv"),
     ("batch", "batch"),
+    ("live", "live"),
     ("map", "map_command"),
     ("compensate", "compensate"),
     ("evaluate", "evaluate"),

@@ -1,0 +1,1 @@
+"""eoloc live: KLV streams as they arrive (:mod:`.session`, :mod:`.sources`)."""

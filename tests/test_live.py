@@ -1,0 +1,125 @@
+"""`eoloc live` on real UDP sockets over loopback: the mountain flight's packets sent as datagrams
+with faults (a corrupt packet, duplicates, reordering, a datagram that is not KLV, an encoder
+restart, silence), located as they arrive, written as NDJSON; the result compared with `eoloc klv`
+on the same stream (the batch path), and the stop by SIGINT with its summary."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import eoloc
+from eoloc.io.klv import read_klv
+from eoloc.io.klv.synthetic import circling_flight_klv
+from eoloc.jobs.klv import klv_job
+from eoloc.live.session import LiveSession
+from eoloc.terrain import open_dem
+
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+FLIGHT = MOUNTAIN / "flight.klv"
+DEM = MOUNTAIN / "longs_peak_srtmgl3.tif"
+
+
+def _packets(path: Path) -> list[bytes]:
+    data = path.read_bytes()
+    s = read_klv(path)
+    starts = sorted({p.offset for p in s.packets} | {i.offset for i in s.issues})
+    return [data[a:b] for a, b in zip(starts, [*starts[1:], len(data)], strict=True)]
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _batch_fixes() -> dict[tuple[float, str], tuple[float, float, float]]:
+    """`eoloc klv`'s located targets by (packet time, target id)."""
+    job = klv_job(FLIGHT, dem=open_dem(DEM))
+    r = job.records
+    return {(float(f), str(t)): (la, lo, h) for f, t, la, lo, h, st in
+            zip(r["time_s"], r["target_id"], r["lat_deg"], r["lon_deg"], r["h_m"], r["status"], strict=True)
+            if st == "OK"}
+
+
+def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
+    port = _free_udp_port()
+    out = tmp_path / "fixes.ndjson"
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "live", f"udp://127.0.0.1:{port}",
+                             "--dem", str(DEM), "--ndjson", str(out), "--silence", "0.5"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    packets = _packets(FLIGHT)
+    assert len(packets) == 40  # 39 good + the demo's corrupted packet 17
+    sends = list(packets)
+    sends.insert(5, packets[4])  # a duplicate
+    sends[10], sends[11] = sends[11], sends[10]  # reordered
+    sends.insert(20, b"\x00hello, not KLV")
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    time.sleep(2.0)  # the receiver binds (it imports eoloc first)
+    for d in sends:
+        tx.sendto(d, ("127.0.0.1", port))
+        time.sleep(0.01)
+    time.sleep(1.5)  # silence: warned
+    restart = circling_flight_klv(3, seed=1)  # another encoder clock, years earlier: a restart
+    tx.sendto(restart, ("127.0.0.1", port))
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    log, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, log
+    assert "Traceback" not in log
+    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (SIGINT)")):].splitlines()[0])
+    assert summary["packets"] == 39 + 3 and summary["duplicates"] == 1 and summary["corrupt"] == 1
+    assert summary["not_klv"] == 1 and summary["late"] >= 1 and summary["restarts"] == 1
+    assert summary["latency_ms_median"] < 50
+    assert "silence" in log and "checksum" in log and "datagram" in log
+    rows = [json.loads(line) for line in out.read_text(encoding="utf-8").splitlines()]
+    mountain = [r for r in rows if r["properties"]["time_s"] > 1.7e9]  # not the restart's packets
+    ref = _batch_fixes()
+    got = {(r["properties"]["time_s"], str(r["properties"]["target_id"])): r for r in mountain
+           if r["properties"]["status"] == "OK"}
+    assert len(got) == len(ref) == 103
+    for key, (la, lo, h) in ref.items():
+        lon_l, lat_l, h_l = got[key]["geometry"]["coordinates"]
+        assert abs(lat_l - la) < 1e-12 and abs(lon_l - lo) < 1e-12 and abs(h_l - h) < 1e-6
+
+
+def test_report_on_change_values_are_carried_between_datagrams(tmp_path):
+    """Packets that leave out what has not changed (the field of view, the position) are located
+    with the last values sent, as in a file."""
+    from eoloc.io.klv.encode import build_uas_packet, uas_items
+
+    full = _packets(FLIGHT)[:3]
+    session = LiveSession("udp://test", dem=open_dem(DEM))
+    first = session.feed(full[0])
+    # packet 1 with the field of view (16, 17) and the platform position (13, 14, 15) left out
+    thin = build_uas_packet([(t, v) for t, v in uas_items(full[1]) if t not in (16, 17, 13, 14, 15)])
+    got = session.feed(thin)
+    assert first and got
+    # the file reader fills report-on-change values forward within a file: the same two packets as
+    # a file must give the same points
+    path = tmp_path / "carried.klv"
+    path.write_bytes(full[0] + thin)
+    r = klv_job(path, dem=open_dem(DEM)).records
+    second = r["frame"] == 1
+    assert second.sum() == len(got)
+    for a, la, lo, st in zip(got, r["lat_deg"][second], r["lon_deg"][second], r["status"][second], strict=True):
+        assert a["properties"]["status"] == st
+        if st == "OK":
+            lon_l, lat_l = a["geometry"]["coordinates"][:2]
+            assert abs(lon_l - lo) < 1e-12 and abs(lat_l - la) < 1e-12
+    assert any(a["properties"]["status"] == "OK" for a in got)
+
+
+@pytest.mark.parametrize("source, words", [("udp://nohost", "udp://HOST:PORT"), ("-", "udp://HOST:PORT and raw KLV")])
+def test_unsupported_sources_are_named(source, words, tmp_path):
+    r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", source, "--ndjson",
+                        str(tmp_path / "x.ndjson")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
