@@ -84,15 +84,9 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
     from ..render import print_klv_job
 
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    sensor, budget = None, None
-    if config_path:
-        from ..accuracy.budget import ErrorBudget
-        from ..misb import misb_sensor
+    from ..jobs.setup import misb_setup
 
-        cfg = load_config(config_path)
-        inst = cfg.installation
-        sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
-        budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
+    sensor, budget = misb_setup(load_config(config_path) if config_path else None)
     with err_console.status("decoding and locating..."):
         job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every, strict=strict,
                       assume=assume)

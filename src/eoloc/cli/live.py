@@ -52,16 +52,10 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, realt
     from ..live.sources import file_packets, udp_datagrams, udp_socket
 
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    sensor = budget = None
-    if config_path:
-        from ..accuracy.budget import ErrorBudget
-        from ..misb import misb_sensor
-        from .common import load_config
+    from ..jobs.setup import misb_setup
+    from .common import load_config
 
-        cfg = load_config(config_path)
-        inst = cfg.installation
-        sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
-        budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
+    sensor, budget = misb_setup(load_config(config_path) if config_path else None)
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget)
     stopping = {"why": None}
     started = time.monotonic()

@@ -213,16 +213,10 @@ def is_done(task: Task, settings: BatchSettings, fingerprint: str) -> FileResult
 
 
 def _layers_klv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Records, list | None]], int]:
-    from ..accuracy.budget import ErrorBudget
-    from ..misb import misb_sensor
     from .klv import frame_records, klv_job, telemetry_records
+    from .setup import misb_setup
 
-    cfg = _config(settings.config_path)
-    sensor = budget = None
-    if cfg is not None:
-        inst = cfg.installation
-        sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
-        budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
+    sensor, budget = misb_setup(_config(settings.config_path))
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
     job = klv_job(task.path, dem=dem, sensor=sensor, budget=budget, footprint_every=settings.footprint_every,
                   strict=settings.strict, assume=settings.assume, map_layers=False)

@@ -60,3 +60,17 @@ def compensation_model(cfg: Config, path: str | Path, override: str | Path | Non
         return CompensationModel.load(model_path, features=None if c is None else c.features)
     except ModelFileError as exc:
         raise ConfigError(str(exc)) from None
+
+
+def misb_setup(cfg: Config | None):
+    """(sensor, error budget) for a KLV stream: the MISB sensor with the config's [installation]
+    and its [accuracy.budget]; (None, None) without a config (the defaults of the KLV jobs)."""
+    if cfg is None:
+        return None, None
+    from ..accuracy.budget import ErrorBudget
+    from ..misb import misb_sensor
+
+    inst = cfg.installation
+    sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
+    budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
+    return sensor, budget
