@@ -122,3 +122,27 @@ def test_unsupported_sources_are_named(source, words, tmp_path):
     r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", source, "--ndjson",
                         str(tmp_path / "x.ndjson")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_a_late_packet_does_not_replace_the_newer_values_carried(tmp_path):
+    """Packets 0, 2, then 1 late, then packet 3 without its position: packet 3 takes packet 2's
+    position (the newest sent), as the file reader gives it for 0, 2, 3 in order."""
+    from eoloc.io.klv.encode import build_uas_packet, uas_items
+
+    full = _packets(FLIGHT)[:4]
+    thin = build_uas_packet([(t, v) for t, v in uas_items(full[3]) if t not in (13, 14, 15)])
+    session = LiveSession("udp://test", dem=open_dem(DEM))
+    for d in (full[0], full[2], full[1]):
+        session.feed(d)
+    assert session.counters.late == 1
+    got = session.feed(thin)
+    path = tmp_path / "in_order.klv"
+    path.write_bytes(full[0] + full[2] + thin)
+    r = klv_job(path, dem=open_dem(DEM)).records
+    last = r["frame"] == 2
+    assert last.sum() == len(got) > 0
+    for a, la, lo, st in zip(got, r["lat_deg"][last], r["lon_deg"][last], r["status"][last], strict=True):
+        assert a["properties"]["status"] == st
+        if st == "OK":
+            lon_l, lat_l = a["geometry"]["coordinates"][:2]
+            assert abs(lon_l - lo) < 1e-12 and abs(lat_l - la) < 1e-12

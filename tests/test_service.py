@@ -17,6 +17,7 @@ import pytest
 
 import eoloc
 from eoloc.io.config import load_config
+from eoloc.result import Status
 from eoloc.rules import AtHeight, OnDEM
 from eoloc.sensor import Pose
 from eoloc.terrain import open_dem
@@ -87,7 +88,7 @@ def test_a_batch_on_the_dem_equals_the_library(server):
     p = Pose(**{k: v for k, v in pose.items() if k != "gimbal_deg"}, gimbal_deg=(10.0, -35.0, 0.0))
     ref = OnDEM(dem).locate(cfg.sensor(), p, np.array(pixels))
     for k, fix in enumerate(a["fixes"]):
-        assert fix["status"] == ("OK" if ref.ok[k] else fix["status"])
+        assert fix["status"] == Status(int(ref.status[k])).name
         if ref.ok[k]:
             assert abs(fix["lat_deg"] - ref.lat_deg[k]) < 1e-12 and abs(fix["h_m"] - ref.h_m[k]) < 1e-6
     assert a["fixes"][3]["status"] == "OUT_OF_IMAGE" and a["fixes"][3]["lat_deg"] is None

@@ -59,12 +59,14 @@ def R_ned_body(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike, *, degrees: bo
     return as_matrix(_kernels.r_ned_body(_rad(yaw, degrees), _rad(pitch, degrees), _rad(roll, degrees)))
 
 
-def euler_from_R_ned_body(R: ArrayLike, *, degrees: bool = True):
-    """(yaw, pitch, roll) of R_ned_body (..., 3, 3); yaw in [0, 360) deg, pitch in [-90, 90]."""
+def euler_from_R_ned_body(R: ArrayLike, *, degrees: bool = True, warn_gimbal_lock: bool = True):
+    """(yaw, pitch, roll) of R_ned_body (..., 3, 3); yaw in [0, 360) deg, pitch in [-90, 90].
+    ``warn_gimbal_lock=False``: callers for which pitch ±90° is just another rotation (readers,
+    interpolation) take the yaw-only form without a warning."""
     R = np.asarray(R, dtype=np.float64)
     pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
     locked = np.abs(R[..., 2, 0]) > 1.0 - 1e-12
-    if np.any(locked):
+    if warn_gimbal_lock and np.any(locked):
         warnings.warn("gimbal lock: pitch is ±90°, roll set to 0 and the rotation put in yaw", stacklevel=2)
     yaw = np.where(locked, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0]))
     roll = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))

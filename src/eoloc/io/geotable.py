@@ -58,10 +58,10 @@ def point_geometries(records: Records):
 
 
 def feature_geometries(features: list[dict]):
-    import shapely
 
-    return np.array([None if f.get("geometry") is None else shapely.from_geojson(json.dumps(f["geometry"]))
-                     for f in features], dtype=object)
+    from shapely.geometry import shape
+
+    return np.array([None if f.get("geometry") is None else shape(f["geometry"]) for f in features], dtype=object)
 
 
 def geo_table(records: Records, features: list[dict] | None = None):
@@ -73,7 +73,7 @@ def geo_table(records: Records, features: list[dict] | None = None):
     geoms = point_geometries(records) if features is None else feature_geometries(features)
     if features is not None and len(records) != len(features):
         raise ValueError(f"geo_table: {len(records)} records for {len(features)} features")
-    present = np.array([g is not None for g in geoms], dtype=bool)
+    present = ~shapely.is_missing(geoms)
     sub = geoms[present]
     kinds = shapely.get_type_id(sub) if sub.size else np.zeros(0, dtype=int)
     zs = shapely.has_z(sub) if sub.size else np.zeros(0, dtype=bool)

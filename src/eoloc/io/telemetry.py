@@ -228,11 +228,7 @@ def _attitude(t: Table) -> None:
         R[bad] = np.nan
         why = {int(k): f"dcm_11 ... dcm_33 is not a rotation (|RᵀR - I| = {off[k]:.2g}, det {det[k]:.3g}); record "
                        "not located (rows and columns swapped, or a reflection?)" for k in np.flatnonzero(bad)}
-    import warnings
-
-    with warnings.catch_warnings():  # at exactly ±90° pitch yaw takes the roll: the same rotation
-        warnings.simplefilter("ignore")
-        c["yaw_deg"], c["pitch_deg"], c["roll_deg"] = euler_from_R_ned_body(R)
+    c["yaw_deg"], c["pitch_deg"], c["roll_deg"] = euler_from_R_ned_body(R, warn_gimbal_lock=False)
     t.issues.extend(Issue(t.path, int(t.line[k]), msg) for k, msg in why.items())
     t.issues.sort(key=lambda i: i.line)
 

@@ -263,7 +263,7 @@ def _write_partition(out_dir: Path, layer: str, key: str, records: Records, feat
     if not len(records):
         return
     cols = {"source_file": np.full(len(records), source, dtype=object), **records.columns}
-    records = with_grid_columns(Records(cols), grid) if grid else Records(cols)
+    records = with_grid_columns(Records(cols), grid)
     folder = out_dir / layer / f"file={key}"
     folder.mkdir(parents=True, exist_ok=True)
     tmp = folder / ".part-0.parquet.tmp"

@@ -17,7 +17,7 @@ Faults are counted, never fatal: a datagram that is not KLV or a packet that fai
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -36,7 +36,8 @@ class Counters:
     detections: int = 0
     fixes_ok: int = 0
     not_klv: int = 0
-    latency_s: list[float] = field(default_factory=list)
+    latency_s: deque = field(default_factory=lambda: deque(maxlen=100_000))  # the latest (memory stays bounded)
+    latency_max_s: float = 0.0
 
     def summary(self) -> dict:
         lat = np.asarray(self.latency_s) * 1e3
@@ -44,7 +45,7 @@ class Counters:
                 "duplicates": self.duplicates, "late": self.late, "restarts": self.restarts,
                 "not_klv": self.not_klv, "detections": self.detections, "fixes_ok": self.fixes_ok,
                 "latency_ms_median": float(np.median(lat)) if lat.size else None,
-                "latency_ms_max": float(lat.max()) if lat.size else None}
+                "latency_ms_max": self.latency_max_s * 1e3 if lat.size else None}
 
 
 class LiveSession:
@@ -91,21 +92,23 @@ class LiveSession:
             c.packets += 1
             t = pkt.fields.get(2)
             t_s = t.timestamp() if hasattr(t, "timestamp") else None
+            late = False
             if t_s is not None and self.newest_s is not None and t_s < self.newest_s:
                 if self.newest_s - t_s > self.restart_s:
                     c.restarts += 1
                     self.newest_s = t_s
                 else:
                     c.late += 1
+                    late = True
             elif t_s is not None:
                 self.newest_s = t_s
             carried = self.carry.get(pkt.stream)
             packets = [pkt] if carried is None else [carried, pkt]
-            merged = replace(pkt, fields={**(carried.fields if carried is not None else {}), **pkt.fields})
-            self.carry[pkt.stream] = merged
+            if not late:  # a late packet's values are older than those carried: they do not replace them
+                self.carry[pkt.stream] = replace(pkt, fields={**(carried.fields if carried else {}), **pkt.fields})
             features += self._locate(KLVStream(self.source, "klv", packets), pkt.index)
-        done = time.perf_counter()
-        c.latency_s.append(done - arrived)
+        c.latency_s.append(time.perf_counter() - arrived)
+        c.latency_max_s = max(c.latency_max_s, c.latency_s[-1])
         return features
 
     def _locate(self, stream, index: int) -> list[dict]:

@@ -67,13 +67,11 @@ class Pose:
 
     def invalid(self) -> np.ndarray:
         """True where the pose cannot be used: NaN/inf anywhere, |lat| > 90°, a focal scale <= 0."""
-        fields = (self.lat_deg, self.lon_deg, self.h_m, self.yaw_deg, self.pitch_deg, self.roll_deg, *self.gimbal_deg)
+        fields = (self.lat_deg, self.lon_deg, self.h_m, self.yaw_deg, self.pitch_deg, self.roll_deg, *self.gimbal_deg,
+                  self.focal_scale)
         with np.errstate(invalid="ignore"):
             total = sum(fields)
-            bad = ~np.isfinite(total) | (np.abs(self.lat_deg) > 90.0)
-            if self.focal_scale.ndim or self.focal_scale != 1.0:
-                bad = bad | ~(np.isfinite(self.focal_scale) & (self.focal_scale > 0.0))
-            return bad
+            return ~np.isfinite(total) | (np.abs(self.lat_deg) > 90.0) | ~(self.focal_scale > 0.0)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,6 @@ records, so nothing plausible-but-wrong is produced.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,9 +105,7 @@ def interpolate_poses(time_s: ArrayLike, pose: Pose, t_query: ArrayLike, *, time
     lat_q, lon_q, h_q = geodesy.ecef_to_geodetic(p[..., 0], p[..., 1], p[..., 2])
     R_ned = np.swapaxes(geodesy.R_ecef_ned(lat_q, lon_q), -1, -2) @ slerp(qq.ravel()).as_matrix().reshape(
         (*qq.shape, 3, 3))
-    with warnings.catch_warnings():  # at exactly ±90° pitch yaw takes the roll: the same rotation
-        warnings.simplefilter("ignore")
-        yaw_q, pitch_q, roll_q = euler_from_R_ned_body(R_ned)
+    yaw_q, pitch_q, roll_q = euler_from_R_ned_body(R_ned, warn_gimbal_lock=False)  # ±90°: the same rotation
     g_q = tuple(np.interp(qq, ts, _unwrap_deg(g)) for g in gim)
     zoom_q = np.interp(qq, ts, zoom)  # a zoom lens's focal length, linear between records
     nan = np.float64("nan")
