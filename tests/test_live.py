@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import eoloc
-from eoloc.io.klv import read_klv
+from eoloc.io.klv.reader import split_klv
 from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.klv import klv_job
 from eoloc.live.session import LiveSession
@@ -28,10 +28,12 @@ DEM = MOUNTAIN / "longs_peak_srtmgl3.tif"
 
 
 def _packets(path: Path) -> list[bytes]:
-    data = path.read_bytes()
-    s = read_klv(path)
-    starts = sorted({p.offset for p in s.packets} | {i.offset for i in s.issues})
-    return [data[a:b] for a, b in zip(starts, [*starts[1:], len(data)], strict=True)]
+    return [raw for raw, _ in split_klv(path.read_bytes())]
+
+
+def _targets(updates) -> list[dict]:
+    """The target features of live packet updates."""
+    return [f for u in updates for f in u.features() if f["properties"]["what"] == "target"]
 
 
 def _free_udp_port() -> int:
@@ -80,6 +82,8 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     assert summary["latency_ms_median"] < 50
     assert "silence" in log and "checksum" in log and "datagram" in log
     rows = [json.loads(line) for line in out.read_text(encoding="utf-8").splitlines()]
+    assert {r["properties"]["what"] for r in rows} == {"aircraft", "footprint", "frame centre", "target"}
+    rows = [r for r in rows if r["properties"]["what"] == "target"]
     mountain = [r for r in rows if r["properties"]["time_s"] > 1.7e9]  # not the restart's packets
     ref = _batch_fixes()
     got = {(r["properties"]["time_s"], str(r["properties"]["target_id"])): r for r in mountain
@@ -97,10 +101,10 @@ def test_report_on_change_values_are_carried_between_datagrams(tmp_path):
 
     full = _packets(FLIGHT)[:3]
     session = LiveSession("udp://test", dem=open_dem(DEM))
-    first = session.feed(full[0])
+    first = _targets(session.feed(full[0]))
     # packet 1 with the field of view (16, 17) and the platform position (13, 14, 15) left out
     thin = build_uas_packet([(t, v) for t, v in uas_items(full[1]) if t not in (16, 17, 13, 14, 15)])
-    got = session.feed(thin)
+    got = _targets(session.feed(thin))
     assert first and got
     # the file reader fills report-on-change values forward within a file: the same two packets as
     # a file must give the same points
@@ -117,10 +121,16 @@ def test_report_on_change_values_are_carried_between_datagrams(tmp_path):
     assert any(a["properties"]["status"] == "OK" for a in got)
 
 
-@pytest.mark.parametrize("source, words", [("udp://nohost", "udp://HOST:PORT"), ("-", "udp://HOST:PORT and raw KLV")])
-def test_unsupported_sources_are_named(source, words, tmp_path):
-    r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", source, "--ndjson",
-                        str(tmp_path / "x.ndjson")], capture_output=True, text=True, timeout=60)
+@pytest.mark.parametrize("args, words", [
+    (["udp://nohost", "--ndjson", "x"], "udp://HOST:PORT"),
+    (["rtsp://cam/1", "--ndjson", "x"], "relay with ffmpeg"),
+    (["udp://127.0.0.1:1"], "at least one output"),
+    (["udp://127.0.0.1:1", "--cot", "http://tak:8087"], "tcp://HOST:PORT"),
+    (["udp://127.0.0.1:1", "--cot", "udp://239.2.3.1:6969?ttl=x"], "ttl must be"),
+])
+def test_unsupported_sources_and_outputs_are_named(args, words, tmp_path):
+    r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", *args], capture_output=True, text=True,
+                       timeout=60, cwd=tmp_path)
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
@@ -135,7 +145,7 @@ def test_a_late_packet_does_not_replace_the_newer_values_carried(tmp_path):
     for d in (full[0], full[2], full[1]):
         session.feed(d)
     assert session.counters.late == 1
-    got = session.feed(thin)
+    got = _targets(session.feed(thin))
     path = tmp_path / "in_order.klv"
     path.write_bytes(full[0] + full[2] + thin)
     r = klv_job(path, dem=open_dem(DEM)).records

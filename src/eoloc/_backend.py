@@ -115,6 +115,7 @@ def run(name: str, *args):
     shape = np.broadcast_shapes(*(a.shape for a in arrays))
     n = int(np.prod(shape))
     flat_in = [a if not isinstance(a, np.ndarray) else float(a) if a.ndim == 0
+               else a.reshape(-1) if a.shape == shape and a.flags.c_contiguous  # no copy, no broadcast
                else np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1) for a in flat_args]
     outs = []
     for o in sig.outputs:

@@ -87,9 +87,17 @@ def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_de
     height per packet such as the encoder's own frame-centre elevation). With ``range_m`` the
     centre is placed at that slant range along the boresight instead (M1, laser)."""
     tx, ty = _half_tangents(hfov_deg, vfov_deg)
-    centre = frame_centre(sensor, pose, surface, range_m=range_m)
-    corner_rays = packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None])
-    corners = stop_on(corner_rays, surface, sensor)
+    if range_m is not None:
+        centre = frame_centre(sensor, pose, surface, range_m=range_m)
+        corners = stop_on(packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None]),
+                          surface, sensor)
+    else:  # the centre and the corners as one batch of five rays per packet
+        zero = np.zeros_like(tx)[..., None]
+        both = stop_on(packet_rays(sensor, pose, np.concatenate([zero, CORNERS[:, 0] * tx[..., None]], -1),
+                                   np.concatenate([zero, CORNERS[:, 1] * ty[..., None]], -1)), surface, sensor)
+        arrays = np.broadcast_arrays(both.lat_deg, both.lon_deg, both.h_m, both.range_m, both.status)
+        centre = Fixes(*(np.ascontiguousarray(a[..., 0]) for a in arrays)).flat()
+        corners = Fixes(*(np.ascontiguousarray(a[..., 1:]) for a in arrays))
     kind = "DEM" if isinstance(surface, DEM) else "ellipsoid at the frame-centre elevation"
     return FrameGeometry(centre, corners, kind)
 

@@ -1,4 +1,5 @@
-"""`eoloc live`: a KLV stream as it arrives -> located VMTI targets as NDJSON."""
+"""`eoloc live`: a KLV stream as it arrives -> located VMTI targets, frame centre and footprint,
+as NDJSON and Cursor-on-Target."""
 
 from __future__ import annotations
 
@@ -13,23 +14,37 @@ from .common import open_dem
 from .main import err_console, fail, warn
 from .options import config_option, dem_options
 
-LIVE_HELP = """Locate the VMTI targets of a live MISB ST 0601 stream, packet by packet, as it arrives.
+LIVE_HELP = """Locate the VMTI targets of a live MISB ST 0601 stream, packet by packet, as it arrives,
+and send them on as NDJSON and Cursor-on-Target (TAK).
 
 \b
-eoloc live SOURCE [--dem F] [--config C] --ndjson FILE|-
-  SOURCE: udp://HOST:PORT (raw KLV datagrams, one or more whole packets each; a multicast
-  HOST such as 239.1.1.1 is joined), or a raw KLV file replayed packet by packet (--realtime:
-  at the stream's own clock).
+eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
+  SOURCE: udp://HOST:PORT (a multicast HOST such as 239.1.1.1 is joined): datagrams of MPEG-TS
+  (ST 1402, any number of KLV PIDs, each its own stream) or raw KLV (whole packets), told apart
+  as they come; a raw KLV or MPEG-TS file (--realtime: at the stream's own clock, from the
+  ST 0601 time stamps or the TS PCR); or - for stdin (a pipe of TS or raw KLV bytes).
   Each packet is decoded as `eoloc klv` decodes files (checksums, report-on-change values carried
-  from packet to packet) and its targets located on --dem, else on the packet's frame-centre
-  elevation; with the config's [accuracy.budget] each fix gets its uncertainty.
-  --ndjson FILE|-: one GeoJSON Feature per located target per line (lon, lat, ellipsoidal h;
-  a failed fix keeps its status with a null geometry), flushed as it is written.
-  Faults are counted, never fatal: corrupt or non-KLV datagrams, duplicated packets (dropped),
-  late ones (located all the same), encoder restarts (time back > 2 s), silence (--silence S:
-  a warning on stderr).
-  Ctrl-C (SIGINT) or SIGTERM, --packets N or --duration S stop it with a summary on stderr:
-  datagrams, packets, detections, fixes, faults and the latency from arrival to output.
+  from packet to packet); its frame centre, footprint (the four corners) and VMTI targets are
+  located on --dem, else on the packet's frame-centre elevation; with the config's
+  [accuracy.budget] each target gets its uncertainty.
+\b
+Outputs (any combination, at least one):
+  --ndjson FILE|-   one GeoJSON Feature per line (lon, lat, ellipsoidal h), property "what":
+                    aircraft, footprint, frame centre, target (a failed target keeps its
+                    status with a null geometry); flushed per packet.
+  --cot URL         Cursor-on-Target, repeatable: udp://239.2.3.1:6969 (ATAK's SA multicast;
+                    ?ttl=N), udp://HOST:PORT, or tcp://HOST:8087 (a TAK server's CoT port;
+                    reconnects with back-off, never holds up the rest). Per packet: the
+                    aircraft with its sensor's field of view, the frame centre (sensor point of
+                    interest), the footprint as a shape, and each located target with ce/le
+                    (1 sigma) from its covariance; stale after 10 packet intervals.
+\b
+Faults are counted, never fatal: corrupt or non-KLV datagrams, duplicated packets (dropped),
+late ones (located all the same), encoder restarts (time back > 2 s), silence (--silence S: a
+warning on stderr, and the aircraft sent to TAK as stale).
+Ctrl-C (SIGINT) or SIGTERM, --packets N or --duration S stop it with a summary on stderr:
+datagrams, packets, detections, fixes, faults, what each output sent and the latency from a
+datagram's arrival to its outputs sent.
 """
 
 
@@ -38,25 +53,37 @@ eoloc live SOURCE [--dem F] [--config C] --ndjson FILE|-
 @dem_options("Terrain: DEM file(s) for the targets (default: each packet's frame-centre elevation).")
 @config_option(required=False, help_text="TOML with [installation] (calibrated misalignments) and "
                                          "[accuracy.budget] (uncertainty).")
-@click.option("--ndjson", "ndjson", required=True, metavar="FILE|-",
-              help="Write one GeoJSON feature per located target per line ('-': stdout).")
+@click.option("--ndjson", "ndjson", default=None, metavar="FILE|-",
+              help="Write one GeoJSON feature per line ('-': stdout).")
+@click.option("--cot", "cot_urls", multiple=True, metavar="URL",
+              help="Send Cursor-on-Target to udp://HOST:PORT (multicast too) or tcp://HOST:PORT; repeatable.")
+@click.option("--cot-interval", type=click.FloatRange(0.0), default=0.0, show_default=True, metavar="S",
+              help="At most one CoT event per target (and per aircraft, footprint) every S seconds; 0: all.")
 @click.option("--realtime", is_flag=True, help="A file SOURCE: replay at the stream's own clock.")
 @click.option("--packets", "max_packets", type=click.IntRange(1), default=None, help="Stop after N good packets.")
 @click.option("--duration", type=click.FloatRange(0.0, min_open=True), default=None, metavar="S",
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
-              help="Warn when nothing arrives for S seconds.")
-def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, realtime, max_packets, duration,
-         silence) -> None:
-    from ..live.session import LiveSession
-    from ..live.sources import file_packets, udp_datagrams, udp_socket
-
-    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+              help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
+def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, cot_interval, realtime,
+         max_packets, duration, silence) -> None:
     from ..jobs.setup import misb_setup
+    from ..live.cot import CotFeed
+    from ..live.senders import cot_sender
+    from ..live.session import LiveSession
+    from ..live.sources import byte_stream_chunks, file_datagrams, udp_datagrams, udp_socket
     from .common import load_config
 
+    if ndjson is None and not cot_urls:
+        fail("eoloc live: give at least one output: --ndjson FILE|- and/or --cot URL")
+    if source.startswith(("rtsp://", "srt://", "tcp://", "http://", "https://")):
+        fail(f"{source!r}: eoloc live reads udp://HOST:PORT, raw KLV or MPEG-TS files, and - (stdin); for "
+             f"RTSP/SRT, relay with ffmpeg: ffmpeg -i {source} -map 0 -c copy -f mpegts udp://127.0.0.1:15000")
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     sensor, budget = misb_setup(load_config(config_path) if config_path else None)
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget)
+    feed_cot = CotFeed(interval_s=cot_interval)
+    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot")) for url in cot_urls]
     stopping = {"why": None}
     started = time.monotonic()
 
@@ -70,32 +97,46 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, realt
     def on_signal(signum, _frame) -> None:
         stopping["why"] = signal.Signals(signum).name
 
+    def on_silence(quiet_s: float) -> None:
+        warn(f"{source}: nothing received for {quiet_s:.0f} s", "silence")
+        for event in feed_cot.silence(quiet_s):
+            for s in senders:
+                s.send(event)
+
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
     if source.startswith("udp://"):
         sock = udp_socket(source)
         err_console.print(f"eoloc live: listening on {source} (Ctrl-C stops)")
-        feed = udp_datagrams(sock, stop, silence_s=silence,
-                             on_silence=lambda s: warn(f"{source}: nothing received for {s:.0f} s", "silence"))
-    elif source.startswith(("rtsp://", "srt://", "tcp://")) or source == "-":
-        fail(f"{source!r}: eoloc live reads udp://HOST:PORT and raw KLV files for now")
+        feed = udp_datagrams(sock, stop, silence_s=silence, on_silence=on_silence)
+    elif source == "-":
+        feed = byte_stream_chunks(sys.stdin.buffer.read1, stop)
     else:
-        feed = file_packets(source, stop, realtime=realtime)
-    out = sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
+        feed = file_datagrams(source, stop, realtime=realtime)
+    out = None if ndjson is None else sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
     seen_issues = 0
     try:
         for datagram, arrived in feed:
-            for feature in session.feed(datagram, arrived):
-                out.write(json.dumps(feature, allow_nan=False) + "\n")
-            out.flush()
+            updates = session.feed(datagram)
+            for u in updates:
+                for event in feed_cot.events(u):
+                    for s in senders:
+                        s.send(event)
+            if out is not None and updates:
+                out.write("".join(json.dumps(f, allow_nan=False) + "\n" for u in updates for f in u.features()))
+                out.flush()
+            session.done(arrived)
             for issue in session.issues[seen_issues:]:
                 warn(issue, "packet")
             seen_issues = len(session.issues)
             if stop():
                 break
     finally:
-        if out is not sys.stdout:
+        if out is not None and out is not sys.stdout:
             out.close()
-    summary = session.counters.summary()
+        for s in senders:
+            s.close()
+    summary = session.counters.summary() | {"streams": session.streams, "cot_events": feed_cot.events_out,
+                                            "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
     err_console.print(f"eoloc live stopped ({stopping['why'] or 'end of the source'}): "
                       + json.dumps(summary), soft_wrap=True, highlight=False)

@@ -8,6 +8,9 @@ clock's origin, else the time of writing. CoT's ``<point>`` takes lat/lon in WGS
 ``hae`` in metres above the ellipsoid (eoloc's h_m as is), with ``ce``/``le`` the circular and
 linear 1-sigma errors in metres (the CoT base schema); 9999999 means unknown, which is what a fix
 without a covariance gets, never an invented number. CE90/LE90 and CEP50 go in the remarks.
+
+Events are written as text by :func:`event_xml` (one template, attribute values escaped): the
+live feed sends thousands a second and ElementTree would be most of its latency.
 """
 
 from __future__ import annotations
@@ -16,11 +19,13 @@ import math
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from xml.sax.saxutils import escape, quoteattr
 
 UNKNOWN = 9999999.0
 
 
-def _iso(t: datetime) -> str:
+def iso_utc(t: datetime) -> str:
+    """CoT's time format: ISO 8601 UTC with milliseconds and a Z."""
     return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
@@ -29,10 +34,60 @@ def _num(row: dict, key: str) -> float:
     return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else math.nan
 
 
+def ce_le(row: dict) -> tuple[float, float]:
+    """CoT's 1-sigma circular (ce) and vertical (le) errors of a fix row from its sigma_e/n/u_m
+    columns; :data:`UNKNOWN` for what the row does not know."""
+    se, sn, su = _num(row, "sigma_e_m"), _num(row, "sigma_n_m"), _num(row, "sigma_u_m")
+    ce = math.sqrt((se * se + sn * sn) / 2.0) if math.isfinite(se + sn) else UNKNOWN
+    return ce, (su if math.isfinite(su) else UNKNOWN)
+
+
+_PLAIN = frozenset("0123456789.-+,eE ")
+
+
+def _attr(v) -> str:
+    v = str(v)
+    return f'"{v}"' if _PLAIN.issuperset(v) else quoteattr(v)  # numbers need no escaping (the common case)
+
+
+def element_xml(tag: str, text: str | None = None, /, **attrs) -> str:
+    """One XML element as text, attributes escaped (None values left out); ``text`` escaped."""
+    a = "".join(f" {k}={_attr(v)}" for k, v in attrs.items() if v is not None)
+    return f"<{tag}{a}/>" if text is None else f"<{tag}{a}>{escape(text)}</{tag}>"
+
+
+def event_xml(*, uid: str, cot_type: str, how: str, time: datetime | str, stale: datetime | str, lat: float,
+              lon: float, hae: float, ce: float = UNKNOWN, le: float = UNKNOWN, detail: str = "") -> bytes:
+    """One CoT event as a standalone UTF-8 XML document; ``detail`` is the inner XML of ``<detail>``
+    (from :func:`element_xml`); times as datetimes or already as :func:`iso_utc` text."""
+    t = time if isinstance(time, str) else iso_utc(time)
+    stale = stale if isinstance(stale, str) else iso_utc(stale)
+    return (f'<?xml version="1.0" encoding="utf-8"?>\n<event version="2.0" uid={quoteattr(uid)} '
+            f'type="{cot_type}" how="{how}" time="{t}" start="{t}" stale="{stale}">'
+            f'<point lat="{lat:.8f}" lon="{lon:.8f}" hae="{hae:.2f}" ce="{ce:.2f}" le="{le:.2f}"/>'
+            f"<detail>{detail}</detail></event>").encode()
+
+
+def fix_remarks(row: dict, tid) -> str:
+    parts = [f"eoloc fix of target {tid}"]
+    for key, label in (("cep50_m", "CEP50"), ("ce90_m", "CE90"), ("le90_m", "LE90"), ("range_m", "slant range")):
+        v = _num(row, key)
+        if math.isfinite(v):
+            parts.append(f"{label} {v:.1f} m")
+    return "; ".join(parts)
+
+
 def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", stale_s: float = 300.0,
               now: datetime | None = None) -> ET.Element | None:
     """The CoT event of one fix row (``export.fix_records`` layout, with the covariance columns when
     known); None for a fix that failed (no point to send)."""
+    data = cot_event_bytes(row, uid_prefix=uid_prefix, cot_type=cot_type, stale_s=stale_s, now=now)
+    return None if data is None else ET.fromstring(data)
+
+
+def cot_event_bytes(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", stale_s: float = 300.0,
+                    now: datetime | None = None) -> bytes | None:
+    """:func:`cot_event` as the XML document TAK reads."""
     if row.get("status") != "OK":
         return None
     iso = row.get("time_utc")
@@ -41,33 +96,11 @@ def cot_event(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-u-G", 
     # one fix, one uid: the frame (or the source line) tells fixes of the same target apart
     which = next((row[k] for k in ("frame", "line") if row.get(k) is not None), None)
     uid = f"{uid_prefix}-{tid}" if which is None else f"{uid_prefix}-{tid}-{which}"
-    ev = ET.Element("event", version="2.0", uid=str(uid), type=cot_type, how="m-i", time=_iso(t), start=_iso(t),
-                    stale=_iso(t + timedelta(seconds=stale_s)))
-    se, sn, su = _num(row, "sigma_e_m"), _num(row, "sigma_n_m"), _num(row, "sigma_u_m")
-    ce = math.sqrt((se * se + sn * sn) / 2.0) if math.isfinite(se + sn) else UNKNOWN
-    le = su if math.isfinite(su) else UNKNOWN
-    ET.SubElement(ev, "point", lat=f"{row['lat_deg']:.8f}", lon=f"{row['lon_deg']:.8f}", hae=f"{row['h_m']:.2f}",
-                  ce=f"{ce:.2f}", le=f"{le:.2f}")
-    detail = ET.SubElement(ev, "detail")
-    ET.SubElement(detail, "contact", callsign=str(tid))
-    parts = [f"eoloc fix of target {tid}"]
-    for key, label in (("cep50_m", "CEP50"), ("ce90_m", "CE90"), ("le90_m", "LE90"), ("range_m", "slant range")):
-        v = _num(row, key)
-        if math.isfinite(v):
-            parts.append(f"{label} {v:.1f} m")
-    ET.SubElement(detail, "remarks").text = "; ".join(parts)
-    return ev
-
-
-def cot_events(rows: list[dict], **kwargs) -> list[ET.Element]:
-    """The CoT events of every OK fix row, in order."""
-    return [ev for ev in (cot_event(row, **kwargs) for row in rows) if ev is not None]
-
-
-def event_bytes(ev: ET.Element) -> bytes:
-    """One event as a standalone XML document (what a TAK feed sends as one message)."""
-    ET.indent(ev)
-    return ET.tostring(ev, encoding="utf-8", xml_declaration=True)
+    ce, le = ce_le(row)
+    detail = element_xml("contact", callsign=str(tid)) + element_xml("remarks", fix_remarks(row, tid))
+    return event_xml(uid=str(uid), cot_type=cot_type, how="m-i", time=t, stale=t + timedelta(seconds=stale_s),
+                     lat=float(row["lat_deg"]), lon=float(row["lon_deg"]), hae=float(row["h_m"]), ce=ce, le=le,
+                     detail=detail)
 
 
 def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", **kwargs) -> tuple[Path, int]:
@@ -75,7 +108,7 @@ def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", 
     ``MANIFEST/manifest.xml``); returns (path, number of events)."""
     import zipfile
 
-    events = cot_events(rows, **kwargs)
+    events = [e for e in (cot_event_bytes(row, **kwargs) for row in rows) if e is not None]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     manifest = ET.Element("MissionPackageManifest", version="2")
@@ -86,9 +119,9 @@ def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", 
     contents = ET.SubElement(manifest, "Contents")
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for ev in events:
-            uid = ev.get("uid")
+            uid = ET.fromstring(ev).get("uid")
             entry = f"{uid}/{uid}.cot"
-            zf.writestr(entry, event_bytes(ev))
+            zf.writestr(entry, ev)
             c = ET.SubElement(contents, "Content", ignore="false", zipEntry=entry)
             ET.SubElement(c, "Parameter", name="uid", value=uid)
         ET.indent(manifest)

@@ -1,17 +1,19 @@
-"""A live KLV session: datagrams in, located VMTI targets out, packet by packet.
+"""A live KLV session: datagrams in, one :class:`~eoloc.live.update.PacketUpdate` per packet out.
 
-Each datagram is framed and decoded with the same tolerant reader as files
-(:func:`eoloc.io.klv.reader.decode_klv_bytes`); the packet's pose, field of view and VMTI targets
-go through the same code as `eoloc klv` (:func:`eoloc.io.klv.klv_telemetry`,
-:func:`eoloc.io.klv.vmti_detections`, :func:`eoloc.video.locate_vmti`). What ST 0601 sends only
-when it changes (report-on-change) is carried from packet to packet: each packet is decoded
-after a copy of everything known so far, so a packet that leaves its field of view out still
-gets the last one sent.
+A datagram is either MPEG-TS (whole 188-byte transport packets starting with 0x47, as ST 1402
+sends them, usually seven per datagram) or raw KLV (one or more whole packets); each is told
+apart on arrival. Transport streams go through one demultiplexer kept for the whole session
+(stanag4609's, as for files), so a KLV packet split over several datagrams is put back
+together; each KLV PID is its own stream ("PID 497"). Packets are framed and decoded with the
+same tolerant reader as files (:func:`eoloc.io.klv.reader.decode_klv_bytes`) and worked out by
+:func:`eoloc.live.update.locate_packet`. What ST 0601 sends only when it changes
+(report-on-change) is carried from packet to packet per stream.
 
-Faults are counted, never fatal: a datagram that is not KLV or a packet that fails its checksum
-(``corrupt``), the same packet twice (``duplicates``: dropped), a packet older than the last
-(``late``: located all the same), an encoder restart (time back by more than ``restart_s``:
-``restarts``), and gaps (``gaps``, the longest in ``longest_gap_s``).
+Faults are counted, never fatal: a datagram that is neither (``not_klv``), a packet that fails
+its checksum or framing, or a transport packet the demultiplexer refuses (``corrupt``), the same
+packet twice (``duplicates``: dropped), a packet older than the last of its stream (``late``:
+located all the same, its values not carried), an encoder restart (its time back by more than
+``restart_s``: ``restarts``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .update import PacketUpdate, locate_packet
+
 RESTART_S = 2.0  # a time stamp this far behind the newest one: the encoder restarted its clock
+TS_PACKET = 188
 
 
 @dataclass
@@ -45,11 +50,20 @@ class Counters:
                 "duplicates": self.duplicates, "late": self.late, "restarts": self.restarts,
                 "not_klv": self.not_klv, "detections": self.detections, "fixes_ok": self.fixes_ok,
                 "latency_ms_median": float(np.median(lat)) if lat.size else None,
+                "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
                 "latency_ms_max": self.latency_max_s * 1e3 if lat.size else None}
 
 
+def is_transport(datagram: bytes) -> bool:
+    """Whether a datagram is whole MPEG-TS packets (ST 1402) rather than raw KLV."""
+    n = len(datagram)
+    return n >= TS_PACKET and n % TS_PACKET == 0 and datagram[0] == 0x47 and datagram[n - TS_PACKET] == 0x47
+
+
 class LiveSession:
-    """Feed datagrams (:meth:`feed`); each returns the GeoJSON features of the targets located in it."""
+    """Feed datagrams (:meth:`feed`); each returns the :class:`PacketUpdate` of every new packet
+    completed by it. Whoever sends the outputs calls :meth:`done` after them: the latency counted
+    runs from the datagram's arrival to its outputs sent."""
 
     def __init__(self, source: str, *, dem=None, sensor=None, budget=None, recent: int = 512,
                  restart_s: float = RESTART_S) -> None:
@@ -62,27 +76,80 @@ class LiveSession:
         self.recent: OrderedDict[bytes, None] = OrderedDict()
         self.recent_size = recent
         self.restart_s = restart_s
-        self.newest_s: float | None = None
+        self.newest_s: dict[str, float] = {}
         self.issues: list[str] = []
         self.next_index = 0
+        self.demux = None
+        self.streams: dict[str, int] = {}  # stream -> good packets
 
-    def feed(self, datagram: bytes, arrived: float | None = None) -> list[dict]:
-        """The features (GeoJSON Points, one per VMTI target; failed ones with a null geometry)
-        of the packets in ``datagram``."""
-        from ..io.klv.reader import KLVStream, decode_klv_bytes
-
-        arrived = time.perf_counter() if arrived is None else arrived
+    def feed(self, datagram: bytes) -> list[PacketUpdate]:
         c = self.counters
         c.datagrams += 1
-        stream = decode_klv_bytes(datagram, self.source, first_index=self.next_index)
-        c.corrupt += stream.n_bad
-        self.issues += [f"{self.source}: datagram {c.datagrams}: {i.kind}: {i.message}" for i in stream.issues]
-        if not stream.packets and stream.n_bad == 0:  # no packet key at all: not KLV
-            c.not_klv += 1
-            return []
-        features: list[dict] = []
-        for pkt in stream.packets:
-            self.next_index = max(self.next_index, pkt.index + 1)
+        if is_transport(datagram):
+            chunks = self._demux(datagram)
+        else:
+            chunks = [(datagram, "")]
+            if not datagram.startswith(b"\x06\x0e\x2b\x34"):
+                from ..io.klv.reader import EG0104_KEY, UAS_KEY
+
+                if UAS_KEY not in datagram and EG0104_KEY not in datagram:
+                    c.not_klv += 1
+                    return []
+        updates: list[PacketUpdate] = []
+        for payload, stream_name in chunks:
+            updates += self._packets(payload, stream_name)
+        return updates
+
+    def done(self, arrived: float) -> None:
+        """The outputs of the datagram that arrived at ``arrived`` are sent: its latency is counted."""
+        c = self.counters
+        c.latency_s.append(time.perf_counter() - arrived)
+        c.latency_max_s = max(c.latency_max_s, c.latency_s[-1])
+
+    def _demux(self, datagram: bytes) -> list[tuple[bytes, str]]:
+        """KLV payloads (stream name) completed by the transport packets of one datagram."""
+        from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+        from stanag4609.transport.metadata import parse_metadata_au_cells
+
+        from ..io.klv.reader import one_line
+
+        if self.demux is None:
+            self.demux = TransportDemuxer(recover_transport=True)
+        out = []
+        for k in range(0, len(datagram), TS_PACKET):
+            try:
+                events = self.demux.feed(datagram[k:k + TS_PACKET])
+            except Exception as exc:  # the demultiplexer's verdict on a damaged transport packet
+                self.counters.corrupt += 1
+                self.issues.append(f"{self.source}: datagram {self.counters.datagrams}: transport packet "
+                                   f"{k // TS_PACKET}: {one_line(exc)}")
+                continue
+            for ev in events:
+                if not isinstance(ev, PESStreamEvent) or ev.kind is not StreamKind.KLV:
+                    continue
+                payload = ev.pes.payload
+                if ev.stream.stream_type == 0x15:  # synchronous metadata: access-unit cells wrap the KLV
+                    try:
+                        payload = b"".join(cell.data for cell in parse_metadata_au_cells(payload))
+                    except Exception as exc:
+                        self.counters.corrupt += 1
+                        self.issues.append(f"{self.source}: PID {ev.pid}: metadata access unit: {one_line(exc)}")
+                        continue
+                out.append((payload, f"PID {ev.pid}"))
+        return out
+
+    def _packets(self, payload: bytes, stream_name: str) -> list[PacketUpdate]:
+        from ..io.klv.reader import decode_klv_bytes
+
+        c = self.counters
+        decoded = decode_klv_bytes(payload, self.source, first_index=self.next_index, stream=stream_name,
+                                   container="mpegts" if stream_name else "klv")
+        c.corrupt += decoded.n_bad
+        where = f"{self.source}{f' [{stream_name}]' if stream_name else ''}: datagram {c.datagrams}"
+        self.issues += [f"{where}: {i.kind}: {i.message}" for i in decoded.issues]
+        self.next_index += len(decoded.packets) + decoded.n_bad
+        updates = []
+        for pkt in decoded.packets:
             if pkt.raw in self.recent:
                 c.duplicates += 1
                 continue
@@ -90,42 +157,26 @@ class LiveSession:
             if len(self.recent) > self.recent_size:
                 self.recent.popitem(last=False)
             c.packets += 1
+            self.streams[pkt.stream] = self.streams.get(pkt.stream, 0) + 1
             t = pkt.fields.get(2)
             t_s = t.timestamp() if hasattr(t, "timestamp") else None
+            newest = self.newest_s.get(pkt.stream)
             late = False
-            if t_s is not None and self.newest_s is not None and t_s < self.newest_s:
-                if self.newest_s - t_s > self.restart_s:
+            if t_s is not None and newest is not None and t_s < newest:
+                if newest - t_s > self.restart_s:
                     c.restarts += 1
-                    self.newest_s = t_s
+                    self.newest_s[pkt.stream] = t_s
                 else:
                     c.late += 1
                     late = True
             elif t_s is not None:
-                self.newest_s = t_s
+                self.newest_s[pkt.stream] = t_s
             carried = self.carry.get(pkt.stream)
-            packets = [pkt] if carried is None else [carried, pkt]
             if not late:  # a late packet's values are older than those carried: they do not replace them
                 self.carry[pkt.stream] = replace(pkt, fields={**(carried.fields if carried else {}), **pkt.fields})
-            features += self._locate(KLVStream(self.source, "klv", packets), pkt.index)
-        c.latency_s.append(time.perf_counter() - arrived)
-        c.latency_max_s = max(c.latency_max_s, c.latency_s[-1])
-        return features
-
-    def _locate(self, stream, index: int) -> list[dict]:
-        from ..io.export import fix_features, fix_records, with_utc
-        from ..io.klv import klv_telemetry, vmti_detections
-        from ..video import locate_vmti
-
-        det = vmti_detections(stream)
-        if not len(det):
-            return []
-        mine = det.columns["frame"] == index
-        if not mine.any():
-            return []
-        det = det.keep(mine)
-        tel = klv_telemetry(stream, report_on_change=True)
-        v = locate_vmti(tel, det, self.dem, budget=self.budget, base=self.sensor)
-        self.counters.detections += len(det)
-        self.counters.fixes_ok += int(np.sum(v.fixes.ok))
-        extra = with_utc({"stream": det.columns["stream"], **v.extra}, "unix")
-        return fix_features(fix_records(v.fixes, extra, v.uncertainty))
+            u = locate_packet(self.source, pkt, carried, late=late, dem=self.dem, sensor=self.sensor,
+                              budget=self.budget)
+            c.detections += len(u.fixes)
+            c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")
+            updates.append(u)
+        return updates

@@ -20,6 +20,7 @@ What is ours and what is not:
 
 from __future__ import annotations
 
+import itertools
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -204,7 +205,7 @@ def _strict_check(raw: bytes) -> str | None:
     return None
 
 
-class _Keys:
+class PacketKeys:
     """Next position of either packet key at or after a position (each key searched once per hit)."""
 
     def __init__(self, data: bytes) -> None:
@@ -231,7 +232,7 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
     issues: list[KLVIssue] = []
     notes = _Notes()
     marks = np.array([m[0] for m in pts], dtype=np.int64) if pts else None
-    keys = _Keys(data)
+    keys = PacketKeys(data)
     n = first_index
     pos = 0
     size = len(data)
@@ -276,6 +277,19 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
         pos = end
         after_bad = False
     return KLVStream(path, container, packets, issues, notes.result())
+
+
+def split_klv(data: bytes, path: str = "<bytes>") -> list[tuple[bytes, float]]:
+    """Raw KLV bytes cut into packets as sent (bad ones and stray bytes too, each with the packet
+    it precedes), with each packet's ST 0601 time stamp (UNIX s; NaN without one)."""
+    import math
+
+    stream = decode_klv_bytes(data, path)
+    starts = sorted({p.offset for p in stream.packets} | {i.offset for i in stream.issues if i.offset is not None})
+    times = {p.offset: p.fields.get(2) for p in stream.packets}
+    bounds = [*starts, len(data)]
+    return [(data[a:b], times[a].timestamp() if hasattr(times.get(a), "timestamp") else math.nan)
+            for a, b in itertools.pairwise(bounds)]
 
 
 def packet_end(data: bytes, k: int) -> tuple[int | None, int, str]:

@@ -1,0 +1,67 @@
+"""KLV into MPEG-TS with libavformat (PyAV): one asynchronous KLV data stream (stream_type 0x06,
+'KLVA') per list of packets, each packet a PES with its presentation time. For demos, tests and
+benchmarks that need a transport stream as an encoder would send it."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+PTS_HZ = 90_000
+
+
+def packet_times(packets: Sequence[bytes]) -> np.ndarray:
+    """The ST 0601 time stamps (UNIX s) of raw packets, NaN where a packet has none."""
+    from .reader import decode_klv_bytes
+
+    out = np.full(len(packets), np.nan)
+    for i, raw in enumerate(packets):
+        s = decode_klv_bytes(raw)
+        t = s.packets[0].fields.get(2) if s.packets else None
+        if hasattr(t, "timestamp"):
+            out[i] = t.timestamp()
+    return out
+
+
+def write_klv_ts(path: str | Path, streams: Sequence[Sequence[bytes]], times_s: Sequence[Sequence[float]] | None = None
+                 ) -> Path:
+    """Write ``streams`` (each a list of raw KLV packets) as the KLV PIDs of one transport stream.
+
+    times_s: each packet's presentation time (s) per stream; by default its ST 0601 time stamp
+    relative to the earliest one over all streams (a packet without one takes the last time
+    before it).
+    """
+    import av
+
+    if times_s is None:
+        stamps = [packet_times(s) for s in streams]
+        t0 = min((np.nanmin(t) for t in stamps if np.isfinite(t).any()), default=0.0)
+        times_s = [np.nan_to_num(_hold(t - t0)) for t in stamps]
+    order = sorted((float(t), k, i) for k, ts in enumerate(times_s) for i, t in enumerate(ts))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with av.open(str(path), "w", format="mpegts") as out:
+        pids = [out.add_data_stream(codec_name="klv") for _ in streams]
+        for t, k, i in order:
+            pkt = av.Packet(streams[k][i])
+            pkt.stream = pids[k]
+            pkt.pts = pkt.dts = round(t * PTS_HZ)
+            pkt.time_base = Fraction(1, PTS_HZ)
+            out.mux(pkt)
+    return path
+
+
+def _hold(t: np.ndarray) -> np.ndarray:
+    """NaN replaced by the last finite value before it (the first finite one at the start)."""
+    t = np.asarray(t, dtype=np.float64).copy()
+    ok = np.isfinite(t)
+    if not ok.any():
+        return np.zeros_like(t)
+    idx = np.where(ok, np.arange(t.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    first = int(np.argmax(ok))
+    idx[:first] = first
+    return t[idx]

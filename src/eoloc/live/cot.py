@@ -1,0 +1,157 @@
+"""Cursor-on-Target events of live packets, for TAK clients and servers (after MISB ST 0805,
+"KLV to CoT conversion", as jMISB implements it).
+
+Per packet, each event one standalone XML document:
+
+- the **platform** (``a-f-A-M-F-Q``, a friendly UAV; uid ``eoloc-<platform>``, the platform
+  designation or the stream) at the sensor's position, with a ``<sensor>`` detail — azimuth
+  and elevation of the line of sight, horizontal and vertical field of view, range to the frame
+  centre, model — which ATAK and WinTAK draw as the sensor's field-of-view cone, and its heading
+  in ``<track course>``;
+- the **sensor point of interest** (``b-m-p-s-p-i``, uid ``<platform>-spi``): eoloc's frame
+  centre on the chosen surface, linked to the platform (``relation="p-p"``);
+- the **footprint** as a closed shape (``u-d-f``, uid ``<platform>-footprint``: a ``<link
+  point>`` per corner, first repeated last);
+- one event per **located target** (``a-u-G``, uid ``<platform>-<target id>``: a VMTI target
+  keeps its marker from packet to packet), ``ce``/``le`` the 1-sigma horizontal and vertical
+  errors from its covariance (9999999, unknown, without an error budget), CE90/LE90 in the
+  remarks.
+
+``time``/``start`` are when the event is sent and ``stale`` that plus ``stale_packets`` packet
+intervals of its stream (the median of the last 15 by the ST 0601 time stamps, between ``min_stale_s`` and
+``max_stale_s``): a marker lasts a few packets after its stream stops. The packet's own UTC time
+goes in the remarks (a replayed stream's clock is not now, and TAK drops events already stale).
+:meth:`CotFeed.silence` re-sends each platform already stale when its stream goes quiet.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import deque
+from datetime import UTC, datetime, timedelta
+
+from ..io.cot import ce_le, element_xml, event_xml, fix_remarks, iso_utc
+from .update import PacketUpdate
+
+PLATFORM_TYPE = "a-f-A-M-F-Q"  # friendly / air / military / fixed wing / UAV
+TARGET_TYPE = "a-u-G"  # unknown affiliation, ground
+SPI_TYPE = "b-m-p-s-p-i"  # sensor point of interest (MISB ST 0805)
+SHAPE_TYPE = "u-d-f"  # a drawn shape (TAK's freehand polygon)
+
+
+class CotFeed:
+    """CoT events of :class:`PacketUpdate`s, with stale times from each stream's rate and an
+    optional minimum interval per uid (``interval_s``; ``held`` counts the events left out)."""
+
+    def __init__(self, *, uid_prefix: str = "eoloc", stale_packets: float = 10.0, min_stale_s: float = 2.0,
+                 max_stale_s: float = 60.0, interval_s: float = 0.0) -> None:
+        self.uid_prefix = uid_prefix
+        self.stale_packets, self.min_stale_s, self.max_stale_s = stale_packets, min_stale_s, max_stale_s
+        self.interval_s = interval_s
+        self.period_s: dict[str, float] = {}  # stream -> its packet interval (median of the last 15)
+        self.intervals: dict[str, deque] = {}
+        self.last_time: dict[str, float] = {}
+        self.last_sent: dict[str, float] = {}
+        self.platforms: dict[str, tuple[PacketUpdate, str]] = {}  # uid -> its last update and stream
+        self.events_out = 0
+        self.held = 0
+
+    def stale_s(self, stream: str) -> float:
+        """How long this stream's events stay current: ``stale_packets`` packet intervals."""
+        p = self.period_s.get(stream)
+        if p is None:
+            return 10.0
+        return min(max(self.stale_packets * p, self.min_stale_s), self.max_stale_s)
+
+    def _rate(self, u: PacketUpdate) -> None:
+        t, last = u.time_s, self.last_time.get(u.stream)
+        if not math.isfinite(t) or u.late:
+            return
+        if last is not None and 0.0 < t - last < 30.0:
+            recent = self.intervals.setdefault(u.stream, deque(maxlen=15))
+            recent.append(t - last)
+            self.period_s[u.stream] = statistics.median(recent)  # a lost packet or two does not move it
+        self.last_time[u.stream] = t
+
+    def _due(self, uid: str, now_s: float) -> bool:
+        if self.interval_s <= 0:
+            return True
+        last = self.last_sent.get(uid)
+        if last is not None and now_s - last < self.interval_s:
+            self.held += 1
+            return False
+        self.last_sent[uid] = now_s
+        return True
+
+    def events(self, u: PacketUpdate, now: datetime | None = None) -> list[bytes]:
+        """The events of one packet: platform, sensor point of interest, footprint, targets."""
+        now_dt = now or datetime.now(UTC)
+        now_s = now_dt.timestamp()
+        self._rate(u)
+        now, stale = iso_utc(now_dt), iso_utc(now_dt + timedelta(seconds=self.stale_s(u.stream)))
+        base = f"{self.uid_prefix}-{u.key}"
+        name = (u.platform or {}).get("name") or u.key
+        when = u.time_utc or "no time stamp"
+        out: list[bytes] = []
+        if u.platform is not None and not u.late:
+            self.platforms[base] = (u, u.stream)
+            if self._due(base, now_s):
+                out.append(self._platform(u, base, name, now, stale, f"{name}: packet {u.index} of {when}"))
+        link = element_xml("link", uid=base, type=PLATFORM_TYPE, relation="p-p")
+        if u.centre is not None and not u.late and self._due(base + "-spi", now_s):
+            lat, lon, h = u.centre
+            out.append(event_xml(uid=base + "-spi", cot_type=SPI_TYPE, how="m-i", time=now, stale=stale, lat=lat,
+                                 lon=lon, hae=h, detail=element_xml("contact", callsign=f"{name} SPI") + link
+                                 + element_xml("remarks", f"eoloc frame centre of {name} at {when}")))
+        if u.footprint is not None and not u.late and self._due(base + "-footprint", now_s):
+            ring = u.footprint["coordinates"][0]
+            lat = sum(p[1] for p in ring[:-1]) / (len(ring) - 1)
+            lon = sum(p[0] for p in ring[:-1]) / (len(ring) - 1)
+            h = sum(p[2] for p in ring[:-1]) / (len(ring) - 1)
+            detail = "".join(element_xml("link", point=f"{p[1]:.8f},{p[0]:.8f},{p[2]:.2f}") for p in ring)
+            detail += (element_xml("strokeColor", value="-256") + element_xml("strokeWeight", value="2.0")
+                       + element_xml("fillColor", value="822083328") + element_xml("labels_on", value="false")
+                       + element_xml("contact", callsign=f"{name} footprint") + link)
+            out.append(event_xml(uid=base + "-footprint", cot_type=SHAPE_TYPE, how="m-i", time=now, stale=stale,
+                                 lat=lat, lon=lon, hae=h, detail=detail))
+        for row in u.fixes:
+            if row.get("status") != "OK":
+                continue
+            tid = row.get("target_id")
+            uid = f"{base}-{tid}"
+            if not self._due(uid, now_s):
+                continue
+            ce, le = ce_le(row)
+            detail = (element_xml("contact", callsign=f"{name} {tid}") + link
+                      + element_xml("remarks", f"{fix_remarks(row, tid)}; {when}"))
+            out.append(event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale,
+                                 lat=float(row["lat_deg"]), lon=float(row["lon_deg"]), hae=float(row["h_m"]), ce=ce,
+                                 le=le, detail=detail))
+        self.events_out += len(out)
+        return out
+
+    def _platform(self, u: PacketUpdate, uid: str, name: str, now: datetime | str, stale: datetime | str,
+                  remarks: str) -> bytes:
+        p, look = u.platform, u.look or {}
+        sensor = element_xml("sensor", azimuth=_fmt(look.get("azimuth_deg")), elevation=_fmt(look.get("elevation_deg")),
+                             fov=_fmt(look.get("hfov_deg")), vfov=_fmt(look.get("vfov_deg")),
+                             range=_fmt(look.get("range_m")), model=look.get("sensor"))
+        track = element_xml("track", course=_fmt(p.get("heading_deg"))) if p.get("heading_deg") is not None else ""
+        detail = element_xml("contact", callsign=name) + sensor + track + element_xml("remarks", remarks)
+        return event_xml(uid=uid, cot_type=PLATFORM_TYPE, how="m-g", time=now, stale=stale, lat=p["lat_deg"],
+                         lon=p["lon_deg"], hae=p["h_m"], detail=detail)
+
+    def silence(self, quiet_s: float, now: datetime | None = None) -> list[bytes]:
+        """Each platform's last event again, stale at once: TAK shows it as lost."""
+        now = now or datetime.now(UTC)
+        out = []
+        for uid, (u, _) in self.platforms.items():
+            name = (u.platform or {}).get("name") or u.key
+            out.append(self._platform(u, uid, name, now, now, f"{name}: no metadata for {quiet_s:.0f} s"))
+        self.events_out += len(out)
+        return out
+
+
+def _fmt(v) -> str | None:
+    return None if v is None else f"{float(v):.3f}"

@@ -1,0 +1,231 @@
+"""`eoloc live` on MPEG-TS over real UDP sockets, with Cursor-on-Target out: the mountain flight
+and a second encoder as two KLV PIDs muxed by libavformat (PyAV), cut into ST 1402 datagrams
+(seven transport packets) and sent over loopback, some datagrams duplicated and one lost; CoT
+received on a multicast group by a receiver that parses every datagram as one XML event.
+Checked against `eoloc klv` on the same TS (the batch path): every target of every packet that
+arrived whole, to 1e-8 degrees (CoT's printed precision), ce/le from the same covariance,
+the frame centre and the sensor's field of view; stale times from the stream rate. Also: the
+same TS replayed at its own clock (PTS) into `eoloc live` with CoT by unicast (none lost), and
+from stdin."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import xml.etree.ElementTree as ET
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import eoloc
+from eoloc.io.klv import read_klv
+from eoloc.io.klv.mux import write_klv_ts
+from eoloc.io.klv.reader import split_klv
+from eoloc.io.klv.synthetic import circling_flight_klv
+from eoloc.jobs.klv import klv_job
+from eoloc.jobs.setup import misb_setup
+from eoloc.live.sources import file_datagrams, ts_packet_times
+from eoloc.terrain import open_dem
+
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+FLIGHT, DEM, CONFIG = MOUNTAIN / "flight.klv", MOUNTAIN / "longs_peak_srtmgl3.tif", MOUNTAIN / "klv.toml"
+EOLOC = str(Path(sys.executable).parent / "eoloc")
+
+
+def _free_port(kind=socket.SOCK_DGRAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class CotReceiver:
+    """Every datagram on a UDP address (a multicast group joined) parsed as one CoT event."""
+
+    def __init__(self, url: str) -> None:
+        from eoloc.live.sources import udp_socket
+
+        self.sock = udp_socket(url)
+        self.sock.settimeout(0.2)
+        self.events: list[ET.Element] = []
+        self.bad: list[bytes] = []
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while self.running:
+            try:
+                data = self.sock.recv(65535)
+            except TimeoutError:
+                continue
+            try:
+                ev = ET.fromstring(data)
+                assert ev.tag == "event" and ev.find("point") is not None
+                self.events.append(ev)
+            except (ET.ParseError, AssertionError):
+                self.bad.append(data)
+
+    def stop(self) -> None:
+        self.running = False
+        self.thread.join()
+        self.sock.close()
+
+
+def _two_pid_ts(path: Path) -> tuple[Path, int]:
+    """The mountain flight (its corrupt packet too) and a circling flight as two KLV PIDs; returns
+    the path and the number of good packets."""
+    mountain = [raw for raw, _ in split_klv(FLIGHT.read_bytes())]
+    other = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=3, rate_hz=1.0, start_unix_s=1.6e9))]
+    t = np.arange(40, dtype=float)
+    write_klv_ts(path, [mountain, other], [t, t + 0.5])
+    s = read_klv(path)
+    assert s.streams == ["PID 256", "PID 257"] and s.n_bad == 1
+    return path, s.n_good
+
+
+def _wait_listening(proc) -> str:
+    """The receiver's first lines, up to the one saying it listens (it binds before that)."""
+    lines = []
+    while "listening on" not in (line := proc.stdout.readline()):
+        assert line, "".join(lines)
+        lines.append(line)
+    return "".join(lines)
+
+
+def _settle(path: Path, quiet_s: float = 1.5, timeout_s: float = 120.0) -> None:
+    """Wait until ``path`` has stopped growing for ``quiet_s`` (the receiver has caught up)."""
+    deadline, last, since = time.monotonic() + timeout_s, -1, time.monotonic()
+    while time.monotonic() < deadline:
+        size = path.stat().st_size if path.exists() else 0
+        if size != last:
+            last, since = size, time.monotonic()
+        elif size and time.monotonic() - since > quiet_s:
+            return
+        time.sleep(0.1)
+
+
+def _parse_time(iso: str) -> float:
+    return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp()
+
+
+def test_ts_over_udp_to_cot_multicast_equals_the_batch_path(tmp_path):
+    ts, n_good = _two_pid_ts(tmp_path / "two.ts")
+    port, group = _free_port(), f"udp://239.2.3.1:{_free_port()}?ttl=0"
+    rx = CotReceiver(group.split("?")[0])
+    out = tmp_path / "live.ndjson"
+    proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port}", "--dem", str(DEM), "--config", str(CONFIG),
+                             "--cot", group, "--ndjson", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    datagrams = [d for d, _ in file_datagrams(str(ts), lambda: False)]
+    lost = len(datagrams) // 2
+    sends = [d for i, d in enumerate(datagrams) if i != lost]  # one datagram lost
+    sends.insert(10, sends[9])  # and two sent twice: their KLV packets are seen again and dropped
+    sends.insert(30, sends[29])
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    _wait_listening(proc)
+    for d in sends:
+        tx.sendto(d, ("127.0.0.1", port))
+        time.sleep(0.002)
+    _settle(out)
+    proc.send_signal(signal.SIGINT)
+    log, _ = proc.communicate(timeout=30)
+    rx.stop()
+    assert proc.returncode == 0 and "Traceback" not in log, log
+    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (SIGINT)")):].splitlines()[0])
+    assert rx.bad == []
+    # what the lost datagram carried (at most the KLV packets in its transport packets) is all that is missing
+    assert n_good - 2 <= summary["packets"] < n_good and 1 <= summary["duplicates"] <= 4
+    assert set(summary["streams"]) == {"PID 256", "PID 257"}
+    job = klv_job(ts, dem=open_dem(DEM), sensor=misb_setup(eoloc.io.config.load_config(CONFIG))[0],
+                  budget=misb_setup(eoloc.io.config.load_config(CONFIG))[1])
+    r = job.records
+    ref = {(str(s), str(t), float(ts_)): i for i, (s, t, ts_, st) in
+           enumerate(zip(r["stream"], r["target_id"], r["time_s"], r["status"], strict=True)) if st == "OK"}
+    targets = [e for e in rx.events if e.get("type") == "a-u-G"]
+    assert len(targets) == summary["fixes_ok"] == summary["cot"][0]["sent"] - (len(rx.events) - len(targets))
+    # each target event: the batch fix of the same stream, target and packet time
+    rows = [json.loads(x) for x in out.read_text().splitlines()]
+    live_targets = [f for f in rows if f["properties"]["what"] == "target" and f["properties"]["status"] == "OK"]
+    assert len(live_targets) == len(targets) >= len(ref) - 10
+    for ev, f in zip(targets, live_targets, strict=True):
+        p = f["properties"]
+        i = ref[(p["stream"], str(p["target_id"]), p["time_s"])]
+        pt = ev.find("point")
+        assert abs(float(pt.get("lat")) - r["lat_deg"][i]) < 1e-8 and abs(float(pt.get("lon")) - r["lon_deg"][i]) < 1e-8
+        assert abs(float(pt.get("hae")) - r["h_m"][i]) < 0.006
+        ce = math.sqrt((r["sigma_e_m"][i] ** 2 + r["sigma_n_m"][i] ** 2) / 2)
+        assert abs(float(pt.get("ce")) - ce) < 0.006 and abs(float(pt.get("le")) - r["sigma_u_m"][i]) < 0.006
+        assert ev.find("detail/link").get("relation") == "p-p"
+        # stale: 10 packet intervals of a 1 Hz stream, from the time of sending
+        assert _parse_time(ev.get("stale")) - _parse_time(ev.get("time")) == pytest.approx(10.0, abs=0.01)
+    # the platforms: the sensor's field of view as the packet sent it, the frame centre as the batch computes it
+    platforms = [e for e in rx.events if e.get("type") == "a-f-A-M-F-Q"]
+    spis = [e for e in rx.events if e.get("type") == "b-m-p-s-p-i"]
+    assert {e.get("uid") for e in platforms} == {"eoloc-PID_256", "eoloc-PID_257"}
+    tel = job.telemetry.columns
+    hfov = dict(zip(zip(tel["stream"], np.round(tel["lat_deg"], 8), strict=True), tel["hfov_deg"], strict=True))
+    for e in platforms:
+        key = (e.get("uid").replace("eoloc-", "").replace("_", " "), round(float(e.find("point").get("lat")), 8))
+        assert float(e.find("detail/sensor").get("fov")) == pytest.approx(hfov[key], abs=1e-3)
+    centres = job.check.geometry.centre
+    mine = tel["stream"] == "PID 256"
+    ref_c = {round(la, 6) for la, ok in zip(centres.lat_deg[mine], centres.ok[mine], strict=True) if ok}
+    got_c = {round(float(e.find("point").get("lat")), 6) for e in spis if e.get("uid") == "eoloc-PID_256-spi"}
+    assert got_c and got_c <= ref_c
+    shapes = [e for e in rx.events if e.get("type") == "u-d-f"]
+    assert shapes and all(len(e.findall("detail/link[@point]")) >= 4 for e in shapes)
+
+
+def test_ts_replayed_at_its_own_rate_every_packet_and_cot_event_arrives(tmp_path):
+    """A 10 Hz TS (two PIDs, 5 targets each) sent at its own clock (PTS) to `eoloc live` with CoT
+    to a unicast receiver: every packet processed, one event per located target, none lost."""
+    a = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=1))]
+    b = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=2))]
+    ts = write_klv_ts(tmp_path / "ten_hz.ts", [a, b])
+    t = ts_packet_times(ts.read_bytes())
+    assert t[-1] - t[0] == pytest.approx(3.9, abs=0.01)  # the PTS of the last packet pair
+    port, cot_port = _free_port(), _free_port()
+    rx = CotReceiver(f"udp://127.0.0.1:{cot_port}")
+    proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port}", "--cot", f"udp://127.0.0.1:{cot_port}",
+                             "--packets", "80"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    _wait_listening(proc)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    started = time.monotonic()
+    for d, _ in file_datagrams(str(ts), lambda: False, realtime=True):
+        tx.sendto(d, ("127.0.0.1", port))
+    took = time.monotonic() - started
+    log, _ = proc.communicate(timeout=30)
+    time.sleep(0.3)
+    rx.stop()
+    assert proc.returncode == 0 and "Traceback" not in log, log
+    assert took == pytest.approx(3.9, abs=0.5)  # paced by the stream's own clock, not sent at once
+    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (--packets 80)")):].splitlines()[0])
+    assert summary["packets"] == 80 and summary["corrupt"] == 0 and summary["fixes_ok"] == 400
+    targets = [e for e in rx.events if e.get("type") == "a-u-G"]
+    assert len(targets) == 400 and rx.bad == []
+    assert len({e.get("uid") for e in targets}) == 10  # a target keeps its uid from packet to packet
+    assert len(rx.events) == summary["cot"][0]["sent"] == summary["cot_events"]
+
+
+def test_stdin_gives_what_the_file_gives(tmp_path):
+    ts, _ = _two_pid_ts(tmp_path / "two.ts")
+    from_file = subprocess.run([EOLOC, "live", str(ts), "--ndjson", "-"], capture_output=True, text=True,
+                               timeout=120)
+    with open(ts, "rb") as fh:
+        from_stdin = subprocess.run([EOLOC, "live", "-", "--ndjson", "-"], stdin=fh, capture_output=True,
+                                    text=True, timeout=120)
+    assert from_file.returncode == from_stdin.returncode == 0, from_stdin.stderr
+    assert from_file.stdout == from_stdin.stdout and from_file.stdout.count('"target"') > 100
+    raw = subprocess.run([EOLOC, "live", "-", "--ndjson", "-"], input=FLIGHT.read_bytes(), capture_output=True,
+                         timeout=120)
+    raw_file = subprocess.run([EOLOC, "live", str(FLIGHT), "--ndjson", "-"], capture_output=True, timeout=120)
+    assert raw.returncode == 0 and b"checksum" in raw.stderr  # the demo's corrupt packet, named
+    assert raw.stdout == raw_file.stdout and raw.stdout.count(b'"what": "target"') > 100
