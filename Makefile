@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean browser
+.PHONY: demo test lint bench clean browser tak
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,7 +26,21 @@ browser:
 	  { apt-get update -q >/dev/null && apt-get install -y -q chromium chromium-driver >/dev/null; }; } || \
 	  { echo "install Debian's chromium and chromium-driver (as root) for the map test"; exit 1; }
 
-test: $(STAMP) lint browser
+# A real TAK server for the CoT test: FreeTAKServer from PyPI in a venv of its own (its pins clash
+# with ours); opentelemetry is held at the release it was built against (1.23 broke its tracer).
+TAK_VENV  := .venv-tak
+TAK_STAMP := $(TAK_VENV)/.installed
+
+$(TAK_STAMP):
+	$(PYTHON) -m venv $(TAK_VENV)
+	$(TAK_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(TAK_VENV)/bin/python -m pip install --quiet "FreeTAKServer==2.2.1" "opentelemetry-sdk==1.22.0" \
+	  "opentelemetry-api==1.22.0"
+	touch $(TAK_STAMP)
+
+tak: $(TAK_STAMP)
+
+test: $(STAMP) lint browser tak
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)

@@ -83,7 +83,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     sensor, budget = misb_setup(load_config(config_path) if config_path else None)
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget)
     feed_cot = CotFeed(interval_s=cot_interval)
-    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot")) for url in cot_urls]
+    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
     stopping = {"why": None}
     started = time.monotonic()
 

@@ -27,6 +27,7 @@ goes in the remarks (a replayed stream's clock is not now, and TAK drops events 
 from __future__ import annotations
 
 import math
+import socket
 import statistics
 from collections import deque
 from datetime import UTC, datetime, timedelta
@@ -141,6 +142,19 @@ class CotFeed:
         detail = element_xml("contact", callsign=name) + sensor + track + element_xml("remarks", remarks)
         return event_xml(uid=uid, cot_type=PLATFORM_TYPE, how="m-g", time=now, stale=stale, lat=p["lat_deg"],
                          lon=p["lon_deg"], hae=p["h_m"], detail=detail)
+
+    def presence(self, now: datetime | None = None) -> bytes:
+        """eoloc itself as a TAK client announces itself (a friendly ground sensor with a contact
+        and ``<takv>``): what a TAK server expects first on a new connection."""
+        from .. import __version__
+
+        now = now or datetime.now(UTC)
+        detail = (element_xml("contact", callsign=self.uid_prefix, endpoint="*:-1:stcp")
+                  + element_xml("__group", name="Cyan", role="Team Member")
+                  + element_xml("takv", platform="eoloc", version=__version__, device="ground station", os="")
+                  + element_xml("remarks", "eoloc live: geolocated targets from MISB KLV"))
+        return event_xml(uid=f"{self.uid_prefix}-{socket.gethostname()}", cot_type="a-f-G-E-S", how="h-g-i-g-o",
+                         time=now, stale=now + timedelta(hours=1), lat=0.0, lon=0.0, hae=0.0, detail=detail)
 
     def silence(self, quiet_s: float, now: datetime | None = None) -> list[bytes]:
         """Each platform's last event again, stale at once: TAK shows it as lost."""

@@ -67,7 +67,7 @@ class UdpSender:
 class TcpSender:
     """Events streamed to ``tcp://HOST:PORT`` from a thread of its own (see the module notes)."""
 
-    def __init__(self, url: str, *, queue_events: int = QUEUE_EVENTS, on_state=None) -> None:
+    def __init__(self, url: str, *, queue_events: int = QUEUE_EVENTS, on_state=None, hello=None) -> None:
         _, self.host, self.port, _ = parse_cot_url(url)
         self.url = url
         self.queue: deque[bytes] = deque(maxlen=queue_events)
@@ -75,6 +75,7 @@ class TcpSender:
         self.stopping = threading.Event()
         self.sent = self.dropped = self.lost = self.connects = 0
         self.on_state = on_state or (lambda message: None)
+        self.hello = hello  # () -> bytes: sent first on every connection (a TAK client's presence)
         self.thread = threading.Thread(target=self._run, name=f"cot {url}", daemon=True)
         self.thread.start()
 
@@ -93,6 +94,13 @@ class TcpSender:
             return None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.settimeout(5.0)
+        if self.hello is not None:
+            try:
+                sock.sendall(self.hello())
+            except OSError as exc:
+                self.on_state(f"{self.url}: connection lost at once ({exc.strerror or exc}); retrying")
+                sock.close()
+                return None
         self.connects += 1
         if self.connects > 1:
             self.on_state(f"{self.url}: reconnected")
@@ -156,6 +164,7 @@ class TcpSender:
                 "lost": self.lost, "connects": self.connects}
 
 
-def cot_sender(url: str, on_state=None) -> UdpSender | TcpSender:
+def cot_sender(url: str, on_state=None, hello=None) -> UdpSender | TcpSender:
+    """The sender for a --cot URL; ``hello`` (TCP): the event sent first on each connection."""
     scheme = parse_cot_url(url)[0]
-    return UdpSender(url) if scheme == "udp" else TcpSender(url, on_state=on_state)
+    return UdpSender(url) if scheme == "udp" else TcpSender(url, on_state=on_state, hello=hello)
