@@ -57,7 +57,7 @@ Filesystem:
   FTS_EXCHECK_CHECKLIST_PATH: {p}/ExCheck/checklist
 """)
     env = {**os.environ, "FTS_FIRST_START": "false", "FTS_CONFIG_PATH": str(folder / "FTSConfig.yaml")}
-    log = open(folder / "fts.log", "w")  # noqa: SIM115 (closed below)
+    log = open(folder / "fts.log", "w")
     proc = subprocess.Popen([str(TAK_PYTHON), "-m", "FreeTAKServer.controllers.services.FTS", "-AutoStart", "True",
                              "-CoTIP", "127.0.0.1", "-CoTPort", str(cot), "-SSLCoTPort", str(ssl_cot),
                              "-DataPackageIP", "127.0.0.1", "-DataPackagePort", str(dp), "-SSLDataPackagePort",

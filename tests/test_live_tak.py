@@ -14,12 +14,12 @@ import time
 from pathlib import Path
 
 import pytest
-from tak_server import TakClient, free_tcp_port, freetakserver
 
 import eoloc
 from eoloc.io.klv.reader import split_klv
 from eoloc.live.cot import CotFeed
 from eoloc.live.senders import TcpSender
+from tak_server import TakClient, free_tcp_port, freetakserver
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 FLIGHT, DEM, CONFIG = MOUNTAIN / "flight.klv", MOUNTAIN / "longs_peak_srtmgl3.tif", MOUNTAIN / "klv.toml"
@@ -191,7 +191,7 @@ def test_a_full_queue_drops_the_oldest_and_counts_them():
     sender = TcpSender(f"tcp://127.0.0.1:{free_tcp_port()}", queue_events=100)
     for i in range(150):
         sender.send(b"%d" % i)
-    assert sender.dropped == 50 and list(sender.queue)[0] == b"50"
+    assert sender.dropped == 50 and sender.queue[0] == b"50"
     sender.close(timeout_s=0.1)
     assert not sender.thread.is_alive()
 
