@@ -14,7 +14,9 @@ import bench_csv
 import bench_evaluate
 import bench_geodesy
 import bench_klv
+import bench_live
 import bench_locate
+import bench_serve
 import bench_startup
 import bench_terrain
 from _common import HEADER, machine
@@ -25,5 +27,5 @@ if __name__ == "__main__":
     for line in (bench_locate.main(1_000_000) + bench_geodesy.main(1_000_000) + bench_terrain.main(200_000)
                  + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_startup.main(15)
                  + bench_csv.main() + bench_klv.main(3000) + bench_evaluate.main(1_000_000)
-                 + bench_batch.main(12_000)):
+                 + bench_batch.main(12_000) + bench_live.main(1.0) + bench_serve.main(20.0)):
         print(line, flush=True)

@@ -229,3 +229,35 @@ def test_stdin_gives_what_the_file_gives(tmp_path):
     raw_file = subprocess.run([EOLOC, "live", str(FLIGHT), "--ndjson", "-"], capture_output=True, timeout=120)
     assert raw.returncode == 0 and b"checksum" in raw.stderr  # the demo's corrupt packet, named
     assert raw.stdout == raw_file.stdout and raw.stdout.count(b'"what": "target"') > 100
+
+
+def test_cot_feed_events_of_one_packet_and_the_silence():
+    """The events of one packet parse as CoT with the ST 0805 types and links; the stale time
+    follows the stream's rate (median interval, a gap does not move it); silence re-sends the
+    aircraft already stale; --cot-interval holds events back per uid."""
+    from eoloc.live.cot import CotFeed
+    from eoloc.live.session import LiveSession
+
+    packets = [raw for raw, _ in split_klv(circling_flight_klv(12, seed=5, rate_hz=5.0))]
+    session, feed = LiveSession("test"), CotFeed()
+    now = datetime.fromisoformat("2026-11-24T12:00:00+00:00")
+    events = []
+    for k, raw in enumerate(packets):
+        if k == 6:
+            continue  # a lost packet: one interval of 0.4 s among 0.2 s ones
+        for u in session.feed(raw):
+            events = [ET.fromstring(e) for e in feed.events(u, now=now)]
+    types = [e.get("type") for e in events]
+    assert types == ["a-f-A-M-F-Q", "b-m-p-s-p-i", "u-d-f"] + ["a-u-G"] * 5
+    for e in events:
+        assert _parse_time(e.get("stale")) - _parse_time(e.get("time")) == pytest.approx(2.0)  # 10 x 0.2 s
+        assert e.get("uid").startswith("eoloc-stream")
+    assert all(e.find("detail/link[@uid]").get("uid") == "eoloc-stream" for e in events[1:])
+    quiet = [ET.fromstring(e) for e in feed.silence(7.0, now=now)]
+    assert len(quiet) == 1 and quiet[0].get("stale") == quiet[0].get("time")
+    assert "no metadata for 7 s" in quiet[0].find("detail/remarks").text
+    hello = ET.fromstring(feed.presence(now=now))
+    assert hello.find("detail/takv").get("platform") == "eoloc" and hello.get("type") == "a-f-G-E-S"
+    held = CotFeed(interval_s=10.0)
+    u = LiveSession("test").feed(packets[0])[0]
+    assert len(held.events(u, now=now)) == 8 and held.events(u, now=now) == [] and held.held == 8

@@ -111,6 +111,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     run_report_demo(out_dir / "report", console=console, config_path=data / "camera.toml", flights=flights)
     run_rectify_demo(out_dir / "rectify", console=console, data=data / "mountain")
     run_batch_demo(out_dir / "archive", console=console, data=data / "mountain")
+    run_live_demo(out_dir / "live", console=console, data=data / "mountain")
 
 
 def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
@@ -330,3 +331,80 @@ def run_batch_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     console.print(f"run again: {again.counts()} (nothing changed, nothing redone). Read the fixes with "
                   f"geopandas.read_parquet('{settings.out_dir}/fixes') or DuckDB: SELECT * FROM "
                   f"read_parquet('{settings.out_dir}/fixes/*/*.parquet', hive_partitioning = true)")
+
+
+def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
+    """A live session on loopback: the mountain flight muxed into MPEG-TS, sent as ST 1402
+    datagrams to `eoloc live` (the real command, its own process), Cursor-on-Target out by UDP to a
+    receiver here, NDJSON to a file; what went where printed."""
+    import json
+    import socket
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    from .io.klv.mux import write_klv_ts
+    from .io.klv.reader import split_klv
+    from .live.sources import file_datagrams
+
+    console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK) and NDJSON")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    packets = [raw for raw, _ in split_klv((data / "flight.klv").read_bytes())]
+    ts = write_klv_ts(out_dir / "flight.ts", [packets])
+
+    def free_port() -> int:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    port, cot_port = free_port(), free_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", cot_port))
+    rx.settimeout(0.2)
+    received: list[bytes] = []
+    running = True
+
+    def receive() -> None:
+        while running:
+            try:
+                received.append(rx.recv(65535))
+            except TimeoutError:
+                continue
+
+    threading.Thread(target=receive, daemon=True).start()
+    ndjson = out_dir / "live.ndjson"
+    cmd = [sys.executable, "-m", "eoloc", "live", f"udp://127.0.0.1:{port}", "--dem",
+           str(data / "longs_peak_srtmgl3.tif"), "--config", str(data / "klv.toml"), "--cot",
+           f"udp://127.0.0.1:{cot_port}", "--ndjson", str(ndjson), "--packets", str(len(packets) - 1),
+           "--duration", "60"]
+    console.print("$ " + " ".join(["eoloc", *cmd[3:]]), highlight=False, soft_wrap=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    while "listening on" not in (line := proc.stdout.readline()):
+        if not line:
+            raise RuntimeError("eoloc live did not start")
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sent = 0
+    for datagram, _ in file_datagrams(str(ts), lambda: False):
+        tx.sendto(datagram, ("127.0.0.1", port))
+        sent += 1
+        time.sleep(0.005)
+    log, _ = proc.communicate(timeout=120)
+    time.sleep(0.3)
+    running = False
+    summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+    (out_dir / "cot_received.xml").write_bytes(b"\n".join(received))
+    kinds: dict[str, int] = {}
+    for ev in received:
+        kind = ev.split(b' type="', 1)[1].split(b'"', 1)[0].decode() if b' type="' in ev else "?"
+        kinds[kind] = kinds.get(kind, 0) + 1
+    names = {"a-f-A-M-F-Q": "aircraft + sensor FOV", "b-m-p-s-p-i": "frame centre (SPI)", "u-d-f": "footprint",
+             "a-u-G": "targets"}
+    console.print(f"sent {sent} UDP datagrams of MPEG-TS ({ts.stat().st_size:,} bytes, {len(packets)} KLV packets "
+                  f"with the corrupt one); eoloc live: {summary['packets']} packets, {summary['corrupt']} corrupt "
+                  f"(named), {summary['fixes_ok']} targets located, latency p50 "
+                  f"{summary['latency_ms_median']:.1f} ms")
+    console.print("CoT received on udp://127.0.0.1:" + str(cot_port) + ": " + ", ".join(
+        f"{n} {names.get(k, k)}" for k, n in kinds.items()) + f" -> {out_dir / 'cot_received.xml'}")
+    console.print(f"NDJSON (one GeoJSON feature per line): {ndjson}. In ATAK/WinTAK: point `eoloc live --cot "
+                  "udp://239.2.3.1:6969` at the SA multicast, or `--cot tcp://TAKSERVER:8087` at a TAK server.")

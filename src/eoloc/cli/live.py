@@ -22,10 +22,12 @@ eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
   SOURCE: udp://HOST:PORT (a multicast HOST such as 239.1.1.1 is joined): datagrams of MPEG-TS
   (ST 1402, any number of KLV PIDs, each its own stream) or raw KLV (whole packets), told apart
   as they come; a raw KLV or MPEG-TS file (--realtime: at the stream's own clock, from the
-  ST 0601 time stamps or the TS PCR); or - for stdin (a pipe of TS or raw KLV bytes).
+  ST 0601 time stamps, or the TS PCR, else PTS); or - for stdin (a pipe of TS or raw KLV bytes;
+  RTSP/SRT: ffmpeg -i URL -map 0 -c copy -f mpegts - | eoloc live - ...).
   Each packet is decoded as `eoloc klv` decodes files (checksums, report-on-change values carried
-  from packet to packet); its frame centre, footprint (the four corners) and VMTI targets are
-  located on --dem, else on the packet's frame-centre elevation; with the config's
+  from packet to packet); its frame centre, footprint (the four corners; on --dem the image
+  border traced on the terrain) and VMTI targets are located on --dem, else on the packet's
+  frame-centre elevation; heights ellipsoidal (WGS-84), angles in degrees; with the config's
   [accuracy.budget] each target gets its uncertainty.
 \b
 Outputs (any combination, at least one):
