@@ -40,10 +40,12 @@ def row(work: str, figure: str, peer: str, ratio: float | None) -> str:
 HEADER = "| work | eoloc | peer (same run) | peer time / eoloc time |\n|---|---|---|---|"
 
 
-def script(main: Callable[[int], list[str]], doc: str | None) -> None:
-    """Command-line entry of one benchmark script: ``--n`` elements, prints the machine and a table."""
+def script(main: Callable[[float], list[str]], doc: str | None, *, flag: str = "--n", kind: type = int,
+           default: float = 1_000_000, help_text: str = "elements per batch (default 10^6)") -> None:
+    """Command-line entry of one benchmark script: one argument (``flag``, default ``--n``
+    elements) handed to ``main``; prints the machine and a table."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=1_000_000, help="elements per batch (default 10^6)")
+    ap.add_argument(flag, dest="value", type=kind, default=default, help=help_text)
     print(machine())
     print(HEADER)
-    print("\n".join(main(ap.parse_args().n)))
+    print("\n".join(main(ap.parse_args().value)))

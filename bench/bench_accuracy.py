@@ -6,7 +6,7 @@ Peers in the same run: the usual hand-written vectorised Monte Carlo of the same
 Rotation for attitude and turret, pyproj for geodetic <-> ECEF) with the same draws; for the
 covariance, the 5 000-sample Monte Carlo it replaces; for Dask, one local process.
 
-    python bench/bench_accuracy.py [--n 1000000] [--no-dask]
+    python bench/bench_accuracy.py [--n 1000000]
 """
 
 from __future__ import annotations

@@ -57,4 +57,4 @@ def main(n: int = 12_000) -> list[str]:
 
 
 if __name__ == "__main__":
-    script(main, __doc__)
+    script(main, __doc__, default=12_000, help_text="packets in the archive, 600 per file (default 12000)")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import best_time, row
+from _common import best_time, row, script
 
 
 def pose_packets(n: int, *, vmti: bool = False, seed: int = 0) -> list[bytes]:
@@ -105,12 +105,4 @@ def main(n: int = 3000) -> list[str]:
 
 
 if __name__ == "__main__":
-    import argparse
-
-    from _common import HEADER, machine
-
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=3000, help="packets per stream (default 3000)")
-    print(machine())
-    print(HEADER)
-    print("\n".join(main(ap.parse_args().n)))
+    script(main, __doc__, flag="--n", kind=int, default=3000, help_text="packets per stream (default 3000)")

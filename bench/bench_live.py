@@ -14,7 +14,6 @@ job, in this process), CPU per packet.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -29,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import HEADER, machine, row
+from _common import row, script
 
 RATE_HZ, TARGETS, WARMUP = 30.0, 20, 90
 
@@ -139,8 +138,4 @@ def main(minutes: float) -> list[str]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--minutes", type=float, default=1.0, help="length of the soak (the goal's is 10)")
-    print(machine())
-    print(HEADER)
-    print("\n".join(main(ap.parse_args().minutes)))
+    script(main, __doc__, flag="--minutes", kind=float, default=1.0, help_text="length of the soak (the goal's is 10)")

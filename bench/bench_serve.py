@@ -12,7 +12,6 @@ Baseline in the same run: the same work through the library in this process (no 
 
 from __future__ import annotations
 
-import argparse
 import socket
 import subprocess
 import sys
@@ -21,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import HEADER, best_time, machine, row
+from _common import best_time, row, script
 
 RATE = 500.0
 S13 = {"pose": {"lat_deg": 42.0, "lon_deg": 125.0, "h_m": 10_000.0, "yaw_deg": 10.0, "pitch_deg": 5.0,
@@ -112,8 +111,4 @@ def main(seconds: float) -> list[str]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seconds", type=float, default=20.0, help="length of the 500 req/s run")
-    print(machine())
-    print(HEADER)
-    print("\n".join(main(ap.parse_args().seconds)))
+    script(main, __doc__, flag="--seconds", kind=float, default=20.0, help_text="length of the 500 req/s run")

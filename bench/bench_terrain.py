@@ -94,4 +94,4 @@ def main(n: int) -> list[str]:
 
 
 if __name__ == "__main__":
-    script(main, __doc__)
+    script(main, __doc__, default=200_000, help_text="elements per batch (default 200000)")

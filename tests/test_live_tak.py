@@ -35,7 +35,8 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
         client = TakClient(port)
         client.wait_for(lambda evs: any(e.get("type") == "b-t-f" for e in evs), 60)  # its welcome: routing is up
         proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port_in}", "--dem", str(DEM), "--config",
-                                 str(CONFIG), "--cot", f"tcp://127.0.0.1:{port}", "--ndjson", str(out)],
+                                 str(CONFIG), "--cot", f"tcp://127.0.0.1:{port}", "--ndjson", str(out),
+                                 "--silence", "1"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         while "listening on" not in proc.stdout.readline():
             assert proc.poll() is None
@@ -73,13 +74,13 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
     assert not any(by_uid.values())
     platform = [e for e in relayed if e.get("type") == "a-f-A-M-F-Q" and e.get("stale") != e.get("time")]
     assert len(platform) == summary["packets"] and platform[0].find("detail/sensor").get("fov")
-    # and when the stream went quiet (3 s), the aircraft again, already stale
+    # and when the stream went quiet (--silence 1; the test waits 3 s of quiet), the aircraft again, already stale
     def remarks(e):  # FreeTAKServer relays <remarks> as an attribute of <detail>
         r = e.find("detail/remarks")
         return r.text if r is not None else e.find("detail").get("remarks", "")
 
-    assert all("no metadata for" in remarks(e) for e in relayed
-               if e.get("type") == "a-f-A-M-F-Q" and e.get("stale") == e.get("time"))
+    quiet = [e for e in relayed if e.get("type") == "a-f-A-M-F-Q" and e.get("stale") == e.get("time")]
+    assert quiet and all("no metadata for" in remarks(e) for e in quiet)
 
 
 class TcpSink:

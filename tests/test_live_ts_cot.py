@@ -84,8 +84,7 @@ def _two_pid_ts(path: Path) -> tuple[Path, int]:
     the path and the number of good packets."""
     mountain = [raw for raw, _ in split_klv(FLIGHT.read_bytes())]
     other = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=3, rate_hz=1.0, start_unix_s=1.6e9))]
-    t = np.arange(40, dtype=float)
-    write_klv_ts(path, [mountain, other], [t, t + 0.5])
+    write_klv_ts(path, [[(raw, k) for k, raw in enumerate(mountain)], [(raw, k + 0.5) for k, raw in enumerate(other)]])
     s = read_klv(path)
     assert s.streams == ["PID 256", "PID 257"] and s.n_bad == 1
     return path, s.n_good
@@ -187,8 +186,8 @@ def test_ts_over_udp_to_cot_multicast_equals_the_batch_path(tmp_path):
 def test_ts_replayed_at_its_own_rate_every_packet_and_cot_event_arrives(tmp_path):
     """A 10 Hz TS (two PIDs, 5 targets each) sent at its own clock (PTS) to `eoloc live` with CoT
     to a unicast receiver: every packet processed, one event per located target, none lost."""
-    a = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=1))]
-    b = [raw for raw, _ in split_klv(circling_flight_klv(40, seed=2))]
+    a = split_klv(circling_flight_klv(40, seed=1))
+    b = split_klv(circling_flight_klv(40, seed=2))  # the same clock as a
     ts = write_klv_ts(tmp_path / "ten_hz.ts", [a, b])
     t = ts_packet_times(ts.read_bytes())
     assert t[-1] - t[0] == pytest.approx(3.9, abs=0.01)  # the PTS of the last packet pair

@@ -350,7 +350,7 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
 
     console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK) and NDJSON")
     out_dir.mkdir(parents=True, exist_ok=True)
-    packets = [raw for raw, _ in split_klv((data / "flight.klv").read_bytes())]
+    packets = split_klv((data / "flight.klv").read_bytes())
     ts = write_klv_ts(out_dir / "flight.ts", [packets])
 
     def free_port() -> int:

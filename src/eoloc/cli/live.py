@@ -120,7 +120,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     try:
         for datagram, arrived in feed:
             updates = session.feed(datagram)
-            for u in updates:
+            for u in updates if senders else ():
                 for event in feed_cot.events(u):
                     for s in senders:
                         s.send(event)

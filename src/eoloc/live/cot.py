@@ -54,7 +54,7 @@ class CotFeed:
         self.intervals: dict[str, deque] = {}
         self.last_time: dict[str, float] = {}
         self.last_sent: dict[str, float] = {}
-        self.platforms: dict[str, tuple[PacketUpdate, str]] = {}  # uid -> its last update and stream
+        self.platforms: dict[str, PacketUpdate] = {}  # uid -> its last update
         self.events_out = 0
         self.held = 0
 
@@ -96,7 +96,7 @@ class CotFeed:
         when = u.time_utc or "no time stamp"
         out: list[bytes] = []
         if u.platform is not None and not u.late:
-            self.platforms[base] = (u, u.stream)
+            self.platforms[base] = u
             if self._due(base, now_s):
                 out.append(self._platform(u, base, name, now, stale, f"{name}: packet {u.index} of {when}"))
         link = element_xml("link", uid=base, type=PLATFORM_TYPE, relation="p-p")
@@ -107,9 +107,7 @@ class CotFeed:
                                  + element_xml("remarks", f"eoloc frame centre of {name} at {when}")))
         if u.footprint is not None and not u.late and self._due(base + "-footprint", now_s):
             ring = u.footprint["coordinates"][0]
-            lat = sum(p[1] for p in ring[:-1]) / (len(ring) - 1)
-            lon = sum(p[0] for p in ring[:-1]) / (len(ring) - 1)
-            h = sum(p[2] for p in ring[:-1]) / (len(ring) - 1)
+            lon, lat, h = (sum(c) / (len(ring) - 1) for c in zip(*ring[:-1], strict=True))  # the centroid
             detail = "".join(element_xml("link", point=f"{p[1]:.8f},{p[0]:.8f},{p[2]:.2f}") for p in ring)
             detail += (element_xml("strokeColor", value="-256") + element_xml("strokeWeight", value="2.0")
                        + element_xml("fillColor", value="822083328") + element_xml("labels_on", value="false")
@@ -160,7 +158,7 @@ class CotFeed:
         """Each platform's last event again, stale at once: TAK shows it as lost."""
         now = now or datetime.now(UTC)
         out = []
-        for uid, (u, _) in self.platforms.items():
+        for uid, u in self.platforms.items():
             name = (u.platform or {}).get("name") or u.key
             out.append(self._platform(u, uid, name, now, now, f"{name}: no metadata for {quiet_s:.0f} s"))
         self.events_out += len(out)

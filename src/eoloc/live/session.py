@@ -85,16 +85,7 @@ class LiveSession:
     def feed(self, datagram: bytes) -> list[PacketUpdate]:
         c = self.counters
         c.datagrams += 1
-        if is_transport(datagram):
-            chunks = self._demux(datagram)
-        else:
-            chunks = [(datagram, "")]
-            if not datagram.startswith(b"\x06\x0e\x2b\x34"):
-                from ..io.klv.reader import EG0104_KEY, UAS_KEY
-
-                if UAS_KEY not in datagram and EG0104_KEY not in datagram:
-                    c.not_klv += 1
-                    return []
+        chunks = self._demux(datagram) if is_transport(datagram) else [(datagram, "")]
         updates: list[PacketUpdate] = []
         for payload, stream_name in chunks:
             updates += self._packets(payload, stream_name)
@@ -144,6 +135,9 @@ class LiveSession:
         c = self.counters
         decoded = decode_klv_bytes(payload, self.source, first_index=self.next_index, stream=stream_name,
                                    container="mpegts" if stream_name else "klv")
+        if not decoded.packets and decoded.n_bad == 0 and not stream_name:  # no packet key at all
+            c.not_klv += 1
+            return []
         c.corrupt += decoded.n_bad
         where = f"{self.source}{f' [{stream_name}]' if stream_name else ''}: datagram {c.datagrams}"
         self.issues += [f"{where}: {i.kind}: {i.message}" for i in decoded.issues]
@@ -172,9 +166,10 @@ class LiveSession:
             elif t_s is not None:
                 self.newest_s[pkt.stream] = t_s
             carried = self.carry.get(pkt.stream)
+            known = replace(pkt, fields={**(carried.fields if carried else {}), **pkt.fields})
             if not late:  # a late packet's values are older than those carried: they do not replace them
-                self.carry[pkt.stream] = replace(pkt, fields={**(carried.fields if carried else {}), **pkt.fields})
-            u = locate_packet(self.source, pkt, carried, late=late, dem=self.dem, sensor=self.sensor,
+                self.carry[pkt.stream] = known
+            u = locate_packet(self.source, pkt, known, late=late, dem=self.dem, sensor=self.sensor,
                               budget=self.budget)
             c.detections += len(u.fixes)
             c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")

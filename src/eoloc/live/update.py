@@ -74,23 +74,22 @@ def _finite(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def locate_packet(source: str, packet, known, *, late: bool = False, dem=None, sensor=None,
+def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=None, sensor=None,
                   budget=None) -> PacketUpdate:
-    """The :class:`PacketUpdate` of ``packet`` (a :class:`~eoloc.io.klv.reader.KLVPacket`), whose
-    values left out (report-on-change) are taken from ``known``: a packet holding every value
-    the stream has sent so far (or None). VMTI targets come from ``packet`` alone."""
+    """The :class:`PacketUpdate` of ``packet`` (a :class:`~eoloc.io.klv.reader.KLVPacket`).
+    ``known``: the same packet with the values it left out (report-on-change) filled in from
+    those its stream sent before (default: the packet as it is); the pose comes from it, the
+    VMTI targets from ``packet`` alone."""
     from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.reader import KLVStream
     from ..misb import frame_geometry, misb_sensor, packet_pose
     from ..video import locate_vmti
 
     sensor = sensor or misb_sensor()
-    merged = packet if known is None else type(packet)(packet.index, packet.offset, packet.pts_s, packet.raw,
-                                                       {**known.fields, **packet.fields}, packet.stream,
-                                                       packet.standard)
-    tel = klv_telemetry(KLVStream(source, "klv", [merged]), report_on_change=False)
+    known = known or packet
+    tel = klv_telemetry(KLVStream(source, "klv", [known]), report_on_change=False)
     c = {k: v[0] for k, v in tel.columns.items()}
-    f = merged.fields
+    f = known.fields
     name = f.get(10) or f.get(4) or None
     platform = None
     if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):

@@ -13,40 +13,23 @@ import numpy as np
 PTS_HZ = 90_000
 
 
-def packet_times(packets: Sequence[bytes]) -> np.ndarray:
-    """The ST 0601 time stamps (UNIX s) of raw packets, NaN where a packet has none."""
-    from .reader import decode_klv_bytes
-
-    out = np.full(len(packets), np.nan)
-    for i, raw in enumerate(packets):
-        s = decode_klv_bytes(raw)
-        t = s.packets[0].fields.get(2) if s.packets else None
-        if hasattr(t, "timestamp"):
-            out[i] = t.timestamp()
-    return out
-
-
-def write_klv_ts(path: str | Path, streams: Sequence[Sequence[bytes]], times_s: Sequence[Sequence[float]] | None = None
-                 ) -> Path:
-    """Write ``streams`` (each a list of raw KLV packets) as the KLV PIDs of one transport stream.
-
-    times_s: each packet's presentation time (s) per stream; by default its ST 0601 time stamp
-    relative to the earliest one over all streams (a packet without one takes the last time
-    before it).
-    """
+def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]]) -> Path:
+    """Write ``streams`` as the KLV PIDs of one transport stream; each stream is a list of
+    (raw packet, time s) pairs as :func:`eoloc.io.klv.reader.split_klv` gives them (its ST 0601
+    time stamps) or as the caller chooses. Presentation times are those times relative to the
+    earliest over all streams; a packet without one (NaN) takes the last time before it."""
     import av
 
-    if times_s is None:
-        stamps = [packet_times(s) for s in streams]
-        t0 = min((np.nanmin(t) for t in stamps if np.isfinite(t).any()), default=0.0)
-        times_s = [np.nan_to_num(_hold(t - t0)) for t in stamps]
-    order = sorted((float(t), k, i) for k, ts in enumerate(times_s) for i, t in enumerate(ts))
+    stamps = [np.array([t for _, t in s], dtype=np.float64) for s in streams]
+    t0 = min((np.nanmin(t) for t in stamps if np.isfinite(t).any()), default=0.0)
+    times = [np.nan_to_num(_hold(t - t0)) for t in stamps]
+    order = sorted((float(t), k, i) for k, ts in enumerate(times) for i, t in enumerate(ts))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with av.open(str(path), "w", format="mpegts") as out:
         pids = [out.add_data_stream(codec_name="klv") for _ in streams]
         for t, k, i in order:
-            pkt = av.Packet(streams[k][i])
+            pkt = av.Packet(streams[k][i][0])
             pkt.stream = pids[k]
             pkt.pts = pkt.dts = round(t * PTS_HZ)
             pkt.time_base = Fraction(1, PTS_HZ)
