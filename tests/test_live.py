@@ -82,7 +82,7 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     assert summary["latency_ms_median"] < 50
     assert "silence" in log and "checksum" in log and "datagram" in log
     rows = [json.loads(line) for line in out.read_text(encoding="utf-8").splitlines()]
-    assert {r["properties"]["what"] for r in rows} == {"aircraft", "footprint", "frame centre", "target"}
+    assert {r["properties"]["what"] for r in rows} == {"aircraft", "footprint", "frame centre", "target", "estimate"}
     rows = [r for r in rows if r["properties"]["what"] == "target"]
     mountain = [r for r in rows if r["properties"]["time_s"] > 1.7e9]  # not the restart's packets
     ref = _batch_fixes()

@@ -141,11 +141,13 @@ def aircraft_feature(tel: Table, rows: np.ndarray | None = None, stream: str | N
 
 @dataclass(frozen=True)
 class VMTIFixes:
-    """Located VMTI detections: fixes (N,), per-target columns, covariance columns (or {})."""
+    """Located VMTI detections: fixes (N,), per-target columns, covariance columns (or {}), and
+    the covariance itself (N, 3, 3) ENU m^2 when a budget gave one (NaN for the fixes without)."""
 
     fixes: Fixes
     extra: dict[str, np.ndarray]
     uncertainty: dict[str, np.ndarray]
+    cov_enu: np.ndarray | None = None
 
 
 def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
@@ -171,6 +173,7 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     lat, lon, hh, rng = (np.full(n, np.nan) for _ in range(4))
     status = np.full(n, int(Status.NO_TELEMETRY), dtype=np.int8)
     unc: dict[str, np.ndarray] = {}
+    cov_enu = None
     pose_all = packet_pose(tel).take(row) if n else None
     groups = {}
     usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
@@ -198,9 +201,12 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
 
             for k, v in covariance_columns(cov, ok).items():
                 unc.setdefault(k, np.full(n, np.nan))[idx] = v
+            if cov_enu is None:
+                cov_enu = np.full((n, 3, 3), np.nan)
+            cov_enu[idx] = np.where(ok[:, None, None], np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
     extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
              "u_px": d["u_px"], "v_px": d["v_px"]}
-    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc)
+    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc, cov_enu)
 
 
 def _frame_properties(tel: Table, i: int) -> dict:

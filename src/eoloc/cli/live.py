@@ -28,18 +28,27 @@ eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
   from packet to packet); its frame centre, footprint (the four corners; on --dem the image
   border traced on the terrain) and VMTI targets are located on --dem, else on the packet's
   frame-centre elevation; heights ellipsoidal (WGS-84), angles in degrees; with the config's
-  [accuracy.budget] each target gets its uncertainty.
+  [accuracy.budget] each target gets its uncertainty. Across packets each target id is refined
+  (--refine): by recursive least squares (static targets), or by a constant-velocity Kalman filter
+  (moving ones), the same steps as eoloc track --static and eoloc track.
 \b
 Outputs (any combination, at least one):
   --ndjson FILE|-   one GeoJSON Feature per line (lon, lat, ellipsoidal h), property "what":
                     aircraft, footprint, frame centre, target (a failed target keeps its
-                    status with a null geometry); flushed per packet.
+                    status with a null geometry), estimate (the refined target: model,
+                    n_fixes, cep50_m, speed_mps); flushed per packet.
   --cot URL         Cursor-on-Target, repeatable: udp://239.2.3.1:6969 (ATAK's SA multicast;
                     ?ttl=N), udp://HOST:PORT, or tcp://HOST:8087 (a TAK server's CoT port;
                     reconnects with back-off, never holds up the rest). Per packet: the
                     aircraft with its sensor's field of view, the frame centre (sensor point of
                     interest), the footprint as a shape, and each located target with ce/le
                     (1 sigma) from its covariance; stale after 10 packet intervals.
+  --map HOST:PORT   a live map in the browser at http://HOST:PORT/live (offline Leaflet, updated
+                    over a WebSocket): aircraft and trail, footprint, frame centre, targets with
+                    their CEP50 circles and tracks, and the stream's state (live, SILENT, STOPPED).
+                    The same server answers eoloc serve's API (POST /v1/locate, /docs). Port 0:
+                    any free one (printed). With --map the page stays up after the source ends,
+                    until Ctrl-C or --duration.
 \b
 Faults are counted, never fatal: corrupt or non-KLV datagrams, duplicated packets (dropped),
 late ones (located all the same), encoder restarts (time back > 2 s), silence (--silence S: a
@@ -59,16 +68,23 @@ datagram's arrival to its outputs sent.
               help="Write one GeoJSON feature per line ('-': stdout).")
 @click.option("--cot", "cot_urls", multiple=True, metavar="URL",
               help="Send Cursor-on-Target to udp://HOST:PORT (multicast too) or tcp://HOST:PORT; repeatable.")
+@click.option("--map", "map_at", default=None, metavar="HOST:PORT",
+              help="Serve a live map at http://HOST:PORT/live (e.g. 127.0.0.1:8080; 0.0.0.0:8080 for other machines).")
 @click.option("--cot-interval", type=click.FloatRange(0.0), default=0.0, show_default=True, metavar="S",
               help="At most one CoT event per target (and per aircraft, footprint) every S seconds; 0: all.")
+@click.option("--refine", type=click.Choice(["static", "moving", "auto", "off"]), default="static", show_default=True,
+              help="Refine each VMTI target id across packets: static (RLS, as eoloc track --static; a target "
+                   "whose fixes walk gets a warning and their scatter as its uncertainty), moving (Kalman, as "
+                   "eoloc track), auto (Kalman once the speed is significant: a drifting attitude bias makes a "
+                   "fixed target look moving too), off.")
 @click.option("--realtime", is_flag=True, help="A file SOURCE: replay at the stream's own clock.")
 @click.option("--packets", "max_packets", type=click.IntRange(1), default=None, help="Stop after N good packets.")
 @click.option("--duration", type=click.FloatRange(0.0, min_open=True), default=None, metavar="S",
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
-def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, cot_interval, realtime,
-         max_packets, duration, silence) -> None:
+def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, map_at, cot_interval, refine,
+         realtime, max_packets, duration, silence) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cot import CotFeed
     from ..live.senders import cot_sender
@@ -76,16 +92,26 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     from ..live.sources import byte_stream_chunks, file_datagrams, udp_datagrams, udp_socket
     from .common import load_config
 
-    if ndjson is None and not cot_urls:
-        fail("eoloc live: give at least one output: --ndjson FILE|- and/or --cot URL")
+    if ndjson is None and not cot_urls and map_at is None:
+        fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL and/or --map HOST:PORT")
+    map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
     if source.startswith(("rtsp://", "srt://", "tcp://", "http://", "https://")):
         fail(f"{source!r}: eoloc live reads udp://HOST:PORT, raw KLV or MPEG-TS files, and - (stdin); for "
              f"RTSP/SRT, relay with ffmpeg: ffmpeg -i {source} -map 0 -c copy -f mpegts udp://127.0.0.1:15000")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    sensor, budget = misb_setup(load_config(config_path) if config_path else None)
-    session = LiveSession(source, dem=dem, sensor=sensor, budget=budget)
+    config = load_config(config_path) if config_path else None
+    sensor, budget = misb_setup(config)
+    filters = None
+    if refine != "off":
+        from ..live.refine import TargetFilters
+
+        filters = TargetFilters(refine)
+    session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters)
     feed_cot = CotFeed(interval_s=cot_interval)
     senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
+    hub = server = None
+    if map_at is not None:
+        hub, server = start_map(map_host, map_port, session, source, silence, dem, config)
     stopping = {"why": None}
     started = time.monotonic()
 
@@ -124,21 +150,62 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
                 for event in feed_cot.events(u):
                     for s in senders:
                         s.send(event)
-            if out is not None and updates:
-                out.write("".join(json.dumps(f, allow_nan=False) + "\n" for u in updates for f in u.features()))
-                out.flush()
+            if updates and (out is not None or hub is not None):
+                features = [u.features() for u in updates]
+                if out is not None:
+                    out.write("".join(json.dumps(f, allow_nan=False) + "\n" for fs in features for f in fs))
+                    out.flush()
+                if hub is not None:
+                    for u, fs in zip(updates, features, strict=True):
+                        hub.publish(u, fs)
             session.done(arrived)
             for issue in session.issues[seen_issues:]:
                 warn(issue, "packet")
             seen_issues = len(session.issues)
             if stop():
                 break
+        if hub is not None:
+            hub.stop(stopping["why"] or "end of the source")
+            if stopping["why"] is None:
+                err_console.print(f"eoloc live: the source ended; the map stays up at {server.url} "
+                                  "(Ctrl-C stops)")
+                while not stop():
+                    time.sleep(0.1)
     finally:
         if out is not None and out is not sys.stdout:
             out.close()
         for s in senders:
             s.close()
+        if server is not None:
+            server.close()
     summary = session.counters.summary() | {"streams": session.streams, "cot_events": feed_cot.events_out,
                                             "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
+    if hub is not None:
+        summary["map"] = hub.summary()
     err_console.print(f"eoloc live stopped ({stopping['why'] or 'end of the source'}): "
                       + json.dumps(summary), soft_wrap=True, highlight=False)
+
+
+def parse_host_port(text: str) -> tuple[str, int]:
+    """(host, port) of --map's HOST:PORT (a bare PORT listens on 127.0.0.1)."""
+    host, _, port = text.rpartition(":")
+    if not port.isdigit() or int(port) > 65535:
+        fail(f"--map {text!r}: give HOST:PORT, e.g. 127.0.0.1:8080 (0.0.0.0:8080 to be seen from other machines; "
+             "port 0: any free one)")
+    return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def start_map(host: str, port: int, session, source: str, silence_s: float, dem, config):
+    """The live map's hub and its server (eoloc serve's app with the map's routes), started."""
+    from ..service.api import ServiceState, create_app
+    from ..service.livemap import LiveHub, MapServer
+    hub = LiveHub(silence_s=silence_s, title=f"eoloc live: {source}",
+                  counters=lambda: session.counters.counts() | {"streams": dict(session.streams)})
+    state = ServiceState(config, {"dem": dem} if dem is not None else {})
+    server = MapServer(create_app(state, hub=hub), host, port)
+    try:
+        server.start()
+    except OSError as exc:
+        fail(f"--map {host}:{port}: cannot serve there: {exc}")
+    err_console.print(f"eoloc live: map at {server.url}")
+    return hub, server

@@ -15,8 +15,6 @@ from ..result import Fixes
 from .inputs import read_inputs
 from .locate import LocateJob, locate_files
 
-SCATTER_LIMIT = 3.0  # scatter ratio (mean chi^2 / 2 per frame, 1 expected) past which a "static" target is not
-
 
 def located_detections(cfg, config_path, telemetry, detections, rule, **kw) -> LocateJob:
     """Every detection located (with its covariance when the config has [accuracy.budget]); an
@@ -85,7 +83,7 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
     """Recursive least squares per target id over its frames: one row per target, with its sigma,
     CEP50, scatter ratio and convergence; a target whose fixes scatter more than SCATTER_LIMIT
     times their sigma gets a warning and the fixes' own scatter as its uncertainty."""
-    from ..sequence.rls import rls_static
+    from ..sequence.rls import SCATTER_LIMIT, rls_static, scatter_inflation
 
     located = job.located
     fixes: Fixes = located.fixes
@@ -110,9 +108,7 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
         # optimistic), so the "static" model is rejected and averaging does not shrink the error.
         # The uncertainty becomes the fixes' own scatter (one frame's sigma times sqrt(ratio)), said.
         ratio = float(est.scatter_ratio)
-        inflate = 1.0
-        if ratio > SCATTER_LIMIT:
-            inflate = max(np.sqrt(ratio), single / np.sqrt(2.0) * np.sqrt(ratio) / float(np.mean(s[:2])))
+        inflate = scatter_inflation(ratio, single, float(np.mean(s[:2])))
         s = s * inflate
         warning = "" if inflate == 1.0 else (
             f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their sigma allows (> {SCATTER_LIMIT:g}): "

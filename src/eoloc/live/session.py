@@ -7,7 +7,8 @@ apart on arrival. Transport streams go through one demultiplexer kept for the wh
 together; each KLV PID is its own stream ("PID 497"). Packets are framed and decoded with the
 same tolerant reader as files (:func:`eoloc.io.klv.reader.decode_klv_bytes`) and worked out by
 :func:`eoloc.live.update.locate_packet`. What ST 0601 sends only when it changes
-(report-on-change) is carried from packet to packet per stream.
+(report-on-change) is carried from packet to packet per stream. With ``refine`` (a
+:class:`eoloc.live.refine.TargetFilters`) each target id is also refined across packets.
 
 Faults are counted, never fatal: a datagram that is neither (``not_klv``), a packet that fails
 its checksum or framing, or a transport packet the demultiplexer refuses (``corrupt``), the same
@@ -44,11 +45,16 @@ class Counters:
     latency_s: deque = field(default_factory=lambda: deque(maxlen=100_000))  # the latest (memory stays bounded)
     latency_max_s: float = 0.0
 
-    def summary(self) -> dict:
-        lat = np.asarray(self.latency_s) * 1e3
+    def counts(self) -> dict:
+        """The counts so far (cheap: no latency statistics)."""
         return {"datagrams": self.datagrams, "packets": self.packets, "corrupt": self.corrupt,
                 "duplicates": self.duplicates, "late": self.late, "restarts": self.restarts,
-                "not_klv": self.not_klv, "detections": self.detections, "fixes_ok": self.fixes_ok,
+                "not_klv": self.not_klv, "detections": self.detections, "fixes_ok": self.fixes_ok}
+
+    def summary(self) -> dict:
+        """The counts and the latency from a datagram's arrival to its outputs sent (ms)."""
+        lat = np.asarray(self.latency_s) * 1e3
+        return self.counts() | {
                 "latency_ms_median": float(np.median(lat)) if lat.size else None,
                 "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
                 "latency_ms_max": self.latency_max_s * 1e3 if lat.size else None}
@@ -66,7 +72,7 @@ class LiveSession:
     runs from the datagram's arrival to its outputs sent."""
 
     def __init__(self, source: str, *, dem=None, sensor=None, budget=None, recent: int = 512,
-                 restart_s: float = RESTART_S) -> None:
+                 restart_s: float = RESTART_S, refine=None) -> None:
         from ..misb import misb_sensor
 
         self.source, self.dem, self.budget = source, dem, budget
@@ -81,6 +87,7 @@ class LiveSession:
         self.next_index = 0
         self.demux = None
         self.streams: dict[str, int] = {}  # stream -> good packets
+        self.refine = refine  # a live.refine.TargetFilters: the targets refined across packets, or None
 
     def feed(self, datagram: bytes) -> list[PacketUpdate]:
         c = self.counters
@@ -171,6 +178,8 @@ class LiveSession:
                 self.carry[pkt.stream] = known
             u = locate_packet(self.source, pkt, known, late=late, dem=self.dem, sensor=self.sensor,
                               budget=self.budget)
+            if self.refine is not None:
+                self.refine.update(u)
             c.detections += len(u.fixes)
             c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")
             updates.append(u)

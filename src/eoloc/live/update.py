@@ -29,8 +29,10 @@ class PacketUpdate:
     centre: tuple[float, float, float] | None  # frame centre (lat, lon, h) on the chosen surface
     footprint: dict | None  # GeoJSON Polygon: the four frame corners, or on a DEM the traced border
     fixes: list[dict] = field(default_factory=list)  # one row per VMTI target (export.fix_records layout)
+    cov_enu: np.ndarray | None = None  # (len(fixes), 3, 3) ENU m^2, with an error budget
 
     time_utc: str | None = None  # the time stamp as ISO 8601 UTC
+    estimates: list[dict] = field(default_factory=list)  # refined targets (GeoJSON), see live.refine
 
     @property
     def key(self) -> str:
@@ -42,7 +44,8 @@ class PacketUpdate:
     def features(self) -> list[dict]:
         """GeoJSON features (RFC 7946: lon, lat, h): the aircraft, the footprint and the frame
         centre when known, and every target (a failed one with a null geometry); each with
-        ``what``, ``stream``, ``packet`` and ``time_utc`` properties."""
+        ``what``, ``stream``, ``packet`` and ``time_utc`` properties; then the targets refined over
+        the packets so far (``what`` "estimate", :mod:`eoloc.live.refine`)."""
         common = {"stream": self.stream, "packet": self.index, "time_utc": self.time_utc}
         out = []
         p = self.platform
@@ -58,7 +61,7 @@ class PacketUpdate:
             props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
             out.append(_feature("target", _point(row["lon_deg"], row["lat_deg"], row["h_m"]) if ok else None,
                                 {**common, **props}))
-        return out
+        return out + self.estimates
 
 
 def _point(lon, lat, h) -> dict:
@@ -120,11 +123,14 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
                      "elevation_deg": math.degrees(math.atan2(-d, math.hypot(n, e))),
                      "range_m": float(geom.centre.range_m[0])}
     fixes: list[dict] = []
+    cov_enu = None
     det = vmti_detections(KLVStream(source, "klv", [packet]))
     if len(det):
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
         extra = with_utc({"stream": det.columns["stream"], **v.extra}, "unix")
         fixes = fix_records(v.fixes, extra, v.uncertainty).rows()
+        cov_enu = v.cov_enu
     t = float(c["time_s"])
     iso = utc_times([t], "unix")[0]
-    return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes, iso)
+    return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
+                        cov_enu, iso)

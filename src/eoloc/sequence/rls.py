@@ -65,6 +65,99 @@ class StaticEstimate:
         return cep_zero_mean(e[..., 0], e[..., 1], 0.5)
 
 
+SCATTER_LIMIT = 3.0  # scatter ratio (mean chi^2 / 2 per frame, 1 expected) past which a "static" target is not
+# static: it moved, or its sigma is optimistic
+
+
+def check_forgetting(forgetting: float) -> None:
+    if not 0.0 < forgetting <= 1.0:
+        raise ValueError(f"forgetting factor must be in (0, 1], got {forgetting!r}")
+
+
+def weights(R: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """R^-1 of each fix used (0 for the others). A height stop fixes the up component (zero
+    variance): a 1 mm floor keeps R invertible."""
+    eye = np.eye(3)
+    Rf = np.where(use[..., None, None], R, eye) + (1e-3) ** 2 * eye
+    return np.where(use[..., None, None], np.linalg.inv(Rf), 0.0)
+
+
+@dataclass
+class RLSState:
+    """The running state of RLS for K targets, one frame at a time (:meth:`update`): the batch
+    :func:`rls_static` steps it over its frames, `eoloc live` packet by packet. Besides the
+    information A, the B of the covariance, the weighted sum of R and the weights, it keeps the
+    sums that give the horizontal scatter ratio about the present estimate without the past fixes
+    (exact for forgetting = 1, as the batch's)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    Rsum: np.ndarray
+    wsum: np.ndarray
+    x: np.ndarray
+    lam: float
+    n: np.ndarray  # fixes used
+    s0: np.ndarray  # sum of z_h^T W2 z_h
+    s1: np.ndarray  # sum of W2 z_h
+    s2: np.ndarray  # sum of W2 (W2: the horizontal block's inverse)
+
+    @classmethod
+    def empty(cls, k: int, forgetting: float = 1.0) -> RLSState:
+        check_forgetting(forgetting)
+        z3 = np.zeros((k, 3, 3))
+        return cls(z3, z3.copy(), z3.copy(), np.zeros(k), np.full((k, 3), np.nan), float(forgetting),
+                   np.zeros(k, np.int64), np.zeros(k), np.zeros((k, 2)), np.zeros((k, 2, 2)))
+
+    def update(self, z: np.ndarray, R: np.ndarray, W: np.ndarray, use: np.ndarray) -> None:
+        """One frame: fixes z (K, 3) ENU m, covariances R (K, 3, 3), weights W = :func:`weights`,
+        ``use`` (K,) which fixes count."""
+        lam = self.lam
+        self.A = lam * self.A + W
+        self.B = lam * lam * self.B + W
+        self.wsum = lam * self.wsum + use
+        self.Rsum = lam * self.Rsum + np.where(use[:, None, None], R, 0.0)
+        x = self.x
+        first = use & ~np.isfinite(x[:, 0])
+        x[first] = z[first]
+        upd = use & ~first
+        if upd.any():
+            gain = np.linalg.solve(self.A[upd], W[upd])  # A^-1 R^-1
+            x[upd] = x[upd] + np.einsum("kij,kj->ki", gain, z[upd] - x[upd])
+        W2 = np.linalg.inv(np.where(use[:, None, None], R, np.eye(3))[:, :2, :2] + (1e-3) ** 2 * np.eye(2))
+        zh = np.where(use[:, None], z[:, :2], 0.0)
+        W2 = np.where(use[:, None, None], W2, 0.0)
+        self.n += use
+        self.s0 += np.einsum("ki,kij,kj->k", zh, W2, zh)
+        self.s1 += np.einsum("kij,kj->ki", W2, zh)
+        self.s2 += W2
+
+    def scatter_ratio(self) -> np.ndarray:
+        """Mean horizontal (z - x)^T R^-1 (z - x) / 2 over the fixes used, about the present x."""
+        xh = np.nan_to_num(self.x[:, :2])
+        q = self.s0 - 2.0 * np.einsum("ki,ki->k", xh, self.s1) + np.einsum("ki,kij,kj->k", xh, self.s2, xh)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return q / (2.0 * np.maximum(self.n - 1, 0))
+
+    def covariance(self, correlated_fraction: float | str = "auto") -> np.ndarray:
+        """(K, 3, 3): the estimate's covariance (see the module: the bias share kept undiminished)."""
+        c = (np.clip(1.0 - np.nan_to_num(self.scatter_ratio(), nan=1.0), 0.0, 0.99)
+             if correlated_fraction == "auto" else np.full(len(self.x), float(correlated_fraction)))
+        out = np.full((len(self.x), 3, 3), np.nan)
+        seen = self.wsum > 0
+        out[seen] = _covariance(self.A[seen], self.B[seen], self.Rsum[seen], self.wsum[seen], c[seen])
+        return out
+
+
+def scatter_inflation(ratio: float, single_sigma_h_m: float, mean_sigma_h_m: float) -> float:
+    """How much to widen a static estimate's sigma whose fixes spread ``ratio`` times more than
+    their sigma allows: 1 up to :data:`SCATTER_LIMIT`; past it the target moved (or the sigma is
+    optimistic), averaging does not shrink the error, and the uncertainty becomes the fixes' own
+    scatter (one fix's sigma times sqrt(ratio))."""
+    if not ratio > SCATTER_LIMIT:
+        return 1.0
+    return max(np.sqrt(ratio), single_sigma_h_m / np.sqrt(2.0) * np.sqrt(ratio) / mean_sigma_h_m)
+
+
 def _enu_of(fixes: Fixes, origin) -> np.ndarray:
     return geodesy.ecef_to_enu(fixes.p_ecef(), *origin)
 
@@ -82,8 +175,7 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     than ``tol_m`` (default ``tol_fraction`` of the single-frame horizontal sigma, sqrt(R_ee + R_nn))
     over the last ``window`` frames, and stays so.
     """
-    if not 0.0 < forgetting <= 1.0:
-        raise ValueError(f"forgetting factor must be in (0, 1], got {forgetting!r}")
+    check_forgetting(forgetting)
     if correlated_fraction != "auto" and not 0.0 <= float(correlated_fraction) < 1.0:
         raise ValueError(f"correlated_fraction must be 'auto' or in [0, 1), got {correlated_fraction!r}")
     if window < 1:
@@ -111,41 +203,20 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     else:
         R = np.broadcast_to(np.asarray(cov_enu, dtype=np.float64), (f_n, k_n, 3, 3))
     use = fixes.ok & np.all(np.isfinite(z), -1) & np.all(np.isfinite(R), (-1, -2))
-    eye = np.eye(3)
-    # A height stop fixes the up component (zero variance): a 1 mm floor keeps R invertible
-    Rf = np.where(use[..., None, None], R, eye) + (1e-3) ** 2 * eye
-    W = np.where(use[..., None, None], np.linalg.inv(Rf), 0.0)
+    W = weights(R, use)
 
-    A = np.zeros((k_n, 3, 3))
-    B = np.zeros((k_n, 3, 3))
-    Rsum = np.zeros((k_n, 3, 3))  # forgetting-weighted sum of R and of the weights, for the bias share
-    wsum = np.zeros(k_n)
-    x = np.full((k_n, 3), np.nan)
+    state = RLSState.empty(k_n, forgetting)
     hist = np.full((f_n, k_n, 3), np.nan)
     Ahist, Bhist, Rhist = (np.zeros((f_n, k_n, 3, 3)) for _ in range(3))
     whist = np.zeros((f_n, k_n))
-    lam = float(forgetting)
     for k in range(f_n):
-        u = use[k]
-        A = lam * A + W[k]
-        B = lam * lam * B + W[k]
-        wsum = lam * wsum + u
-        Rsum = lam * Rsum + np.where(u[:, None, None], R[k], 0.0)
-        first = u & ~np.isfinite(x[:, 0])
-        x[first] = z[k, first]
-        upd = u & ~first
-        if upd.any():
-            gain = np.linalg.solve(A[upd], W[k, upd])  # A^-1 R^-1
-            x[upd] = x[upd] + np.einsum("kij,kj->ki", gain, z[k, upd] - x[upd])
-        hist[k] = x
-        Ahist[k], Bhist[k], Rhist[k], whist[k] = A, B, Rsum, wsum
-    # horizontal scatter: a height stop leaves no scatter in up to compare
-    r = np.where(use[..., None], z - x[None], 0.0)[..., :2]
-    W2 = np.linalg.inv(np.where(use[..., None, None], R, eye)[..., :2, :2] + (1e-3) ** 2 * np.eye(2))
-    nis = np.where(use, np.einsum("fki,fkij,fkj->fk", r, W2, r), 0.0)
+        state.update(z[k], R[k], W[k], use[k])
+        hist[k] = state.x
+        Ahist[k], Bhist[k], Rhist[k], whist[k] = state.A, state.B, state.Rsum, state.wsum
+    x = state.x
+    scatter = state.scatter_ratio()  # horizontal: a height stop leaves no scatter in up to compare
     n_used = use.sum(0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        scatter = nis.sum(0) / (2.0 * np.maximum(n_used - 1, 0))
         sigma_h = np.sqrt(np.nanmedian(np.where(use, R[..., 0, 0] + R[..., 1, 1], np.nan), axis=0))
     c = np.clip(1.0 - np.nan_to_num(scatter, nan=1.0), 0.0, 0.99) if correlated_fraction == "auto" else \
         np.full(k_n, float(correlated_fraction))

@@ -163,39 +163,66 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
         R = np.asarray(cov_enu, dtype=np.float64).reshape(n, 3, 3)[:, :2, :2]
         ok &= np.all(np.isfinite(R), (-1, -2))
     ids = None if target_id is None else np.asarray(target_id).ravel().astype(str)
-    gate = chi2.ppf(cfg.gate_prob, 2)
+    tracker = Tracker(cfg, associate)
     assigned = np.full(n, "", dtype=object)
-    live: dict[str, _Live] = {}
-    done: list[Track] = []
-    counter = 0
     good = np.flatnonzero(ok)
     good = good[np.argsort(t[good], kind="stable")]
     frames, starts = np.unique(t[good], return_index=True)
     for fi, (tk, here) in enumerate(zip(frames, np.split(good, starts[1:]), strict=True)):
+        for key, j in tracker.frame(tk, here, z, R, ids):
+            assigned[j] = key
+        if progress is not None:
+            progress(fi + 1, frames.size)
+    keep = [tr for tr in tracker.tracks() if tr.confirmed or include_tentative]
+    kept = {tr.track_id for tr in keep}
+    assigned = np.array([a if a in kept else "" for a in assigned], dtype=object)
+    return TrackSet(sorted(keep, key=lambda tr: tr.time_s[0]), assigned, tuple(origin))
+
+
+class Tracker:
+    """The tracks one frame at a time (:meth:`frame`): the batch :func:`track_fixes` steps it over
+    its frames, `eoloc live` packet by packet. ``live`` holds the tracks being updated (key ->
+    state x, covariance P, time t, the :class:`Track`); a track not updated for
+    ``config.max_coast_s`` ends."""
+
+    def __init__(self, config: TrackerConfig | None = None, associate: bool = False) -> None:
+        self.cfg = config or TrackerConfig()
+        self.associate = associate
+        self.gate = chi2.ppf(self.cfg.gate_prob, 2)
+        self.live: dict[str, _Live] = {}
+        self.done: list[Track] = []
+        self.counter = 0
+
+    def frame(self, tk: float, here: np.ndarray, z: np.ndarray, R: np.ndarray,
+              ids: np.ndarray | None) -> list[tuple[str, int]]:
+        """Update with the fixes ``here`` (indices into z (N, 3) ENU m, R (N, 2, 2) m^2 and ids
+        (N,), or None when associating) at time ``tk`` s; (track key, fix index) for each fix."""
+        cfg, live = self.cfg, self.live
         for key in [k for k, lv in live.items() if tk - lv.t > cfg.max_coast_s]:  # ended
-            done.append(live.pop(key).track)
+            self.done.append(live.pop(key).track)
         pred = {}
         for key, lv in live.items():
             F, Q = cv_model(tk - lv.t, cfg.accel_psd)
             pred[key] = (F @ lv.x, F @ lv.P @ F.T + Q)
-        if associate:
-            pairs, fresh = _associate(here, z, R, pred, gate)
+        if self.associate:
+            pairs, fresh = _associate(here, z, R, pred, self.gate)
         else:
             pairs = [(ids[j], j) for j in here if ids[j] in live]
             fresh = [j for j in here if ids[j] not in live]
             if len({ids[j] for j in here}) != here.size:
                 raise InputError(f"target id repeated within the frame at t = {tk:g} s")
+        out = []
         for key, j in pairs:
             lv = live[key]
             lv.x, lv.P = joseph_update(*pred[key], z[j, :2], R[j])
             lv.t, lv.hits = tk, lv.hits + 1
             lv.track.confirmed |= lv.hits >= cfg.confirm_hits
             _record(lv, j, z)
-            assigned[j] = key
+            out.append((key, int(j)))
         for j in fresh:
-            if associate:
-                counter += 1
-                key = f"T{counter}"
+            if self.associate:
+                self.counter += 1
+                key = f"T{self.counter}"
             else:
                 key = ids[j]
             x0 = np.array([z[j, 0], z[j, 1], 0.0, 0.0])
@@ -205,14 +232,12 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
             lv = _Live(Track(key, confirmed=cfg.confirm_hits <= 1), x0, P0, tk)
             live[key] = lv
             _record(lv, j, z)
-            assigned[j] = key
-        if progress is not None:
-            progress(fi + 1, frames.size)
-    done.extend(lv.track for lv in live.values())
-    keep = [tr for tr in done if tr.confirmed or include_tentative]
-    kept = {tr.track_id for tr in keep}
-    assigned = np.array([a if a in kept else "" for a in assigned], dtype=object)
-    return TrackSet(sorted(keep, key=lambda tr: tr.time_s[0]), assigned, tuple(origin))
+            out.append((key, int(j)))
+        return out
+
+    def tracks(self) -> list[Track]:
+        """Every track so far: those ended, then those still live."""
+        return self.done + [lv.track for lv in self.live.values()]
 
 
 def _record(lv: _Live, j: int, z: np.ndarray) -> None:

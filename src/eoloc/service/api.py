@@ -210,20 +210,35 @@ def _pixel_count(obs: list[ObservationIn]) -> int:
     return sum(1 if o.pixels is None else len(o.pixels) for o in obs)
 
 
-def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES):
-    """The ASGI application (FastAPI), wrapped in the request-size limit."""
+def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES, hub=None):
+    """The ASGI application (FastAPI), wrapped in the request-size limit. With ``hub`` (a
+    :class:`eoloc.service.livemap.LiveHub`, as `eoloc live --map` gives) it also serves the live
+    map: the page at ``/live`` (``/`` leads there) and its WebSocket."""
+    import asyncio
+    import contextlib
     import time
 
     import orjson
     from fastapi import FastAPI, Request
     from fastapi.exceptions import RequestValidationError
-    from fastapi.responses import JSONResponse, Response
+    from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 
     from .. import __version__
 
     state = state or ServiceState()
     state.started = time.time()
-    app = FastAPI(title="eoloc", version=__version__,
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        beat = None
+        if hub is not None:
+            hub.loop = asyncio.get_running_loop()
+            beat = asyncio.create_task(hub.heartbeat())
+        yield
+        if beat is not None:
+            beat.cancel()
+
+    app = FastAPI(title="eoloc", version=__version__, lifespan=lifespan,
                   description="Geolocation of targets seen by airborne EO/IR sensors: pose + gimbal + camera + pixel "
                               "+ a stop rule -> WGS-84 points with a status each (see the README's conventions).")
 
@@ -264,6 +279,29 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
         # the rows are built to the response model's shape; orjson writes them (pydantic objects per fix
         # and the stdlib encoder cost 50x the geolocation on a batch of 10^5)
         return Response(orjson.dumps(out), media_type="application/json")
+
+    if hub is not None:
+        from .livemap import WS_PATH
+
+        page = hub.page()
+
+        @app.get("/live", response_class=HTMLResponse)
+        def live_page():
+            """The live map (Leaflet, offline), updated over the WebSocket."""
+            return HTMLResponse(page)
+
+        @app.get("/", include_in_schema=False)
+        def root():
+            return RedirectResponse("/live")
+
+        @app.get("/v1/live/status")
+        def live_status() -> dict:
+            """The live session's state (waiting, live, silent, stopped), counters and browsers."""
+            return hub.status() | {"map": hub.summary()}
+
+        from starlette.routing import WebSocketRoute
+
+        app.router.routes.append(WebSocketRoute(WS_PATH, hub.serve))
 
     return SizeLimit(app, max_body_bytes)
 
