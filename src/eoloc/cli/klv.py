@@ -15,7 +15,7 @@ KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV d
 geolocate its VMTI targets and write everything out.
 
 \b
-eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMap] [--write-klv OUT.klv]
+eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMap] [--klv-out OUT.klv]
   Flags as elsewhere: --dem stops the VMTI rays on the terrain instead of at the frame-centre
   elevation; --format picks the fix formats (default csv, geojson, cot).
   1. Decodes every packet: MISB ST 0601 (and the older EG 0104), with ST 0903 VMTI and ST 1607
@@ -35,7 +35,7 @@ eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMa
      ellipsoidal), frames.csv (ours vs the encoder's per packet), footprints.geojson, fixes.csv,
      fixes.geojson, eoloc.kml (all layers), fixes.cot.zip (Cursor-on-Target: a TAK data
      package, one event per fix), map.html
-     (self-contained, works offline). --write-klv re-encodes the stream with each packet's first
+     (self-contained, works offline). --klv-out re-encodes the stream with each packet's first
      fix in the target location tags 40-42, 45, 46.
   5. Convention check: when eoloc's frame centres or VMTI locations disagree with the
      encoder's, tries the alternative readings below and says which one the encoder follows,
@@ -68,8 +68,8 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @grid_option()
 @click.option("--map/--no-map", "make_map", default=True, show_default=True, help="Write map.html.")
 @click.option("--tiles", default=None, help="Web map tiles under the map (e.g. OpenStreetMap; needs a network).")
-@click.option("--write-klv", "write_klv", type=click.Path(dir_okay=False), default=None,
-              help="Write the stream back with the fixes in tags 40-46.")
+@click.option("--klv-out", "--write-klv", "write_klv", type=click.Path(dir_okay=False), default=None,
+              help="Write the stream back with the fixes in tags 40-42, 45, 46 (as eoloc live --klv-out).")
 @click.option("--footprint-every", type=click.IntRange(1), default=1, show_default=True,
               help="Draw one footprint every N packets.")
 @click.option("--strict", is_flag=True, help="Enforce MISB ST 0601 as written (stanag4609 validates each packet): "

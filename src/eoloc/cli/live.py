@@ -43,6 +43,10 @@ Outputs (any combination, at least one):
                     aircraft with its sensor's field of view, the frame centre (sensor point of
                     interest), the footprint as a shape, and each located target with ce/le
                     (1 sigma) from its covariance; stale after 10 packet intervals.
+  --klv-out URL|FILE  the stream re-sent (udp://HOST:PORT, multicast ?ttl=N) or recorded (FILE)
+                    with each packet's first located target (lowest VMTI id) in ST 0601 tags
+                    40-42 and its CE90/LE90 in 45/46 (tag 42 in the stream's datum); TS in, TS
+                    out: video, audio and tables passed on untouched, the metadata PES rebuilt.
   --map HOST:PORT   a live map in the browser at http://HOST:PORT/live (offline Leaflet, updated
                     over a WebSocket): aircraft and trail, footprint, frame centre, targets with
                     their CEP50 circles and tracks, and the stream's state (live, SILENT, STOPPED).
@@ -68,6 +72,9 @@ datagram's arrival to its outputs sent.
               help="Write one GeoJSON feature per line ('-': stdout).")
 @click.option("--cot", "cot_urls", multiple=True, metavar="URL",
               help="Send Cursor-on-Target to udp://HOST:PORT (multicast too) or tcp://HOST:PORT; repeatable.")
+@click.option("--klv-out", "klv_out", default=None, metavar="URL|FILE",
+              help="Re-send the stream with the target locations in ST 0601 tags 40-42, 45, 46: udp://HOST:PORT or "
+                   "a file.")
 @click.option("--map", "map_at", default=None, metavar="HOST:PORT",
               help="Serve a live map at http://HOST:PORT/live (e.g. 127.0.0.1:8080; 0.0.0.0:8080 for other machines).")
 @click.option("--cot-interval", type=click.FloatRange(0.0), default=0.0, show_default=True, metavar="S",
@@ -83,8 +90,8 @@ datagram's arrival to its outputs sent.
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
-def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, map_at, cot_interval, refine,
-         realtime, max_packets, duration, silence) -> None:
+def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_interval,
+         refine, realtime, max_packets, duration, silence) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cot import CotFeed
     from ..live.senders import cot_sender
@@ -92,8 +99,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     from ..live.sources import byte_stream_chunks, file_datagrams, udp_datagrams, udp_socket
     from .common import load_config
 
-    if ndjson is None and not cot_urls and map_at is None:
-        fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL and/or --map HOST:PORT")
+    if ndjson is None and not cot_urls and map_at is None and klv_out is None:
+        fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
+             "--map HOST:PORT")
     map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
     if source.startswith(("rtsp://", "srt://", "tcp://", "http://", "https://")):
         fail(f"{source!r}: eoloc live reads udp://HOST:PORT, raw KLV or MPEG-TS files, and - (stdin); for "
@@ -106,7 +114,12 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
         from ..live.refine import TargetFilters
 
         filters = TargetFilters(refine)
-    session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters)
+    rewriter = None
+    if klv_out is not None:
+        from ..live.klvout import KlvOut
+
+        rewriter = KlvOut(klv_out)
+    session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=rewriter)
     feed_cot = CotFeed(interval_s=cot_interval)
     senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
     hub = server = None
@@ -178,10 +191,14 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
             s.close()
         if server is not None:
             server.close()
+        if rewriter is not None:
+            rewriter.close()
     summary = session.counters.summary() | {"streams": session.streams, "cot_events": feed_cot.events_out,
                                             "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
     if hub is not None:
         summary["map"] = hub.summary()
+    if rewriter is not None:
+        summary["klv_out"] = rewriter.summary()
     err_console.print(f"eoloc live stopped ({stopping['why'] or 'end of the source'}): "
                       + json.dumps(summary), soft_wrap=True, highlight=False)
 

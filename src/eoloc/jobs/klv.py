@@ -135,7 +135,7 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
         path, unchanged = write_klv_stream(Path(klv_out), job)
         written.append(path)
         if unchanged:
-            notes.append(f"--write-klv: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
+            notes.append(f"--klv-out: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
                          "they were written as they came, without their fix")
     written.append(write_kml(out / "eoloc.kml", job.layers, name=job.path.name))
     lay = job.layers

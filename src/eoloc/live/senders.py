@@ -37,7 +37,7 @@ def parse_cot_url(url: str) -> tuple[str, str, int, dict[str, str]]:
 class UdpSender:
     """Each event one datagram to ``udp://HOST:PORT`` (multicast TTL from ``?ttl=N``, default 1)."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, option: str = "--cot") -> None:
         _, host, port, q = parse_cot_url(url)
         self.url, self.sent, self.errors = url, 0, 0
         self.addr = (socket.gethostbyname(host), port)
@@ -46,7 +46,7 @@ class UdpSender:
             try:
                 ttl = int(q.get("ttl", "1"))
             except ValueError:
-                raise InputError(f"--cot {url!r}: ttl must be a whole number of hops") from None
+                raise InputError(f"{option} {url!r}: ttl must be a whole number of hops") from None
             self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, ttl)
             self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
 

@@ -72,7 +72,7 @@ class LiveSession:
     runs from the datagram's arrival to its outputs sent."""
 
     def __init__(self, source: str, *, dem=None, sensor=None, budget=None, recent: int = 512,
-                 restart_s: float = RESTART_S, refine=None) -> None:
+                 restart_s: float = RESTART_S, refine=None, klv_out=None) -> None:
         from ..misb import misb_sensor
 
         self.source, self.dem, self.budget = source, dem, budget
@@ -88,14 +88,22 @@ class LiveSession:
         self.demux = None
         self.streams: dict[str, int] = {}  # stream -> good packets
         self.refine = refine  # a live.refine.TargetFilters: the targets refined across packets, or None
+        self.klv_out = klv_out  # a live.klvout.KlvOut: the stream re-sent with the target locations, or None
+        self._items: list = []  # with klv_out: the datagram's transport packets to pass on and PES to rebuild
 
     def feed(self, datagram: bytes) -> list[PacketUpdate]:
         c = self.counters
         c.datagrams += 1
-        chunks = self._demux(datagram) if is_transport(datagram) else [(datagram, "")]
+        transport = is_transport(datagram)
+        chunks = self._demux(datagram) if transport else [(datagram, "")]
         updates: list[PacketUpdate] = []
         for payload, stream_name in chunks:
             updates += self._packets(payload, stream_name)
+        if self.klv_out is not None:
+            if transport:
+                self.klv_out.transport(self._items)
+            else:
+                self.klv_out.raw_datagram(datagram)
         return updates
 
     def done(self, arrived: float) -> None:
@@ -114,17 +122,30 @@ class LiveSession:
         if self.demux is None:
             self.demux = TransportDemuxer(recover_transport=True)
         out = []
+        items = self._items = []
+        metadata_pids = self._metadata_pids() if self.klv_out is not None else set()
         for k in range(0, len(datagram), TS_PACKET):
+            tp = datagram[k:k + TS_PACKET]
+            if self.klv_out is not None and ((tp[1] & 0x1F) << 8 | tp[2]) not in metadata_pids:
+                items.append(tp)  # passed on untouched (video, audio, tables, clock)
             try:
-                events = self.demux.feed(datagram[k:k + TS_PACKET])
+                events = self.demux.feed(tp)
             except Exception as exc:  # the demultiplexer's verdict on a damaged transport packet
                 self.counters.corrupt += 1
                 self.issues.append(f"{self.source}: datagram {self.counters.datagrams}: transport packet "
                                    f"{k // TS_PACKET}: {one_line(exc)}")
                 continue
             for ev in events:
-                if not isinstance(ev, PESStreamEvent) or ev.kind is not StreamKind.KLV:
+                if not isinstance(ev, PESStreamEvent):
+                    if self.klv_out is not None:
+                        metadata_pids = self._metadata_pids()
                     continue
+                if ev.kind is not StreamKind.KLV:
+                    if ev.pid in metadata_pids:  # held back as metadata, but not KLV: on as it came
+                        items += [bytes(p) for p in ev.pes.transport_packets]
+                    continue
+                if self.klv_out is not None:
+                    items.append(ev)
                 payload = ev.pes.payload
                 if ev.stream.stream_type == 0x15:  # synchronous metadata: access-unit cells wrap the KLV
                     try:
@@ -135,6 +156,13 @@ class LiveSession:
                         continue
                 out.append((payload, f"PID {ev.pid}"))
         return out
+
+    def _metadata_pids(self) -> set[int]:
+        """The PIDs the program tables give as metadata (their packets are held for KLV out)."""
+        from .klvout import METADATA_STREAM_TYPES
+
+        return {s.elementary_pid for pmt in self.demux.programs.values() for s in pmt.streams
+                if s.stream_type in METADATA_STREAM_TYPES}
 
     def _packets(self, payload: bytes, stream_name: str) -> list[PacketUpdate]:
         from ..io.klv.reader import decode_klv_bytes
@@ -180,6 +208,8 @@ class LiveSession:
                               budget=self.budget)
             if self.refine is not None:
                 self.refine.update(u)
+            if self.klv_out is not None:
+                self.klv_out.mark(pkt.raw, u, hae=78 in known.fields)
             c.detections += len(u.fixes)
             c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")
             updates.append(u)

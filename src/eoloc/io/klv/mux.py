@@ -13,11 +13,14 @@ import numpy as np
 PTS_HZ = 90_000
 
 
-def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]]) -> Path:
+def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]], *, video_fps: float = 0.0,
+                 video_size: tuple[int, int] = (160, 96)) -> Path:
     """Write ``streams`` as the KLV PIDs of one transport stream; each stream is a list of
     (raw packet, time s) pairs as :func:`eoloc.io.klv.reader.split_klv` gives them (its ST 0601
     time stamps) or as the caller chooses. Presentation times are those times relative to the
-    earliest over all streams; a packet without one (NaN) takes the last time before it."""
+    earliest over all streams; a packet without one (NaN) takes the last time before it.
+    ``video_fps`` > 0 adds an H.264 video stream over the same span whose frames show their own
+    index (:func:`index_frame`), as an encoder's video beside its metadata."""
     import av
 
     stamps = [np.array([t for _, t in s], dtype=np.float64) for s in streams]
@@ -27,14 +30,43 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with av.open(str(path), "w", format="mpegts") as out:
+        video = None
+        if video_fps > 0:
+            video = out.add_stream("libx264", rate=Fraction(video_fps).limit_denominator(1001))
+            video.width, video.height = video_size
+            video.pix_fmt = "yuv420p"
+            video.options = {"preset": "ultrafast", "tune": "zerolatency"}
+            end = max((float(ts.max()) for ts in times if ts.size), default=0.0)
+            order += [(j / video_fps, -1, j) for j in range(int(end * video_fps) + 1)]
+            order.sort()
         pids = [out.add_data_stream(codec_name="klv") for _ in streams]
         for t, k, i in order:
+            if k < 0:
+                frame = av.VideoFrame.from_ndarray(index_frame(i, video_size), format="gray")
+                frame.pts = i
+                for vp in video.encode(frame.reformat(format="yuv420p")):
+                    out.mux(vp)
+                continue
             pkt = av.Packet(streams[k][i][0])
             pkt.stream = pids[k]
             pkt.pts = pkt.dts = round(t * PTS_HZ)
             pkt.time_base = Fraction(1, PTS_HZ)
             out.mux(pkt)
+        if video is not None:
+            for vp in video.encode(None):
+                out.mux(vp)
     return path
+
+
+def index_frame(i: int, size: tuple[int, int] = (160, 96)) -> np.ndarray:
+    """A grey frame (height, width) that shows its index ``i``: 16 bits as black/white blocks
+    across the top row of blocks, most significant first, readable after lossy coding."""
+    w, h = size
+    img = np.full((h, w), 128, dtype=np.uint8)
+    bw = w // 16
+    for b in range(16):
+        img[: h // 4, b * bw:(b + 1) * bw] = 255 if (i >> (15 - b)) & 1 else 0
+    return img
 
 
 def _hold(t: np.ndarray) -> np.ndarray:

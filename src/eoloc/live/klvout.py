@@ -1,0 +1,156 @@
+"""KLV out: the live stream re-sent with eoloc's answer in it. Each ST 0601 packet gets its
+first located target (the lowest VMTI target id with status OK, as `eoloc klv --klv-out`) in the
+target location tags 40-42 (tag 42 in the datum the stream uses: HAE when it sends tag 78, else
+MSL through the geoid) with CE90 and LE90 in tags 45 and 46; every other item is kept byte for
+byte and the checksum recomputed. A packet without a located target, or one stanag4609 cannot
+re-encode (non-standard), goes on as it came.
+
+The output keeps the input's form. Raw KLV in: each datagram out carries the same packets.
+MPEG-TS in: every transport packet that is not metadata (video, audio, PAT, PMT, PCR) is passed
+on untouched, in its place; the metadata PIDs' PES packets are rebuilt around the new KLV (same
+stream id, PTS, DTS and alignment; synchronous metadata keeps its access-unit cells) and split
+into transport packets with their own continuity counters. Datagrams carry 7 transport packets
+(1316 bytes), as ST 1402 and most encoders send them.
+
+Destinations: ``udp://HOST:PORT`` (a multicast group too, ``?ttl=N``), or a file (raw KLV or
+.ts, appended datagram by datagram).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from ..errors import InputError
+from .update import PacketUpdate
+
+TS_PACKET = 188
+TS_PER_DATAGRAM = 7
+METADATA_STREAM_TYPES = (0x06, 0x15)  # asynchronous (private data) and synchronous metadata (ST 1402)
+
+
+def first_located(update: PacketUpdate) -> dict | None:
+    """The fix that goes into the packet's target location tags: the lowest target id located."""
+    ok = [r for r in update.fixes if r.get("status") == "OK"]
+    return min(ok, key=lambda r: str(r.get("target_id"))) if ok else None
+
+
+class KlvOut:
+    """Collects, per datagram, what the session decoded and located (:meth:`mark`), then sends the
+    datagram on rewritten (:meth:`raw_datagram`, :meth:`transport`)."""
+
+    def __init__(self, destination: str) -> None:
+        from urllib.parse import urlparse
+
+        self.destination = destination
+        scheme = urlparse(destination).scheme
+        if scheme == "udp":
+            from .senders import UdpSender
+
+            self.sender = UdpSender(destination, option="--klv-out")
+            self._send: Callable[[bytes], None] = self.sender.send
+            self.file = None
+        elif scheme:
+            raise InputError(f"--klv-out {destination!r}: give udp://HOST:PORT (multicast too, ?ttl=N) or a file")
+        else:
+            try:
+                self.file = open(Path(destination), "wb")  # kept open for the session
+            except OSError as exc:
+                raise InputError(f"--klv-out {destination!r}: cannot write there: {exc.strerror}") from None
+            self.sender = None
+            self._send = self.file.write
+        self.replace: dict[bytes, bytes] = {}
+        self.cc: dict[int, int] = {}
+        self.held: dict[int, int] = {}  # metadata PID -> transport packets held until its PES completes
+        self.counts = {"packets": 0, "with_target": 0, "unchanged": 0, "datagrams": 0, "bytes": 0}
+        self._geoid = None
+
+    def mark(self, raw: bytes, update: PacketUpdate | None, hae: bool) -> None:
+        """The packet ``raw`` (as it arrived) located as ``update``: its rewritten bytes are
+        kept for the datagram being built. ``hae``: the stream gives tag 42 as HAE."""
+        from stanag4609.errors import Stanag4609Error
+
+        from ..io.klv import with_target_location
+
+        self.counts["packets"] += 1
+        fix = first_located(update) if update is not None else None
+        if fix is None:
+            return
+        h = float(fix["h_m"])
+        if not hae:
+            if self._geoid is None:
+                from ..terrain.geoid import default_geoid
+
+                self._geoid = default_geoid()
+            h -= float(self._geoid.undulation(fix["lat_deg"], fix["lon_deg"]))
+        ce, le = fix.get("ce90_m"), fix.get("le90_m")
+        try:
+            new = with_target_location(raw, float(fix["lat_deg"]), float(fix["lon_deg"]), h,
+                                       ce90_m=ce if ce is not None and math.isfinite(ce) else None,
+                                       le90_m=le if le is not None and math.isfinite(le) else None)
+        except Stanag4609Error:
+            self.counts["unchanged"] += 1
+            return
+        self.replace[raw] = new
+        self.counts["with_target"] += 1
+
+    def payload(self, data: bytes) -> bytes:
+        """``data`` (KLV bytes) with each packet marked so far replaced by its rewritten bytes."""
+        for old, new in self.replace.items():
+            data = data.replace(old, new, 1)
+        return data
+
+    def raw_datagram(self, datagram: bytes) -> None:
+        self._out(self.payload(datagram))
+        self.replace.clear()
+
+    def transport(self, items: list) -> None:
+        """Send one TS datagram's worth: ``items`` in arrival order, each a transport packet's
+        bytes to pass on, or a completed metadata PES event (stanag4609 ``PESStreamEvent``) to
+        rebuild."""
+        from stanag4609.transport.metadata import encode_metadata_au_cell, parse_metadata_au_cells
+        from stanag4609.transport.mux import encode_pes_packet, packetize_pes
+
+        out: list[bytes] = []
+        for item in items:
+            if isinstance(item, bytes):
+                out.append(item)
+                continue
+            ev = item
+            pes = ev.pes
+            payload = pes.payload
+            if ev.stream.stream_type == 0x15:  # synchronous metadata: the KLV inside its cells
+                cells = parse_metadata_au_cells(payload)
+                payload = b"".join(encode_metadata_au_cell(
+                    self.payload(c.data), metadata_service_id=c.metadata_service_id,
+                    sequence_number=c.sequence_number, fragmentation=c.fragmentation,
+                    decoder_config=c.decoder_config, random_access=c.random_access) for c in cells)
+            else:
+                payload = self.payload(payload)
+            if payload == pes.payload and ev.pid not in self.cc:
+                out += [bytes(tp) for tp in pes.transport_packets]  # unchanged: as it came
+                continue
+            new_pes = encode_pes_packet(payload, stream_id=pes.stream_id, pts=pes.pts, dts=pes.dts,
+                                        data_alignment_indicator=pes.data_alignment_indicator)
+            packets, self.cc[ev.pid] = packetize_pes(new_pes, pid=ev.pid, continuity_counter=self.cc.get(ev.pid, 0))
+            out += packets
+        self.replace.clear()
+        for k in range(0, len(out), TS_PER_DATAGRAM):
+            self._out(b"".join(out[k:k + TS_PER_DATAGRAM]))
+
+    def _out(self, data: bytes) -> None:
+        if data:
+            self._send(data)
+            self.counts["datagrams"] += 1
+            self.counts["bytes"] += len(data)
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+        if self.sender is not None:
+            self.sender.close()
+
+    def summary(self) -> dict:
+        return {"to": self.destination, **self.counts,
+                **({"errors": self.sender.errors} if self.sender is not None else {})}
