@@ -118,6 +118,7 @@ def main(minutes: float) -> list[str]:
     lat = np.array([rx.platform_at[k] - t for k, t in sent_at.items() if k in rx.platform_at]) * 1e3
     measured = n - WARMUP
     cpu_per_packet = cpu / measured
+    refine_ms = _refine_cost(packets[:400])
     per_core = 1.0 / (cpu / wall)
     return [
         row(f"`eoloc live` soak: {measured:,} packets at {RATE_HZ:.0f} Hz x {TARGETS} VMTI targets "
@@ -134,7 +135,31 @@ def main(minutes: float) -> list[str]:
             f"{per_core:.1f} such streams",
             f"batch path (`eoloc klv` job) {batch_cpu_per_packet * 1e3:.2f} ms per packet",
             batch_cpu_per_packet / cpu_per_packet),
+        row("`--refine static` (the default: RLS per target id), CPU per packet in-process (LiveSession)",
+            f"{refine_ms['static']:.2f} ms", f"--refine off {refine_ms['off']:.2f} ms", refine_ms["off"] /
+            refine_ms["static"]),
+        row("`--refine auto` (RLS + the Kalman tracker per target id), CPU per packet in-process",
+            f"{refine_ms['auto']:.2f} ms", f"--refine off {refine_ms['off']:.2f} ms", refine_ms["off"] /
+            refine_ms["auto"]),
     ]
+
+
+def _refine_cost(packets: list[bytes]) -> dict[str, float]:
+    """CPU ms per packet of a LiveSession without and with the targets refined across packets
+    (the first 100 packets warm it up)."""
+    from eoloc.live.refine import TargetFilters
+    from eoloc.live.session import LiveSession
+
+    out = {}
+    for model in ("off", "static", "auto"):
+        s = LiveSession("bench", refine=None if model == "off" else TargetFilters(model))
+        for raw in packets[:100]:
+            s.feed(raw)
+        c0 = time.process_time()
+        for raw in packets[100:]:
+            s.feed(raw)
+        out[model] = (time.process_time() - c0) / (len(packets) - 100) * 1e3
+    return out
 
 
 if __name__ == "__main__":

@@ -346,12 +346,13 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
 
     from .io.klv.mux import write_klv_ts
     from .io.klv.reader import split_klv
+    from .io.mapview import write_map
     from .live.sources import file_datagrams
 
-    console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK) and NDJSON")
+    console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK), a live map, KLV out, NDJSON")
     out_dir.mkdir(parents=True, exist_ok=True)
     packets = split_klv((data / "flight.klv").read_bytes())
-    ts = write_klv_ts(out_dir / "flight.ts", [packets])
+    ts = write_klv_ts(out_dir / "flight.ts", [packets], video_fps=10)
 
     def free_port() -> int:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -359,6 +360,9 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
             return s.getsockname()[1]
 
     port, cot_port = free_port(), free_port()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        map_port = s.getsockname()[1]
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", cot_port))
     rx.settimeout(0.2)
@@ -376,13 +380,28 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     ndjson = out_dir / "live.ndjson"
     cmd = [sys.executable, "-m", "eoloc", "live", f"udp://127.0.0.1:{port}", "--dem",
            str(data / "longs_peak_srtmgl3.tif"), "--config", str(data / "klv.toml"), "--cot",
-           f"udp://127.0.0.1:{cot_port}", "--ndjson", str(ndjson), "--packets", str(len(packets) - 1),
-           "--duration", "60"]
+           f"udp://127.0.0.1:{cot_port}", "--ndjson", str(ndjson), "--klv-out", str(out_dir / "klv_out.ts"),
+           "--map", f"127.0.0.1:{map_port}", "--packets", str(len(packets) - 1), "--duration", "60"]
     console.print("$ " + " ".join(["eoloc", *cmd[3:]]), highlight=False, soft_wrap=True)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     while "listening on" not in (line := proc.stdout.readline()):
         if not line:
             raise RuntimeError("eoloc live did not start")
+    browser = {"packets": 0}
+
+    def watch_map() -> None:  # a browser's view: the live map's WebSocket
+        from websockets.exceptions import ConnectionClosed
+        from websockets.sync.client import connect
+
+        try:
+            with connect(f"ws://127.0.0.1:{map_port}/v1/live/ws") as ws:
+                for message in ws:
+                    browser["packets"] += json.loads(message)["type"] == "packet"
+        except ConnectionClosed:  # the session ended: eoloc live stops its server
+            pass
+
+    threading.Thread(target=watch_map, daemon=True).start()
+    time.sleep(0.3)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sent = 0
     for datagram, _ in file_datagrams(str(ts), lambda: False):
@@ -406,5 +425,19 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
                   f"{summary['latency_ms_median']:.1f} ms")
     console.print("CoT received on udp://127.0.0.1:" + str(cot_port) + ": " + ", ".join(
         f"{n} {names.get(k, k)}" for k, n in kinds.items()) + f" -> {out_dir / 'cot_received.xml'}")
+    feats = [json.loads(line) for line in ndjson.read_text(encoding="utf-8").splitlines()]
+    by = {w: [f for f in feats if f["properties"]["what"] == w and f["geometry"]] for w in
+          ("aircraft", "footprint", "target", "estimate")}
+    track = [f["geometry"]["coordinates"] for f in by["aircraft"]]
+    last_estimates = {f["properties"]["target_id"]: f for f in by["estimate"]}
+    page = write_map(out_dir / "map.html", aircraft=[{"type": "Feature", "properties": {},
+                                                     "geometry": {"type": "LineString", "coordinates": track}}],
+                     footprints=by["footprint"][::5], targets=list(last_estimates.values()),
+                     title="eoloc live: the session's aircraft, footprints and refined targets")
+    console.print(f"live map (http://127.0.0.1:{map_port}/live while it ran): {browser['packets']} packet updates "
+                  f"reached a WebSocket client; the session drawn after: {page}")
+    klv = summary.get("klv_out", {})
+    console.print(f"KLV out: {klv.get('with_target', 0)} of {klv.get('packets', 0)} packets with their first target "
+                  f"in ST 0601 tags 40-42, 45, 46, the H.264 video passed on untouched -> {out_dir / 'klv_out.ts'}")
     console.print(f"NDJSON (one GeoJSON feature per line): {ndjson}. In ATAK/WinTAK: point `eoloc live --cot "
                   "udp://239.2.3.1:6969` at the SA multicast, or `--cot tcp://TAKSERVER:8087` at a TAK server.")

@@ -108,7 +108,7 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
         # optimistic), so the "static" model is rejected and averaging does not shrink the error.
         # The uncertainty becomes the fixes' own scatter (one frame's sigma times sqrt(ratio)), said.
         ratio = float(est.scatter_ratio)
-        inflate = scatter_inflation(ratio, single, float(np.mean(s[:2])))
+        inflate = float(scatter_inflation(ratio, single, float(np.mean(s[:2]))))
         s = s * inflate
         warning = "" if inflate == 1.0 else (
             f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their sigma allows (> {SCATTER_LIMIT:g}): "

@@ -108,6 +108,12 @@ class RLSState:
         return cls(z3, z3.copy(), z3.copy(), np.zeros(k), np.full((k, 3), np.nan), float(forgetting),
                    np.zeros(k, np.int64), np.zeros(k), np.zeros((k, 2)), np.zeros((k, 2, 2)))
 
+    def grow(self, k: int) -> None:
+        """``k`` more targets (empty: no fix yet), after those there are."""
+        more = RLSState.empty(k, self.lam)
+        for name in ("A", "B", "Rsum", "wsum", "x", "n", "s0", "s1", "s2"):
+            setattr(self, name, np.concatenate([getattr(self, name), getattr(more, name)]))
+
     def update(self, z: np.ndarray, R: np.ndarray, W: np.ndarray, use: np.ndarray) -> None:
         """One frame: fixes z (K, 3) ENU m, covariances R (K, 3, 3), weights W = :func:`weights`,
         ``use`` (K,) which fixes count."""
@@ -148,14 +154,16 @@ class RLSState:
         return out
 
 
-def scatter_inflation(ratio: float, single_sigma_h_m: float, mean_sigma_h_m: float) -> float:
+def scatter_inflation(ratio: ArrayLike, single_sigma_h_m: ArrayLike, mean_sigma_h_m: ArrayLike) -> np.ndarray:
     """How much to widen a static estimate's sigma whose fixes spread ``ratio`` times more than
     their sigma allows: 1 up to :data:`SCATTER_LIMIT`; past it the target moved (or the sigma is
     optimistic), averaging does not shrink the error, and the uncertainty becomes the fixes' own
-    scatter (one fix's sigma times sqrt(ratio))."""
-    if not ratio > SCATTER_LIMIT:
-        return 1.0
-    return max(np.sqrt(ratio), single_sigma_h_m / np.sqrt(2.0) * np.sqrt(ratio) / mean_sigma_h_m)
+    scatter (one fix's sigma times sqrt(ratio)). Arrays broadcast."""
+    r = np.asarray(ratio, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        wide = np.maximum(np.sqrt(r), np.asarray(single_sigma_h_m) / np.sqrt(2.0) * np.sqrt(r) /
+                          np.asarray(mean_sigma_h_m))
+    return np.where(r > SCATTER_LIMIT, wide, 1.0)
 
 
 def _enu_of(fixes: Fixes, origin) -> np.ndarray:
