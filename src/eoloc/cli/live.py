@@ -83,7 +83,7 @@ datagram's arrival to its outputs sent.
               help="Refine each VMTI target id across packets: static (RLS, as eoloc track --static; a target "
                    "whose fixes walk gets a warning and their scatter as its uncertainty), moving (Kalman, as "
                    "eoloc track), auto (Kalman once the speed is significant: a drifting attitude bias makes a "
-                   "fixed target look moving too), off.")
+                   "fixed target look moving too), off. The estimates go to --ndjson and --map.")
 @click.option("--realtime", is_flag=True, help="A file SOURCE: replay at the stream's own clock.")
 @click.option("--packets", "max_packets", type=click.IntRange(1), default=None, help="Stop after N good packets.")
 @click.option("--duration", type=click.FloatRange(0.0, min_open=True), default=None, metavar="S",
@@ -110,7 +110,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)
     filters = None
-    if refine != "off":
+    if refine != "off" and (ndjson is not None or map_at is not None):  # the outputs that carry estimates
         from ..live.refine import TargetFilters
 
         filters = TargetFilters(refine)
