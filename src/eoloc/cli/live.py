@@ -216,6 +216,7 @@ def start_map(host: str, port: int, session, source: str, silence_s: float, dem,
     """The live map's hub and its server (eoloc serve's app with the map's routes), started."""
     from ..service.api import ServiceState, create_app
     from ..service.livemap import LiveHub, MapServer
+
     hub = LiveHub(silence_s=silence_s, title=f"eoloc live: {source}",
                   counters=lambda: session.counters.counts() | {"streams": dict(session.streams)})
     state = ServiceState(config, {"dem": dem} if dem is not None else {})

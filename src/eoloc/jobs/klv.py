@@ -151,10 +151,7 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
 def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
     """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46; and how
     many packets had to be passed on without theirs (stanag4609 cannot re-encode them)."""
-    from stanag4609.errors import Stanag4609Error
-
-    from ..io.klv import with_target_location
-    from ..terrain.geoid import default_geoid
+    from ..io.klv.encode import with_fix
 
     v, tel = job.vmti, job.telemetry
     f = v.fixes
@@ -166,7 +163,6 @@ def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
     ce = v.uncertainty.get("ce90_m", np.full(len(f), np.nan))
     le = v.uncertainty.get("le90_m", np.full(len(f), np.nan))
     hae = tel.columns["target_elevation_hae"] > 0  # the datum the reader gives tag 42 in each packet
-    geoid = default_geoid()
     out = bytearray()
     row_of = {int(k): i for i, k in enumerate(tel.line)}  # rows are grouped by stream, in time order
     unchanged = 0
@@ -174,13 +170,10 @@ def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
         raw = p.raw
         j = first.get(p.index) if p.standard == "ST 0601" else None
         if j is not None:
-            h = float(f.h_m[j]) if hae[row_of[p.index]] else \
-                float(f.h_m[j] - geoid.undulation(f.lat_deg[j], f.lon_deg[j]))
-            try:
-                raw = with_target_location(raw, float(f.lat_deg[j]), float(f.lon_deg[j]), h, ce90_m=ce[j],
-                                           le90_m=le[j])
-            except Stanag4609Error:  # a packet stanag4609 cannot re-encode (non-standard): passed on as it came
-                unchanged += 1
+            new = with_fix(raw, f.lat_deg[j], f.lon_deg[j], f.h_m[j], ce90_m=ce[j], le90_m=le[j],
+                           tag42_hae=bool(hae[row_of[p.index]]))
+            unchanged += new is None  # a packet stanag4609 cannot re-encode (non-standard): passed on as it came
+            raw = raw if new is None else new
         out += raw
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(bytes(out))

@@ -18,7 +18,6 @@ Destinations: ``udp://HOST:PORT`` (a multicast group too, ``?ttl=N``), or a file
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -64,32 +63,19 @@ class KlvOut:
         self.cc: dict[int, int] = {}
         self.held: dict[int, int] = {}  # metadata PID -> transport packets held until its PES completes
         self.counts = {"packets": 0, "with_target": 0, "unchanged": 0, "datagrams": 0, "bytes": 0}
-        self._geoid = None
 
     def mark(self, raw: bytes, update: PacketUpdate | None, hae: bool) -> None:
         """The packet ``raw`` (as it arrived) located as ``update``: its rewritten bytes are
         kept for the datagram being built. ``hae``: the stream gives tag 42 as HAE."""
-        from stanag4609.errors import Stanag4609Error
-
-        from ..io.klv import with_target_location
+        from ..io.klv.encode import with_fix
 
         self.counts["packets"] += 1
         fix = first_located(update) if update is not None else None
         if fix is None:
             return
-        h = float(fix["h_m"])
-        if not hae:
-            if self._geoid is None:
-                from ..terrain.geoid import default_geoid
-
-                self._geoid = default_geoid()
-            h -= float(self._geoid.undulation(fix["lat_deg"], fix["lon_deg"]))
         ce, le = fix.get("ce90_m"), fix.get("le90_m")
-        try:
-            new = with_target_location(raw, float(fix["lat_deg"]), float(fix["lon_deg"]), h,
-                                       ce90_m=ce if ce is not None and math.isfinite(ce) else None,
-                                       le90_m=le if le is not None and math.isfinite(le) else None)
-        except Stanag4609Error:
+        new = with_fix(raw, fix["lat_deg"], fix["lon_deg"], fix["h_m"], ce90_m=ce, le90_m=le, tag42_hae=hae)
+        if new is None:
             self.counts["unchanged"] += 1
             return
         self.replace[raw] = new
@@ -119,21 +105,27 @@ class KlvOut:
                 continue
             ev = item
             pes = ev.pes
-            payload = pes.payload
-            if ev.stream.stream_type == 0x15:  # synchronous metadata: the KLV inside its cells
-                cells = parse_metadata_au_cells(payload)
-                payload = b"".join(encode_metadata_au_cell(
-                    self.payload(c.data), metadata_service_id=c.metadata_service_id,
-                    sequence_number=c.sequence_number, fragmentation=c.fragmentation,
-                    decoder_config=c.decoder_config, random_access=c.random_access) for c in cells)
-            else:
-                payload = self.payload(payload)
-            if payload == pes.payload and ev.pid not in self.cc:
-                out += [bytes(tp) for tp in pes.transport_packets]  # unchanged: as it came
+            as_it_came = [bytes(tp) for tp in pes.transport_packets]
+            try:
+                if ev.stream.stream_type == 0x15:  # synchronous metadata: the KLV inside its cells
+                    payload = b"".join(encode_metadata_au_cell(
+                        self.payload(c.data), metadata_service_id=c.metadata_service_id,
+                        sequence_number=c.sequence_number, fragmentation=c.fragmentation,
+                        decoder_config=c.decoder_config, random_access=c.random_access)
+                        for c in parse_metadata_au_cells(pes.payload))
+                else:
+                    payload = self.payload(pes.payload)
+                if payload == pes.payload and ev.pid not in self.cc:
+                    out += as_it_came  # unchanged, and the PID's counters still the encoder's
+                    continue
+                new_pes = encode_pes_packet(payload, stream_id=pes.stream_id, pts=pes.pts, dts=pes.dts,
+                                            data_alignment_indicator=pes.data_alignment_indicator)
+                packets, self.cc[ev.pid] = packetize_pes(new_pes, pid=ev.pid,
+                                                         continuity_counter=self.cc.get(ev.pid, 0))
+            except ValueError:  # damaged access-unit cells (stanag4609's DecodeError), or a PES grown past 64 KB
+                self.counts["unchanged"] += 1
+                out += as_it_came
                 continue
-            new_pes = encode_pes_packet(payload, stream_id=pes.stream_id, pts=pes.pts, dts=pes.dts,
-                                        data_alignment_indicator=pes.data_alignment_indicator)
-            packets, self.cc[ev.pid] = packetize_pes(new_pes, pid=ev.pid, continuity_counter=self.cc.get(ev.pid, 0))
             out += packets
         self.replace.clear()
         for k in range(0, len(out), TS_PER_DATAGRAM):

@@ -158,7 +158,7 @@ class TargetFilters:
 
     def _moving(self, u: PacketUpdate, st: _Stream, kal: dict, moving: np.ndarray, ids: np.ndarray,
                 known: bool) -> list[dict]:
-        x, P = kal["x"][moving], kal["P"][moving]
+        x, P, speed, speed_sigma = (kal[k][moving] for k in ("x", "P", "speed", "speed_sigma"))
         e = geodesy.enu_to_ecef(np.c_[x[:, 0], x[:, 1], kal["z"][moving, 2]], *st.track_origin)
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
         sig = error_ellipses(P[:, :2, :2])
@@ -167,9 +167,8 @@ class TargetFilters:
         hits = np.asarray(kal["hits"])[moving]
         out = []
         for j, tid in enumerate(ids[moving]):
-            props = {"model": "moving (Kalman)", "n_fixes": int(hits[j]), "speed_mps": float(kal["speed"][moving][j]),
-                     "heading_deg": float(heading[j]),
-                     "speed_sigma_mps": _finite(kal["speed_sigma"][moving][j]) if known else None,
+            props = {"model": "moving (Kalman)", "n_fixes": int(hits[j]), "speed_mps": float(speed[j]),
+                     "heading_deg": float(heading[j]), "speed_sigma_mps": _finite(speed_sigma[j]) if known else None,
                      "cep50_m": _finite(cep[j]) if known else None}
             out.append(_estimate(u, tid, float(lon[j]), float(lat[j]), float(h[j]), props))
         return out

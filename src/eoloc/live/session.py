@@ -114,7 +114,7 @@ class LiveSession:
 
     def _demux(self, datagram: bytes) -> list[tuple[bytes, str]]:
         """KLV payloads (stream name) completed by the transport packets of one datagram."""
-        from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+        from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind, TransportDemuxer
         from stanag4609.transport.metadata import parse_metadata_au_cells
 
         from ..io.klv.reader import one_line
@@ -136,9 +136,9 @@ class LiveSession:
                                    f"{k // TS_PACKET}: {one_line(exc)}")
                 continue
             for ev in events:
+                if isinstance(ev, PMTEvent) and self.klv_out is not None:
+                    metadata_pids = self._metadata_pids()
                 if not isinstance(ev, PESStreamEvent):
-                    if self.klv_out is not None:
-                        metadata_pids = self._metadata_pids()
                     continue
                 if ev.kind is not StreamKind.KLV:
                     if ev.pid in metadata_pids:  # held back as metadata, but not KLV: on as it came

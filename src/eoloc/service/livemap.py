@@ -106,7 +106,8 @@ class LiveHub:
         for c in self.clients:
             c.put(data)
 
-    def status(self, client: _Client | None = None) -> dict:
+    def status(self) -> dict:
+        """The session's state (waiting, live, silent, stopped), its counters and the browsers."""
         now = time.monotonic()
         quiet = None if self.last_packet is None else now - self.last_packet
         state = ("stopped" if self.stopped else "waiting" if quiet is None
@@ -114,12 +115,17 @@ class LiveHub:
         counters = self.counters()
         return {"type": "status", "state": state, "why": self.stopped, "quiet_s": quiet, "silence_s": self.silence_s,
                 "counters": {k: v for k, v in counters.items() if k != "streams"},
-                "streams": counters.get("streams", {}), "clients": len(self.clients),
-                "dropped": None if client is None else client.dropped, "sent": None if client is None else client.sent}
+                "streams": counters.get("streams", {}), "clients": len(self.clients)}
+
+    @staticmethod
+    def _for(client: _Client, status: dict) -> bytes:
+        """The status as one browser gets it: with what it was sent and lost."""
+        return orjson.dumps(status | {"dropped": client.dropped, "sent": client.sent})
 
     def _status_all(self) -> None:
+        status = self.status()
         for c in self.clients:
-            c.put(orjson.dumps(self.status(c)))
+            c.put(self._for(c, status))
 
     async def heartbeat(self) -> None:
         while True:
@@ -135,7 +141,7 @@ class LiveHub:
         with self.lock:
             for data in self.newest.values():
                 client.put(data)
-        client.put(orjson.dumps(self.status(client)))
+        client.put(self._for(client, self.status()))
         self.clients.add(client)
         self.connections += 1
 

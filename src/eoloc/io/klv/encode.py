@@ -77,3 +77,23 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
     if le90_m is not None and np.isfinite(le90_m):
         upd[46] = float(min(le90_m, 4095.0))
     return update_uas_local_set(packet, upd)
+
+
+def with_fix(packet: bytes, lat_deg: float, lon_deg: float, h_hae_m: float, *, ce90_m: float | None = None,
+             le90_m: float | None = None, tag42_hae: bool) -> bytes | None:
+    """The packet with a fix (ellipsoidal height) in its target location tags, tag 42 in the
+    datum the stream gives it: HAE when ``tag42_hae`` (the stream sends tag 78), else MSL through
+    the geoid. None when stanag4609 cannot re-encode the packet (it breaks ST 0601 in a way its
+    encoder refuses); the caller passes such a packet on as it came. Used by `eoloc klv --klv-out`
+    and `eoloc live --klv-out`."""
+    from stanag4609.errors import Stanag4609Error
+
+    h = float(h_hae_m)
+    if not tag42_hae:
+        from ...terrain.geoid import default_geoid
+
+        h -= float(default_geoid().undulation(lat_deg, lon_deg))
+    try:
+        return with_target_location(packet, float(lat_deg), float(lon_deg), h, ce90_m=ce90_m, le90_m=le90_m)
+    except Stanag4609Error:
+        return None
