@@ -794,7 +794,7 @@ def _floor_index(x, hi):
     return np.clip(np.floor(x), 0, hi).astype(np.int64)
 
 
-@compiled()
+@compiled(inline=True)
 def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     """Bilinear height of a lat/lon grid at (lat, lon) in degrees -> (height, inside).
 

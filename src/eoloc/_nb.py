@@ -24,6 +24,7 @@ from numba.extending import overload
 
 from . import _kernels as K
 from . import _march as M
+from . import _ortho as O
 
 _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 
@@ -33,7 +34,7 @@ def _cache_dir() -> str:
         os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "eoloc"
     )
     digest = hashlib.sha256()
-    for mod in (K.__file__, M.__file__, __file__):
+    for mod in (K.__file__, M.__file__, O.__file__, __file__):
         digest.update(Path(mod).read_bytes())
     return os.path.join(root, f"numba-{numba.__version__}-{digest.hexdigest()[:16]}")
 
@@ -152,7 +153,7 @@ numba.config.CACHE_DIR = _cache_dir()
 try:
     _g = dict(vars(K))
     _g["pick"] = njit(forceinline=True, **_JIT)(_pick_scalar)
-    _g["_floor_index"] = njit(**_JIT)(_floor_index_scalar)
+    _g["_floor_index"] = njit(forceinline=True, **_JIT)(_floor_index_scalar)
     # call- and branch-free trigonometry (the fdlibm polynomials), so that LLVM vectorises the loops
     _g["sincos"] = njit(forceinline=True, **_JIT)(pytypes.FunctionType(K.sincos_poly.__code__, _g, "sincos"))
     _g["atan2"] = njit(forceinline=True, **_JIT)(pytypes.FunctionType(K.atan2_poly.__code__, _g, "atan2"))
@@ -171,6 +172,20 @@ try:
         _f = getattr(M, _name)
         _gm[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _gm, _name, _f.__defaults__))
     _march_ray = _gm["march_ray"]
+    # M5 orthorectification: the passes over the output cells, with the kernels' twins
+    _go = dict(vars(O))
+    _go.update({name: _g[name] for name in (*_kernels, "pick", "_floor_index", "sincos", "atan2")})
+    for _name, _how in _marked(O).items():
+        _f = getattr(O, _name)
+        if _f.__module__ != O.__name__:
+            continue  # a kernel it imports: its twin is already in _go
+        _opts = {"forceinline": True} if _how == "inline" else {}
+        _go[_name] = njit(**_opts, **_JIT)(pytypes.FunctionType(_f.__code__, _go, _name, _f.__defaults__))
+    ortho_project_cells = _go["project_cells"]
+    ortho_rasterize_depth = _go["rasterize_depth"]
+    ortho_fold_tiles = _go["fold_tiles"]
+    ortho_mark_visible = _go["mark_visible"]
+    ortho_sample_bands = _go["sample_bands"]
 
     @_driver
     def terrain_march(n, ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin,

@@ -18,6 +18,7 @@ ray.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -126,7 +127,7 @@ class Ortho:
         rows, cols = self.shape
         x0, x1 = t.c, t.c + cols * t.a
         y1, y0 = t.f, t.f + rows * t.e
-        tr = pyproj.Transformer.from_crs(self.crs, _WGS84, always_xy=True)
+        tr = transformer(self.crs, _WGS84)
         return tr.transform_bounds(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1), densify_pts=101)
 
 def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float:
@@ -140,21 +141,28 @@ def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float
     return float(np.mean(d))
 
 
-def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str = "utm",
-                 gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0,
-                 occlusion: bool = True, max_cells: int = 40_000_000, edge_samples: int = 16) -> Ortho:
-    """Orthorectify one frame ``image`` ((H, W) or (bands, H, W), or (H, W, bands) with 3-4 bands
-    last, as images load) seen from ``pose`` onto ``surface`` (constant ellipsoidal height, or a
-    DEM) in ``crs`` (see :func:`output_crs`), at ``gsd_m`` metres per cell (default: the native
-    ground sample distance at the image centre; for a geographic CRS the cell is that many metres
-    at the frame centre's latitude). Cells outside the footprint, off the DEM, or (``occlusion``,
-    DEM only) hidden by terrain get ``nodata``."""
-    from rasterio.transform import from_origin
-    from scipy.ndimage import map_coordinates
+@dataclass(frozen=True)
+class OutputGrid:
+    """A north-up output raster: ``crs`` (pyproj), ``transform`` (rasterio Affine, pixel corners),
+    ``shape`` (rows, cols) and ``res`` (x, y cell size in the CRS's units)."""
 
-    if resampling not in RESAMPLING:
-        raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
-    img = _bands_first(np.asarray(image), sensor)
+    crs: pyproj.CRS
+    transform: object
+    shape: tuple[int, int]
+    res: tuple[float, float]
+
+    def centres(self, rows: ArrayLike, cols: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """CRS coordinates (x, y) of the centres of cells (rows, cols)."""
+        t = self.transform
+        return t.c + (np.asarray(cols, float) + 0.5) * t.a, t.f + (np.asarray(rows, float) + 0.5) * t.e
+
+
+def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str = "utm",
+                gsd_m: float | None = None, max_cells: int = 40_000_000, edge_samples: int = 16) -> OutputGrid:
+    """The grid a frame is rectified onto: its footprint's bounding box in ``crs`` (see
+    :func:`output_crs`), cell edges on multiples of the cell size (so the grids of a pass line up),
+    at ``gsd_m`` metres per cell (default: the native ground sample distance at the image centre;
+    for a geographic CRS that many metres at the frame centre's latitude)."""
     prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
     if len(prints) != 1:
         raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
@@ -167,50 +175,207 @@ def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: flo
     gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, surface)
     if not gsd > 0:
         raise InputError(f"gsd_m must be > 0, got {gsd_m!r}")
-    to_crs = pyproj.Transformer.from_crs(_WGS84, out_crs, always_xy=True)
     if out_crs.is_geographic:
         M, N = _radii(clat)
         res = (gsd / (N * math.cos(math.radians(clat))) * 180.0 / math.pi, gsd / M * 180.0 / math.pi)
     else:
         res = (gsd, gsd)
-    x, y = to_crs.transform(fp.lon_deg, fp.lat_deg)
-    x0 = math.floor(np.min(x) / res[0]) * res[0]
-    y1 = math.ceil(np.max(y) / res[1]) * res[1]
-    cols = math.ceil((np.max(x) - x0) / res[0])
-    rows = math.ceil((y1 - np.min(y)) / res[1])
+    x, y = transformer(_WGS84, out_crs).transform(fp.lon_deg, fp.lat_deg)
+    return grid_covering(out_crs, res, (np.min(x), np.min(y), np.max(x), np.max(y)), max_cells=max_cells,
+                         what=f"at {gsd:g} m (the footprint reaches {'the horizon' if fp.clipped.any() else 'far'})")
+
+
+def grid_covering(crs: pyproj.CRS, res: tuple[float, float], bounds: tuple[float, float, float, float], *,
+                  max_cells: int = 40_000_000, what: str = "") -> OutputGrid:
+    """The north-up grid of cells ``res`` on multiples of the cell size that covers ``bounds``
+    (xmin, ymin, xmax, ymax in ``crs``)."""
+    from rasterio.transform import from_origin
+
+    xmin, ymin, xmax, ymax = bounds
+    x0 = math.floor(xmin / res[0]) * res[0]
+    y1 = math.ceil(ymax / res[1]) * res[1]
+    cols = max(math.ceil((xmax - x0) / res[0]), 1)
+    rows = max(math.ceil((y1 - ymin) / res[1]), 1)
     if rows * cols > max_cells:
-        raise InputError(f"the output would be {rows} x {cols} cells at {gsd:g} m (the footprint reaches "
-                         f"{'the horizon' if fp.clipped.any() else 'far'}): give a coarser gsd_m (--gsd) or "
+        raise InputError(f"the output would be {rows} x {cols} cells {what}: give a coarser gsd_m (--gsd) or "
                          "raise max_cells")
-    transform = from_origin(x0, y1, res[0], res[1])
-    cc, rr = np.meshgrid(np.arange(cols) + 0.5, np.arange(rows) + 0.5)
-    gx, gy = x0 + cc * res[0], y1 - rr * res[1]
-    lon, lat = pyproj.Transformer.from_crs(out_crs, _WGS84, always_xy=True).transform(gx, gy)
+    return OutputGrid(crs, from_origin(x0, y1, res[0], res[1]), (rows, cols), res)
+
+
+@functools.lru_cache(maxsize=64)
+def transformer(src: pyproj.CRS, dst: pyproj.CRS) -> pyproj.Transformer:
+    """pyproj's transformer from ``src`` to ``dst`` (x = longitude / easting first), made once."""
+    return pyproj.Transformer.from_crs(src, dst, always_xy=True)
+
+
+FOLD_TILE_PX = 16  # image tiles where the terrain folds over get the z-buffer
+NODE_STEP = 16  # cells between the nodes where pyproj and the exact geodesy are evaluated
+
+
+@dataclass(frozen=True)
+class FramePixels:
+    """Where every cell of an output grid falls in a frame: pixel (u, v) and range (m), NaN
+    without ground or behind the camera; ``valid`` where the camera sees the cell."""
+
+    u_px: np.ndarray
+    v_px: np.ndarray
+    range_m: np.ndarray
+    valid: np.ndarray
+
+
+def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: OutputGrid, *,
+                 occlusion: bool = True) -> FramePixels:
+    """Project every cell of ``grid`` (its ground point on ``surface``) into the frame seen from
+    ``pose`` and decide which cells the camera sees: inside the image, and (``occlusion``, on a
+    DEM) not hidden by nearer terrain (a z-buffer of the terrain mesh). Compiled (numba) passes,
+    eoloc._ortho; with the numpy backend, the reference path (M4 rays for the hiding)."""
+    from . import _kernels
+    from ._backend import get_backend
+
+    if get_backend() == "numpy":
+        return _frame_pixels_reference(sensor, pose, surface, grid, occlusion=occlusion)
+    from . import _nb, _ortho
+
+    cam = sensor.camera
+    rows, cols = grid.shape
+    nr, nc = _ortho.node_count(rows, NODE_STEP), _ortho.node_count(cols, NODE_STEP)
+    node_x, _ = grid.centres(0, np.arange(nc) * NODE_STEP)
+    _, node_y = grid.centres(np.arange(nr) * NODE_STEP, 0)
+    gx, gy = np.meshgrid(node_x, node_y)
+    lon, lat = transformer(grid.crs, _WGS84).transform(gx, gy)
+    frame = sensor.camera_frame(pose)
+    R = np.reshape(np.array([np.asarray(r, float).ravel()[0] for r in frame.R]), (3, 3))  # R_ecef_cam
+    o = np.array([float(np.ravel(a)[0]) for a in (frame.ox, frame.oy, frame.oz)])
+    p0 = np.stack(geodesy.geodetic_to_ecef(lat, lon, 0.0), -1)
+    la, lo = np.radians(lat), np.radians(lon)
+    up = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
+    nodes = np.empty((nr, nc, _ortho.N_NODE))
+    nodes[..., 0], nodes[..., 1] = lat, lon
+    nodes[..., 2:5] = (p0 - o) @ R  # R^T (p - o), row vectors
+    nodes[..., 5:8] = up @ R
+    row_i0, row_a = _ortho.node_index(rows, NODE_STEP)
+    col_i0, col_a = _ortho.node_index(cols, NODE_STEP)
+    fs = float(np.ravel(pose.focal_scale)[0])
+    dist = cam.distortion
+    kind, dp = (dist.kind, np.asarray(dist.packed, float)) if dist is not None else (_kernels.DIST_NONE, np.zeros(1))
+    r2_max = _ideal_radius2(cam, fs) * 1.02**2
+    if isinstance(surface, DEM):
+        g = surface.grid
+        dem = (g.z, float(g.lat0), float(g.lon0), float(g.dlat), float(g.dlon), 0.0, True)
+    else:
+        dem = (np.zeros((2, 2)), 0.0, 0.0, 1.0, 1.0, float(surface), False)
+    u, v, rng = (np.empty((rows, cols)) for _ in range(3))
+    bad = bool(np.any(frame.invalid))
+    if bad:
+        u[:], v[:], rng[:] = np.nan, np.nan, np.nan
+    else:
+        _nb.ortho_project_cells(nodes, row_i0, row_a, col_i0, col_a, *dem, cam.fx * fs, cam.fy * fs, cam.cx, cam.cy,
+                                int(kind), dp, r2_max, u, v, rng)
+    use_zbuf = occlusion and isinstance(surface, DEM)
+    zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf)
+    if use_zbuf:  # only where the terrain folds over in the image (eoloc._ortho.fold_tiles)
+        tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)), np.uint8)
+        n_front, n_back = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, 1.0, tiles)
+        if n_back > n_front:  # a mirrored view: clockwise triangles face the camera
+            tiles[:] = 0
+            n_back, n_front = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, -1.0, tiles)
+        if n_back:
+            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, zbuf)
+    valid = np.empty((rows, cols), np.uint8)
+    _nb.ortho_mark_visible(u, v, rng, zbuf, use_zbuf, cam.width, cam.height, valid)
+    return FramePixels(u, v, rng, valid.view(bool))
+
+
+def _ideal_radius2(cam, focal_scale: float) -> float:
+    """The largest squared ideal (undistorted) normalised radius the image reaches (its outer
+    border, sampled densely, undistorted)."""
+    t = np.linspace(0.0, 1.0, 65)
+    w, h = cam.width - 0.5, cam.height - 0.5
+    u = np.r_[-0.5 + (w + 0.5) * t, np.full(65, w), w - (w + 0.5) * t, np.full(65, -0.5)]
+    v = np.r_[np.full(65, -0.5), -0.5 + (h + 0.5) * t, np.full(65, h), h - (h + 0.5) * t]
+    xn, yn = cam.pixel_to_normalized(u, v, focal_scale=focal_scale)
+    r2 = xn * xn + yn * yn
+    return float(np.max(r2[np.isfinite(r2)])) if np.isfinite(r2).any() else math.inf
+
+
+def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: OutputGrid, *,
+                            occlusion: bool = True) -> FramePixels:
+    """numpy: every cell through pyproj, the DEM and :meth:`SensorModel.ground_to_image`; a cell is
+    hidden when the M4 ray through its own pixel stops on terrain well before reaching it."""
+    rows, cols = grid.shape
+    rr, cc = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    gx, gy = grid.centres(rr, cc)
+    lon, lat = transformer(grid.crs, _WGS84).transform(gx, gy)
     h = _surface_height(surface, lat, lon)
     p = np.stack(geodesy.geodetic_to_ecef(lat, lon, h), -1)
     u, v = sensor.ground_to_image(pose, p)
     cam = sensor.camera
+    cam_p = np.stack(np.broadcast_arrays(*geodesy.geodetic_to_ecef(pose.lat_deg, pose.lon_deg, pose.h_m)), -1)
+    rng = np.linalg.norm(p - cam_p, axis=-1)
     with np.errstate(invalid="ignore"):
         valid = (np.isfinite(u) & np.isfinite(v) & (u >= -0.5) & (u <= cam.width - 0.5) & (v >= -0.5)
                  & (v <= cam.height - 0.5))
     if occlusion and isinstance(surface, DEM) and valid.any():
         f = locate_dem(sensor, pose, surface, (u[valid], v[valid]))
-        cam_p = np.stack(np.broadcast_arrays(*geodesy.geodetic_to_ecef(pose.lat_deg, pose.lon_deg, pose.h_m)), -1)
-        rng_cell = np.linalg.norm(p[valid] - cam_p, axis=-1)
+        gsd = float(min(abs(grid.res[0]), abs(grid.res[1])))
+        if grid.crs.is_geographic:
+            gsd *= math.pi / 180.0 * 6.37e6
         # the ray through the cell's own pixel stops before reaching the cell: something is in front
-        seen = np.where(f.ok, f.range_m >= rng_cell - max(2.0 * gsd, 1.0), False)
+        seen = np.where(f.ok, f.range_m >= rng[valid] - max(2.0 * gsd, 1.0), False)
         valid[valid] = seen
-    data = np.empty((img.shape[0], rows, cols), dtype=img.dtype)
+    return FramePixels(u, v, np.where(np.isfinite(u), rng, np.nan), valid)
+
+
+def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear", nodata: float = 0) -> np.ndarray:
+    """Every band of ``image`` (bands, H, W) read at the cells' pixels (nearest, bilinear or
+    cubic), nodata where the camera does not see the cell; the image's dtype (integers rounded
+    and clipped)."""
+    if resampling not in RESAMPLING:
+        raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
+    rows, cols = px.valid.shape
+    out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
+    is_int = np.issubdtype(image.dtype, np.integer)
+    info = np.iinfo(image.dtype) if is_int else None
+    from ._backend import get_backend
+
+    if resampling != "cubic" and get_backend() != "numpy":
+        from . import _nb
+
+        _nb.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8),
+                               resampling == "bilinear", is_int, np.asarray(nodata).astype(image.dtype)[()], out)
+        return out
+    from scipy.ndimage import map_coordinates
+
     order = RESAMPLING[resampling]
-    coords = np.stack([np.where(valid, v, -10.0), np.where(valid, u, -10.0)])
-    for b in range(img.shape[0]):
-        band = map_coordinates(img[b].astype(np.float64), coords, order=order, mode="nearest",
-                               prefilter=order > 1)
-        if np.issubdtype(img.dtype, np.integer):
-            info = np.iinfo(img.dtype)
+    valid = px.valid
+    coords = np.stack([np.where(valid, px.v_px, -10.0), np.where(valid, px.u_px, -10.0)])
+    for b in range(image.shape[0]):
+        band = map_coordinates(image[b].astype(np.float64), coords, order=order, mode="nearest", prefilter=order > 1)
+        if is_int:
             band = np.clip(np.rint(band), info.min, info.max)
-        data[b] = np.where(valid, band, nodata).astype(img.dtype)
-    return Ortho(data, valid, transform, out_crs, nodata, res)
+        out[b] = np.where(valid, band, nodata).astype(image.dtype)
+    return out
+
+
+def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str = "utm",
+                 gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0,
+                 occlusion: bool = True, max_cells: int = 40_000_000, edge_samples: int = 16,
+                 grid: OutputGrid | None = None) -> Ortho:
+    """Orthorectify one frame ``image`` ((H, W) or (bands, H, W), or (H, W, bands) with 3-4 bands
+    last, as images load) seen from ``pose`` onto ``surface`` (constant ellipsoidal height, or a
+    DEM) in ``crs`` (see :func:`output_crs`), at ``gsd_m`` metres per cell (default: the native
+    ground sample distance at the image centre; for a geographic CRS the cell is that many metres
+    at the frame centre's latitude), or onto a given ``grid``. Cells outside the footprint, off the
+    DEM, or (``occlusion``, DEM only) hidden by terrain get ``nodata``."""
+    if resampling not in RESAMPLING:
+        raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
+    img = _bands_first(np.asarray(image), sensor)
+    if grid is None:
+        grid = output_grid(sensor, pose, surface, crs=crs, gsd_m=gsd_m, max_cells=max_cells,
+                           edge_samples=edge_samples)
+    px = frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+    data = resample(img, px, resampling=resampling, nodata=nodata)
+    return Ortho(data, px.valid, grid.transform, grid.crs, nodata, grid.res)
 
 
 def _radii(lat_deg: float) -> tuple[float, float]:
@@ -269,7 +434,7 @@ def shortcut_error(ortho: Ortho, sensor: SensorModel, pose: Pose, surface: float
     rectified image, read them back with :func:`bounds_shortcut`, and return the distances."""
     px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
     f = surface_rule(surface).locate(sensor, pose, (px[:, 0], px[:, 1]))
-    x, y = pyproj.Transformer.from_crs(_WGS84, ortho.crs, always_xy=True).transform(f.lon_deg, f.lat_deg)
+    x, y = transformer(_WGS84, ortho.crs).transform(f.lon_deg, f.lat_deg)
     row, col = ortho.pixel_of(x, y)
     lat1, lon1 = bounds_shortcut(ortho, row, col)
     lat2, lon2 = bounds_shortcut(ortho, np.floor(row) + 0.5, np.floor(col) + 0.5)
@@ -277,5 +442,6 @@ def shortcut_error(ortho: Ortho, sensor: SensorModel, pose: Pose, surface: float
                          geodesy.horizontal_distance_m(f.lat_deg, f.lon_deg, lat2, lon2))
 
 
-__all__ = ["GroundGrid", "Ortho", "ShortcutError", "bounds_shortcut", "ground_grid", "native_gsd_m",
-           "orthorectify", "output_crs", "shortcut_error"]
+__all__ = ["FramePixels", "GroundGrid", "Ortho", "OutputGrid", "ShortcutError", "bounds_shortcut", "frame_pixels",
+           "grid_covering", "ground_grid", "native_gsd_m", "orthorectify", "output_crs", "output_grid", "resample",
+           "shortcut_error", "transformer"]

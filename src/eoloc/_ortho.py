@@ -1,0 +1,313 @@
+"""M5 orthorectification by forward projection: the compiled passes over the output cells.
+
+Ground -> image, one output cell at a time (README "Orthorectification"):
+
+1. ``project_cells``: a cell's latitude and longitude, and the camera-frame position of its
+   ellipsoid point and up normal, interpolated bilinearly from nodes every ``step`` cells that
+   pyproj and the exact geodesy computed (the interpolation error is (step * cell)^2 / 8R: 5 µm
+   at 16 cells of 1 m); the DEM's bilinear height there (or the constant surface); the camera
+   frame point c0 + h n; its pinhole projection, the lens distortion (the same
+   ``_kernels.distort`` as every other ground -> pixel path) and its range.
+2. ``rasterize_depth``: a z-buffer at the image's resolution. The cells are the vertices of a
+   mesh of the terrain (two triangles per 2 x 2 cells); every triangle is rasterised at the pixel
+   centres it covers with its interpolated range, the nearest one kept. A triangulated surface
+   covers its image without gaps, so no pixel behind a ridge is left open.
+3. ``mark_visible``: a cell is seen when it lies in the image and its range is no more than the
+   farthest of the z-buffer's at the four pixel centres around its pixel (plus a slack for the
+   mesh's curvature: about one cell's range change, ``range_slack``). A linear surface's range at a point inside a square is at most its
+   largest at the corners, so a cell on the nearest surface always passes, and a cell is hidden
+   only when nearer terrain covers all four: at a silhouette the sub-pixel doubt goes to "seen".
+4. ``sample_bands``: nearest or bilinear sampling of every band at the seen cells' pixels.
+
+Each is plain scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins; the
+numpy reference is :func:`eoloc.rectify.orthorectify_reference`, which reaches the same cells by
+scipy's map_coordinates and decides hiding by each cell's own ray (M4) instead of a z-buffer.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._kernels import compiled, distort, grid_height
+
+N_NODE = 8  # per node: lat_deg, lon_deg, camera-frame ellipsoid point (x, y, z), camera-frame up normal (x, y, z)
+_TRI_EPS = 1e-9  # barycentric slack: a pixel centre on the edge shared by two triangles goes to both
+
+
+def node_count(n_cells: int, step: int) -> int:
+    """Nodes along an axis of n_cells cells: at cells 0, step, 2 step, ..., the last at or past
+    the last cell (at least two)."""
+    return max(-(-(n_cells - 1) // step) + 1, 2)
+
+
+def node_index(n_cells: int, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell along one axis: the node before it and the fraction of the way to the next."""
+    k = np.arange(n_cells) / step
+    i0 = np.minimum(np.floor(k).astype(np.int64), node_count(n_cells, step) - 2)
+    return i0, k - i0
+
+
+@compiled()
+def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, lat0, lon0, dlat, dlon, h_const, use_dem, fx, fy, cx,
+                  cy, dist_kind, dist_params, r2_max, u, v, rng):
+    """Pass 1: every cell -> pixel (u, v) and range (m); NaN where it has no ground (off the DEM,
+    a void) or does not lie in front of the camera within the lens model's field (r2_max: the
+    largest squared ideal normalised radius the image reaches)."""
+    rows = u.shape[0]
+    cols = u.shape[1]
+    n_nodes = nodes.shape[1]
+    line = np.empty((n_nodes, N_NODE))  # the nodes interpolated to this row
+    h_row = np.empty(cols)
+    for r in range(rows):
+        i = row_i0[r]
+        a = row_a[r]
+        for j in range(n_nodes):
+            for k in range(N_NODE):
+                line[j, k] = (1.0 - a) * nodes[i, j, k] + a * nodes[i + 1, j, k]
+        # three loops: the DEM's lookups (gathers) kept out of the two that LLVM vectorises
+        for c in range(cols):
+            j = col_i0[c]
+            b = col_a[c]
+            u[r, c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # latitude, for now
+            v[r, c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # longitude
+        if use_dem:
+            for c in range(cols):
+                h_row[c], inside = grid_height(dem_z, lat0, lon0, dlat, dlon, u[r, c], v[r, c])
+        else:
+            h_row[:] = h_const
+        for c in range(cols):
+            j = col_i0[c]
+            b = col_a[c]
+            h = h_row[c]
+            X = (1.0 - b) * (line[j, 2] + h * line[j, 5]) + b * (line[j + 1, 2] + h * line[j + 1, 5])
+            Y = (1.0 - b) * (line[j, 3] + h * line[j, 6]) + b * (line[j + 1, 3] + h * line[j + 1, 6])
+            Z = (1.0 - b) * (line[j, 4] + h * line[j, 7]) + b * (line[j + 1, 4] + h * line[j + 1, 7])
+            xn = X / Z
+            yn = Y / Z
+            ok = Z > 0.0 and xn * xn + yn * yn <= r2_max  # False for NaN (no ground)
+            if dist_kind != 0:
+                xn, yn = distort(dist_kind, dist_params, xn, yn)
+            u[r, c] = fx * xn + cx if ok else np.nan
+            v[r, c] = fy * yn + cy if ok else np.nan
+            rng[r, c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
+
+
+@compiled(inline=True)
+def cover(zbuf, x, y, ua, va, da, ub, vb, db, uc, vc, dc, inv):
+    """Keep the nearer of the z-buffer's range at pixel centre (x, y) and triangle abc's there, if
+    the triangle covers it (inv: 1 / the triangle's doubled signed area)."""
+    wb = ((x - ua) * (vc - va) - (uc - ua) * (y - va)) * inv
+    wc = ((ub - ua) * (y - va) - (x - ua) * (vb - va)) * inv
+    wa = 1.0 - wb - wc
+    if wa >= -_TRI_EPS and wb >= -_TRI_EPS and wc >= -_TRI_EPS:
+        z = wa * da + wb * db + wc * dc
+        if z < zbuf[y, x]:
+            zbuf[y, x] = z
+
+
+@compiled()
+def raster_quad(zbuf, u00, v00, d00, u01, v01, d01, u10, v10, d10, u11, v11, d11):
+    """Rasterise the two triangles (00, 01, 11) and (00, 11, 10) of a mesh quad into the z-buffer
+    (either may be missing: a NaN range) at the pixel centres (integer u, v) they cover."""
+    height = zbuf.shape[0]
+    width = zbuf.shape[1]
+    t1 = (d01 - d01) == 0.0
+    t2 = (d10 - d10) == 0.0
+    umin = min(u00, u11, u01 if t1 else u00, u10 if t2 else u00)
+    umax = max(u00, u11, u01 if t1 else u00, u10 if t2 else u00)
+    vmin = min(v00, v11, v01 if t1 else v00, v10 if t2 else v00)
+    vmax = max(v00, v11, v01 if t1 else v00, v10 if t2 else v00)
+    x0 = max(int(np.ceil(umin)), 0)
+    x1 = min(int(np.floor(umax)), width - 1)
+    y0 = max(int(np.ceil(vmin)), 0)
+    y1 = min(int(np.floor(vmax)), height - 1)
+    if x0 > x1 or y0 > y1:  # no pixel centre inside: the common case for cells the size of a pixel
+        return
+    a1 = (u01 - u00) * (v11 - v00) - (u11 - u00) * (v01 - v00)
+    a2 = (u11 - u00) * (v10 - v00) - (u10 - u00) * (v11 - v00)
+    t1 = t1 and a1 != 0.0
+    t2 = t2 and a2 != 0.0
+    inv1 = 1.0 / a1 if t1 else 0.0
+    inv2 = 1.0 / a2 if t2 else 0.0
+    for y in range(y0, y1 + 1):
+        for x in range(x0, x1 + 1):
+            if t1:
+                cover(zbuf, x, y, u00, v00, d00, u01, v01, d01, u11, v11, d11, inv1)
+            if t2:
+                cover(zbuf, x, y, u00, v00, d00, u11, v11, d11, u10, v10, d10, inv2)
+
+
+@compiled()
+def fold_tiles(u, v, rng, tile_px, front, tiles):
+    """Mark the image tiles (tile_px square, one tile of margin around) that the mesh's back
+    faces touch: triangles whose doubled signed area in the image has the sign opposite to
+    ``front`` (+1: counter-clockwise in (u, v) faces the camera), and return (how many face each
+    way). The caller checks that the front faces are the majority.
+
+    Terrain hides terrain only where the mesh folds over in the image: a point of the image that
+    several layers of the surface cover is covered by a back-facing triangle too (the layers'
+    orientations add up to the image's one), so the z-buffer is needed in the back faces' tiles
+    only."""
+    rows = u.shape[0]
+    cols = u.shape[1]
+    n_ty = tiles.shape[0]
+    n_tx = tiles.shape[1]
+    n_front = 0
+    n_back = 0
+    for r in range(rows - 1):
+        for c in range(cols - 1):
+            d00 = rng[r, c]
+            d11 = rng[r + 1, c + 1]
+            if not ((d00 - d00) == 0.0 and (d11 - d11) == 0.0):
+                continue
+            u00 = u[r, c]
+            v00 = v[r, c]
+            u11 = u[r + 1, c + 1]
+            v11 = v[r + 1, c + 1]
+            for t in range(2):
+                ro = rng[r, c + 1] if t == 0 else rng[r + 1, c]
+                if not (ro - ro) == 0.0:
+                    continue
+                uo = u[r, c + 1] if t == 0 else u[r + 1, c]
+                vo = v[r, c + 1] if t == 0 else v[r + 1, c]
+                area = (uo - u00) * (v11 - v00) - (u11 - u00) * (vo - v00)
+                if t == 1:
+                    area = -area  # (00, 11, 10) walks the other way round than (00, 01, 11)
+                if area * front >= 0.0:
+                    n_front += 1
+                    continue
+                n_back += 1
+                tx0 = max(int(np.floor(min(u00, u11, uo) / tile_px)) - 1, 0)
+                tx1 = min(int(np.floor(max(u00, u11, uo) / tile_px)) + 1, n_tx - 1)
+                ty0 = max(int(np.floor(min(v00, v11, vo) / tile_px)) - 1, 0)
+                ty1 = min(int(np.floor(max(v00, v11, vo) / tile_px)) + 1, n_ty - 1)
+                for ty in range(ty0, ty1 + 1):
+                    for tx in range(tx0, tx1 + 1):
+                        tiles[ty, tx] = 1
+    return n_front, n_back
+
+
+@compiled()
+def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
+    """Pass 2: the z-buffer (image rows x columns, filled with +inf by the caller), in the marked
+    tiles, of the mesh whose vertices are the cells (triangles (r, c) (r, c+1) (r+1, c+1) and
+    (r, c) (r+1, c+1) (r+1, c), where all three vertices project)."""
+    rows = u.shape[0]
+    cols = u.shape[1]
+    n_ty = tiles.shape[0]
+    n_tx = tiles.shape[1]
+    for r in range(rows - 1):
+        for c in range(cols - 1):
+            d00 = rng[r, c]
+            d11 = rng[r + 1, c + 1]
+            if (d00 - d00) == 0.0 and (d11 - d11) == 0.0:
+                tx = min(max(int(np.floor(u[r, c] / tile_px)), 0), n_tx - 1)
+                ty = min(max(int(np.floor(v[r, c] / tile_px)), 0), n_ty - 1)
+                tx1 = min(max(int(np.floor(u[r + 1, c + 1] / tile_px)), 0), n_tx - 1)
+                ty1 = min(max(int(np.floor(v[r + 1, c + 1] / tile_px)), 0), n_ty - 1)
+                if tiles[ty, tx] or tiles[ty1, tx1]:
+                    raster_quad(zbuf, u[r, c], v[r, c], d00, u[r, c + 1], v[r, c + 1], rng[r, c + 1], u[r + 1, c],
+                                v[r + 1, c], rng[r + 1, c], u[r + 1, c + 1], v[r + 1, c + 1], d11)
+
+
+@compiled()
+def neighbour_difference(x, r, c, dr, dc):
+    """x[r + dr, c + dc] - x[r, c] (one-sided at the grid's edge: the other side; NaN if none)."""
+    rows = x.shape[0]
+    cols = x.shape[1]
+    r1 = r + dr
+    c1 = c + dc
+    if r1 < 0 or r1 >= rows or c1 < 0 or c1 >= cols:
+        r1 = r - dr
+        c1 = c - dc
+        if r1 < 0 or r1 >= rows or c1 < 0 or c1 >= cols:
+            return np.nan
+        return x[r, c] - x[r1, c1]
+    return x[r1, c1] - x[r, c]
+
+
+@compiled()
+def range_slack(u, v, rng, r, c):
+    """How much farther than the four pixel centres around its pixel a cell on the nearest
+    surface may lie (the mesh's curvature within a pixel): the largest range change to a
+    neighbouring cell, times the pixels the cell spans if it is smaller than 1.5 px (NaN where no
+    neighbour projects: the caller then gives the cell the benefit of the doubt). Bounded by the
+    cells' own spacing, not by a range gradient: at a fold of the image, where the gradient is
+    unbounded, it would excuse any hidden cell."""
+    step = np.nan
+    size = 0.0
+    for k in range(4):
+        dr = 1 if k == 0 else (-1 if k == 1 else 0)
+        dc = 1 if k == 2 else (-1 if k == 3 else 0)
+        dd = neighbour_difference(rng, r, c, dr, dc)
+        du = neighbour_difference(u, r, c, dr, dc)
+        dv = neighbour_difference(v, r, c, dr, dc)
+        if (dd - dd) == 0.0:
+            step = abs(dd) if not (step >= abs(dd)) else step
+            size = max(size, np.sqrt(du * du + dv * dv))
+    return step * max(1.0, 1.5 / size) if size > 0.0 else step
+
+
+@compiled()
+def mark_visible(u, v, rng, zbuf, use_zbuf, width, height, valid):
+    """Pass 3: valid[r, c] = 1 where the cell lies in the image (its pixel within the outer edges
+    of the edge pixels) and, with the z-buffer, nearer terrain does not cover its pixel."""
+    rows = u.shape[0]
+    cols = u.shape[1]
+    for r in range(rows):
+        for c in range(cols):
+            uc = u[r, c]
+            vc = v[r, c]
+            seen = uc >= -0.5 and uc <= width - 0.5 and vc >= -0.5 and vc <= height - 0.5
+            if seen and use_zbuf:
+                x0 = min(max(int(np.floor(uc)), 0), width - 1)
+                y0 = min(max(int(np.floor(vc)), 0), height - 1)
+                x1 = min(x0 + 1, width - 1)
+                y1 = min(y0 + 1, height - 1)
+                z = max(zbuf[y0, x0], zbuf[y0, x1], zbuf[y1, x0], zbuf[y1, x1])
+                d = rng[r, c]
+                if d > z:
+                    slack = range_slack(u, v, rng, r, c)
+                    seen = not (d > z + slack + 1e-4 * d + 0.01)  # NaN slack: seen
+            valid[r, c] = 1 if seen else 0
+
+
+@compiled()
+def sample_bands(image, u, v, valid, bilinear, is_int, nodata, out):
+    """Pass 4: out[b, r, c] = image band b at (u, v) (bilinear, or nearest) where valid, else
+    nodata; integer outputs rounded. Pixel centres at integers; reads past
+    the last centre take the edge pixel's value."""
+    bands = image.shape[0]
+    height = image.shape[1]
+    width = image.shape[2]
+    rows = u.shape[0]
+    cols = u.shape[1]
+    for r in range(rows):
+        for c in range(cols):
+            if valid[r, c] == 0:
+                for b in range(bands):
+                    out[b, r, c] = nodata
+                continue
+            x = min(max(u[r, c], 0.0), width - 1.0)
+            y = min(max(v[r, c], 0.0), height - 1.0)
+            if bilinear:
+                x0 = min(int(x), width - 2) if width > 1 else 0
+                y0 = min(int(y), height - 2) if height > 1 else 0
+                ax = x - x0
+                ay = y - y0
+                x1 = min(x0 + 1, width - 1)
+                y1 = min(y0 + 1, height - 1)
+                for b in range(bands):
+                    val = ((1.0 - ay) * ((1.0 - ax) * image[b, y0, x0] + ax * image[b, y0, x1])
+                           + ay * ((1.0 - ax) * image[b, y1, x0] + ax * image[b, y1, x1]))
+                    if is_int:  # a weighted mean of values in range stays in range: rounding is enough
+                        val = np.floor(val + 0.5)
+                    out[b, r, c] = val
+            else:
+                xi = int(np.floor(x + 0.5))
+                yi = int(np.floor(y + 0.5))
+                for b in range(bands):
+                    out[b, r, c] = image[b, yi, xi]
+
+
+__all__ = ["N_NODE", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells", "rasterize_depth", "sample_bands"]
