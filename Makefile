@@ -12,6 +12,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e ".[test]"
+	# orthority, the peer of the ortho test and bench: without its deps (it asks for opencv-python,
+	# which clashes with our opencv-python-headless; its other deps are in the test extra)
+	$(BIN)/python -m pip install --quiet --no-deps "orthority==0.7.0"
 	touch $(STAMP)
 
 demo: $(STAMP)

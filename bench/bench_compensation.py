@@ -3,9 +3,7 @@
 Per-target cost of applying a compensation model (features from the pose chain + prediction +
 range flags) next to the fix itself, with a gradient-boosted tree ensemble (scikit-learn
 HistGradientBoostingRegressor, the peer family) predicting the same errors in the same run.
-Orthorectification: one 1280 x 720 frame onto a DEM at its native GSD, with rasterio's
-``reproject`` warping the same frame by its own ground-control-point grid (GDAL's GCP
-polynomial warp, the usual tool; no terrain, no occlusion) as the peer.
+(Orthorectification moved to bench/bench_ortho.py, with orthority and GDAL's GCP warp as peers.)
 
     python bench/bench_compensation.py [--n 1000000]
 """
@@ -54,44 +52,7 @@ def main(n: int) -> list[str]:
             f"the fix itself (M3) {t_fix * ns:.0f} ns/fix", None),
         row("  of which features (rays again, NED, heights)", f"{t_feat * ns:.0f} ns/fix", "", None),
     ]
-    lines.append(_ortho_row())
     return lines
-
-
-def _ortho_row() -> str:
-    import warnings
-
-    import rasterio
-    from rasterio.control import GroundControlPoint
-    from rasterio.errors import NotGeoreferencedWarning
-    from rasterio.warp import Resampling, reproject
-
-    from eoloc import rectify as R
-
-    sensor = SensorModel(Camera.from_hfov(30.0, 1280, 720), AzElGimbal())
-    tr = calibration_flights(sensor, n_flights=1, looks_per_flight=10, seed=0)
-    pose = Pose(35.09, 112.7, 2400.0, 10.0, 1.0, -2.0, (5.0, -50.0))
-    img = np.random.default_rng(0).integers(0, 255, (720, 1280), dtype=np.uint8)
-    t_o = best_time(lambda: R.orthorectify(img, sensor, pose, tr.dem), repeat=3)
-    o = R.orthorectify(img, sensor, pose, tr.dem)
-    grid = R.ground_grid(sensor, pose, tr.dem, step_px=80)
-    f = grid.fixes.flat()
-    gcps = [GroundControlPoint(row=float(v), col=float(u), x=float(x), y=float(y))
-            for u, v, x, y, ok in zip(grid.u_px.ravel(), grid.v_px.ravel(), f.lon_deg, f.lat_deg, f.ok, strict=True)
-            if ok]
-    dst = np.zeros(o.shape, np.uint8)
-
-    def peer():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            reproject(img, dst, gcps=gcps, src_crs="EPSG:4326", dst_crs=rasterio.crs.CRS.from_wkt(o.crs.to_wkt()),
-                      dst_transform=o.transform, resampling=Resampling.bilinear)
-
-    t_p = best_time(peer, repeat=3)
-    cells = o.shape[0] * o.shape[1]
-    return row(f"orthorectify 1280x720 on a DEM, {cells / 1e6:.1f} M cells (+occlusion)",
-               f"{t_o:.2f} s ({cells / t_o / 1e6:.1f} M cells/s)", f"GDAL GCP warp, no terrain {t_p:.2f} s",
-               t_p / t_o)
 
 
 if __name__ == "__main__":

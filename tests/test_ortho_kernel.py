@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import eoloc
-
 from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, geodesy, locate_dem, open_dem
 from eoloc import rectify as R
 from eoloc._backend import use_backend
@@ -129,19 +128,47 @@ def test_no_fold_means_no_hiding_and_the_camera_position_is_the_range_origin():
 
 
 def test_resampling_matches_scipy():
-    """Bilinear and nearest sampling of the compiled pass equal scipy's map_coordinates (the
-    reference path) on a 16-bit and an 8-bit 3-band frame, to one count (rounding of .5)."""
+    """Sampling against scipy's map_coordinates (the reference path): nearest and bilinear of
+    float images through eoloc's compiled sampler to 1e-5; nearest of integer images exactly
+    (to one count: rounding of .5); bilinear of 8- and 16-bit images is OpenCV's remap, which
+    places the sample to 1/32 px: scipy at the position rounded so, to one count."""
     sensor = SensorModel(CAM, AzElGimbal())
     rng = np.random.default_rng(4)
     grid = R.output_grid(sensor, POSE, _hills(), gsd_m=3.0)
     px = R.frame_pixels(sensor, POSE, _hills(), grid)
+    q = R.FramePixels(np.round(px.u_px * 32) / 32, np.round(px.v_px * 32) / 32, px.range_m, px.valid, px.map_x,
+                      px.map_y)
     for img in (rng.integers(0, 65535, (1, 300, 400), dtype=np.uint16),
-                rng.integers(0, 255, (3, 300, 400), dtype=np.uint8), rng.random((2, 300, 400)).astype(np.float32)):
+                rng.integers(0, 255, (3, 300, 400), dtype=np.uint8), rng.random((2, 300, 400)).astype(np.float32),
+                rng.integers(-30000, 30000, (5, 300, 400), dtype=np.int16)):
         for how in ("bilinear", "nearest"):
             fast = R.resample(img, px, resampling=how, nodata=7)
+            opencv = how == "bilinear" and img.dtype.name in R.REMAP_DTYPES
             with use_backend("numpy"):
-                ref = R.resample(img, px, resampling=how, nodata=7)
-            assert fast.dtype == img.dtype
+                ref = R.resample(img, q if opencv else px, resampling=how, nodata=7)
+            assert fast.dtype == img.dtype and fast.shape == ref.shape
             tol = 1e-5 if img.dtype == np.float32 else 1
-            assert np.max(np.abs(fast.astype(float) - ref.astype(float))) <= tol
+            assert np.max(np.abs(fast.astype(float) - ref.astype(float))) <= tol, (img.dtype, how)
             assert (fast[:, ~px.valid] == 7).all()
+
+
+def test_orthority_agrees_where_both_see_the_ground():
+    """bench/bench_ortho.py's frame (1280 x 720 over Longs Peak, ~1 M cells at 2.25 m): orthority's
+    frame camera, fitted to eoloc's projection by OpenCV's PnP (residual < 0.1 px: the flat world
+    it works in costs that little here), puts every cell both see within half an output pixel of
+    eoloc's pixel for 99 % of cells (measured p99 0.36, median 0.05)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "bench"))
+    import bench_ortho as B
+
+    dem, grid, _ = B.scene(2.25)
+    px = R.frame_pixels(B.SENSOR, B.POSE, dem, grid)
+    x, y, z = B.cell_world(grid, dem)
+    fc, rms = B.orthority_camera(px, x, y, z)
+    assert rms < 0.1
+    ji = fc.world_to_pixel(np.stack([x.ravel(), y.ravel(), z.ravel()]))
+    uo, vo = ji[0].reshape(grid.shape), ji[1].reshape(grid.shape)
+    d = B.agreement_px(px, uo, vo)
+    assert d.size > 500_000
+    assert np.percentile(d, 99) < 0.5 and np.median(d) < 0.1

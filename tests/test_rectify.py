@@ -76,14 +76,15 @@ def _corner_errors(ortho: R.Ortho, x0: float, y0: float) -> np.ndarray:
 
 def test_checkerboard_over_a_dem_in_utm_within_one_output_pixel(tmp_path):
     """SPEC M5 must-show: a checkerboard seen obliquely over hills, rectified onto the DEM in UTM at
-    1 m: every corner OpenCV finds is within one output pixel of truth (measured 0.2 px); the
+    1 m: every corner OpenCV finds is within half an output pixel of truth (measured 0.14 px, the
+    compiled forward projection with OpenCV's bilinear remap; issue 22's bar); the
     GeoTIFF opens in rasterio with EPSG:32649 and the transform we computed."""
     crs = R.output_crs("utm", 35.1, 112.7)
     assert crs.to_epsg() == 32649
     img, x0, y0 = _render(_dem(), crs)
     ortho = R.orthorectify(img, SENSOR, POSE, _dem(), crs="utm", gsd_m=1.0)
     err = _corner_errors(ortho, x0, y0)
-    assert err.max() < 1.0, err
+    assert err.max() < 0.5, err
     path = write_ortho(ortho, tmp_path / "o.tif")
     with rasterio.open(path) as ds:
         assert ds.crs.to_epsg() == 32649
@@ -101,7 +102,7 @@ def test_checkerboard_on_the_ellipsoid_in_gauss_kruger():
     assert p["Longitude of natural origin"] == 114 and p["False easting"] == 38_500_000
     img, x0, y0 = _render(400.0, crs)
     ortho = R.orthorectify(img, SENSOR, POSE, 400.0, crs="gk3", gsd_m=1.0)
-    assert _corner_errors(ortho, x0, y0).max() < 1.0
+    assert _corner_errors(ortho, x0, y0).max() < 0.5  # measured 0.19 px
 
 
 def test_any_band_count_and_dtype():

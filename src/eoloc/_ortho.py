@@ -8,16 +8,21 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    at 16 cells of 1 m); the DEM's bilinear height there (or the constant surface); the camera
    frame point c0 + h n; its pinhole projection, the lens distortion (the same
    ``_kernels.distort`` as every other ground -> pixel path) and its range.
-2. ``rasterize_depth``: a z-buffer at the image's resolution. The cells are the vertices of a
-   mesh of the terrain (two triangles per 2 x 2 cells); every triangle is rasterised at the pixel
-   centres it covers with its interpolated range, the nearest one kept. A triangulated surface
-   covers its image without gaps, so no pixel behind a ridge is left open.
-3. ``mark_visible``: a cell is seen when it lies in the image and its range is no more than the
-   farthest of the z-buffer's at the four pixel centres around its pixel (plus a slack for the
-   mesh's curvature: about one cell's range change, ``range_slack``). A linear surface's range at a point inside a square is at most its
-   largest at the corners, so a cell on the nearest surface always passes, and a cell is hidden
-   only when nearer terrain covers all four: at a silhouette the sub-pixel doubt goes to "seen".
-4. ``sample_bands``: nearest or bilinear sampling of every band at the seen cells' pixels.
+2. ``fold_tiles``: terrain hides terrain only where the mesh of the cells (two triangles per
+   2 x 2 cells) folds over in the image, i.e. near its back-facing triangles; the image tiles
+   they touch are marked. No back face: nothing is hidden and the z-buffer is skipped.
+3. ``rasterize_depth``: a z-buffer at the image's resolution, filled in the blocks of cells that
+   meet a marked tile: every triangle rasterised at the pixel centres it covers with its
+   interpolated range, the nearest kept. A triangulated surface covers its image without gaps,
+   so no pixel behind a ridge is left open.
+4. ``mark_visible``: a cell is seen when it lies in the image and its range is no more than the
+   farthest of the z-buffer's at the four pixel centres around its pixel, plus a slack for the
+   mesh's curvature (about one cell's range change, ``range_slack``). A linear surface's range at
+   a point inside a square is at most its largest at the corners, so a cell on the nearest
+   surface passes, and a cell is hidden only when nearer terrain covers all four: at a silhouette
+   the sub-cell doubt goes to "seen". It also writes the sampling maps for OpenCV's remap.
+5. ``sample_bands``: nearest or exact bilinear sampling (float images; 8/16-bit bilinear goes
+   through OpenCV's remap, eoloc.rectify.resample).
 
 Each is plain scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins; the
 numpy reference is :func:`eoloc.rectify.orthorectify_reference`, which reaches the same cells by
@@ -188,26 +193,52 @@ def fold_tiles(u, v, rng, tile_px, front, tiles):
 
 
 @compiled()
-def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
+def rasterize_depth(u, v, rng, tile_px, tiles, block, zbuf):
     """Pass 2: the z-buffer (image rows x columns, filled with +inf by the caller), in the marked
     tiles, of the mesh whose vertices are the cells (triangles (r, c) (r, c+1) (r+1, c+1) and
-    (r, c) (r+1, c+1) (r+1, c), where all three vertices project)."""
+    (r, c) (r+1, c+1) (r+1, c), where all three vertices project). The cells are taken in blocks
+    of ``block`` x ``block``; a block whose image bounding box meets no marked tile is skipped."""
     rows = u.shape[0]
     cols = u.shape[1]
     n_ty = tiles.shape[0]
     n_tx = tiles.shape[1]
-    for r in range(rows - 1):
-        for c in range(cols - 1):
-            d00 = rng[r, c]
-            d11 = rng[r + 1, c + 1]
-            if (d00 - d00) == 0.0 and (d11 - d11) == 0.0:
-                tx = min(max(int(np.floor(u[r, c] / tile_px)), 0), n_tx - 1)
-                ty = min(max(int(np.floor(v[r, c] / tile_px)), 0), n_ty - 1)
-                tx1 = min(max(int(np.floor(u[r + 1, c + 1] / tile_px)), 0), n_tx - 1)
-                ty1 = min(max(int(np.floor(v[r + 1, c + 1] / tile_px)), 0), n_ty - 1)
-                if tiles[ty, tx] or tiles[ty1, tx1]:
-                    raster_quad(zbuf, u[r, c], v[r, c], d00, u[r, c + 1], v[r, c + 1], rng[r, c + 1], u[r + 1, c],
-                                v[r + 1, c], rng[r + 1, c], u[r + 1, c + 1], v[r + 1, c + 1], d11)
+    # summed-area table of the marked tiles: any marked tile in a box in O(1)
+    sat = np.zeros((n_ty + 1, n_tx + 1), np.int64)
+    for ty in range(n_ty):
+        for tx in range(n_tx):
+            sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
+    for br in range(0, rows - 1, block):
+        for bc in range(0, cols - 1, block):
+            r1 = min(br + block + 1, rows)
+            c1 = min(bc + block + 1, cols)
+            umin = np.inf
+            umax = -np.inf
+            vmin = np.inf
+            vmax = -np.inf
+            for r in range(br, r1):
+                for c in range(bc, c1):
+                    uc = u[r, c]
+                    vc = v[r, c]
+                    if (uc - uc) == 0.0:
+                        umin = min(umin, uc)
+                        umax = max(umax, uc)
+                        vmin = min(vmin, vc)
+                        vmax = max(vmax, vc)
+            if not umin <= umax:
+                continue
+            tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
+            tx1 = min(max(int(np.floor(umax / tile_px)), 0), n_tx - 1)
+            ty0 = min(max(int(np.floor(vmin / tile_px)), 0), n_ty - 1)
+            ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
+            if sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] == 0:
+                continue
+            for r in range(br, r1 - 1):
+                for c in range(bc, c1 - 1):
+                    d00 = rng[r, c]
+                    d11 = rng[r + 1, c + 1]
+                    if (d00 - d00) == 0.0 and (d11 - d11) == 0.0:
+                        raster_quad(zbuf, u[r, c], v[r, c], d00, u[r, c + 1], v[r, c + 1], rng[r, c + 1], u[r + 1, c],
+                                    v[r + 1, c], rng[r + 1, c], u[r + 1, c + 1], v[r + 1, c + 1], d11)
 
 
 @compiled()
@@ -249,9 +280,11 @@ def range_slack(u, v, rng, r, c):
 
 
 @compiled()
-def mark_visible(u, v, rng, zbuf, use_zbuf, width, height, valid):
+def mark_visible(u, v, rng, zbuf, use_zbuf, width, height, valid, map_x, map_y):
     """Pass 3: valid[r, c] = 1 where the cell lies in the image (its pixel within the outer edges
-    of the edge pixels) and, with the z-buffer, nearer terrain does not cover its pixel."""
+    of the edge pixels) and, with the z-buffer, nearer terrain does not cover its pixel; and the
+    sampling maps OpenCV's remap takes (float32): the pixel, clamped to the outermost pixel
+    centres (a read past them takes the edge pixel), or -16 (outside: nodata) where not seen."""
     rows = u.shape[0]
     cols = u.shape[1]
     for r in range(rows):
@@ -270,6 +303,8 @@ def mark_visible(u, v, rng, zbuf, use_zbuf, width, height, valid):
                     slack = range_slack(u, v, rng, r, c)
                     seen = not (d > z + slack + 1e-4 * d + 0.01)  # NaN slack: seen
             valid[r, c] = 1 if seen else 0
+            map_x[r, c] = min(max(uc, 0.0), width - 1.0) if seen else -16.0
+            map_y[r, c] = min(max(vc, 0.0), height - 1.0) if seen else -16.0
 
 
 @compiled()
@@ -310,4 +345,5 @@ def sample_bands(image, u, v, valid, bilinear, is_int, nodata, out):
                     out[b, r, c] = image[b, yi, xi]
 
 
-__all__ = ["N_NODE", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells", "rasterize_depth", "sample_bands"]
+__all__ = ["N_NODE", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells", "rasterize_depth",
+           "sample_bands"]

@@ -215,12 +215,17 @@ NODE_STEP = 16  # cells between the nodes where pyproj and the exact geodesy are
 @dataclass(frozen=True)
 class FramePixels:
     """Where every cell of an output grid falls in a frame: pixel (u, v) and range (m), NaN
-    without ground or behind the camera; ``valid`` where the camera sees the cell."""
+    without ground or behind the camera; ``valid`` where the camera sees the cell; ``map_x``,
+    ``map_y``: OpenCV remap's float32 maps (the seen cells' pixels clamped to the outermost pixel
+    centres, -16 elsewhere: outside the image, nodata)."""
 
     u_px: np.ndarray
     v_px: np.ndarray
     range_m: np.ndarray
     valid: np.ndarray
+
+    map_x: np.ndarray
+    map_y: np.ndarray
 
 
 def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: OutputGrid, *,
@@ -280,10 +285,11 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
             tiles[:] = 0
             n_back, n_front = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, -1.0, tiles)
         if n_back:
-            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, zbuf)
+            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, FOLD_TILE_PX, zbuf)
     valid = np.empty((rows, cols), np.uint8)
-    _nb.ortho_mark_visible(u, v, rng, zbuf, use_zbuf, cam.width, cam.height, valid)
-    return FramePixels(u, v, rng, valid.view(bool))
+    map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
+    _nb.ortho_mark_visible(u, v, rng, zbuf, use_zbuf, cam.width, cam.height, valid, map_x, map_y)
+    return FramePixels(u, v, rng, valid.view(bool), map_x, map_y)
 
 
 def _ideal_radius2(cam, focal_scale: float) -> float:
@@ -323,29 +329,47 @@ def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DE
         # the ray through the cell's own pixel stops before reaching the cell: something is in front
         seen = np.where(f.ok, f.range_m >= rng[valid] - max(2.0 * gsd, 1.0), False)
         valid[valid] = seen
-    return FramePixels(u, v, np.where(np.isfinite(u), rng, np.nan), valid)
+    map_x = np.where(valid, np.clip(u, 0.0, cam.width - 1.0), -16.0).astype(np.float32)
+    map_y = np.where(valid, np.clip(v, 0.0, cam.height - 1.0), -16.0).astype(np.float32)
+    return FramePixels(u, v, np.where(np.isfinite(u), rng, np.nan), valid, map_x, map_y)
+
+
+REMAP_DTYPES = ("uint8", "uint16", "int16")  # integer images OpenCV's remap samples (float: eoloc's exact sampler)
 
 
 def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear", nodata: float = 0) -> np.ndarray:
     """Every band of ``image`` (bands, H, W) read at the cells' pixels (nearest, bilinear or
     cubic), nodata where the camera does not see the cell; the image's dtype (integers rounded
-    and clipped)."""
+    and clipped). Bilinear on 8- and 16-bit images is OpenCV's remap (SIMD, fixed point: the
+    position to 1/32 px, as orthority and GDAL's warper do); float images, nearest and other
+    integer types go through eoloc's compiled sampler (exact weights), cubic through scipy."""
     if resampling not in RESAMPLING:
         raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
-    rows, cols = px.valid.shape
-    out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
-    is_int = np.issubdtype(image.dtype, np.integer)
-    info = np.iinfo(image.dtype) if is_int else None
     from ._backend import get_backend
 
+    rows, cols = px.valid.shape
+    is_int = np.issubdtype(image.dtype, np.integer)
+    fill = np.asarray(nodata).astype(image.dtype)[()]
+    if resampling == "bilinear" and image.dtype.name in REMAP_DTYPES:
+        import cv2
+
+        out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
+        for b0 in range(0, image.shape[0], 4):  # remap takes up to 4 channels at once
+            chunk = np.ascontiguousarray(np.moveaxis(image[b0:b0 + 4], 0, -1))
+            got = cv2.remap(chunk, px.map_x, px.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                            borderValue=(float(fill),) * 4)
+            out[b0:b0 + 4] = got[None] if got.ndim == 2 else np.moveaxis(got, -1, 0)
+        return out
+    out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
     if resampling != "cubic" and get_backend() != "numpy":
         from . import _nb
 
         _nb.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8),
-                               resampling == "bilinear", is_int, np.asarray(nodata).astype(image.dtype)[()], out)
+                               resampling == "bilinear", is_int, fill, out)
         return out
     from scipy.ndimage import map_coordinates
 
+    info = np.iinfo(image.dtype) if is_int else None
     order = RESAMPLING[resampling]
     valid = px.valid
     coords = np.stack([np.where(valid, px.v_px, -10.0), np.where(valid, px.u_px, -10.0)])
