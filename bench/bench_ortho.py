@@ -25,7 +25,6 @@ back to the ground through the local Jacobian of the cell -> pixel map, in outpu
 
 from __future__ import annotations
 
-import os
 import tempfile
 import warnings
 from pathlib import Path
@@ -114,7 +113,6 @@ def main(gsd_m: float) -> list[str]:
     from eoloc.io.raster import write_dem, write_ortho
 
     cv2.setNumThreads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     dem, grid, img = scene(gsd_m)
     cells = grid.shape[0] * grid.shape[1]
     px = R.frame_pixels(SENSOR, POSE, dem, grid)

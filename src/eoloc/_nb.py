@@ -165,22 +165,20 @@ try:
     # one ray at a time: the fast path, and the exact one where it is undecided (a branch)
     _g["stop_at_ellipsoid"] = njit(**_JIT)(
         pytypes.FunctionType(K.stop_at_ellipsoid_scalar.__code__, _g, "stop_at_ellipsoid"))
-    # the M4 march: its helpers compiled with the kernels' twins in their globals
-    _gm = dict(vars(M))
-    _gm.update({name: _g[name] for name in (*_kernels, "pick", "_floor_index", "sincos", "atan2")})
-    for _name in _marked(M):
-        _f = getattr(M, _name)
-        _gm[_name] = njit(**_JIT)(pytypes.FunctionType(_f.__code__, _gm, _name, _f.__defaults__))
-    _march_ray = _gm["march_ray"]
-    # M5 orthorectification: the passes over the output cells, with the kernels' twins
-    _go = dict(vars(O))
-    _go.update({name: _g[name] for name in (*_kernels, "pick", "_floor_index", "sincos", "atan2")})
-    for _name, _how in _marked(O).items():
-        _f = getattr(O, _name)
-        if _f.__module__ != O.__name__:
-            continue  # a kernel it imports: its twin is already in _go
-        _opts = {"forceinline": True} if _how == "inline" else {}
-        _go[_name] = njit(**_opts, **_JIT)(pytypes.FunctionType(_f.__code__, _go, _name, _f.__defaults__))
+    def _with_twins(module) -> dict:
+        """A driver module's own marked functions compiled with the kernels' twins in their
+        globals (the kernels it imports are the twins themselves, not compiled again)."""
+        ns = dict(vars(module))
+        ns.update({name: _g[name] for name in (*_kernels, "pick", "_floor_index", "sincos", "atan2")})
+        for name, how in _marked(module).items():
+            fn = getattr(module, name)
+            if fn.__module__ == module.__name__:
+                opts = {"forceinline": True} if how == "inline" else {}
+                ns[name] = njit(**opts, **_JIT)(pytypes.FunctionType(fn.__code__, ns, name, fn.__defaults__))
+        return ns
+
+    _march_ray = _with_twins(M)["march_ray"]  # the M4 march
+    _go = _with_twins(O)  # M5 orthorectification: the passes over the output cells
     ortho_project_cells = _go["project_cells"]
     ortho_rasterize_depth = _go["rasterize_depth"]
     ortho_fold_tiles = _go["fold_tiles"]

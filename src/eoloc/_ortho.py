@@ -21,7 +21,7 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    a point inside a square is at most its largest at the corners, so a cell on the nearest
    surface passes, and a cell is hidden only when nearer terrain covers all four: at a silhouette
    the sub-cell doubt goes to "seen". It also writes the sampling maps for OpenCV's remap.
-5. ``sample_bands``: nearest or exact bilinear sampling (float images; 8/16-bit bilinear goes
+5. ``sample_bands``: nearest or exact bilinear sampling (uint8/uint16 bilinear goes
    through OpenCV's remap, eoloc.rectify.resample).
 
 Each is plain scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins; the
@@ -36,6 +36,7 @@ import numpy as np
 from ._kernels import compiled, distort, grid_height
 
 N_NODE = 8  # per node: lat_deg, lon_deg, camera-frame ellipsoid point (x, y, z), camera-frame up normal (x, y, z)
+BLOCK = 16  # cells per side of the blocks the z-buffer pass takes or skips whole
 _TRI_EPS = 1e-9  # barycentric slack: a pixel centre on the edge shared by two triangles goes to both
 
 
@@ -193,11 +194,11 @@ def fold_tiles(u, v, rng, tile_px, front, tiles):
 
 
 @compiled()
-def rasterize_depth(u, v, rng, tile_px, tiles, block, zbuf):
+def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
     """Pass 2: the z-buffer (image rows x columns, filled with +inf by the caller), in the marked
     tiles, of the mesh whose vertices are the cells (triangles (r, c) (r, c+1) (r+1, c+1) and
     (r, c) (r+1, c+1) (r+1, c), where all three vertices project). The cells are taken in blocks
-    of ``block`` x ``block``; a block whose image bounding box meets no marked tile is skipped."""
+    of BLOCK x BLOCK; a block whose image bounding box meets no marked tile is skipped."""
     rows = u.shape[0]
     cols = u.shape[1]
     n_ty = tiles.shape[0]
@@ -207,10 +208,10 @@ def rasterize_depth(u, v, rng, tile_px, tiles, block, zbuf):
     for ty in range(n_ty):
         for tx in range(n_tx):
             sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
-    for br in range(0, rows - 1, block):
-        for bc in range(0, cols - 1, block):
-            r1 = min(br + block + 1, rows)
-            c1 = min(bc + block + 1, cols)
+    for br in range(0, rows - 1, BLOCK):
+        for bc in range(0, cols - 1, BLOCK):
+            r1 = min(br + BLOCK + 1, rows)
+            c1 = min(bc + BLOCK + 1, cols)
             umin = np.inf
             umax = -np.inf
             vmin = np.inf

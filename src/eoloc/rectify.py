@@ -249,7 +249,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     gx, gy = np.meshgrid(node_x, node_y)
     lon, lat = transformer(grid.crs, _WGS84).transform(gx, gy)
     frame = sensor.camera_frame(pose)
-    R = np.reshape(np.array([np.asarray(r, float).ravel()[0] for r in frame.R]), (3, 3))  # R_ecef_cam
+    R = np.reshape(frame.R_ecef_cam, (3, 3))
     o = np.array([float(np.ravel(a)[0]) for a in (frame.ox, frame.oy, frame.oz)])
     p0 = np.stack(geodesy.geodetic_to_ecef(lat, lon, 0.0), -1)
     la, lo = np.radians(lat), np.radians(lon)
@@ -285,7 +285,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
             tiles[:] = 0
             n_back, n_front = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, -1.0, tiles)
         if n_back:
-            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, FOLD_TILE_PX, zbuf)
+            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, zbuf)
     valid = np.empty((rows, cols), np.uint8)
     map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
     _nb.ortho_mark_visible(u, v, rng, zbuf, use_zbuf, cam.width, cam.height, valid, map_x, map_y)
@@ -334,15 +334,17 @@ def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DE
     return FramePixels(u, v, np.where(np.isfinite(u), rng, np.nan), valid, map_x, map_y)
 
 
-REMAP_DTYPES = ("uint8", "uint16", "int16")  # integer images OpenCV's remap samples (float: eoloc's exact sampler)
+# the images OpenCV's remap samples bilinearly within a count of exact (measured and tested; its int16 path
+# quantises the position to 1/32 px, 1 000+ counts off on 16-bit noise, so int16 and floats take eoloc's sampler)
+REMAP_DTYPES = ("uint8", "uint16")
 
 
 def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear", nodata: float = 0) -> np.ndarray:
     """Every band of ``image`` (bands, H, W) read at the cells' pixels (nearest, bilinear or
     cubic), nodata where the camera does not see the cell; the image's dtype (integers rounded
-    and clipped). Bilinear on 8- and 16-bit images is OpenCV's remap (SIMD, fixed point: the
-    position to 1/32 px, as orthority and GDAL's warper do); float images, nearest and other
-    integer types go through eoloc's compiled sampler (exact weights), cubic through scipy."""
+    and clipped). Bilinear on 8- and 16-bit images is OpenCV's remap (SIMD, fixed-point weights:
+    within one count of exact bilinear at the float32 positions, tested); float images, nearest and
+    other integer types go through eoloc's compiled sampler (exact weights), cubic through scipy."""
     if resampling not in RESAMPLING:
         raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
     from ._backend import get_backend
