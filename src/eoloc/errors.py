@@ -32,6 +32,11 @@ class KLVError(EolocError):
     """The file cannot be read as KLV at all (missing, empty, no ST 0601 packet in it)."""
 
 
+class VideoError(EolocError):
+    """A video file cannot be opened or decoded (missing, no video stream, corrupt beyond the
+    decoder's recovery): the message names the file and, where it applies, the frame."""
+
+
 class ModelFileError(EolocError):
     """A compensation model file cannot be used (wrong format, version or feature set)."""
 

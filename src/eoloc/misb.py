@@ -29,13 +29,15 @@ CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 
 
 def misb_sensor(mount_misalignment_deg=(0.0, 0.0, 0.0), boresight_misalignment_deg=(0.0, 0.0, 0.0),
-                lever_arm_m=(0.0, 0.0, 0.0)) -> SensorModel:
+                lever_arm_m=(0.0, 0.0, 0.0), camera: Camera | None = None) -> SensorModel:
     """An az-el turret with sensor roll, as ST 0601 describes it (tags 18, 19, 20).
 
-    The camera is a placeholder: rays are built from per-packet normalised coordinates, so the
-    intrinsics never enter. Installation terms are zero unless a calibration gives them.
+    The camera is a placeholder unless given: rays are built from per-packet normalised
+    coordinates, so the intrinsics never enter. A frame's own camera (pixels, a pinhole whose
+    fields of view span the image) is given for what works in pixels (orthorectification).
+    Installation terms are zero unless a calibration gives them.
     """
-    return SensorModel(Camera(2, 2, 1.0, 1.0, 0.5, 0.5), AzElGimbal(), mount_misalignment_deg,
+    return SensorModel(camera or Camera(2, 2, 1.0, 1.0, 0.5, 0.5), AzElGimbal(), mount_misalignment_deg,
                        boresight_misalignment_deg, lever_arm_m)
 
 

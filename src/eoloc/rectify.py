@@ -71,11 +71,13 @@ def ground_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, step_p
 # -- output grids ------------------------------------------------------------------------------
 
 
-def output_crs(name: str, lat_deg: float, lon_deg: float) -> pyproj.CRS:
+def output_crs(name: str | pyproj.CRS, lat_deg: float, lon_deg: float) -> pyproj.CRS:
     """The output CRS for a frame centred at (lat, lon): ``utm`` (the WGS-84 UTM zone, EPSG:326xx /
     327xx), ``gk6`` / ``gk3`` (Gauss-Krüger 6° / 3° zone on WGS-84, false easting with the zone
     number in front as in the Chinese and Russian grids: zone * 10^6 + 500 000 m), or anything
-    pyproj accepts (``EPSG:4547``, a PROJ string, ``EPSG:4326`` for a lat/lon grid)."""
+    pyproj accepts (``EPSG:4547``, a PROJ string, ``EPSG:4326`` for a lat/lon grid, a pyproj CRS)."""
+    if isinstance(name, pyproj.CRS):
+        return name
     key = name.lower()
     if key == "utm":
         zone = math.floor((lon_deg + 180.0) / 6.0) % 60 + 1
@@ -157,12 +159,14 @@ class OutputGrid:
         return t.c + (np.asarray(cols, float) + 0.5) * t.a, t.f + (np.asarray(rows, float) + 0.5) * t.e
 
 
-def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str = "utm",
-                gsd_m: float | None = None, max_cells: int = 40_000_000, edge_samples: int = 16) -> OutputGrid:
+def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str | pyproj.CRS = "utm",
+                gsd_m: float | None = None, res: tuple[float, float] | None = None, max_cells: int = 40_000_000,
+                edge_samples: int = 16) -> OutputGrid:
     """The grid a frame is rectified onto: its footprint's bounding box in ``crs`` (see
     :func:`output_crs`), cell edges on multiples of the cell size (so the grids of a pass line up),
     at ``gsd_m`` metres per cell (default: the native ground sample distance at the image centre;
-    for a geographic CRS that many metres at the frame centre's latitude)."""
+    for a geographic CRS that many metres at the frame centre's latitude), or at ``res`` (x, y) in
+    the CRS's units (the frames of a pass after the first: the same cells exactly)."""
     prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
     if len(prints) != 1:
         raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
@@ -172,14 +176,18 @@ def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: s
     clat, clon = (fp.centre[0], fp.centre[1]) if np.isfinite(fp.centre[0]) else (float(np.mean(fp.lat_deg)),
                                                                                  float(np.mean(fp.lon_deg)))
     out_crs = output_crs(crs, clat, clon)
-    gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, surface)
-    if not gsd > 0:
-        raise InputError(f"gsd_m must be > 0, got {gsd_m!r}")
-    if out_crs.is_geographic:
-        M, N = _radii(clat)
-        res = (gsd / (N * math.cos(math.radians(clat))) * 180.0 / math.pi, gsd / M * 180.0 / math.pi)
+    if res is not None:
+        res = (float(res[0]), float(res[1]))
+        gsd = math.radians(res[1]) * _radii(clat)[0] if out_crs.is_geographic else res[0]
     else:
-        res = (gsd, gsd)
+        gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, surface)
+        if not gsd > 0:
+            raise InputError(f"gsd_m must be > 0, got {gsd_m!r}")
+        if out_crs.is_geographic:
+            M, N = _radii(clat)
+            res = (gsd / (N * math.cos(math.radians(clat))) * 180.0 / math.pi, gsd / M * 180.0 / math.pi)
+        else:
+            res = (gsd, gsd)
     x, y = transformer(_WGS84, out_crs).transform(fp.lon_deg, fp.lat_deg)
     return grid_covering(out_crs, res, (np.min(x), np.min(y), np.max(x), np.max(y)), max_cells=max_cells,
                          what=f"at {gsd:g} m (the footprint reaches {'the horizon' if fp.clipped.any() else 'far'})")

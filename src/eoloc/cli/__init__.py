@@ -25,6 +25,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("evaluate", "evaluate"),
     ("report", "report"),
     ("rectify", "rectify"),
+    ("video", "video"),
     ("serve", "serve"),
     ("demo", "demo"),
 )

@@ -34,21 +34,33 @@ def write_dem(dem: DEM, path: str | Path) -> Path:
     return path
 
 
-def write_ortho(ortho: Ortho, path: str | Path, *, tags: dict | None = None) -> Path:
-    """An orthorectified frame as a GeoTIFF (deflate, tiled when large) with its CRS, transform
-    and nodata; ``tags`` as dataset tags."""
+def write_cog(path: str | Path, data: np.ndarray, transform, crs, *, nodata: float | None = None,
+              mask: np.ndarray | None = None, band_names: list[str] | None = None, tags: dict | None = None) -> Path:
+    """A Cloud-Optimised GeoTIFF (GDAL's COG driver: 512-pixel tiles, overviews, deflate) of
+    ``data`` (bands, rows, cols) on ``transform`` (rasterio Affine) and ``crs`` (pyproj or
+    rasterio); ``mask`` (rows, cols) True where a cell holds data, written as the internal mask
+    GIS software honours; ``band_names`` as band descriptions; ``tags`` as dataset tags."""
     import rasterio
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    b, h, w = ortho.data.shape
-    profile = {"driver": "GTiff", "width": w, "height": h, "count": b, "dtype": ortho.data.dtype.name,
-               "crs": rasterio.crs.CRS.from_wkt(ortho.crs.to_wkt()), "transform": ortho.transform,
-               "nodata": ortho.nodata, "compress": "deflate"}
-    if w >= 256 and h >= 256:
-        profile.update(tiled=True, blockxsize=256, blockysize=256)
+    b, h, w = data.shape
+    crs = rasterio.crs.CRS.from_wkt(crs.to_wkt()) if hasattr(crs, "to_wkt") else crs
+    profile = {"driver": "COG", "width": w, "height": h, "count": b, "dtype": data.dtype.name, "crs": crs,
+               "transform": transform, "nodata": nodata, "compress": "deflate",
+               "predictor": 2 if np.issubdtype(data.dtype, np.integer) else 3}
     with rasterio.open(path, "w", **profile) as ds:
-        ds.write(ortho.data)
+        ds.write(data)
+        if mask is not None:
+            ds.write_mask(np.where(mask, 255, 0).astype(np.uint8))
+        for i, name in enumerate(band_names or []):
+            ds.set_band_description(i + 1, name)
         if tags:
             ds.update_tags(**{k: str(v) for k, v in tags.items()})
     return path
+
+
+def write_ortho(ortho: Ortho, path: str | Path, *, tags: dict | None = None) -> Path:
+    """An orthorectified frame as a Cloud-Optimised GeoTIFF with its CRS, transform, nodata and
+    the cells the camera saw as its internal mask; ``tags`` as dataset tags."""
+    return write_cog(path, ortho.data, ortho.transform, ortho.crs, nodata=ortho.nodata, mask=ortho.valid, tags=tags)

@@ -4,23 +4,25 @@ benchmarks that need a transport stream as an encoder would send it."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
 PTS_HZ = 90_000
+TS_BYTES = 188
 
 
 def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]], *, video_fps: float = 0.0,
-                 video_size: tuple[int, int] = (160, 96)) -> Path:
+                 video_size: tuple[int, int] = (160, 96), duration_s: float = 0.0) -> Path:
     """Write ``streams`` as the KLV PIDs of one transport stream; each stream is a list of
     (raw packet, time s) pairs as :func:`eoloc.io.klv.reader.split_klv` gives them (its ST 0601
     time stamps) or as the caller chooses. Presentation times are those times relative to the
     earliest over all streams; a packet without one (NaN) takes the last time before it.
     ``video_fps`` > 0 adds an H.264 video stream over the same span whose frames show their own
-    index (:func:`index_frame`), as an encoder's video beside its metadata."""
+    index (:func:`index_frame`), as an encoder's video beside its metadata, over the packets'
+    span or ``duration_s``, whichever is longer (no streams and a duration: video alone)."""
     import av
 
     stamps = [np.array([t for _, t in s], dtype=np.float64) for s in streams]
@@ -36,7 +38,7 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
             video.width, video.height = video_size
             video.pix_fmt = "yuv420p"
             video.options = {"preset": "ultrafast", "tune": "zerolatency"}
-            end = max((float(ts.max()) for ts in times if ts.size), default=0.0)
+            end = max(max((float(ts.max()) for ts in times if ts.size), default=0.0), duration_s - 1.0 / video_fps)
             order += [(j / video_fps, -1, j) for j in range(int(end * video_fps) + 1)]
             order.sort()
         pids = [out.add_data_stream(codec_name="klv") for _ in streams]
@@ -56,6 +58,51 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
             for vp in video.encode(None):
                 out.mux(vp)
     return path
+
+
+def add_sync_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, float], bytes | None], *,
+                 pid: int = 0x1F1) -> Path:
+    """Copy the transport stream ``video_ts`` to ``dest`` with a synchronous KLV metadata stream
+    (ST 1402: stream_type 0x15, metadata access units) on ``pid``: after each video access unit,
+    ``packet_for(n, pts_s)`` (n counts the video PES from 0, pts_s its presentation time) gives the
+    ST 0601 packet carried with the same PTS, or None for none. Video passes through byte for
+    byte (stanag4609's transformer re-packetises around the new PID)."""
+    from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+    from stanag4609.transport.metadata import synchronous_klv_stream
+    from stanag4609.transport.processor import TimedKLVPacket
+    from stanag4609.transport.psi import KLVCarriage
+    from stanag4609.transport.transformer import LiveTransportTransformer
+
+    info = synchronous_klv_stream(pid, metadata_input_leak_rate=1_000, metadata_buffer_size=200_000)
+    transformer = LiveTransportTransformer(additional_metadata_stream=info)
+    observer = TransportDemuxer(max_programs=1)
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    data = Path(video_ts).read_bytes()
+    n = 0
+    with dest.open("wb") as out:
+        def emit(events) -> None:
+            nonlocal n
+            for ev in events:
+                if not (isinstance(ev, PESStreamEvent) and ev.kind is StreamKind.VIDEO and ev.pes.pts is not None):
+                    continue
+                raw = packet_for(n, ev.pes.pts / PTS_HZ)
+                n += 1
+                if raw is None:
+                    continue
+                pkt = TimedKLVPacket.from_bytes(raw, program_number=transformer.program.program_number, pid=pid,
+                                                carriage=KLVCarriage.SYNCHRONOUS, pts=ev.pes.pts,
+                                                metadata_service_id=0, random_access=True)
+                out.write(transformer.emit_metadata(pkt).transport)
+
+        for k in range(0, len(data), 64 * TS_BYTES):
+            chunk = data[k:k + 64 * TS_BYTES]
+            events = observer.feed(chunk)
+            out.write(transformer.feed(chunk).transport)
+            emit(events)
+        emit(observer.finish())
+        out.write(transformer.finish().transport)
+    return dest
 
 
 def index_frame(i: int, size: tuple[int, int] = (160, 96)) -> np.ndarray:

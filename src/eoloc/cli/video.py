@@ -1,0 +1,157 @@
+"""`eoloc video`: a video's frames with their metadata, orthorectified, mosaicked and tiled."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+from rich.table import Table as RichTable
+
+from .common import load_config, open_dem, progress
+from .main import console, err_console, report_issues, warn
+from .options import CONVENTIONS, config_option, dem_options, out_option, target_height_option
+
+VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
+GeoTIFF, a mosaic of the pass, XYZ map tiles.
+
+\b
+  eoloc video FLIGHT.ts --dem DEM.tif --every 10 --out out/
+  eoloc video FLIGHT.mp4 --klv FLIGHT.klv --target-height 1650
+  eoloc video FLIGHT.mp4 --telemetry TEL.csv --config CAMERA.toml --dem DEM.tif
+
+\b
+Metadata, and how each frame finds its pose:
+  in the video   MPEG-TS with an ST 0601 KLV stream (synchronous or asynchronous carriage): paired
+                 by presentation time (PTS), the pose interpolated between packets (position by a
+                 spline in ECEF, attitude by slerp, gimbal angles and FOV linearly). Several KLV
+                 streams: the first that carries a position, or --stream "PID n".
+  --klv FILE     KLV beside the video: paired by its time stamps (tag 2), the first packet at the
+                 first frame unless --time-offset T (the UNIX time of the first frame).
+  --telemetry    a telemetry CSV with --config (the camera): its time_s is seconds since the
+                 first frame, minus --time-offset (default: the config's [telemetry] time_offset_s).
+A frame outside the metadata, or in a gap longer than --max-gap, is not rectified (frames.csv
+says why). With KLV the camera is a pinhole whose fields of view (tags 16, 17) span the frame.
+
+\b
+Ground: --dem (terrain, with occlusion) or --target-height H; with KLV and neither, each frame's
+own frame-centre elevation (tag 78, or 25 + geoid).
+
+\b
+Written into --out:
+  frames/frame_NNNNNN.tif  each rectified frame: its bands plus a visibility band (0 unseen,
+                           1 hidden by terrain, 2 seen), the seen cells as the internal mask
+  mosaic.tif               the pass: per cell the frame with the finest ground sample
+  mosaic_source.tif        per cell the source frame index (-1 none) and its GSD (m)
+  tiles/{z}/{x}/{y}.png    the mosaic as XYZ tiles (Web Mercator) for Leaflet, QGIS, ...
+  frames.csv, footprints.geojson, video.json
+All frames share one grid (--crs, cell --gsd: default the first frame's native GSD, rounded).
+"""
+
+
+@click.command(help=VIDEO_HELP + CONVENTIONS)
+@click.argument("video", type=click.Path(dir_okay=False))
+@click.option("--klv", "klv_path", type=click.Path(dir_okay=False), default=None,
+              help="KLV file (raw .klv/.bin or MPEG-TS) beside the video, paired by its time stamps.")
+@click.option("--telemetry", type=click.Path(dir_okay=False), default=None,
+              help="Telemetry CSV beside the video (needs --config), paired by time_s.")
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (with --telemetry).")
+@click.option("--stream", "klv_stream", default=None, metavar="NAME",
+              help='The KLV stream to use when there are several, as eoloc klv names them ("PID 497").')
+@click.option("--time-offset", type=float, default=None,
+              help="Metadata clock minus video clock (s); see above for each source's default.")
+@click.option("--max-gap", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
+              help="Longest metadata gap (s) to interpolate a frame's pose across.")
+@target_height_option("Ground: this ellipsoidal height (m).")
+@dem_options("Ground: DEM file(s); repeat for several tiles.")
+@click.option("--crs", default="utm", show_default=True,
+              help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string; the "
+                   "zone of the first rectified frame holds for the pass.")
+@click.option("--gsd", type=click.FloatRange(0.0, min_open=True), default=None,
+              help="Output cell size (m); default: the first rectified frame's native GSD, rounded.")
+@click.option("--resampling", type=click.Choice(["nearest", "bilinear", "cubic"]), default="bilinear",
+              show_default=True, help="How a cell's value is read from the frame.")
+@click.option("--nodata", type=float, default=0, show_default=True, help="Value of cells with no image.")
+@click.option("--occlusion/--no-occlusion", default=True, show_default=True,
+              help="On a DEM: blank cells hidden by terrain.")
+@click.option("--every", type=click.IntRange(1), default=1, show_default=True, help="Rectify every N-th frame.")
+@click.option("--start", "start_s", type=click.FloatRange(0.0), default=0.0, show_default=True,
+              help="First frame time to rectify (s since the first frame).")
+@click.option("--end", "end_s", type=click.FloatRange(0.0), default=None,
+              help="Last frame time to rectify (s since the first frame); default: the end.")
+@click.option("--frames/--no-frames", "write_frames", default=True, show_default=True,
+              help="Write each rectified frame as a COG.")
+@click.option("--mosaic/--no-mosaic", default=True, show_default=True, help="Build the mosaic of the pass.")
+@click.option("--tiles/--no-tiles", default=True, show_default=True, help="Cut the mosaic into XYZ tiles.")
+@out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
+def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
+          vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
+          mosaic, tiles, out_dir) -> None:
+    from ..io.writers import write_layer
+    from ..jobs.video import FrameSelection, video_job
+
+    if klv_path and telemetry:
+        raise click.UsageError("choose one metadata source beside the video: --klv FILE or --telemetry CSV")
+    if telemetry and not config_path:
+        raise click.UsageError("--telemetry needs --config (the camera: size, focal length, distortion)")
+    if target_height is not None and dem_paths:
+        raise click.UsageError("choose the ground: --target-height H or --dem FILE, not both")
+    if end_s is not None and end_s < start_s:
+        raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    surface = dem if dem is not None else target_height
+    cfg = load_config(config_path) if config_path else None
+    out = Path(out_dir)
+    select = FrameSelection(every, start_s, math.inf if end_s is None else end_s)
+    with progress() as bar:
+        task = bar.add_task("rectifying frames", total=None)
+        job = video_job(video, out=out, klv=klv_path, telemetry=telemetry, cfg=cfg, surface=surface, crs=crs,
+                        gsd_m=gsd, resampling=resampling, nodata=nodata, occlusion=occlusion, select=select,
+                        klv_stream=klv_stream, time_offset_s=time_offset, max_gap_s=max_gap,
+                        write_frames=write_frames, mosaic=mosaic, tiles=tiles,
+                        progress=lambda done, total: bar.update(task, completed=done, total=total))
+    report_issues(job.issues)
+    for line in job.decode_errors:
+        warn(line)
+    written = list(job.written)
+    written += write_layer(out, "frames", job.rows, ["csv"])
+    if job.footprints:
+        written += write_layer(out, "footprints", [f["properties"] for f in job.footprints], ["geojson"],
+                               features=job.footprints)
+    statuses: dict[str, int] = {}
+    for r in job.rows:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    info = job.info
+    report = {"video": str(video), "size": [info.width, info.height], "fps": info.fps, "codec": info.codec,
+              "metadata": job.metadata.source, "frames_selected": len(job.rows), "statuses": statuses}
+    if job.mosaic is not None:
+        g = job.mosaic.grid
+        report["mosaic"] = {"crs": g.crs.to_string(), "res": list(g.res), "size": list(g.shape),
+                            "seen_fraction": float(job.mosaic.valid.mean()),
+                            "frames_used": len(set(job.mosaic.frame[job.mosaic.valid].tolist()))}
+    if job.tiles is not None:
+        report["tiles"] = {"url": job.tiles.url, "min_zoom": job.tiles.min_zoom, "max_zoom": job.tiles.max_zoom,
+                           "count": job.tiles.count}
+    js = out / "video.json"
+    js.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    written.append(js)
+    t = RichTable(title=f"{Path(video).name}", show_header=False)
+    t.add_row("video", f"{info.width} x {info.height} {info.codec}, {info.fps:.3g} fps, {info.container}")
+    t.add_row("metadata", job.metadata.source)
+    t.add_row("frames", ", ".join(f"{n} {k}" for k, n in statuses.items()) + f" (of {len(job.rows)} selected)")
+    if job.mosaic is not None:
+        g = job.mosaic.grid
+        t.add_row("mosaic", f"{g.shape[1]} x {g.shape[0]} cells of {g.res[0]:.3g} "
+                            f"{'deg' if g.crs.is_geographic else 'm'} in {g.crs.name}; "
+                            f"{report['mosaic']['frames_used']} frames")
+    if job.tiles is not None:
+        t.add_row("tiles", f"{job.tiles.count} tiles, zoom {job.tiles.min_zoom}-{job.tiles.max_zoom}")
+    console.print(t)
+    frames = [p for p in written if p.parent.name == "frames"]
+    others = [p for p in written if p.parent.name != "frames"]
+    if frames:
+        err_console.print(f"wrote {len(frames)} frame COGs into [bold]{out / 'frames'}[/]")
+    err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in others))
+    if not job.n_rectified:
+        warn("no frame was rectified: see the status and note columns of frames.csv")

@@ -1,0 +1,353 @@
+"""The `eoloc video` job: a video's frames paired with their metadata by presentation time,
+orthorectified one by one (each a Cloud-Optimised GeoTIFF with its visibility), pasted into a
+mosaic of the pass (the finest ground sample wins; a raster names each cell's source frame) and
+cut into XYZ tiles for a map.
+
+Metadata comes from the video's own KLV (MPEG-TS: ST 0601 packets on a KLV PID, synchronous or
+asynchronous carriage, paired by PTS), from a KLV file beside it (``klv``: its ST 0601 time
+stamps, the first packet at the first frame unless ``time_offset_s`` says otherwise), or from a
+telemetry CSV with a camera config (``telemetry`` + ``cfg``: its time_s, 0 at the first frame
+unless ``time_offset_s``). ``time_offset_s`` is always the metadata clock minus the video clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..errors import InputError, KLVError
+from ..io.video import VideoInfo, iter_frames, probe_video
+from ..sensor.model import Pose, SensorModel
+from ..sequence.sync import FramePoses, Metadata, poses_at_frames
+from ..terrain import DEM
+
+VISIBILITY = {"unseen": 0, "hidden": 1, "seen": 2}
+VISIBILITY_BAND = "visibility: 0 unseen (outside the frame or no ground), 1 hidden by terrain, 2 seen"
+
+
+@dataclass(frozen=True)
+class FrameSelection:
+    """Which frames to rectify: every ``every``-th frame (by index) whose time since the first
+    frame is within [start_s, end_s]."""
+
+    every: int = 1
+    start_s: float = 0.0
+    end_s: float = math.inf
+
+    def __call__(self, index: int, t_since_first_s: float) -> bool:
+        return index % self.every == 0 and self.start_s - 1e-9 <= t_since_first_s <= self.end_s + 1e-9
+
+
+@dataclass
+class VideoJob:
+    """What `eoloc video` did: the video, the metadata and how it was paired, one row per
+    selected frame, the footprints, the mosaic (or None), the files written and the issues."""
+
+    info: VideoInfo
+    metadata: Metadata
+    rows: list[dict]
+    footprints: list[dict]
+    mosaic: object | None
+    tiles: object | None
+    written: list[Path]
+    issues: list = field(default_factory=list)
+    decode_errors: list[str] = field(default_factory=list)
+
+    @property
+    def n_rectified(self) -> int:
+        return sum(r["status"] == "OK" for r in self.rows)
+
+
+# -- metadata on the frames' clock ---------------------------------------------------------------
+
+
+def klv_metadata(path, info: VideoInfo, first_pts_s: float, *, in_video: bool, klv_stream: str | None = None,
+                 time_offset_s: float | None = None, strict: bool = False) -> tuple[Metadata, list]:
+    """ST 0601 packets of ``path`` as records on the frames' clock. ``in_video``: the KLV is in the
+    video's own transport stream, so its PES times are the frames' clock (minus ``time_offset_s``,
+    default 0); otherwise tag 2's UNIX times, the first packet at the first frame unless
+    ``time_offset_s`` is given (UNIX time of the first frame)."""
+    from ..io.klv import klv_telemetry, read_klv
+    from ..misb import packet_pose
+
+    stream = read_klv(path, strict=strict)
+    if not stream.packets:
+        raise KLVError(f"{path}: no KLV packet could be decoded, so no frame has a pose",
+                       [str(i) for i in stream.issues])
+    tel = klv_telemetry(stream)
+    names = list(dict.fromkeys(tel.columns["stream"].tolist()))
+    issues = [*(str(i) for i in stream.issues), *tel.issues]
+    c = tel.columns
+    posed = [n for n in names if np.isfinite(c["lat_deg"][c["stream"] == n]).any()]
+    if klv_stream is not None:
+        if klv_stream not in names:
+            raise InputError(f"{path}: no KLV stream {klv_stream!r}; it has {', '.join(repr(n) for n in names)}")
+        name = klv_stream
+    elif posed:
+        name = posed[0]
+    else:
+        raise InputError(f"{path}: no KLV stream carries a position (tags 13, 14): no frame has a pose", issues)
+    rows = c["stream"] == name
+    sub = {k: v[rows] for k, v in c.items()}
+    label = f" [{name}]" if name else ""
+    if in_video:
+        pts = sub["pts_s"]
+        if not np.isfinite(pts).any():
+            raise InputError(f"{path}{label}: the KLV packets carry no presentation time to pair them with frames")
+        offset = 0.0 if time_offset_s is None else float(time_offset_s)
+        clock = pts - offset
+        how = (f"KLV{label} paired by presentation time (PTS)" + (f", offset {offset:+.3f} s" if offset else ""))
+    else:
+        unix = sub["time_s"]
+        if not np.isfinite(unix).any():
+            raise InputError(f"{path}{label}: the KLV packets carry no time stamp (tag 2) to pair them with frames")
+        offset = float(np.nanmin(unix)) if time_offset_s is None else float(time_offset_s)
+        clock = unix - offset + first_pts_s
+        how = (f"KLV file {Path(path).name}{label} by its time stamps, " +
+               ("its first packet at the first frame" if time_offset_s is None else
+                f"UNIX {offset:.3f} s at the first frame"))
+
+    values = {"hfov_deg": sub["hfov_deg"], "vfov_deg": sub["vfov_deg"], "fc_h_m": sub["fc_h_m"],
+              "unix_s": sub["time_s"]}
+    meta = Metadata(clock, packet_pose(SimpleNamespace(columns=sub)), values, how)
+    return meta, issues
+
+
+def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | None = None) -> tuple[Metadata, list]:
+    """A telemetry CSV's records on the frames' clock: time_s minus ``time_offset_s`` (default:
+    the config's [telemetry] time_offset_s) is the time since the first frame."""
+    from ..io.telemetry import telemetry_pose
+    from .inputs import read_inputs
+
+    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
+                         msl_geoid=cfg.telemetry.msl_geoid)
+    tel = inputs.telemetry
+    t = tel.columns["time_s"]
+    if not np.isfinite(t).any():
+        raise InputError(f"{telemetry}: no time_s column: a video's frames are paired with telemetry by time")
+    offset = float(cfg.telemetry.time_offset_s if time_offset_s is None else time_offset_s)
+    pose = telemetry_pose(tel, slice(None), cfg.sensor().camera)
+    how = f"telemetry {Path(telemetry).name} by time_s" + (f", offset {offset:+.3f} s" if offset else "")
+    return Metadata(t - offset + first_pts_s, pose, {"unix_s": np.full(t.shape, np.nan)}, how), inputs.issues
+
+
+def misb_frame_sensor(width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:
+    """The ST 0601 sensor of one frame: a pinhole whose fields of view span the image (tags 16,
+    17), on the az-el turret with sensor roll; None without a usable field of view."""
+    from ..misb import misb_sensor
+    from ..sensor.camera import Camera
+
+    if not (0 < hfov_deg < 180):
+        return None
+    v = vfov_deg if 0 < vfov_deg < 180 else None
+    return misb_sensor(camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=v))
+
+
+# -- the job ---------------------------------------------------------------------------------------
+
+
+def frame_visibility(px, width: int, height: int) -> np.ndarray:
+    """Per cell: 2 seen, 1 in the image but hidden by terrain, 0 outside the image or no ground."""
+    with np.errstate(invalid="ignore"):
+        inside = ((px.u_px >= -0.5) & (px.u_px <= width - 0.5) & (px.v_px >= -0.5) & (px.v_px <= height - 0.5)
+                  & (px.range_m > 0))
+    vis = np.where(inside, VISIBILITY["hidden"], VISIBILITY["unseen"]).astype(np.uint8)
+    vis[px.valid] = VISIBILITY["seen"]
+    return vis
+
+
+def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, surface=None, crs: str = "utm",
+              gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0, occlusion: bool = True,
+              select: FrameSelection = FrameSelection(), klv_stream: str | None = None,
+              time_offset_s: float | None = None, max_gap_s: float = 0.5, write_frames: bool = True,
+              mosaic: bool = True, tiles: bool = True, strict: bool = False,
+              progress: Callable[[int, int], None] | None = None) -> VideoJob:
+    """Rectify the selected frames of ``video`` (see the module notes for the metadata) onto
+    ``surface`` (a DEM or an ellipsoidal height; None: each packet's frame-centre elevation, KLV
+    only), each onto the pass's grid (``crs``; cell ``gsd_m``, default the first rectified frame's
+    native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles.
+    ``progress(done, total)`` after each frame."""
+    from .. import rectify as R
+    from ..footprint import footprint_features, footprints
+    from ..io.raster import write_cog
+    from ..io.video import frame_times
+    from ..mosaic import Mosaic, ground_sample_m
+
+    out = Path(out)
+    info = probe_video(video)
+    times = frame_times(video)
+    if times.size == 0:
+        raise InputError(f"{video}: the video stream has no frame with a presentation time")
+    t0 = float(times[0])
+    if telemetry is not None:
+        if cfg is None:
+            raise InputError("a telemetry CSV needs the camera: give --config")
+        meta, issues = csv_metadata(telemetry, cfg, t0, time_offset_s=time_offset_s)
+        base_sensor = cfg.sensor()
+    else:
+        src = klv if klv is not None else video
+        meta, issues = klv_metadata(src, info, t0, in_video=klv is None, klv_stream=klv_stream,
+                                    time_offset_s=time_offset_s, strict=strict)
+        base_sensor = None
+    if surface is None and "fc_h_m" not in meta.values:
+        raise InputError("choose the ground: --target-height H or --dem FILE (a telemetry CSV has no frame-centre "
+                         "elevation)")
+    poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
+    chosen = [i for i, t in enumerate(times) if select(i, float(t) - t0)]
+    total = len(chosen)
+    if total == 0:
+        raise InputError(f"no frame of {video} is selected: {info.n_frames or times.size} frames over "
+                         f"{float(times[-1] - t0):.2f} s; check --every, --start and --end")
+    pass_grid: dict = {}
+    mos: Mosaic | None = None
+    rows, feats, written = [], [], []
+    decode_errors: list[str] = []
+    pending: list[Future] = []
+    by_pts = {round(float(t) * 90_000): i for i, t in enumerate(times)}
+    wanted = set(chosen)
+    done = 0
+    with ThreadPoolExecutor(max_workers=1) as writer:  # GDAL writes while the next frame is rectified
+        for fr in iter_frames(video, want=lambda i, t: i in wanted, errors=decode_errors):
+            if fr.image is None:
+                continue
+            j = by_pts.get(round(fr.pts_s * 90_000), -1)
+            pose, vals, ok, reason = _frame_pose(poses, meta, j, fr.pts_s, max_gap_s)
+            row = {"frame": fr.index, "pts_s": round(fr.pts_s, 6), "video_time_s": round(fr.pts_s - t0, 6),
+                   "time_s": vals.get("unix_s", math.nan)}
+            row.update(_pose_columns(pose))
+            row.update({"hfov_deg": vals.get("hfov_deg", math.nan), "vfov_deg": vals.get("vfov_deg", math.nan)})
+            status, note = "OK", ""
+            sensor = base_sensor
+            if not ok:
+                status = "NO_TELEMETRY"
+                note = ("outside the metadata's time span" if reason == 1 else
+                        f"in a metadata gap longer than {max_gap_s:g} s")
+            elif sensor is None:
+                h, w = fr.image.shape[:2]
+                sensor = misb_frame_sensor(w, h, vals["hfov_deg"], vals["vfov_deg"])
+                if sensor is None:
+                    status, note = "INVALID_INPUT", "no usable field of view (tags 16, 17)"
+            ground = surface if surface is not None else vals.get("fc_h_m", math.nan)
+            if status == "OK" and not (isinstance(ground, DEM) or math.isfinite(ground)):
+                status, note = "INVALID_INPUT", "no frame-centre elevation (tags 78 or 25) for the ground"
+            result = None
+            if status == "OK":
+                try:
+                    if gsd_m is None and "res" not in pass_grid:  # the pass's cell: the first frame's GSD, rounded
+                        gsd_m = round_gsd(R.native_gsd_m(sensor, pose, ground))
+                    grid = R.output_grid(sensor, pose, ground, crs=pass_grid.get("crs", crs),
+                                         gsd_m=gsd_m, res=pass_grid.get("res"))
+                    result = _rectify_frame(fr.image, sensor, pose, ground, grid, resampling, nodata, occlusion)
+                except InputError as exc:
+                    status, note = "NOT_RECTIFIED", str(exc)
+            if result is not None:
+                data, px, vis = result
+                pass_grid.setdefault("crs", grid.crs)
+                pass_grid.setdefault("res", grid.res)
+                gsd_cells = ground_sample_m(px, grid)
+                seen = px.valid
+                row.update({"seen_cells": int(seen.sum()), "hidden_cells": int((vis == VISIBILITY["hidden"]).sum()),
+                            "gsd_median_m": float(np.nanmedian(gsd_cells)) if seen.any() else math.nan})
+                if mosaic and seen.any():
+                    if mos is None:
+                        mos = Mosaic(grid.crs, grid.res, data.shape[0], data.dtype, nodata)
+                    mos.add(fr.index, grid, data, seen, gsd_cells)
+                if write_frames:
+                    path = out / "frames" / f"frame_{fr.index:06d}.tif"
+                    stack = np.concatenate([data, vis[None].astype(data.dtype)])
+                    names = [*(f"band {b + 1}" for b in range(data.shape[0])), VISIBILITY_BAND]
+                    pending.append(writer.submit(write_cog, path, stack, grid.transform, grid.crs, nodata=nodata,
+                                                 mask=seen, band_names=names,
+                                                 tags={"EOLOC_FRAME": fr.index, "EOLOC_PTS_S": fr.pts_s,
+                                                       "EOLOC_METADATA": meta.source}))
+                    row["file"] = str(path.relative_to(out))
+                    written.append(path)
+                fp = footprints(sensor, pose, ground)[0]
+                feats += footprint_features([fp], [{"frame": fr.index, "video_time_s": row["video_time_s"]}])
+            row.update({"status": status, "note": note})
+            rows.append(row)
+            done += 1
+            if progress is not None:
+                progress(done, total)
+            pending = _reap(pending)
+        for f in pending:
+            f.result()
+    missing = wanted - {r["frame"] for r in rows}
+    if missing:
+        decode_errors.append(f"{video}: {len(missing)} selected frame(s) could not be decoded (first: frame "
+                             f"{min(missing)})")
+    mres, tileset = None, None
+    if mos is not None:
+        from ..io.tiles import write_xyz_tiles
+        from ..mosaic import cell_size_m
+
+        mres = mos.result()
+        g = mres.grid
+        written.append(write_cog(out / "mosaic.tif", mres.data, g.transform, g.crs, nodata=nodata, mask=mres.valid,
+                                 band_names=[f"band {b + 1}" for b in range(mres.data.shape[0])],
+                                 tags={"EOLOC_SOURCE": Path(video).name, "EOLOC_METADATA": meta.source}))
+        written.append(write_cog(out / "mosaic_source.tif", np.stack([mres.frame.astype(np.float32), mres.gsd_m]),
+                                 g.transform, g.crs, nodata=None, mask=mres.valid,
+                                 band_names=["source frame index (-1: none)", "ground sample distance (m)"]))
+        if tiles:
+            cx, cy = cell_size_m(g)
+            tileset = write_xyz_tiles(out / "tiles", mres.data, mres.valid, g.transform, g.crs,
+                                      cell_m=math.sqrt(cx * cy))
+    return VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors)
+
+
+def round_gsd(gsd_m: float) -> float:
+    """A cell size for people: two significant digits (4.5155 -> 4.5 m, 0.2349 -> 0.23 m)."""
+    if not (gsd_m > 0 and math.isfinite(gsd_m)):
+        return gsd_m
+    return float(f"{gsd_m:.2g}")
+
+
+def _reap(pending: list[Future]) -> list[Future]:
+    """Raise a finished write's error now; keep at most two writes queued (bounded memory)."""
+    keep = []
+    for f in pending:
+        if f.done():
+            f.result()
+        else:
+            keep.append(f)
+    while len(keep) > 2:
+        keep.pop(0).result()
+    return keep
+
+
+def _frame_pose(poses: FramePoses, meta: Metadata, j: int, pts_s: float, max_gap_s: float):
+    """Frame ``j``'s pose from the table made from the container's packet times; a frame whose
+    time was not among them (a damaged packet) gets its own interpolation."""
+    if j < 0:
+        poses = poses_at_frames(meta, np.array([pts_s]), max_gap_s=max_gap_s)
+        j = 0
+    pose, vals = poses.take(j)
+    return pose, vals, bool(poses.ok[j]), int(poses.reason[j])
+
+
+def _pose_columns(pose: Pose) -> dict[str, float]:
+    g = [float(np.ravel(a)[0]) for a in pose.gimbal_deg]
+    cols = {"lat_deg": pose.lat_deg, "lon_deg": pose.lon_deg, "h_m": pose.h_m, "yaw_deg": pose.yaw_deg,
+            "pitch_deg": pose.pitch_deg, "roll_deg": pose.roll_deg}
+    out = {k: float(np.ravel(v)[0]) for k, v in cols.items()}
+    out.update({f"gimbal{k + 1}_deg": x for k, x in enumerate(g[:2])})
+    if len(g) > 2:
+        out["sensor_roll_deg"] = g[2]
+    return out
+
+
+def _rectify_frame(image: np.ndarray, sensor: SensorModel, pose: Pose, ground, grid, resampling: str,
+                   nodata: float, occlusion: bool):
+    from .. import rectify as R
+
+    img = image[None] if image.ndim == 2 else np.moveaxis(image, -1, 0)
+    px = R.frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
+    data = R.resample(img, px, resampling=resampling, nodata=nodata)
+    return data, px, frame_visibility(px, sensor.camera.width, sensor.camera.height)
