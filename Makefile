@@ -19,6 +19,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/eoloc demo --out out/demo
+	$(BIN)/python examples/video_demo.py --out out/demo/video
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench examples

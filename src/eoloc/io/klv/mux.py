@@ -15,14 +15,16 @@ TS_BYTES = 188
 
 
 def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]], *, video_fps: float = 0.0,
-                 video_size: tuple[int, int] = (160, 96), duration_s: float = 0.0) -> Path:
+                 video_size: tuple[int, int] = (160, 96), duration_s: float = 0.0,
+                 frame_source: Callable[[int], np.ndarray] | None = None) -> Path:
     """Write ``streams`` as the KLV PIDs of one transport stream; each stream is a list of
     (raw packet, time s) pairs as :func:`eoloc.io.klv.reader.split_klv` gives them (its ST 0601
     time stamps) or as the caller chooses. Presentation times are those times relative to the
     earliest over all streams; a packet without one (NaN) takes the last time before it.
     ``video_fps`` > 0 adds an H.264 video stream over the same span whose frames show their own
     index (:func:`index_frame`), as an encoder's video beside its metadata, over the packets'
-    span or ``duration_s``, whichever is longer (no streams and a duration: video alone)."""
+    span or ``duration_s``, whichever is longer (no streams and a duration: video alone).
+    ``frame_source(i)``: the picture of frame i instead ((H, W) grey or (H, W, 3) RGB uint8)."""
     import av
 
     stamps = [np.array([t for _, t in s], dtype=np.float64) for s in streams]
@@ -37,14 +39,15 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
             video = out.add_stream("libx264", rate=Fraction(video_fps).limit_denominator(1001))
             video.width, video.height = video_size
             video.pix_fmt = "yuv420p"
-            video.options = {"preset": "ultrafast", "tune": "zerolatency"}
+            video.options = {"preset": "ultrafast", "tune": "zerolatency", "crf": "16"}
             end = max(max((float(ts.max()) for ts in times if ts.size), default=0.0), duration_s - 1.0 / video_fps)
             order += [(j / video_fps, -1, j) for j in range(int(end * video_fps) + 1)]
             order.sort()
         pids = [out.add_data_stream(codec_name="klv") for _ in streams]
         for t, k, i in order:
             if k < 0:
-                frame = av.VideoFrame.from_ndarray(index_frame(i, video_size), format="gray")
+                pic = frame_source(i) if frame_source is not None else index_frame(i, video_size)
+                frame = av.VideoFrame.from_ndarray(pic, format="gray" if pic.ndim == 2 else "rgb24")
                 frame.pts = i
                 for vp in video.encode(frame.reformat(format="yuv420p")):
                     out.mux(vp)
