@@ -44,11 +44,14 @@ COMMANDS = {
     "map": ["map", "--telemetry", "{tel}", "-o", "{out}/map.html"],
     "evaluate": ["evaluate", "{fixes}", "--truth", "{truth}", "--bootstrap", "50", "--no-plots", "--out", "{out}"],
     "report": ["report", "{obs}", "--config", "{cfg}", "--bootstrap", "50", "--out", "{out}"],
+    "video": ["video", "{ts}", "--target-height", "0", "--every", "10", "--out", "{out}"],
+    "video-tel": ["video", "{ts}", "--telemetry", "{tel}", "--config", "{cfg}", "--target-height", "600", "--every",
+                  "10", "--no-mosaic", "--out", "{out}"],
 }
-READS_TELEMETRY = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify"]
-READS_CONFIG = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "compensate-train",
+READS_TELEMETRY = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "video-tel"]
+READS_CONFIG = ["locate", "footprint", "track", "triangulate", "calibrate", "rectify", "video-tel", "compensate-train",
                 "accuracy", "report"]
-WRITES_OUT = ["locate", "footprint", "track", "track-static", "triangulate", "calibrate", "rectify",
+WRITES_OUT = ["locate", "footprint", "track", "track-static", "triangulate", "calibrate", "rectify", "video",
               "compensate-train", "accuracy", "klv", "batch", "evaluate", "report"]
 READS_DEM = ["locate-dem"]
 CONFIG = (DEMO / "camera.toml").read_text(encoding="utf-8")
@@ -114,7 +117,13 @@ def files(tmp_path_factory):
     r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config",
                                   str(cfg), "--target-height", "600", "--out", str(d)])
     assert r.exit_code == 0, r.output
+    from eoloc.io.klv.mux import write_klv_ts
+    from eoloc.io.klv.reader import split_klv
+    from eoloc.io.klv.synthetic import circling_flight_klv
+
+    ts = write_klv_ts(d / "flight.ts", [split_klv(circling_flight_klv(30))], video_fps=10)
     return {"tel": DEMO / "telemetry.csv", "det": DEMO / "detections.csv", "cfg": cfg, "gcps": gcps, "img": img,
+            "ts": ts,
             "fixes": fixes, "truth": DEMO / "truth.csv",
             "obs": sim / "train.csv", "dem": sim / "dem.tif",
             "klv": KLV / "realflight.bin" if (KLV / "realflight.bin").exists() else next(KLV.glob("*.bin"))}
@@ -290,6 +299,26 @@ def test_a_bad_stream_or_layer_is_named(files, tmp_path, command, make, words):
             ["map", "--fixes", str(bad), "-o", str(tmp_path / "map.html")])
     r = _run(args)
     assert r.exit_code == 2 and words in r.output and bad.name in r.output, r.output
+
+
+def test_a_bad_video_is_named(files, tmp_path):
+    """A video that is missing, not a video, without metadata, or cut short: exit 2 and the file
+    named, or (cut short mid-packet) the torn bytes named and every frame with metadata rectified."""
+    from eoloc.io.klv.mux import write_klv_ts
+
+    plain = write_klv_ts(tmp_path / "plain.ts", [], video_fps=10, duration_s=1.0)
+    cases = [(tmp_path / "none.ts", "does not exist"), (plain, "no KLV metadata stream"),
+             (_text(tmp_path / "text.ts", "not a video\n"), "cannot be opened")]
+    for bad, words in cases:
+        r = _run(["video", str(bad), "--out", str(tmp_path / "out")])
+        assert r.exit_code == 2 and words in r.output and bad.name in r.output, r.output
+    data = Path(files["ts"]).read_bytes()
+    cut = tmp_path / "cut.ts"
+    cut.write_bytes(data[: (len(data) // 2 // 188) * 188 + 100])  # half the stream, the last packet torn
+    r = _run(["video", str(cut), "--target-height", "0", "--out", str(tmp_path / "cut")])
+    assert r.exit_code == 0 and "cut short" in r.output, r.output
+    rows, ok = _rows(tmp_path / "cut" / "frames.csv")
+    assert rows >= 10 and ok >= rows - 1  # a frame after the last KLV packet that survived has no pose
 
 
 def _text(p: Path, text: str) -> Path:

@@ -122,6 +122,25 @@ def stop_rule_options(fn=None, *, dem_help: str = "Stop rule M4: DEM file(s) (Ge
     return apply if fn is None else apply(fn)
 
 
+def ortho_options(crs_note: str = "", gsd_default: str = "the native GSD at the centre"):
+    """The orthorectification options of `rectify` and `video`, declared once: the ground
+    (--target-height | --dem ...), --crs, --gsd, --resampling, --nodata, --occlusion."""
+    return _apply([
+        target_height_option("Ground: this ellipsoidal height (m)."),
+        dem_options("Ground: DEM file(s); repeat for several tiles."),
+        click.option("--crs", default="utm", show_default=True,
+                     help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string"
+                          f"{crs_note}."),
+        click.option("--gsd", type=click.FloatRange(0.0, min_open=True), default=None,
+                     help=f"Output cell size (m); default: {gsd_default}."),
+        click.option("--resampling", type=click.Choice(["nearest", "bilinear", "cubic"]), default="bilinear",
+                     show_default=True, help="How a cell's value is read from the frame."),
+        click.option("--nodata", type=float, default=0, show_default=True, help="Value of cells with no image."),
+        click.option("--occlusion/--no-occlusion", default=True, show_default=True,
+                     help="On a DEM: blank cells hidden by terrain."),
+    ])
+
+
 def config_option(required: bool = True, help_text: str = "Camera/gimbal/installation TOML (see the README)."):
     return click.option("--config", "config_path", required=required, type=click.Path(dir_okay=False),
                         metavar="CONFIG.toml", help=help_text)

@@ -10,7 +10,7 @@ from rich.table import Table as RichTable
 
 from .common import ground, load_config, open_dem
 from .main import console, err_console, report_issues
-from .options import CONVENTIONS, config_option, dem_options, out_option, target_height_option
+from .options import CONVENTIONS, config_option, ortho_options, out_option
 
 RECTIFY_HELP = """Orthorectify one frame (visible or IR, any band count) onto the ellipsoid or a DEM
 and write a georeferenced GeoTIFF in UTM, Gauss-Krüger or any CRS (M5).
@@ -33,17 +33,7 @@ image's bounds) against the rigorous ray.
 @click.option("--telemetry", required=True, type=click.Path(dir_okay=False), help="Telemetry CSV with the pose.")
 @click.option("--frame", type=int, default=None, help="The telemetry record of this frame number.")
 @click.option("--time", "time_s", type=float, default=None, help="Or: the record nearest this time (s).")
-@target_height_option("Ground: this ellipsoidal height (m).")
-@dem_options("Ground: DEM file(s); repeat for several tiles.")
-@click.option("--crs", default="utm", show_default=True,
-              help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string.")
-@click.option("--gsd", type=click.FloatRange(0.0, min_open=True), default=None,
-              help="Output cell size (m); default: the native GSD at the centre.")
-@click.option("--resampling", type=click.Choice(["nearest", "bilinear", "cubic"]), default="bilinear",
-              show_default=True, help="How a cell's value is read from the frame.")
-@click.option("--nodata", type=float, default=0, show_default=True, help="Value of cells with no image.")
-@click.option("--occlusion/--no-occlusion", default=True, show_default=True,
-              help="On a DEM: blank cells hidden by terrain.")
+@ortho_options()
 @click.option("--grid-step", type=click.FloatRange(0.0, min_open=True), default=32, show_default=True,
               help="Ground grid spacing (pixels).")
 @out_option("ortho.tif, footprint.geojson, ground_grid.csv and rectify.json")

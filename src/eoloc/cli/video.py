@@ -11,7 +11,7 @@ from rich.table import Table as RichTable
 
 from .common import load_config, open_dem, progress
 from .main import console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, dem_options, out_option, target_height_option
+from .options import CONVENTIONS, config_option, ortho_options, out_option
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
 GeoTIFF, a mosaic of the pass, XYZ map tiles.
@@ -63,18 +63,8 @@ All frames share one grid (--crs, cell --gsd: default the first frame's native G
               help="Metadata clock minus video clock (s); see above for each source's default.")
 @click.option("--max-gap", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
               help="Longest metadata gap (s) to interpolate a frame's pose across.")
-@target_height_option("Ground: this ellipsoidal height (m).")
-@dem_options("Ground: DEM file(s); repeat for several tiles.")
-@click.option("--crs", default="utm", show_default=True,
-              help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string; the "
-                   "zone of the first rectified frame holds for the pass.")
-@click.option("--gsd", type=click.FloatRange(0.0, min_open=True), default=None,
-              help="Output cell size (m); default: the first rectified frame's native GSD, rounded.")
-@click.option("--resampling", type=click.Choice(["nearest", "bilinear", "cubic"]), default="bilinear",
-              show_default=True, help="How a cell's value is read from the frame.")
-@click.option("--nodata", type=float, default=0, show_default=True, help="Value of cells with no image.")
-@click.option("--occlusion/--no-occlusion", default=True, show_default=True,
-              help="On a DEM: blank cells hidden by terrain.")
+@ortho_options("; the zone of the first rectified frame holds for the pass",
+               "the first rectified frame's native GSD, rounded")
 @click.option("--every", type=click.IntRange(1), default=1, show_default=True, help="Rectify every N-th frame.")
 @click.option("--start", "start_s", type=click.FloatRange(0.0), default=0.0, show_default=True,
               help="First frame time to rectify (s since the first frame).")

@@ -328,6 +328,11 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
     demux = TransportDemuxer(recover_transport=True)
     issues: list[KLVIssue] = []
     per_pid: dict[int, tuple[bytearray, list]] = {}
+    torn = len(data) % TS_PACKET
+    if torn:  # a recording cut off mid-packet: the whole packets before it are kept
+        issues.append(KLVIssue(path, None, len(data) - torn, "skipped bytes",
+                               f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)"))
+        data = data[:len(data) - torn]
     try:
         events = demux.feed(data) + demux.finish()
     except Exception as exc:
