@@ -35,11 +35,13 @@ def write_dem(dem: DEM, path: str | Path) -> Path:
 
 
 def write_cog(path: str | Path, data: np.ndarray, transform, crs, *, nodata: float | None = None,
-              mask: np.ndarray | None = None, band_names: list[str] | None = None, tags: dict | None = None) -> Path:
-    """A Cloud-Optimised GeoTIFF (GDAL's COG driver: 512-pixel tiles, overviews, deflate) of
+              mask: np.ndarray | None = None, band_names: list[str] | None = None, tags: dict | None = None,
+              threads: int | str = "ALL_CPUS") -> Path:
+    """A Cloud-Optimised GeoTIFF (GDAL's COG driver: 512-pixel tiles, averaged overviews, deflate) of
     ``data`` (bands, rows, cols) on ``transform`` (rasterio Affine) and ``crs`` (pyproj or
     rasterio); ``mask`` (rows, cols) True where a cell holds data, written as the internal mask
-    GIS software honours; ``band_names`` as band descriptions; ``tags`` as dataset tags."""
+    GIS software honours; ``band_names`` as band descriptions; ``tags`` as dataset tags;
+    ``threads``: GDAL's compression threads."""
     import rasterio
 
     path = Path(path)
@@ -48,7 +50,9 @@ def write_cog(path: str | Path, data: np.ndarray, transform, crs, *, nodata: flo
     crs = rasterio.crs.CRS.from_wkt(crs.to_wkt()) if hasattr(crs, "to_wkt") else crs
     profile = {"driver": "COG", "width": w, "height": h, "count": b, "dtype": data.dtype.name, "crs": crs,
                "transform": transform, "nodata": nodata, "compress": "deflate",
-               "predictor": 2 if np.issubdtype(data.dtype, np.integer) else 3}
+               # averaged overviews, compressed on every core; no predictor: it cost 35 % more time
+               # for a few % smaller files (measured on a rectified frame)
+               "overview_resampling": "average", "num_threads": str(threads)}
     with rasterio.open(path, "w", **profile) as ds:
         ds.write(data)
         if mask is not None:
@@ -60,7 +64,8 @@ def write_cog(path: str | Path, data: np.ndarray, transform, crs, *, nodata: flo
     return path
 
 
-def write_ortho(ortho: Ortho, path: str | Path, *, tags: dict | None = None) -> Path:
+def write_ortho(ortho: Ortho, path: str | Path, *, tags: dict | None = None, threads: int | str = "ALL_CPUS") -> Path:
     """An orthorectified frame as a Cloud-Optimised GeoTIFF with its CRS, transform, nodata and
     the cells the camera saw as its internal mask; ``tags`` as dataset tags."""
-    return write_cog(path, ortho.data, ortho.transform, ortho.crs, nodata=ortho.nodata, mask=ortho.valid, tags=tags)
+    return write_cog(path, ortho.data, ortho.transform, ortho.crs, nodata=ortho.nodata, mask=ortho.valid, tags=tags,
+                     threads=threads)
