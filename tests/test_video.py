@@ -15,6 +15,8 @@ import pyproj
 import pytest
 import rasterio
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rasterio.transform import from_origin
 from rio_cogeo.cogeo import cog_validate
 
@@ -299,3 +301,68 @@ def test_demo_video_rectifies_to_the_texture_s_known_geometry(tmp_path):
     assert np.median(err * acc["cells_m"] / gsd) < 0.15  # in the frames' own pixels, over every corner
     rep = json.loads((tmp_path / "eoloc" / "video.json").read_text())
     assert rep["statuses"] == {"OK": 15}  # 1.5 s at 10 frames/s, the last frame at 1.4 s
+
+
+# -- properties ----------------------------------------------------------------------------------
+
+FRAME = st.tuples(st.integers(-12, 12), st.integers(-12, 12), st.integers(1, 9), st.integers(1, 9),
+                  st.integers(0, 2**32 - 1))
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.lists(FRAME, min_size=1, max_size=6), chunk=st.sampled_from([3, 4, 7, 64]))
+def test_mosaic_equals_a_brute_force_paste(frames, chunk):
+    """Any frames on the global grid (any offsets, sizes, seen cells and GSDs, chunks of any size):
+    each cell holds the first frame with the smallest GSD among those that saw it."""
+    crs, res = pyproj.CRS.from_epsg(32633), (5.0, 5.0)
+    mos = Mosaic(crs, res, 2, np.int16, -1, chunk=chunk)
+    ref_f = {}
+    for k, (r0, c0, h, w, seed) in enumerate(frames):
+        rng = np.random.default_rng(seed)
+        valid = rng.random((h, w)) < 0.7
+        gsd = rng.choice([0.5, 1.0, 2.0], (h, w)).astype(np.float32)
+        data = np.stack([np.full((h, w), k), rng.integers(0, 100, (h, w))]).astype(np.int16)
+        grid = OutputGrid(crs, from_origin(c0 * res[0], -r0 * res[1], *res), (h, w), res)
+        mos.add(k, grid, data, valid, gsd)
+        for i, j in zip(*np.nonzero(valid), strict=True):
+            key = (r0 + i, c0 + j)
+            if key not in ref_f or gsd[i, j] < ref_f[key][0]:
+                ref_f[key] = (gsd[i, j], k, data[1, i, j])
+    if not ref_f:
+        with pytest.raises(Exception, match="empty"):
+            mos.result()
+        return
+    r = mos.result()
+    top, left = round(-r.grid.transform.f / res[1]), round(r.grid.transform.c / res[0])
+    assert top == min(k[0] for k in ref_f) and left == min(k[1] for k in ref_f)
+    assert r.grid.shape == (max(k[0] for k in ref_f) - top + 1, max(k[1] for k in ref_f) - left + 1)
+    for (gr, gc), (g, k, v) in ref_f.items():
+        assert r.frame[gr - top, gc - left] == k and r.data[0, gr - top, gc - left] == k
+        assert r.data[1, gr - top, gc - left] == v and r.gsd_m[gr - top, gc - left] == g
+    assert int(r.valid.sum()) == len(ref_f)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 30), rate=st.sampled_from([1.0, 5.0, 25.0, 29.97]), seed=st.integers(0, 2**32 - 1))
+def test_frames_at_record_times_get_the_records(n, rate, seed):
+    """Frames at the records' own times get the records' pose and values unchanged (the
+    synchronous carriage case), whatever the rate and the motion."""
+    from eoloc.sequence.sync import Metadata, poses_at_frames
+
+    rng = np.random.default_rng(seed)
+    t = 1000.0 + np.arange(n) / rate
+    pose = Pose(40 + rng.normal(0, 0.01, n), -105 + rng.normal(0, 0.01, n), 3000 + rng.normal(0, 50, n),
+                rng.uniform(0, 360, n), rng.uniform(-20, 20, n), rng.uniform(-30, 30, n),
+                (rng.uniform(0, 360, n), rng.uniform(-90, 0, n)))
+    hfov = rng.uniform(1, 60, n)
+    fp = poses_at_frames(Metadata(t, pose, {"hfov_deg": hfov}, "test"), t, max_gap_s=2.0 / rate)
+    assert fp.ok.all()
+    np.testing.assert_allclose(fp.values["hfov_deg"], hfov, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fp.pose.lat_deg, pose.lat_deg, atol=1e-9)
+    np.testing.assert_allclose(fp.pose.h_m, pose.h_m, atol=1e-6)
+    for a, b in zip(fp.pose.gimbal_deg, pose.gimbal_deg, strict=True):
+        np.testing.assert_allclose((a - b + 180) % 360 - 180, 0, atol=1e-9)
+    from eoloc.rotation import R_ned_body
+
+    np.testing.assert_allclose(R_ned_body(fp.pose.yaw_deg, fp.pose.pitch_deg, fp.pose.roll_deg),
+                               R_ned_body(pose.yaw_deg, pose.pitch_deg, pose.roll_deg), atol=1e-9)
