@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 
 from . import geodesy
 from .errors import InputError
-from .footprint import footprints
+from .footprint import Footprint, footprints
 from .result import Fixes, Status
 from .rules import locate_dem, surface_rule
 from .sensor.model import Pose, SensorModel
@@ -161,16 +161,19 @@ class OutputGrid:
 
 def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str | pyproj.CRS = "utm",
                 gsd_m: float | None = None, res: tuple[float, float] | None = None, max_cells: int = 40_000_000,
-                edge_samples: int = 16) -> OutputGrid:
+                edge_samples: int = 16, footprint: Footprint | None = None) -> OutputGrid:
     """The grid a frame is rectified onto: its footprint's bounding box in ``crs`` (see
     :func:`output_crs`), cell edges on multiples of the cell size (so the grids of a pass line up),
     at ``gsd_m`` metres per cell (default: the native ground sample distance at the image centre;
     for a geographic CRS that many metres at the frame centre's latitude), or at ``res`` (x, y) in
-    the CRS's units (the frames of a pass after the first: the same cells exactly)."""
-    prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
-    if len(prints) != 1:
-        raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
-    fp = prints[0]
+    the CRS's units (the frames of a pass after the first: the same cells exactly). ``footprint``:
+    the frame's footprint when the caller has it already."""
+    if footprint is None:
+        prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
+        if len(prints) != 1:
+            raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
+        footprint = prints[0]
+    fp = footprint
     if fp.status != Status.OK:
         raise InputError(f"the frame sees no ground ({fp.status.name}): nothing to rectify")
     clat, clon = (fp.centre[0], fp.centre[1]) if np.isfinite(fp.centre[0]) else (float(np.mean(fp.lat_deg)),

@@ -67,7 +67,7 @@ class VideoJob:
 # -- metadata on the frames' clock ---------------------------------------------------------------
 
 
-def klv_metadata(path, info: VideoInfo, first_pts_s: float, *, in_video: bool, klv_stream: str | None = None,
+def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | None = None,
                  time_offset_s: float | None = None, strict: bool = False) -> tuple[Metadata, list]:
     """ST 0601 packets of ``path`` as records on the frames' clock. ``in_video``: the KLV is in the
     video's own transport stream, so its PES times are the frames' clock (minus ``time_offset_s``,
@@ -192,7 +192,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         base_sensor = cfg.sensor()
     else:
         src = klv if klv is not None else video
-        meta, issues = klv_metadata(src, info, t0, in_video=klv is None, klv_stream=klv_stream,
+        meta, issues = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,
                                     time_offset_s=time_offset_s, strict=strict)
         base_sensor = None
     if surface is None and "fc_h_m" not in meta.values:
@@ -241,8 +241,9 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                 try:
                     if gsd_m is None and "res" not in pass_grid:  # the pass's cell: the first frame's GSD, rounded
                         gsd_m = round_gsd(R.native_gsd_m(sensor, pose, ground))
+                    fp = footprints(sensor, pose, ground)[0]  # the grid's extent, and a layer of its own
                     grid = R.output_grid(sensor, pose, ground, crs=pass_grid.get("crs", crs),
-                                         gsd_m=gsd_m, res=pass_grid.get("res"))
+                                         gsd_m=gsd_m, res=pass_grid.get("res"), footprint=fp)
                     result = _rectify_frame(fr.image, sensor, pose, ground, grid, resampling, nodata, occlusion)
                 except InputError as exc:
                     status, note = "NOT_RECTIFIED", str(exc)
@@ -268,7 +269,6 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                                                        "EOLOC_METADATA": meta.source}))
                     row["file"] = str(path.relative_to(out))
                     written.append(path)
-                fp = footprints(sensor, pose, ground)[0]
                 feats += footprint_features([fp], [{"frame": fr.index, "video_time_s": row["video_time_s"]}])
             row.update({"status": status, "note": note})
             rows.append(row)
