@@ -2,13 +2,16 @@
 
 1. A 10 s pass north at 6 000 m, 3.5 km east of the summit, the turret sweeping 40° across the
    mountain, 35° below the horizon. Its metadata is an ST 0601 KLV stream at 5 Hz (platform
-   pose, turret angles, fields of view, HAE altitude).
+   pose, turret angles, fields of view, HAE altitude), with ST 0903 VMTI: three "vehicles"
+   (20 m red squares on the ground, each in the middle of a board square) boxed wherever the
+   frame sees them.
 2. The video (480 x 270, 10 frames/s, H.264) is rendered through eoloc's sensor model, one ray per pixel
    onto the bundled SRTM DEM: every pixel shows the ground texture where its ray lands. The
    texture is a hillshade of the DEM under a checkerboard of 60 m squares in UTM 13N (light
    squares warm, dark squares cool, so the board survives the shading).
 3. PyAV muxes the video and the KLV (asynchronous carriage) into one MPEG-TS.
-4. `eoloc video` rectifies every frame onto the DEM, builds the mosaic and the XYZ tiles.
+4. `eoloc video` rectifies every frame onto the DEM, builds the mosaic, the XYZ tiles and the
+   player (player.html: the video beside the map), and locates the VMTI targets.
 5. Accuracy against the texture's known geometry: each board corner inside the mosaic is found
    by OpenCV's cornerSubPix in the mosaic and compared with where the corner truly is.
 
@@ -31,8 +34,8 @@ import pyproj
 import rasterio
 
 import eoloc
-from eoloc import AzElGimbal, Camera, Pose, SensorModel, open_dem
-from eoloc.io.klv.encode import encode_uas_packet
+from eoloc import AzElGimbal, Camera, Pose, SensorModel, geodetic_to_ecef, open_dem
+from eoloc.io.klv.encode import encode_uas_packet, encode_vmti
 from eoloc.io.klv.mux import write_klv_ts
 from eoloc.rules import locate_dem
 from eoloc.terrain import DEM
@@ -45,6 +48,8 @@ CELL_M = 3.0  # the mosaic's cell
 UTM = pyproj.CRS.from_epsg(32613)
 START_UNIX_S = datetime(2026, 7, 14, 16, 0, 0, tzinfo=UTC).timestamp()
 LIGHT, DARK = np.array([215.0, 190.0, 150.0]), np.array([95.0, 115.0, 150.0])
+VEHICLE, VEHICLE_M = np.array([235.0, 30.0, 30.0]), 20.0
+VEHICLE_AT_S = (2.0, 5.0, 8.0)  # each vehicle lies near the frame centre of this moment of the pass
 
 
 def truth_pose(t_s: np.ndarray) -> Pose:
@@ -60,8 +65,44 @@ def vfov_deg() -> float:
     return float(np.degrees(2 * np.arctan(np.tan(np.radians(HFOV_DEG) / 2) * HEIGHT / WIDTH)))
 
 
-def klv_packets(seconds: float = SECONDS) -> list[tuple[bytes, float]]:
-    """The pass as ST 0601 packets at KLV_HZ, each with its time (s since the start)."""
+def vehicles(dem: DEM, sensor: SensorModel) -> np.ndarray:
+    """(3, 2) UTM centres of the vehicles: the middle of the board square under the frame
+    centre at each time of VEHICLE_AT_S."""
+    t = np.array(VEHICLE_AT_S)
+    c = sensor.camera
+    f = locate_dem(sensor, truth_pose(t), dem, (np.full(t.shape, c.cx), np.full(t.shape, c.cy)))
+    x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(f.lon_deg, f.lat_deg)
+    return np.stack([(np.floor(x / SQUARE_M) + 0.5) * SQUARE_M, (np.floor(y / SQUARE_M) + 0.5) * SQUARE_M], -1)
+
+
+def vehicle_boxes(dem: DEM, sensor: SensorModel, cars: np.ndarray, t_s: float) -> tuple[list, dict]:
+    """The VMTI of time ``t_s``: (id, u, v) of each vehicle the frame sees (in the image, not
+    hidden by terrain) and its box (the image of its square's corners)."""
+    to_ll = pyproj.Transformer.from_crs(UTM, 4326, always_xy=True)
+    p = truth_pose(np.array(t_s))
+    half = VEHICLE_M / 2
+    targets, boxes = [], {}
+    for k, (x, y) in enumerate(cars):
+        xs = np.array([x, x - half, x + half, x + half, x - half])
+        ys = np.array([y, y - half, y - half, y + half, y + half])
+        lon, lat = to_ll.transform(xs, ys)
+        h = dem.height(lat, lon)
+        u, v = sensor.ground_to_image(p, np.stack(geodetic_to_ecef(lat, lon, h), -1))
+        c = sensor.camera
+        if not (np.isfinite(u).all() and 0 <= u[0] <= c.width - 1 and 0 <= v[0] <= c.height - 1):
+            continue
+        seen = locate_dem(sensor, p, dem, (u[:1], v[:1]))  # hidden by terrain: the ray lands elsewhere
+        if not (seen.ok[0] and abs(seen.lat_deg[0] - lat[0]) * 111_000 < 10 and
+                abs(seen.lon_deg[0] - lon[0]) * 85_000 < 10):
+            continue
+        targets.append((k + 1, float(u[0]), float(v[0])))
+        boxes[k + 1] = (float(u[1:].min()), float(v[1:].min()), float(u[1:].max()), float(v[1:].max()))
+    return targets, boxes
+
+
+def klv_packets(seconds: float = SECONDS, vmti=None) -> list[tuple[bytes, float]]:
+    """The pass as ST 0601 packets at KLV_HZ, each with its time (s since the start); ``vmti(t)``:
+    the (targets, boxes) of the VMTI set at time t."""
     t = np.arange(int(seconds * KLV_HZ) + 1) / KLV_HZ
     p = truth_pose(t)
     out = []
@@ -69,6 +110,10 @@ def klv_packets(seconds: float = SECONDS) -> list[tuple[bytes, float]]:
         values = {2: datetime.fromtimestamp(START_UNIX_S + ti, UTC), 5: 0.0, 6: 0.0, 7: 0.0,
                   13: float(p.lat_deg[i]), 14: float(p.lon_deg[i]), 75: float(p.h_m[i]), 16: HFOV_DEG,
                   17: vfov_deg(), 18: float(p.gimbal_deg[0][i]), 19: float(p.gimbal_deg[1][i]), 20: 0.0}
+        if vmti is not None:
+            targets, boxes = vmti(float(ti))
+            if targets:
+                values[74] = encode_vmti(targets, WIDTH, HEIGHT, boxes=boxes)
         out.append((encode_uas_packet(values), float(ti)))
     return out
 
@@ -99,18 +144,24 @@ def square_wave(x: np.ndarray, width: np.ndarray | float = 0.0) -> np.ndarray:
         return sign * np.where(width > 0, np.minimum(2.0 * d / np.maximum(width, 1e-9), 1.0), 1.0)
 
 
-def texture(shade: DEM, lat: np.ndarray, lon: np.ndarray, pixel_extent: bool = False) -> np.ndarray:
-    """The ground's colour (…, 3) float at (lat, lon): the board in UTM 13N times the hillshade.
-    ``pixel_extent``: (lat, lon) are an image's pixels, and the board is averaged over each
-    pixel's footprint (from the neighbouring pixels' ground points)."""
+def texture(shade: DEM, lat: np.ndarray, lon: np.ndarray, pixel_extent: bool = False,
+            cars: np.ndarray | None = None) -> np.ndarray:
+    """The ground's colour (…, 3) float at (lat, lon): the board in UTM 13N times the hillshade,
+    and the vehicles (``cars``: UTM centres). ``pixel_extent``: (lat, lon) are an image's pixels,
+    and the board is averaged over each pixel's footprint (from the neighbouring pixels' ground
+    points)."""
     x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(lon, lat)
     wx = wy = 0.0
     if pixel_extent:
         (dx_dv, dx_du), (dy_dv, dy_du) = np.gradient(x), np.gradient(y)
         wx, wy = np.nan_to_num(np.abs(dx_du) + np.abs(dx_dv)), np.nan_to_num(np.abs(dy_du) + np.abs(dy_dv))
     light = (0.5 + 0.5 * square_wave(x, wx) * square_wave(y, wy))[..., None]
+    colour = light * LIGHT + (1.0 - light) * DARK
+    for cx, cy in cars if cars is not None else ():
+        on = (np.abs(x - cx) <= VEHICLE_M / 2) & (np.abs(y - cy) <= VEHICLE_M / 2)
+        colour = np.where(on[..., None], VEHICLE, colour)
     s = shade.height(lat, lon)[..., None]
-    return (light * LIGHT + (1.0 - light) * DARK) * np.nan_to_num(s, nan=0.0)
+    return colour * np.nan_to_num(s, nan=0.0)
 
 
 def board_contrast(rgb: np.ndarray, shade: np.ndarray) -> np.ndarray:
@@ -121,13 +172,13 @@ def board_contrast(rgb: np.ndarray, shade: np.ndarray) -> np.ndarray:
         return np.nan_to_num(y / shade, nan=0.0, posinf=0.0).astype(np.float32)
 
 
-def render(dem: DEM, shade: DEM, sensor: SensorModel, i: int) -> np.ndarray:
+def render(dem: DEM, shade: DEM, sensor: SensorModel, i: int, cars: np.ndarray | None = None) -> np.ndarray:
     """Frame i (RGB uint8): every pixel's ray onto the DEM, coloured by the texture over the
     pixel's footprint there (sky and ground off the DEM grey)."""
     p = truth_pose(np.array(i / FPS))
     u, v = np.meshgrid(np.arange(WIDTH, dtype=float), np.arange(HEIGHT, dtype=float))
     f = locate_dem(sensor, p, dem, (u, v))
-    rgb = np.where(f.ok[..., None], texture(shade, f.lat_deg, f.lon_deg, pixel_extent=True), 40.0)
+    rgb = np.where(f.ok[..., None], texture(shade, f.lat_deg, f.lon_deg, pixel_extent=True, cars=cars), 40.0)
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
 
 
@@ -167,6 +218,21 @@ def corner_errors(folder: Path, shade: DEM) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.norm(got.reshape(-1, 2) - truth, axis=1), gsd[at[:, 1], at[:, 0]]
 
 
+def vmti_errors(path: Path, cars: np.ndarray) -> np.ndarray:
+    """Horizontal distance (m) of each located VMTI detection (vmti.csv) from its vehicle's centre."""
+    import csv
+
+    if not path.exists():
+        return np.zeros(0)
+    rows = [r for r in csv.DictReader(path.open()) if r["status"] == "OK"]
+    if not rows:
+        return np.zeros(0)
+    x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(
+        np.array([float(r["lon_deg"]) for r in rows]), np.array([float(r["lat_deg"]) for r in rows]))
+    k = np.array([int(r["target_id"]) - 1 for r in rows])
+    return np.hypot(x - cars[k, 0], y - cars[k, 1])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/demo/video", help="output folder")
@@ -179,8 +245,10 @@ def main(argv: list[str] | None = None) -> int:
     sensor = SensorModel(Camera.from_hfov(HFOV_DEG, WIDTH, HEIGHT, vfov_deg=vfov_deg()), AzElGimbal())
     t0 = time.perf_counter()
     n = int(seconds * FPS) + 1
-    ts = write_klv_ts(out / "longs_peak_pass.ts", [klv_packets(seconds)], video_fps=FPS, video_size=(WIDTH, HEIGHT),
-                      frame_source=lambda i: render(dem, shade, sensor, i))
+    cars = vehicles(dem, sensor)
+    packets = klv_packets(seconds, vmti=lambda t: vehicle_boxes(dem, sensor, cars, t))
+    ts = write_klv_ts(out / "longs_peak_pass.ts", [packets], video_fps=FPS, video_size=(WIDTH, HEIGHT),
+                      frame_source=lambda i: render(dem, shade, sensor, i, cars))
     print(f"rendered {n} frames of {WIDTH} x {HEIGHT} through the sensor model onto the DEM and muxed them with "
           f"{int(seconds * KLV_HZ) + 1} ST 0601 packets into {ts} ({time.perf_counter() - t0:.1f} s)", flush=True)
     cmd = [sys.executable, "-m", "eoloc", "video", str(ts), "--dem", str(DEM_PATH), "--gsd", f"{CELL_M:g}", "--out",
@@ -193,9 +261,11 @@ def main(argv: list[str] | None = None) -> int:
     if not err.size:
         print("no board corner lies well inside the mosaic: nothing to measure")
         return 1
+    vmti_m = vmti_errors(out / "eoloc" / "vmti.csv", cars)
     (out / "accuracy.json").write_text(json.dumps({"corners": int(err.size), "cells_m": CELL_M,
                                                    "error_cells": err.round(4).tolist(),
-                                                   "frame_gsd_m": gsd.round(3).tolist()}) + "\n")
+                                                   "frame_gsd_m": gsd.round(3).tolist(),
+                                                   "vmti_error_m": vmti_m.round(3).tolist()}) + "\n")
     sharp = gsd <= 1.5 * CELL_M
     px = err * CELL_M / gsd
     print(f"accuracy against the texture's known geometry, {err.size} board corners inside the mosaic found by "
@@ -205,6 +275,12 @@ def main(argv: list[str] | None = None) -> int:
               f"{np.median(err[sharp]):.2f}, p95 {np.percentile(err[sharp], 95):.2f} output cells of {CELL_M:g} m")
     print(f"  all corners, in the frame's own pixels (GSD {np.median(gsd):.1f} m median, up to {gsd.max():.0f} m on "
           f"slopes seen edge-on): median {np.median(px):.2f}, p95 {np.percentile(px, 95):.2f} px")
+    if vmti_m.size:
+        print(f"VMTI: {vmti_m.size} detections of the {len(cars)} vehicles located by eoloc with their packets' poses: "
+              f"median {np.median(vmti_m):.1f} m, max {vmti_m.max():.1f} m from the vehicles' true centres (the "
+              "encoder's centroids are whole pixels)")
+    print(f"the player: open {out / 'eoloc' / 'player.html'} in a browser (offline), or for exact clicks:")
+    print(f"  {json.loads((out / 'eoloc' / 'video.json').read_text())['player']['serve']}")
     print(f"open {out / 'eoloc' / 'mosaic.tif'} in QGIS, or its tiles: {out / 'eoloc' / 'tiles'}/{{z}}/{{x}}/{{y}}.png")
     return 0
 

@@ -25,7 +25,10 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
     over --max-body-mb: 413.
   GET /v1/health   alive, uptime, requests served, the config and DEM names.
   --dem NAME=PATH (repeatable) makes the DEM usable as {"dem": NAME}; --dem PATH names it by its
-  file name without the extension.
+  file name without the extension; the same NAME repeated joins tiles into one DEM.
+  --player DIR     serves `eoloc video`'s output folder DIR at /video/ (/ leads to its
+                   player.html): the page then locates a click in the video through /v1/locate,
+                   exactly. `eoloc video` prints the serve line that matches its own DEM and config.
 """
 
 
@@ -36,20 +39,29 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
 @dem_options("A DEM the requests can name: NAME=PATH or PATH; repeat for several.")
 @click.option("--max-body-mb", type=click.FloatRange(0.001), default=8.0, show_default=True,
               help="Largest request body accepted, MB.")
-def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body_mb) -> None:
+@click.option("--player", "player_dir", type=click.Path(file_okay=False, exists=True), default=None,
+              help="`eoloc video`'s output folder to serve at /video/ (its player.html).")
+def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body_mb, player_dir) -> None:
     import uvicorn
 
     from ..service.api import ServiceState, create_app
     from ..terrain import open_dem
 
-    dems = {}
+    tiles: dict[str, list[str]] = {}
     for item in dem_paths:
         name, _, path = item.rpartition("=") if "=" in item else (Path(item).stem, "", item)
-        if not name or name in dems:
-            fail(f"--dem {item!r}: give each DEM a name of its own (NAME=PATH)")
+        if not name:
+            fail(f"--dem {item!r}: give the DEM a name (NAME=PATH)")
+        tiles.setdefault(name, []).append(path)
+    dems = {}
+    for name, paths in tiles.items():
         with err_console.status(f"reading DEM {name}..."):
-            dems[name] = open_dem([path], vertical=vertical, geoid=geoid, assume_crs=dem_crs)
+            dems[name] = open_dem(paths, vertical=vertical, geoid=geoid, assume_crs=dem_crs)
+    if player_dir is not None and not (Path(player_dir) / "player.html").is_file():
+        fail(f"--player {player_dir}: no player.html in it (write one with `eoloc video ... --out {player_dir}`)")
     state = ServiceState(load_config(config_path) if config_path else None, dems)
-    app = create_app(state, max_body_bytes=int(max_body_mb * 1024 * 1024))
+    app = create_app(state, max_body_bytes=int(max_body_mb * 1024 * 1024), player_dir=player_dir)
     err_console.print(f"eoloc serve: http://{host}:{port}/docs (Ctrl-C stops)")
+    if player_dir is not None:
+        err_console.print(f"the player: http://{host}:{port}/video/player.html")
     uvicorn.run(app, host=host, port=port, log_level="info")

@@ -45,6 +45,12 @@ Written into --out:
   mosaic.tif               the pass: per cell the frame with the finest ground sample
   mosaic_source.tif        per cell the source frame index (-1 none) and its GSD (m)
   tiles/{z}/{x}/{y}.png    the mosaic as XYZ tiles (Web Mercator) for Leaflet, QGIS, ...
+  player.html, player/     the video beside the map, synced (open it in a browser; works offline):
+                           footprint, frame centre, aircraft, VMTI boxes and points, the current
+                           frame draped (opacity slider), the mosaic; click in the video -> the
+                           ground point (exact through `eoloc serve --player OUT`, offline from
+                           per-frame ground grids)
+  vmti.csv, vmti.geojson   the VMTI targets (ST 0903 in the KLV), each located with its packet's pose
   frames.csv, footprints.geojson, video.json
 All frames share one grid (--crs, cell --gsd: default the first frame's native GSD, rounded).
 """
@@ -74,10 +80,12 @@ All frames share one grid (--crs, cell --gsd: default the first frame's native G
               help="Write each rectified frame as a COG.")
 @click.option("--mosaic/--no-mosaic", default=True, show_default=True, help="Build the mosaic of the pass.")
 @click.option("--tiles/--no-tiles", default=True, show_default=True, help="Cut the mosaic into XYZ tiles.")
+@click.option("--player/--no-player", default=True, show_default=True,
+              help="Write player.html: the video beside the map (the video remuxed or transcoded to MP4).")
 @out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
-          mosaic, tiles, out_dir) -> None:
+          mosaic, tiles, player, out_dir) -> None:
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
 
@@ -90,6 +98,8 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if end_s is not None and end_s < start_s:
         raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    dem_name = Path(dem_paths[0]).stem if dem_paths else "dem"
+    serve_line = serve_command(Path(out_dir), dem_name, dem_paths, vertical, geoid, dem_crs, config_path)
     surface = dem if dem is not None else target_height
     cfg = load_config(config_path) if config_path else None
     out = Path(out_dir)
@@ -99,13 +109,16 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         job = video_job(video, out=out, klv=klv_path, telemetry=telemetry, cfg=cfg, surface=surface, crs=crs,
                         gsd_m=gsd, resampling=resampling, nodata=nodata, occlusion=occlusion, select=select,
                         klv_stream=klv_stream, time_offset_s=time_offset, max_gap_s=max_gap,
-                        write_frames=write_frames, mosaic=mosaic, tiles=tiles,
+                        write_frames=write_frames, mosaic=mosaic, tiles=tiles, player=player,
+                        dem_name=dem_name, serve_command=serve_line,
                         progress=lambda done, total: bar.update(task, completed=done, total=total))
     report_issues(job.issues)
     for line in job.decode_errors:
         warn(line)
     written = list(job.written)
     written += write_layer(out, "frames", job.rows, ["csv"])
+    if job.vmti:
+        written += write_layer(out, "vmti", job.vmti, ["csv", "geojson"])
     if job.footprints:
         written += write_layer(out, "footprints", [f["properties"] for f in job.footprints], ["geojson"],
                                features=job.footprints)
@@ -120,6 +133,10 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         report["mosaic"] = {"crs": g.crs.to_string(), "res": list(g.res), "size": list(g.shape),
                             "seen_fraction": float(job.mosaic.valid.mean()),
                             "frames_used": len(set(job.mosaic.frame[job.mosaic.valid].tolist()))}
+    if job.player is not None:
+        report["player"] = {"page": str(job.player), "video": job.video_for_browser, "serve": serve_line}
+    if job.vmti:
+        report["vmti"] = {"detections": len(job.vmti), "located": sum(r["status"] == "OK" for r in job.vmti)}
     if job.tiles is not None:
         report["tiles"] = {"url": job.tiles.url, "min_zoom": job.tiles.min_zoom, "max_zoom": job.tiles.max_zoom,
                            "count": job.tiles.count}
@@ -135,6 +152,11 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         t.add_row("mosaic", f"{g.shape[1]} x {g.shape[0]} cells of {g.res[0]:.3g} "
                             f"{'deg' if g.crs.is_geographic else 'm'} in {g.crs.name}; "
                             f"{report['mosaic']['frames_used']} frames")
+    if job.vmti:
+        n_ok = sum(r["status"] == "OK" for r in job.vmti)
+        t.add_row("VMTI", f"{len(job.vmti)} detections, {n_ok} located")
+    if job.player is not None:
+        t.add_row("player", f"{job.player} (the video {job.video_for_browser} to MP4)")
     if job.tiles is not None:
         t.add_row("tiles", f"{job.tiles.count} tiles, zoom {job.tiles.min_zoom}-{job.tiles.max_zoom}")
     console.print(t)
@@ -143,5 +165,26 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if frames:
         err_console.print(f"wrote {len(frames)} frame COGs into [bold]{out / 'frames'}[/]")
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in others))
+    if job.player is not None:
+        err_console.print(f"open {job.player} in a browser; for exact clicks on every frame serve it:")
+        err_console.print(f"  {serve_line}", soft_wrap=True, markup=False)
     if not job.n_rectified:
         warn("no frame was rectified: see the status and note columns of frames.csv")
+
+
+def serve_command(out: Path, dem_name: str, dem_paths, vertical: str, geoid, dem_crs, config_path) -> str:
+    """The `eoloc serve` line that serves the player with what this job used (its clicks exact)."""
+    import shlex
+
+    parts = ["eoloc", "serve", "--player", str(out)]
+    for p in dem_paths:
+        parts += ["--dem", f"{dem_name}={Path(p).resolve()}"]
+    if dem_paths and vertical != "egm96":
+        parts += ["--vertical", vertical]
+    if dem_paths and geoid:
+        parts += ["--geoid", str(Path(geoid).resolve())]
+    if dem_paths and dem_crs:
+        parts += ["--dem-crs", dem_crs]
+    if config_path:
+        parts += ["--config", str(Path(config_path).resolve())]
+    return shlex.join(parts)

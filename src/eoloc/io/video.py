@@ -130,3 +130,57 @@ def iter_frames(path: str | Path, *, want: Callable[[int, float], bool] | None =
 
 def _when(packet, tb) -> str:
     return f"{float(packet.pts * tb):.3f} s" if packet.pts is not None else f"byte {packet.pos}"
+
+
+BROWSER_CODECS = ("h264",)  # what every browser's <video> plays inside MP4
+
+
+def browser_video(path: str | Path, dest: str | Path, *, first_pts_s: float | None = None) -> tuple[Path, str]:
+    """The first video stream of ``path`` as an MP4 a browser plays, its first frame at time 0:
+    H.264 is remuxed (packets copied, nothing re-encoded), anything else (MPEG-2, HEVC, ...) is
+    transcoded with x264 (no B-frames, every frame at its own time). ``first_pts_s``: the time
+    that becomes 0 (default: the first frame's). Returns (dest, "remuxed" | "transcoded")."""
+    import av
+
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    if first_pts_s is None:
+        times = frame_times(path)
+        first_pts_s = float(times[0]) if times.size else 0.0
+    with _open(path) as src:
+        v = src.streams.video[0]
+        remux = v.codec_context.name in BROWSER_CODECS
+        with av.open(str(dest), "w", format="mp4", options={"movflags": "+faststart"}) as out:
+            if remux:
+                o = out.add_stream_from_template(v)
+                shift = round(first_pts_s / v.time_base)
+                for packet in src.demux(v):
+                    if packet.dts is None and packet.pts is None:
+                        continue  # the demuxer's flush packet
+                    if packet.pts is not None:
+                        packet.pts -= shift
+                    if packet.dts is not None:
+                        packet.dts -= shift
+                    packet.stream = o
+                    out.mux(packet)
+            else:
+                o = out.add_stream("libx264", rate=v.average_rate or v.guessed_rate or 25)
+                o.width, o.height, o.pix_fmt = v.codec_context.width, v.codec_context.height, "yuv420p"
+                o.time_base = v.time_base
+                o.options = {"crf": "18", "preset": "veryfast", "bf": "0"}
+                o.codec_context.time_base = v.time_base
+                shift = round(first_pts_s / v.time_base)
+                for packet in src.demux(v):
+                    try:
+                        frames = packet.decode()
+                    except av.FFmpegError:
+                        continue  # eoloc video names undecodable packets; the player shows what decodes
+                    for frame in frames:
+                        if frame.pts is None:
+                            continue
+                        out_frame = frame.reformat(format="yuv420p")
+                        out_frame.pts = frame.pts - shift
+                        out_frame.time_base = v.time_base
+                        out.mux(o.encode(out_frame))
+                out.mux(o.encode(None))
+    return dest, "remuxed" if remux else "transcoded"

@@ -58,6 +58,9 @@ class VideoJob:
     written: list[Path]
     issues: list = field(default_factory=list)
     decode_errors: list[str] = field(default_factory=list)
+    vmti: list[dict] = field(default_factory=list)
+    player: Path | None = None
+    video_for_browser: str = ""
 
     @property
     def n_rectified(self) -> int:
@@ -67,13 +70,24 @@ class VideoJob:
 # -- metadata on the frames' clock ---------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class VMTISource:
+    """The VMTI detections (ST 0903 in tag 74) of the chosen KLV stream, the telemetry rows of
+    their packets and each packet's time on the frames' clock (by packet index)."""
+
+    telemetry: object
+    detections: object
+    clock_by_packet: dict[int, float]
+
+
 def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | None = None,
-                 time_offset_s: float | None = None, strict: bool = False) -> tuple[Metadata, list]:
+                 time_offset_s: float | None = None, strict: bool = False) -> tuple[Metadata, list, VMTISource | None]:
     """ST 0601 packets of ``path`` as records on the frames' clock. ``in_video``: the KLV is in the
     video's own transport stream, so its PES times are the frames' clock (minus ``time_offset_s``,
     default 0); otherwise tag 2's UNIX times, the first packet at the first frame unless
-    ``time_offset_s`` is given (UNIX time of the first frame)."""
-    from ..io.klv import klv_telemetry, read_klv
+    ``time_offset_s`` is given (UNIX time of the first frame). Also the stream's VMTI detections
+    (None when it has none)."""
+    from ..io.klv import klv_telemetry, read_klv, vmti_detections
     from ..misb import packet_pose
 
     stream = read_klv(path, strict=strict)
@@ -116,7 +130,42 @@ def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | 
     values = {"hfov_deg": sub["hfov_deg"], "vfov_deg": sub["vfov_deg"], "fc_h_m": sub["fc_h_m"],
               "unix_s": sub["time_s"]}
     meta = Metadata(clock, packet_pose(SimpleNamespace(columns=sub)), values, how)
-    return meta, issues
+    det = vmti_detections(stream)
+    issues += [str(i) for i in det.issues]
+    det = det.keep(det.columns["stream"] == name)
+    vmti = None
+    if len(det):
+        lines = tel.line[rows]
+        vmti = VMTISource(tel.keep(rows), det, dict(zip(lines.tolist(), clock.tolist(), strict=True)))
+    return meta, issues, vmti
+
+
+def locate_video_vmti(vmti: VMTISource, surface, first_pts_s: float) -> list[dict]:
+    """Each VMTI detection located with its own packet's pose (as `eoloc klv` does) on ``surface``
+    (a DEM, an ellipsoidal height, or None: the packet's frame-centre elevation): one row per
+    detection with its time since the first frame, box (px), point and status."""
+    from ..io.export import STATUS_NAMES
+    from ..video import locate_vmti
+
+    d = vmti.detections.columns
+    v = locate_vmti(vmti.telemetry, vmti.detections, surface)
+    f = v.fixes
+    rows = []
+    for i in range(len(vmti.detections)):
+        clock = vmti.clock_by_packet.get(int(d["frame"][i]), math.nan)
+        ok = int(f.status[i]) == 0
+        rows.append({"packet": int(d["frame"][i]), "video_time_s": round(clock - first_pts_s, 6),
+                     "target_id": str(d["target_id"][i]), "u_px": _num(d["u_px"][i]), "v_px": _num(d["v_px"][i]),
+                     **{k: _num(d[k][i]) for k in ("bbox_u0", "bbox_v0", "bbox_u1", "bbox_v1")},
+                     "lat_deg": _num(f.lat_deg[i]) if ok else None, "lon_deg": _num(f.lon_deg[i]) if ok else None,
+                     "h_m": _num(f.h_m[i]) if ok else None, "range_m": _num(f.range_m[i]) if ok else None,
+                     "status": str(STATUS_NAMES[int(f.status[i])])})
+    return rows
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
 
 
 def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | None = None) -> tuple[Metadata, list]:
@@ -166,13 +215,16 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
               gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0, occlusion: bool = True,
               select: FrameSelection = FrameSelection(), klv_stream: str | None = None,
               time_offset_s: float | None = None, max_gap_s: float = 0.5, write_frames: bool = True,
-              mosaic: bool = True, tiles: bool = True, strict: bool = False,
+              mosaic: bool = True, tiles: bool = True, player: bool = True, dem_name: str = "dem",
+              serve_command: str = "", strict: bool = False,
               progress: Callable[[int, int], None] | None = None) -> VideoJob:
     """Rectify the selected frames of ``video`` (see the module notes for the metadata) onto
     ``surface`` (a DEM or an ellipsoidal height; None: each packet's frame-centre elevation, KLV
     only), each onto the pass's grid (``crs``; cell ``gsd_m``, default the first rectified frame's
-    native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles.
-    ``progress(done, total)`` after each frame."""
+    native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles, and with
+    ``player`` the player page (its clicks ask `eoloc serve` for the DEM named ``dem_name``;
+    ``serve_command`` is what the page tells its user to run for that). The VMTI detections of
+    the KLV are located with their own packets' poses. ``progress(done, total)`` after each frame."""
     from .. import rectify as R
     from ..footprint import footprint_features, footprints
     from ..io.raster import write_cog
@@ -185,6 +237,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     if times.size == 0:
         raise InputError(f"{video}: the video stream has no frame with a presentation time")
     t0 = float(times[0])
+    vmti_source = None
     if telemetry is not None:
         if cfg is None:
             raise InputError("a telemetry CSV needs the camera: give --config")
@@ -192,13 +245,14 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         base_sensor = cfg.sensor()
     else:
         src = klv if klv is not None else video
-        meta, issues = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,
-                                    time_offset_s=time_offset_s, strict=strict)
+        meta, issues, vmti_source = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,
+                                                 time_offset_s=time_offset_s, strict=strict)
         base_sensor = None
     if surface is None and "fc_h_m" not in meta.values:
         raise InputError("choose the ground: --target-height H or --dem FILE (a telemetry CSV has no frame-centre "
                          "elevation)")
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
+    page = _player_data(out, info, times, poses, base_sensor, surface, dem_name, serve_command) if player else None
     chosen = [i for i, t in enumerate(times) if select(i, float(t) - t0)]
     total = len(chosen)
     if total == 0:
@@ -213,6 +267,11 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     wanted = set(chosen)
     done = 0
     with ThreadPoolExecutor(max_workers=1) as writer:  # GDAL writes while the next frame is rectified
+        def submit(fn, *args, **kwargs) -> Future:
+            f = writer.submit(fn, *args, **kwargs)
+            pending.append(f)
+            return f
+
         for fr in iter_frames(video, want=lambda i, t: i in wanted, errors=decode_errors):
             if fr.image is None:
                 continue
@@ -263,21 +322,25 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                     path = out / "frames" / f"frame_{fr.index:06d}.tif"
                     stack = np.concatenate([data, vis[None].astype(data.dtype)])
                     names = [*(f"band {b + 1}" for b in range(data.shape[0])), VISIBILITY_BAND]
-                    pending.append(writer.submit(write_cog, path, stack, grid.transform, grid.crs, nodata=nodata,
-                                                 mask=seen, band_names=names,
-                                                 tags={"EOLOC_FRAME": fr.index, "EOLOC_PTS_S": fr.pts_s,
-                                                       "EOLOC_METADATA": meta.source}))
+                    submit(write_cog, path, stack, grid.transform, grid.crs, nodata=nodata, mask=seen,
+                           band_names=names, tags={"EOLOC_FRAME": fr.index, "EOLOC_PTS_S": fr.pts_s,
+                                                   "EOLOC_METADATA": meta.source})
                     row["file"] = str(path.relative_to(out))
                     written.append(path)
                 feats += footprint_features([fp], [{"frame": fr.index, "video_time_s": row["video_time_s"]}])
+                if page is not None:
+                    hidden = vis == VISIBILITY["hidden"]
+                    page.add_frame(fr.index, sensor, pose, ground, feats[-1], data, seen, grid, submit,
+                                   (px.u_px[hidden], px.v_px[hidden]))
             row.update({"status": status, "note": note})
             rows.append(row)
             done += 1
             if progress is not None:
                 progress(done, total)
-            pending = _reap(pending)
+            _reap(pending)
         for f in pending:
             f.result()
+        page_data = page.as_dict() if page is not None else None  # waits for the drapes
     missing = wanted - {r["frame"] for r in rows}
     if missing:
         decode_errors.append(f"{video}: {len(missing)} selected frame(s) could not be decoded (first: frame "
@@ -299,7 +362,47 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
             cx, cy = cell_size_m(g)
             tileset = write_xyz_tiles(out / "tiles", mres.data, mres.valid, g.transform, g.crs,
                                       cell_m=math.sqrt(cx * cy))
-    return VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors)
+    vmti_rows = locate_video_vmti(vmti_source, surface, t0) if vmti_source is not None else []
+    job = VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors, vmti_rows)
+    if page_data is not None:
+        from ..io.player import write_player
+        from ..io.video import browser_video
+
+        mp4, job.video_for_browser = browser_video(video, out / "player" / "video.mp4", first_pts_s=t0)
+        page_data["vmti"] = vmti_rows
+        page_data["vmti_hold_s"] = max_gap_s
+        if tileset is not None:
+            page_data["mosaic"] = {"url": tileset.url, "min_zoom": tileset.min_zoom, "max_zoom": tileset.max_zoom,
+                                   "bounds": [[tileset.bounds[1], tileset.bounds[0]],
+                                              [tileset.bounds[3], tileset.bounds[2]]]}
+        pages = write_player(out, page_data)
+        job.player = pages[0]
+        written += [*pages, mp4]
+    return job
+
+
+def _player_data(out: Path, info: VideoInfo, times: np.ndarray, poses: FramePoses, base_sensor, surface,
+                 dem_name: str, serve_command: str):
+    """The player's data for this video: the camera and gimbal the page sends to /v1/locate, and
+    the stop rule (the DEM by name, the target height, or each frame's frame-centre elevation)."""
+    from .player import PlayerData
+
+    if base_sensor is None:  # KLV: a pinhole per frame from its fields of view, az-el turret
+        camera = {"width": info.width, "height": info.height, "cx": (info.width - 1) / 2.0,
+                  "cy": (info.height - 1) / 2.0}
+        gimbal = "az-el"
+    else:  # the config's camera (with its distortion) and installation: the server needs --config
+        camera, gimbal = None, base_sensor.gimbal.name
+    ground_h = None
+    if isinstance(surface, DEM):
+        stop = {"dem": dem_name}
+    elif surface is not None:
+        stop = {"target_height_m": float(surface)}
+    else:
+        stop = {"frame_centre": True}
+        ground_h = poses.values["fc_h_m"]
+    return PlayerData(out, info.width, info.height, info.fps, times - times[0], poses, gimbal, camera, stop,
+                      serve_command, Path(info.path).name, ground_h)
 
 
 def round_gsd(gsd_m: float) -> float:
@@ -309,17 +412,17 @@ def round_gsd(gsd_m: float) -> float:
     return float(f"{gsd_m:.2g}")
 
 
-def _reap(pending: list[Future]) -> list[Future]:
-    """Raise a finished write's error now; keep at most two writes queued (bounded memory)."""
+def _reap(pending: list[Future], most: int = 6) -> None:
+    """Raise a finished write's error now; keep at most ``most`` writes queued (bounded memory)."""
     keep = []
     for f in pending:
         if f.done():
             f.result()
         else:
             keep.append(f)
-    while len(keep) > 2:
+    while len(keep) > most:
         keep.pop(0).result()
-    return keep
+    pending[:] = keep
 
 
 def _frame_pose(poses: FramePoses, meta: Metadata, j: int, pts_s: float, max_gap_s: float):

@@ -210,10 +210,13 @@ def _pixel_count(obs: list[ObservationIn]) -> int:
     return sum(1 if o.pixels is None else len(o.pixels) for o in obs)
 
 
-def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES, hub=None):
+def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES, hub=None,
+               player_dir: str | None = None):
     """The ASGI application (FastAPI), wrapped in the request-size limit. With ``hub`` (a
     :class:`eoloc.service.livemap.LiveHub`, as `eoloc live --map` gives) it also serves the live
-    map: the page at ``/live`` (``/`` leads there) and its WebSocket."""
+    map: the page at ``/live`` (``/`` leads there) and its WebSocket. With ``player_dir`` (an
+    `eoloc video` output folder) it serves that folder at ``/video/`` (``/`` leads to its
+    player.html; byte ranges, so the video seeks)."""
     import asyncio
     import contextlib
     import time
@@ -279,6 +282,15 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
         # the rows are built to the response model's shape; orjson writes them (pydantic objects per fix
         # and the stdlib encoder cost 50x the geolocation on a batch of 10^5)
         return Response(orjson.dumps(out), media_type="application/json")
+
+    if player_dir is not None:
+        from fastapi.staticfiles import StaticFiles
+
+        app.mount("/video", StaticFiles(directory=str(player_dir)), name="video")
+        if hub is None:
+            @app.get("/", include_in_schema=False)
+            def player_root():
+                return RedirectResponse("/video/player.html")
 
     if hub is not None:
         from .livemap import WS_PATH

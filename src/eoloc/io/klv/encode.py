@@ -45,17 +45,27 @@ def frame_uas_packet(body: bytes) -> bytes:
 
 
 def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height: int, *,
-                hfov_deg: float | None = None, vfov_deg: float | None = None) -> bytes:
+                hfov_deg: float | None = None, vfov_deg: float | None = None,
+                boxes: dict[int, tuple[float, float, float, float]] | None = None) -> bytes:
     """An ST 0903 VMTI local set (for ST 0601 tag 74) with one VTarget per (id, u_px, v_px)
-    (eoloc pixel convention; written as 1-based centroid pixel number and row/column)."""
+    (eoloc pixel convention; written as 1-based centroid pixel number and row/column); ``boxes``:
+    a bounding box (u0, v0, u1, v1) per target id (tags 2 and 3, clipped to the frame)."""
     from stanag4609.st0903 import VTargetData, encode_vmti_local_set
+
+    def number(u: float, v: float) -> int:
+        col, row = min(max(round(u), 0), width - 1) + 1, min(max(round(v), 0), height - 1) + 1
+        return (row - 1) * width + col
 
     packs = []
     for tid, u, v in targets:
         col, row = round(u) + 1, round(v) + 1
         if not (1 <= col <= width and 1 <= row <= height):
             continue
-        packs.append(VTargetData(int(tid), {1: (row - 1) * width + col, 19: row, 20: col}))
+        items = {1: (row - 1) * width + col, 19: row, 20: col}
+        if boxes and tid in boxes:
+            u0, v0, u1, v1 = boxes[tid]
+            items |= {2: number(u0, v0), 3: number(u1, v1)}
+        packs.append(VTargetData(int(tid), items))
     values: dict[int, Any] = {4: 5, 8: int(width), 9: int(height)}
     if hfov_deg is not None:
         values[11] = float(hfov_deg)
