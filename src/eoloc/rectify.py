@@ -368,10 +368,15 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
 
         out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
         for b0 in range(0, image.shape[0], 4):  # remap takes up to 4 channels at once
-            chunk = np.ascontiguousarray(np.moveaxis(image[b0:b0 + 4], 0, -1))
+            planes = [np.ascontiguousarray(image[b]) for b in range(b0, min(b0 + 4, image.shape[0]))]
+            chunk = planes[0] if len(planes) == 1 else cv2.merge(planes)  # interleaved, as remap wants
             got = cv2.remap(chunk, px.map_x, px.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                             borderValue=(float(fill),) * 4)
-            out[b0:b0 + 4] = got[None] if got.ndim == 2 else np.moveaxis(got, -1, 0)
+            if got.ndim == 2:
+                out[b0] = got
+            else:
+                for i in range(got.shape[2]):  # de-interleave straight into the band planes
+                    cv2.extractChannel(got, i, dst=out[b0 + i])
         return out
     out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
     if resampling != "cubic" and get_backend() != "numpy":
