@@ -19,7 +19,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import socket
 import subprocess
 import sys
 import time
@@ -33,6 +32,7 @@ import eoloc
 from browser import chromium
 from eoloc import Camera, Pose, locate_dem, open_dem
 from eoloc.misb import misb_sensor
+from served import eoloc_serve
 
 EXAMPLES = Path(__file__).parents[1] / "examples"
 DEM_PATH = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"
@@ -51,33 +51,13 @@ def demo(tmp_path_factory):
     return out
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def served(demo):
     """`eoloc serve --player` on the demo's outputs with its DEM, as `eoloc video` printed it."""
-    port = _free_port()
     line = json.loads((demo / "eoloc" / "video.json").read_text())["player"]["serve"].split()
     assert line[:2] == ["eoloc", "serve"]
-    proc = subprocess.Popen([EOLOC, *line[1:], "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    base = f"http://127.0.0.1:{port}"
-    try:
-        for _ in range(200):
-            try:
-                if httpx.get(base + "/v1/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.1)
-        else:
-            raise AssertionError(proc.stderr.read().decode() if proc.poll() is not None else "the server did not start")
-        yield base
-    finally:
-        proc.terminate()
-        proc.wait(10)
+    with eoloc_serve(*line[2:]) as url:
+        yield url
 
 
 def _data(folder: Path) -> dict:

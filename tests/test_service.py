@@ -4,10 +4,6 @@ directly; bad requests against the field they name."""
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -21,6 +17,7 @@ from eoloc.result import Status
 from eoloc.rules import AtHeight, OnDEM
 from eoloc.sensor import Pose
 from eoloc.terrain import open_dem
+from served import eoloc_serve
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 S13_TARGET = (42.02058646, 125.03195512, 419.58)  # [S13] Table 3
@@ -28,32 +25,12 @@ S13 = {"pose": {"lat_deg": 42.0, "lon_deg": 125.0, "h_m": 10_000.0, "yaw_deg": 1
                 "roll_deg": -2.0, "gimbal_deg": [45.0, -75.0]}, "gimbal": "az-el", "stop": {"range_m": 10_200.0}}
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def server():
     """`eoloc serve` as a user starts it, in its own process, with the mountain camera and DEM."""
-    port = _free_port()
-    proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "serve", "--port", str(port), "--config",
-                             str(MOUNTAIN / "camera.toml"), "--dem", f"mountain={MOUNTAIN / 'longs_peak_srtmgl3.tif'}",
-                             "--max-body-mb", "0.5"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}"
-    for _ in range(300):
-        try:
-            if httpx.get(url + "/v1/health", timeout=1).status_code == 200:
-                break
-        except httpx.TransportError:
-            time.sleep(0.1)
-    else:
-        proc.kill()
-        raise RuntimeError(proc.stdout.read().decode())
-    yield url
-    proc.terminate()
-    proc.wait(10)
+    with eoloc_serve("--config", str(MOUNTAIN / "camera.toml"), "--dem",
+                     f"mountain={MOUNTAIN / 'longs_peak_srtmgl3.tif'}", "--max-body-mb", "0.5") as url:
+        yield url
 
 
 def test_health_and_the_openapi_docs(server):

@@ -1,0 +1,44 @@
+"""`eoloc serve` as a user starts it, in its own process on a free loopback port."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def eoloc_serve(*args: str):
+    """Run `eoloc serve ARGS --port P` until the block ends; yields its base URL once /v1/health answers."""
+    port = free_port()
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "serve", *args, "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(300):
+            try:
+                if httpx.get(url + "/v1/health", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                if proc.poll() is not None:
+                    break
+                time.sleep(0.1)
+        else:
+            proc.kill()
+        if proc.poll() is not None:
+            raise RuntimeError(f"eoloc serve {' '.join(args)} did not start:\n{proc.stdout.read().decode()}")
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(10)
