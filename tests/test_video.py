@@ -4,11 +4,13 @@ the mosaic (finest ground sample wins, source frame recorded) and the XYZ tiles.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from datetime import UTC, datetime
 
 import cv2
+import httpx
 import mercantile
 import numpy as np
 import pyproj
@@ -25,9 +27,12 @@ from eoloc.io.klv.encode import encode_uas_packet
 from eoloc.io.klv.mux import add_sync_klv, write_klv_ts
 from eoloc.io.video import iter_frames, probe_video
 from eoloc.jobs.video import FrameSelection, frame_visibility, round_gsd, video_job
+from eoloc.misb import misb_sensor
 from eoloc.mosaic import Mosaic, ground_sample_m
 from eoloc.rectify import FramePixels, OutputGrid, frame_pixels, output_grid
+from eoloc.rules import AtHeight
 from eoloc.sensor import AzElGimbal, Camera, Pose, SensorModel
+from served import eoloc_serve
 
 FPS = 25
 SIZE = (160, 96)
@@ -276,6 +281,34 @@ def test_cli_video_writes_everything_and_refuses_bad_input(carriages, tmp_path):
     assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == [f"frame_{i:06d}.tif" for i in (0, 25, 50, 75)]
     gj = json.loads((tmp_path / "footprints.geojson").read_text())
     assert len(gj["features"]) == 4
+    # the player has every frame's pose (not only the rectified ones'): served, a click on frame 37
+    # (not rectified) is the library's point for that frame's pose, camera and frame-centre height
+    js = (tmp_path / "player" / "data.js").read_text()
+    data = json.loads(js[js.index("=") + 1:].strip().rstrip(";"))
+    F = data["frames"]
+    assert len(F["t"]) == 100 and sorted(data["rectified"]) == ["0", "25", "50", "75"]
+    assert data["stop"] == {"frame_centre": True} and rep["player"]["serve"] == f"eoloc serve --player {tmp_path}"
+    rows = {int(r["frame"]): r for r in csv.DictReader((tmp_path / "frames.csv").open())}
+    assert F["g1"][25] == pytest.approx(float(rows[25]["gimbal1_deg"]), abs=1e-8)
+    i, u, v = 37, 20.25, 70.5
+    body = {"pose": {"lat_deg": F["lat"][i], "lon_deg": F["lon"][i], "h_m": F["h"][i], "yaw_deg": F["yaw"][i],
+                     "pitch_deg": F["pitch"][i], "roll_deg": F["roll"][i],
+                     "gimbal_deg": [F["g1"][i], F["g2"][i], F["g3"][i]]},
+            "gimbal": data["gimbal"], "pixels": [[u, v]], "stop": {"target_height_m": F["ground_h"][i]},
+            "camera": {**data["camera"], "fx": F["fx"][i], "fy": F["fy"][i]}}
+    with eoloc_serve("--player", str(tmp_path)) as url:
+        fix = httpx.post(url + "/v1/locate", json=body).json()["fixes"][0]
+    assert F["g1"][i] == pytest.approx(jumpy_az(i), abs=1e-6) and F["g2"][i] == pytest.approx(-45.0, abs=1e-6)
+    pose = Pose(F["lat"][i], F["lon"][i], F["h"][i], F["yaw"][i], F["pitch"][i], F["roll"][i],
+                (F["g1"][i], F["g2"][i], F["g3"][i]))
+    cam = Camera(*SIZE, F["fx"][i], F["fy"][i], (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2)
+    nominal = Camera.from_hfov(20.0, *SIZE, vfov_deg=12.0)  # tags 16, 17 as sent, to their resolution
+    assert cam.fx == pytest.approx(nominal.fx, rel=1e-4) and cam.fy == pytest.approx(nominal.fy, rel=1e-4)
+    assert F["ground_h"][i] == pytest.approx(0.0, abs=0.2)  # tag 78's 0, to its resolution
+    want = AtHeight(F["ground_h"][i]).locate(misb_sensor(camera=cam), pose, (np.array([u]), np.array([v])))
+    assert fix["status"] == "OK"
+    assert fix["lat_deg"] == pytest.approx(float(want.lat_deg[0]), abs=1e-10)
+    assert fix["lon_deg"] == pytest.approx(float(want.lon_deg[0]), abs=1e-10)
     not_video = d / "not_video.ts"
     not_video.write_bytes(b"\x00" * 5000)
     for args, words in [(["video", str(d / "missing.ts")], "does not exist"),
