@@ -22,7 +22,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -45,28 +44,20 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-class Receiver(threading.Thread):
+class Receiver:
     """CoT datagrams: counted; the arrival time of each aircraft event by its packet number."""
 
     def __init__(self, port: int) -> None:
-        super().__init__(daemon=True)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-        self.sock.bind(("127.0.0.1", port))
-        self.sock.settimeout(0.2)
-        self.events, self.platform_at, self.running = 0, {}, True
+        from eoloc.live.sources import DatagramSink
 
-    def run(self) -> None:
-        pattern = re.compile(rb"packet (\d+) of")
-        while self.running:
-            try:
-                data = self.sock.recv(65535)
-            except TimeoutError:
-                continue
-            now = time.perf_counter()
-            self.events += 1
-            if b'type="a-f-A-M-F-Q"' in data and (m := pattern.search(data)):
-                self.platform_at[int(m.group(1))] = now
+        self.events, self.platform_at = 0, {}
+        self.pattern = re.compile(rb"packet (\d+) of")
+        self.sink = DatagramSink(f"udp://127.0.0.1:{port}", self._count)
+
+    def _count(self, data: bytes, arrival: float) -> None:
+        self.events += 1
+        if b'type="a-f-A-M-F-Q"' in data and (m := self.pattern.search(data)):
+            self.platform_at[int(m.group(1))] = arrival
 
 
 def main(minutes: float) -> list[str]:
@@ -86,7 +77,6 @@ def main(minutes: float) -> list[str]:
         batch_cpu_per_packet = (time.process_time() - c0) / job.stream.n_good
     port, cot_port = _free_port(), _free_port()
     rx = Receiver(cot_port)
-    rx.start()
     eoloc = str(Path(sys.executable).parent / "eoloc")
     proc = subprocess.Popen([eoloc, "live", f"udp://127.0.0.1:{port}", "--cot", f"udp://127.0.0.1:{cot_port}"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -110,8 +100,7 @@ def main(minutes: float) -> list[str]:
     cpu = _cpu_s(proc.pid) - cpu0
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=60)
-    rx.running = False
-    rx.join()
+    rx.sink.stop()
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
     lost_packets = n - summary["packets"]
     lost_events = summary["cot"][0]["sent"] - rx.events

@@ -15,7 +15,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -25,7 +24,7 @@ import eoloc
 from eoloc.io.klv import read_klv
 from eoloc.io.klv.mux import write_klv_ts
 from eoloc.io.klv.reader import split_klv
-from eoloc.live.sources import ts_file_datagrams
+from eoloc.live.sources import DatagramSink, ts_file_datagrams
 from eoloc.terrain.geoid import default_geoid
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
@@ -86,21 +85,8 @@ def _lowest_fixes(ndjson: Path) -> dict[str, dict]:
 def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
     src = write_klv_ts(tmp_path / "in.ts", [split_klv(FLIGHT.read_bytes())], video_fps=10)
     rx_port, tx_port = _port(), _port()
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", rx_port))
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
-    rx.settimeout(0.5)
-    got: list[bytes] = []
-    done = threading.Event()
-
-    def receive() -> None:
-        while not done.is_set():
-            try:
-                got.append(rx.recv(65535))
-            except TimeoutError:
-                pass
-
-    threading.Thread(target=receive, daemon=True).start()
+    sink = DatagramSink(f"udp://127.0.0.1:{rx_port}")
+    got = sink.datagrams
     ndjson = tmp_path / "live.ndjson"
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{tx_port}", "--dem", str(DEM), "--config", str(CONFIG),
                              "--klv-out", f"udp://127.0.0.1:{rx_port}", "--ndjson", str(ndjson)],
@@ -121,7 +107,7 @@ def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
     log = "".join(head) + log
-    done.set()
+    sink.stop()
     assert proc.returncode == 0 and "Traceback" not in log, log
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
     assert summary["packets"] == 39 and summary["klv_out"]["with_target"] == 39, log

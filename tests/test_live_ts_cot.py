@@ -16,7 +16,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 import xml.etree.ElementTree as ET
 from datetime import datetime
@@ -32,7 +31,7 @@ from eoloc.io.klv.reader import split_klv
 from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.klv import klv_job
 from eoloc.jobs.setup import misb_setup
-from eoloc.live.sources import file_datagrams, ts_packet_times
+from eoloc.live.sources import DatagramSink, file_datagrams, ts_packet_times
 from eoloc.terrain import open_dem
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
@@ -46,37 +45,21 @@ def _free_port(kind=socket.SOCK_DGRAM) -> int:
         return s.getsockname()[1]
 
 
-class CotReceiver:
+class CotReceiver(DatagramSink):
     """Every datagram on a UDP address (a multicast group joined) parsed as one CoT event."""
 
     def __init__(self, url: str) -> None:
-        from eoloc.live.sources import udp_socket
-
-        self.sock = udp_socket(url)
-        self.sock.settimeout(0.2)
         self.events: list[ET.Element] = []
         self.bad: list[bytes] = []
-        self.running = True
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        super().__init__(url, self._parse)
 
-    def _run(self) -> None:
-        while self.running:
-            try:
-                data = self.sock.recv(65535)
-            except TimeoutError:
-                continue
-            try:
-                ev = ET.fromstring(data)
-                assert ev.tag == "event" and ev.find("point") is not None
-                self.events.append(ev)
-            except (ET.ParseError, AssertionError):
-                self.bad.append(data)
-
-    def stop(self) -> None:
-        self.running = False
-        self.thread.join()
-        self.sock.close()
+    def _parse(self, data: bytes, _arrival: float) -> None:
+        try:
+            ev = ET.fromstring(data)
+            assert ev.tag == "event" and ev.find("point") is not None
+            self.events.append(ev)
+        except (ET.ParseError, AssertionError):
+            self.bad.append(data)
 
 
 def _two_pid_ts(path: Path) -> tuple[Path, int]:

@@ -181,15 +181,17 @@ def test_play_and_seek_keep_the_map_on_the_frame_shown(demo, served):
         d.find_element("id", "play").click()
         assert len(seen) >= 4, f"the page followed only frames {sorted(seen)} while playing"
         # seek with the slider: the browser shows the frame the page names, and the map is on it
+        boxed = 0
         for k in (4, 13, len(frames) - 1, 0):
             d.execute_script("const s = document.getElementById('seek'); s.value = arguments[0];"
                              "s.dispatchEvent(new Event('input'));", k)
             _wait(d, f"const P = window.eolocPlayer; return P.state.frame === {k} && !P.video.seeking")
             st = d.execute_script(MAP_STATE)
             _check_map(st, data, frames, feats, vmti, W, H)
+            boxed += bool(st["boxes"])
             diff = np.abs(decoded - _grab(d)[None]).mean(axis=(1, 2, 3))
             assert int(np.argmin(diff)) == k and diff[k] < 3.0, (k, diff.round(2).tolist())
-        assert any(st["boxes"] for st in [d.execute_script(MAP_STATE)]) or vmti  # the demo has VMTI
+        assert boxed >= 2  # the vehicles are in view on most of the pass (each box checked above)
         # the drape's opacity follows its slider
         d.execute_script("const s = document.getElementById('opacity'); s.value = 30;"
                          "s.dispatchEvent(new Event('input'));")

@@ -347,7 +347,7 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     from .io.klv.mux import write_klv_ts
     from .io.klv.reader import split_klv
     from .io.mapview import write_map
-    from .live.sources import file_datagrams
+    from .live.sources import DatagramSink, file_datagrams
 
     console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK), a live map, KLV out, NDJSON")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -363,20 +363,7 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         map_port = s.getsockname()[1]
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", cot_port))
-    rx.settimeout(0.2)
-    received: list[bytes] = []
-    running = True
-
-    def receive() -> None:
-        while running:
-            try:
-                received.append(rx.recv(65535))
-            except TimeoutError:
-                continue
-
-    threading.Thread(target=receive, daemon=True).start()
+    cot = DatagramSink(f"udp://127.0.0.1:{cot_port}")  # the TAK client's place: every CoT datagram kept
     ndjson = out_dir / "live.ndjson"
     cmd = [sys.executable, "-m", "eoloc", "live", f"udp://127.0.0.1:{port}", "--dem",
            str(data / "longs_peak_srtmgl3.tif"), "--config", str(data / "klv.toml"), "--cot",
@@ -410,7 +397,8 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
         time.sleep(0.005)
     log, _ = proc.communicate(timeout=120)
     time.sleep(0.3)
-    running = False
+    cot.stop()
+    received = cot.datagrams
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
     (out_dir / "cot_received.xml").write_bytes(b"\n".join(received))
     kinds: dict[str, int] = {}

@@ -41,6 +41,15 @@ def misb_sensor(mount_misalignment_deg=(0.0, 0.0, 0.0), boresight_misalignment_d
                        boresight_misalignment_deg, lever_arm_m)
 
 
+def misb_frame_sensor(width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:
+    """The ST 0601 sensor of one frame: a pinhole whose fields of view span the image (tags 16,
+    17), on the az-el turret with sensor roll; None without a usable field of view."""
+    if not (0 < hfov_deg < 180):
+        return None
+    v = vfov_deg if 0 < vfov_deg < 180 else None
+    return misb_sensor(camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=v))
+
+
 def packet_pose(tel) -> Pose:
     """Poses (F,) of telemetry rows read from KLV (columns of :func:`eoloc.io.klv.klv_telemetry`)."""
     c = tel.columns

@@ -81,6 +81,15 @@ def json_safe(v):
     return v
 
 
+def json_column(a, keep: np.ndarray | None = None) -> list:
+    """An array as a JSON list: NaN, infinity and (where ``keep`` is False) anything as None."""
+    a = np.asarray(a, dtype=np.float64)
+    bad = ~np.isfinite(a) if keep is None else ~(np.isfinite(a) & keep)
+    out = a.astype(object)
+    out[bad] = None
+    return out.tolist()
+
+
 CSV_CHUNK = 1 << 17  # rows rendered per pyarrow call (two at a time, one per core)
 
 

@@ -38,6 +38,23 @@ def _inline_leaflet():
     return OfflineMap, js, css
 
 
+def offline_page(template: str, scripts: dict[str, str], fields: dict[str, str]) -> str:
+    """A page that needs no network, from eoloc/data: the HTML ``template`` (a path under
+    eoloc/data) with Leaflet's CSS and JS inlined at /*LEAFLET_CSS*/ and /*LEAFLET_JS*/, each other
+    /*MARK*/ of ``scripts`` replaced by the data file it names, and each {{NAME}} of ``fields`` by
+    its value, HTML-escaped. The live map and the video player are made this way."""
+    import html
+
+    base = resources.files("eoloc") / "data"
+    page = (base / template).read_text(encoding="utf-8")
+    parts = {"/*LEAFLET_CSS*/": "leaflet/leaflet.css", "/*LEAFLET_JS*/": "leaflet/leaflet.js", **scripts}
+    for mark, name in parts.items():
+        page = page.replace(mark, (base / name).read_text(encoding="utf-8"))
+    for name, value in fields.items():
+        page = page.replace("{{" + name + "}}", html.escape(value))
+    return page
+
+
 def _hillshade_png(dem) -> tuple[str, list[list[float]]]:
     """The DEM as a hillshaded PNG data URL and its [[south, west], [north, east]] bounds."""
     import matplotlib

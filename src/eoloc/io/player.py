@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import base64
 import json
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -31,14 +30,13 @@ def write_drape(path: str | Path, data: np.ndarray, seen: np.ndarray, transform,
     a WebP with alpha (``seen``); its [[south, west], [north, east]] bounds, or None (and no file)
     when it saw nothing."""
     import cv2
-    import rasterio
     from rasterio.warp import Resampling, calculate_default_transform, reproject, transform_bounds
 
-    from .tiles import to_8bit
+    from .tiles import rasterio_crs, rgba
 
     if not seen.any():
         return None
-    crs = rasterio.crs.CRS.from_wkt(crs.to_wkt()) if hasattr(crs, "to_wkt") else crs
+    crs = rasterio_crs(crs)
     rows, cols = seen.shape
     x0, y1 = transform.c, transform.f
     x1, y0 = x0 + cols * transform.a, y1 + rows * transform.e
@@ -49,9 +47,7 @@ def write_drape(path: str | Path, data: np.ndarray, seen: np.ndarray, transform,
 
         dst_t = dst_t @ Affine.scale(scale)
         w, h = max(1, round(w / scale)), max(1, round(h / scale))
-    img = to_8bit(data, seen)
-    rgb = img[:3] if img.shape[0] >= 3 else np.repeat(img[:1], 3, axis=0)
-    src = np.concatenate([rgb, np.where(seen, 255, 0).astype(np.uint8)[None]])
+    src = rgba(data, seen)
     dst = np.zeros((4, h, w), np.uint8)
     reproject(src, dst, src_transform=transform, src_crs=crs, dst_transform=dst_t, dst_crs="EPSG:3857",
               resampling=Resampling.average if scale > 1 else Resampling.bilinear, src_alpha=4, dst_alpha=4)
@@ -88,17 +84,9 @@ def write_grid_script(path: str | Path, index: int, grid) -> Path:
 
 def player_page(title: str) -> str:
     """player.html: the page with Leaflet and the player's script inlined."""
-    import html
+    from .mapview import offline_page
 
-    base = resources.files("eoloc") / "data"
-    page = (base / "player" / "player.html").read_text(encoding="utf-8")
-    parts = {"/*LEAFLET_CSS*/": (base / "leaflet" / "leaflet.css").read_text(encoding="utf-8"),
-             "/*LEAFLET_JS*/": (base / "leaflet" / "leaflet.js").read_text(encoding="utf-8"),
-             "/*PLAYER_JS*/": (base / "player" / "player.js").read_text(encoding="utf-8"),
-             "{{TITLE}}": html.escape(title)}
-    for key, text in parts.items():
-        page = page.replace(key, text)
-    return page
+    return offline_page("player/player.html", {"/*PLAYER_JS*/": "player/player.js"}, {"TITLE": title})
 
 
 def write_player(out: str | Path, data: dict) -> list[Path]:

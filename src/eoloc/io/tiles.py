@@ -34,6 +34,21 @@ class TileSet:
         return f"{self.folder.name}/{{z}}/{{x}}/{{y}}.png"
 
 
+def rasterio_crs(crs):
+    """A pyproj CRS (or anything rasterio takes) as rasterio's CRS."""
+    import rasterio
+
+    return rasterio.crs.CRS.from_wkt(crs.to_wkt()) if hasattr(crs, "to_wkt") else crs
+
+
+def rgba(data: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(4, rows, cols) uint8 for display: one band grey, three or more as RGB (8-bit, stretched
+    when not 8-bit: :func:`to_8bit`), ``valid`` as the alpha."""
+    img = to_8bit(data, valid)
+    rgb = img[:3] if img.shape[0] >= 3 else np.repeat(img[:1], 3, axis=0)
+    return np.concatenate([rgb, np.where(valid, 255, 0).astype(np.uint8)[None]])
+
+
 def native_zoom(cell_m: float, lat_deg: float) -> int:
     """The zoom whose tile pixel is about one ``cell_m`` at ``lat_deg`` (never coarser than it)."""
     return int(min(max(math.ceil(math.log2(WEB_MERCATOR_M * math.cos(math.radians(lat_deg)) / (TILE_PX * cell_m))),
@@ -60,12 +75,11 @@ def write_xyz_tiles(folder: str | Path, data: np.ndarray, valid: np.ndarray, tra
     all fits in one tile). One band is drawn grey, three or more as RGB; ``valid`` is the alpha."""
     import cv2
     import mercantile
-    import rasterio
     from rasterio.transform import from_bounds
     from rasterio.warp import Resampling, reproject, transform_bounds
 
     folder = Path(folder)
-    crs = rasterio.crs.CRS.from_wkt(crs.to_wkt()) if hasattr(crs, "to_wkt") else crs
+    crs = rasterio_crs(crs)
     rows, cols = valid.shape
     x0, y1 = transform.c, transform.f
     x1, y0 = x0 + cols * transform.a, y1 + rows * transform.e
@@ -73,9 +87,7 @@ def write_xyz_tiles(folder: str | Path, data: np.ndarray, valid: np.ndarray, tra
     zmax = native_zoom(cell_m, 0.5 * (south + north))
     whole = mercantile.bounding_tile(west, south, east, north)
     zmin = min(max(zmax - zoom_levels + 1, whole.z, 0), zmax)
-    img = to_8bit(data, valid)
-    rgb = img[:3] if img.shape[0] >= 3 else np.repeat(img[:1], 3, axis=0)
-    src = np.concatenate([rgb, np.where(valid, 255, 0).astype(np.uint8)[None]])
+    src = rgba(data, valid)
     count = 0
     for z in range(zmin, zmax + 1):
         tile_m = WEB_MERCATOR_M / (2**z * TILE_PX)

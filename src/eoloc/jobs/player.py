@@ -15,7 +15,6 @@ The files are written by :mod:`eoloc.io.player`; this module computes.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.export import json_column
 from ..result import Status
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses
@@ -58,11 +58,13 @@ def grid_step_px(width: int, height: int) -> int:
     return max(3, round(min(width, height) / 45))
 
 
-def _local_m(lat0: np.ndarray, lat: np.ndarray, lon: np.ndarray, lat_ref: float, lon_ref: float):
+def _local_m(lat: np.ndarray, lon: np.ndarray, lat_ref: float, lon_ref: float):
+    """East, north (m) from (lat_ref, lon_ref) on a sphere of the equatorial radius: for
+    comparing points a cell apart, not for positions."""
     from .. import geodesy
 
     n = np.radians(lat - lat_ref) * geodesy.WGS84.a
-    e = np.radians(lon - lon_ref) * geodesy.WGS84.a * np.cos(np.radians(lat0))
+    e = np.radians(lon - lon_ref) * geodesy.WGS84.a * np.cos(np.radians(lat_ref))
     return e, n
 
 
@@ -86,22 +88,22 @@ def offline_grid(sensor: SensorModel, pose: Pose, ground, step_px: int, hidden_p
     lon_ref = float(np.nanmean(lon)) if ok.any() else 0.0
     cell_err = np.zeros((R - 1, C - 1))
     exact_ok = np.ones((R - 1, C - 1), bool)
-    u0, u1 = np.meshgrid(us[:-1], vs[:-1])[0], np.meshgrid(us[1:], vs[:-1])[0]
-    v0, v1 = np.meshgrid(us[:-1], vs[:-1])[1], np.meshgrid(us[:-1], vs[1:])[1]
+    u0, v0 = np.meshgrid(us[:-1], vs[:-1])  # each cell's first and last node pixels
+    u1, v1 = np.meshgrid(us[1:], vs[1:])
     rule = surface_rule(ground)
     with np.errstate(invalid="ignore"):
         for a, b in ((0.5, 0.5), (0.5, 0.0), (0.0, 0.5), (1.0, 0.5), (0.5, 1.0)):  # centre, edge midpoints
             fx = rule.locate(sensor, pose, (u0 + a * (u1 - u0), v0 + b * (v1 - v0)))
             interp = [(1 - a) * (1 - b) * x[:-1, :-1] + a * (1 - b) * x[:-1, 1:] + (1 - a) * b * x[1:, :-1]
                       + a * b * x[1:, 1:] for x in (lat, lon, h)]
-            e1, n1 = _local_m(lat_ref, interp[0], interp[1], lat_ref, lon_ref)
-            e2, n2 = _local_m(lat_ref, fx.lat_deg, fx.lon_deg, lat_ref, lon_ref)
+            e1, n1 = _local_m(interp[0], interp[1], lat_ref, lon_ref)
+            e2, n2 = _local_m(fx.lat_deg, fx.lon_deg, lat_ref, lon_ref)
             err = np.sqrt((e1 - e2) ** 2 + (n1 - n2) ** 2 + (interp[2] - fx.h_m) ** 2)
             cell_err = np.fmax(cell_err, err)
             exact_ok &= (fx.status == Status.OK) & np.isfinite(err)
         # the cell's ground size per image pixel: its diagonals' ground lengths over their pixel lengths
-        ea, na = _local_m(lat_ref, lat[:-1, :-1], lon[:-1, :-1], lat_ref, lon_ref)
-        eb, nb = _local_m(lat_ref, lat[1:, 1:], lon[1:, 1:], lat_ref, lon_ref)
+        ea, na = _local_m(lat[:-1, :-1], lon[:-1, :-1], lat_ref, lon_ref)
+        eb, nb = _local_m(lat[1:, 1:], lon[1:, 1:], lat_ref, lon_ref)
         px_m = np.hypot(eb - ea, nb - na) / np.hypot(u1 - u0, v1 - v0)
         limit = np.maximum(CELL_LIMIT_PX * px_m, CELL_ERROR_FLOOR_M)
         edge = np.zeros((R - 1, C - 1), bool)
@@ -139,7 +141,6 @@ class PlayerData:
     ground_h_m: np.ndarray | None = None
     rectified: dict[int, dict] = field(default_factory=dict)
     pending: list[tuple[int, Future]] = field(default_factory=list)
-    vmti: list[dict] = field(default_factory=list)
 
     def add_frame(self, index: int, sensor: SensorModel, pose: Pose, ground: float | DEM, footprint: dict,
                   image: np.ndarray, seen: np.ndarray, grid, submit: Callable[..., Future], hidden_px=None) -> None:
@@ -170,42 +171,22 @@ class PlayerData:
         self.pending.clear()
         pose = self.poses.pose
         g = [np.broadcast_to(np.asarray(a, dtype=np.float64), self.frame_time_s.shape) for a in pose.gimbal_deg]
-        frames = {"t": self.frame_time_s, "ok": self.poses.ok.astype(np.int8),
-                  "lat": pose.lat_deg, "lon": pose.lon_deg, "h": pose.h_m, "yaw": pose.yaw_deg,
+        frames = {"t": self.frame_time_s, "lat": pose.lat_deg, "lon": pose.lon_deg, "h": pose.h_m, "yaw": pose.yaw_deg,
                   "pitch": pose.pitch_deg, "roll": pose.roll_deg, **{f"g{k + 1}": a for k, a in enumerate(g)}}
-        if self.camera is not None and "hfov_deg" in self.poses.values:
-            hf, vf = self.poses.values["hfov_deg"], self.poses.values["vfov_deg"]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                fx = (self.width / 2.0) / np.tan(np.radians(hf) / 2.0)
-                fy = np.where((vf > 0) & (vf < 180), (self.height / 2.0) / np.tan(np.radians(vf) / 2.0), fx)
-            frames |= {"fx": fx, "fy": fy}
+        if self.camera is not None and "hfov_deg" in self.poses.values:  # KLV: each frame's own pinhole
+            from ..misb import misb_frame_sensor
+
+            cams = [misb_frame_sensor(self.width, self.height, hf, vf) for hf, vf in
+                    zip(self.poses.values["hfov_deg"], self.poses.values["vfov_deg"], strict=True)]
+            frames |= {"fx": [c.camera.fx if c else np.nan for c in cams],
+                       "fy": [c.camera.fy if c else np.nan for c in cams]}
         if self.ground_h_m is not None:
             frames["ground_h"] = self.ground_h_m
         ok = self.poses.ok & np.isfinite(pose.lat_deg)
         return {"title": self.title, "video": "player/video.mp4", "width": self.width, "height": self.height,
-                "fps": self.fps, "frames": {k: _json_list(np.broadcast_to(v, self.frame_time_s.shape))
-                                            for k, v in frames.items()},
+                "fps": self.fps, "frames": {"ok": self.poses.ok.astype(int).tolist(),
+                                            **{k: json_column(np.broadcast_to(v, self.frame_time_s.shape))
+                                               for k, v in frames.items()}},
                 "gimbal": self.gimbal, "camera": self.camera, "stop": self.stop, "serve": self.serve_command,
                 "rectified": {str(k): v for k, v in sorted(self.rectified.items())},
-                "track": [[float(a), float(b)] for a, b in zip(pose.lat_deg[ok], pose.lon_deg[ok], strict=True)],
-                "vmti": self.vmti}
-
-
-def _json_list(a: np.ndarray) -> list:
-    a = np.asarray(a)
-    if a.dtype.kind in "iub":
-        return a.tolist()
-    out = a.astype(np.float64).astype(object)
-    out[~np.isfinite(a.astype(np.float64))] = None
-    return out.tolist()
-
-
-def json_safe(x):
-    """NaN and infinities as None, recursively (JSON has no NaN)."""
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, dict):
-        return {k: json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [json_safe(v) for v in x]
-    return x
+                "track": [[float(a), float(b)] for a, b in zip(pose.lat_deg[ok], pose.lon_deg[ok], strict=True)]}

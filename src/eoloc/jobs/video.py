@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import InputError, KLVError
 from ..io.video import VideoInfo, iter_frames, probe_video
+from ..misb import misb_frame_sensor
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
 from ..terrain import DEM
@@ -144,28 +145,22 @@ def locate_video_vmti(vmti: VMTISource, surface, first_pts_s: float) -> list[dic
     """Each VMTI detection located with its own packet's pose (as `eoloc klv` does) on ``surface``
     (a DEM, an ellipsoidal height, or None: the packet's frame-centre elevation): one row per
     detection with its time since the first frame, box (px), point and status."""
-    from ..io.export import STATUS_NAMES
+    from ..io.export import STATUS_NAMES, json_column
+    from ..result import Status
     from ..video import locate_vmti
 
     d = vmti.detections.columns
-    v = locate_vmti(vmti.telemetry, vmti.detections, surface)
-    f = v.fixes
-    rows = []
-    for i in range(len(vmti.detections)):
-        clock = vmti.clock_by_packet.get(int(d["frame"][i]), math.nan)
-        ok = int(f.status[i]) == 0
-        rows.append({"packet": int(d["frame"][i]), "video_time_s": round(clock - first_pts_s, 6),
-                     "target_id": str(d["target_id"][i]), "u_px": _num(d["u_px"][i]), "v_px": _num(d["v_px"][i]),
-                     **{k: _num(d[k][i]) for k in ("bbox_u0", "bbox_v0", "bbox_u1", "bbox_v1")},
-                     "lat_deg": _num(f.lat_deg[i]) if ok else None, "lon_deg": _num(f.lon_deg[i]) if ok else None,
-                     "h_m": _num(f.h_m[i]) if ok else None, "range_m": _num(f.range_m[i]) if ok else None,
-                     "status": str(STATUS_NAMES[int(f.status[i])])})
-    return rows
-
-
-def _num(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
+    f = locate_vmti(vmti.telemetry, vmti.detections, surface).fixes
+    status = np.asarray(f.status).astype(np.intp)
+    ok = status == Status.OK
+    packets = d["frame"].astype(np.int64)
+    clock = np.array([vmti.clock_by_packet.get(int(p), math.nan) for p in packets])
+    cols = {"packet": packets.tolist(), "video_time_s": json_column(np.round(clock - first_pts_s, 6)),
+            "target_id": d["target_id"].astype(str).tolist(),
+            **{k: json_column(d[k]) for k in ("u_px", "v_px", "bbox_u0", "bbox_v0", "bbox_u1", "bbox_v1")},
+            **{k: json_column(getattr(f, k), ok) for k in ("lat_deg", "lon_deg", "h_m", "range_m")},
+            "status": STATUS_NAMES[status].tolist()}
+    return [dict(zip(cols, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
 
 
 def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | None = None) -> tuple[Metadata, list]:
@@ -184,18 +179,6 @@ def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | N
     pose = telemetry_pose(tel, slice(None), cfg.sensor().camera)
     how = f"telemetry {Path(telemetry).name} by time_s" + (f", offset {offset:+.3f} s" if offset else "")
     return Metadata(t - offset + first_pts_s, pose, {"unix_s": np.full(t.shape, np.nan)}, how), inputs.issues
-
-
-def misb_frame_sensor(width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:
-    """The ST 0601 sensor of one frame: a pinhole whose fields of view span the image (tags 16,
-    17), on the az-el turret with sensor roll; None without a usable field of view."""
-    from ..misb import misb_sensor
-    from ..sensor.camera import Camera
-
-    if not (0 < hfov_deg < 180):
-        return None
-    v = vfov_deg if 0 < vfov_deg < 180 else None
-    return misb_sensor(camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=v))
 
 
 # -- the job ---------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ from __future__ import annotations
 import ipaddress
 import socket
 import struct
+import threading
 import time
 from collections.abc import Callable, Iterator
 from urllib.parse import urlparse
@@ -59,6 +60,36 @@ def udp_datagrams(sock: socket.socket, stop: Callable[[], bool], *, silence_s: f
             continue
         last, silent = time.monotonic(), False
         yield data, time.perf_counter()
+
+
+class DatagramSink:
+    """A receiver on ``udp://HOST:PORT`` (bound before the constructor returns) in a background
+    thread: every datagram goes to ``on_datagram(data, arrival_s)`` (default: kept in
+    ``datagrams``) until :meth:`stop`. What a CoT or KLV-out consumer is, for demos, tests and
+    benchmarks; a context manager."""
+
+    def __init__(self, url: str, on_datagram: Callable[[bytes, float], None] | None = None) -> None:
+        self.sock = udp_socket(url)
+        self.datagrams: list[bytes] = []
+        self._on = on_datagram or (lambda data, _t: self.datagrams.append(data))
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        for data, arrival in udp_datagrams(self.sock, self._stopped.is_set):
+            self._on(data, arrival)
+
+    def stop(self) -> None:
+        self._stopped.set()
+        self._thread.join()
+        self.sock.close()
+
+    def __enter__(self) -> DatagramSink:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
 
 
 TS_PACKET = 188

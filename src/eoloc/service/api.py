@@ -15,7 +15,6 @@ Bad requests are answered as JSON naming the field (``observations.0.pose.lat_de
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
@@ -117,11 +116,6 @@ class ServiceState:
     served: int = 0
 
 
-def _num(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
 def locate_observation(obs: ObservationIn, state: ServiceState, where: str) -> dict:
     """One observation through eoloc's chain; RequestError naming the field for what cannot be served."""
     from ..pipeline import locate_by_rule
@@ -180,27 +174,19 @@ def locate_observation(obs: ObservationIn, state: ServiceState, where: str) -> d
     return {"fixes": fix_rows(f, u, v, unc)}
 
 
-def _column(a: np.ndarray, keep: np.ndarray | None = None) -> list:
-    """Values as a list for JSON: NaN, infinity and (where ``keep`` is False) anything as None."""
-    a = np.asarray(a, dtype=np.float64)
-    bad = ~np.isfinite(a) if keep is None else ~(np.isfinite(a) & keep)
-    out = a.astype(object)
-    out[bad] = None
-    return out.tolist()
-
-
 def fix_rows(f, u: np.ndarray, v: np.ndarray, unc: dict | None) -> list[dict]:
     """The fixes as the API's rows (:class:`FixOut`), built column by column: a failed fix has no
     coordinates (null), never a plausible point."""
-    from ..io.export import STATUS_NAMES
+    from ..io.export import STATUS_NAMES, json_column
 
     ok = np.ravel(f.ok)
-    cols = {"lat_deg": _column(f.lat_deg, ok), "lon_deg": _column(f.lon_deg, ok), "h_m": _column(f.h_m, ok),
-            "range_m": _column(f.range_m, ok), "status": STATUS_NAMES[np.ravel(f.status).astype(np.intp)].tolist(),
-            "u_px": _column(u), "v_px": _column(v)}
+    cols = {"lat_deg": json_column(f.lat_deg, ok), "lon_deg": json_column(f.lon_deg, ok),
+            "h_m": json_column(f.h_m, ok), "range_m": json_column(f.range_m, ok),
+            "status": STATUS_NAMES[np.ravel(f.status).astype(np.intp)].tolist(),
+            "u_px": json_column(u), "v_px": json_column(v)}
     rows = [dict(zip(cols, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
     if unc is not None:
-        names, values = list(unc), [_column(c) for c in unc.values()]
+        names, values = list(unc), [json_column(c) for c in unc.values()]
         for row, vals in zip(rows, zip(*values, strict=True), strict=True):
             row["uncertainty"] = dict(zip(names, vals, strict=True))
     return rows

@@ -28,7 +28,6 @@ import threading
 import time
 from collections import OrderedDict, deque
 from collections.abc import Callable
-from importlib import resources
 
 import orjson
 
@@ -171,13 +170,10 @@ class LiveHub:
 
     def page(self) -> str:
         """The live map page: Leaflet inlined (no network needed), the WebSocket at WS_PATH."""
-        base = resources.files("eoloc") / "data"
-        html = (base / "livemap" / "live.html").read_text(encoding="utf-8")
-        for mark, name in (("/*LEAFLET_CSS*/", "leaflet/leaflet.css"), ("/*LEAFLET_JS*/", "leaflet/leaflet.js"),
-                           ("/*LIVE_JS*/", "livemap/live.js")):
-            html = html.replace(mark, (base / name).read_text(encoding="utf-8"))
-        title = self.title.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
-        return html.replace("{{TITLE}}", title).replace("{{WS_PATH}}", WS_PATH)
+        from ..io.mapview import offline_page
+
+        return offline_page("livemap/live.html", {"/*LIVE_JS*/": "livemap/live.js"},
+                            {"TITLE": self.title, "WS_PATH": WS_PATH})
 
 
 class MapServer:

@@ -53,25 +53,32 @@
 
   // -- frames and time ------------------------------------------------------------------------
   function frameAt(t) { // the frame whose presentation time is nearest t (s since the first frame)
-    let lo = 0, hi = N - 1;
-    while (lo < hi) {
-      const mid = (lo + hi + 1) >> 1;
-      if (F.t[mid] <= t) lo = mid; else hi = mid - 1;
-    }
+    let lo = Math.max(lastAtOrBefore(F.t, t), 0);
     if (lo + 1 < N && Math.abs(F.t[lo + 1] - t) < Math.abs(F.t[lo] - t)) lo += 1;
     return lo;
   }
-  function rectifiedAtOrBefore(i) {
-    let best = -1;
-    for (const k of rectifiedIdx) { if (k <= i) best = k; else break; }
-    return best;
+  function lastAtOrBefore(sorted, x) { // index of the last element <= x, or -1 (binary search)
+    let lo = -1, hi = sorted.length - 1;
+    while (lo < hi) {
+      const mid = (lo + hi + 1) >> 1;
+      if (sorted[mid] <= x) lo = mid; else hi = mid - 1;
+    }
+    return lo;
   }
-  const vmtiTimes = [...new Set(D.vmti.map((r) => r.video_time_s))].sort((a, b) => a - b);
+  function rectifiedAtOrBefore(i) {
+    const k = lastAtOrBefore(rectifiedIdx, i);
+    return k < 0 ? -1 : rectifiedIdx[k];
+  }
+  const vmtiByTime = new Map(); // VMTI packet time -> its detections
+  for (const r of D.vmti) {
+    if (!vmtiByTime.has(r.video_time_s)) vmtiByTime.set(r.video_time_s, []);
+    vmtiByTime.get(r.video_time_s).push(r);
+  }
+  const vmtiTimes = [...vmtiByTime.keys()].sort((a, b) => a - b);
   function vmtiAt(t) { // the detections of the latest VMTI packet at or before t, within the hold time
-    let best = null;
-    for (const vt of vmtiTimes) { if (vt <= t + 1e-6) best = vt; else break; }
-    if (best === null || t - best > D.vmti_hold_s) return [];
-    return D.vmti.filter((r) => r.video_time_s === best);
+    const k = lastAtOrBefore(vmtiTimes, t + 1e-6);
+    if (k < 0 || t - vmtiTimes[k] > D.vmti_hold_s) return [];
+    return vmtiByTime.get(vmtiTimes[k]);
   }
 
   const state = { frame: -1, shown: -1, boxes: [], vmti: [], lastClick: null, mode: "offline",
