@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean browser tak
+.PHONY: demo test lint bench clean browser tak streams
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,15 @@ browser:
 	  { apt-get update -q >/dev/null && apt-get install -y -q chromium chromium-driver >/dev/null; }; } || \
 	  { echo "install Debian's chromium and chromium-driver (as root) for the map test"; exit 1; }
 
+# Real network senders for the live-source test: an RTSP server (GStreamer's gst-rtsp-server,
+# through Debian's python3-gi) and SRT's own tools (srt-live-transmit), installed here when missing.
+STREAM_DEBS := python3-gi gir1.2-gst-rtsp-server-1.0 gstreamer1.0-plugins-good gstreamer1.0-plugins-bad srt-tools
+streams:
+	@{ command -v srt-live-transmit >/dev/null && /usr/bin/python3 -c "import gi; gi.require_version('GstRtspServer', '1.0')" \
+	  2>/dev/null; } || { apt-get install -y -q --no-install-recommends $(STREAM_DEBS) >/dev/null 2>&1 || \
+	  { apt-get update -q >/dev/null && apt-get install -y -q --no-install-recommends $(STREAM_DEBS) >/dev/null; }; } || \
+	  { echo "install Debian's $(STREAM_DEBS) (as root) for the live-source test"; exit 1; }
+
 # A real TAK server for the CoT test: FreeTAKServer from PyPI in a venv of its own (its pins clash
 # with ours); opentelemetry is held at the release it was built against (1.23 broke its tracer).
 TAK_VENV  := .venv-tak
@@ -44,7 +53,7 @@ $(TAK_STAMP):
 
 tak: $(TAK_STAMP)
 
-test: $(STAMP) lint browser tak
+test: $(STAMP) lint browser tak streams
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)

@@ -22,8 +22,11 @@ eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
   SOURCE: udp://HOST:PORT (a multicast HOST such as 239.1.1.1 is joined): datagrams of MPEG-TS
   (ST 1402, any number of KLV PIDs, each its own stream) or raw KLV (whole packets), told apart
   as they come; a raw KLV or MPEG-TS file (--realtime: at the stream's own clock, from the
-  ST 0601 time stamps, or the TS PCR, else PTS); or - for stdin (a pipe of TS or raw KLV bytes;
-  RTSP/SRT: ffmpeg -i URL -map 0 -c copy -f mpegts - | eoloc live - ...).
+  ST 0601 time stamps, or the TS PCR, else PTS); - for stdin (a pipe of TS or raw KLV bytes);
+  rtsp://HOST:PORT/PATH or rtmp://... (through FFmpeg: each KLV data stream of the session,
+  MPEG-TS over RTP included, RTSP over TCP); tcp://HOST:PORT or http(s)://... (a byte stream
+  of MPEG-TS or raw KLV, through FFmpeg); srt://HOST:PORT (caller; srt://:PORT listens),
+  bridged by srt-live-transmit (apt install srt-tools) since PyAV's FFmpeg has no SRT.
   Each packet is decoded as `eoloc klv` decodes files (checksums, report-on-change values carried
   from packet to packet); its frame centre, footprint (the four corners; on --dem the image
   border traced on the terrain) and VMTI targets are located on --dem, else on the packet's
@@ -96,16 +99,13 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     from ..live.cot import CotFeed
     from ..live.senders import cot_sender
     from ..live.session import LiveSession
-    from ..live.sources import byte_stream_chunks, file_datagrams, udp_datagrams, udp_socket
+    from ..live.sources import open_source
     from .common import load_config
 
     if ndjson is None and not cot_urls and map_at is None and klv_out is None:
         fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
              "--map HOST:PORT")
     map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
-    if source.startswith(("rtsp://", "srt://", "tcp://", "http://", "https://")):
-        fail(f"{source!r}: eoloc live reads udp://HOST:PORT, raw KLV or MPEG-TS files, and - (stdin); for "
-             f"RTSP/SRT, relay with ffmpeg: ffmpeg -i {source} -map 0 -c copy -f mpegts udp://127.0.0.1:15000")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)
@@ -146,19 +146,14 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
-    if source.startswith("udp://"):
-        sock = udp_socket(source)
-        err_console.print(f"eoloc live: listening on {source} (Ctrl-C stops)")
-        feed = udp_datagrams(sock, stop, silence_s=silence, on_silence=on_silence)
-    elif source == "-":
-        feed = byte_stream_chunks(sys.stdin.buffer.read1, stop)
-    else:
-        feed = file_datagrams(source, stop, realtime=realtime)
+    feed, where = open_source(source, stop, realtime=realtime, silence_s=silence, on_silence=on_silence,
+                              stdin=sys.stdin.buffer)
+    err_console.print(f"eoloc live: {where} (Ctrl-C stops)")
     out = None if ndjson is None else sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
     seen_issues = 0
     try:
-        for datagram, arrived in feed:
-            updates = session.feed(datagram)
+        for datagram, arrived, *stream in feed:
+            updates = session.feed(datagram, *stream)
             for u in updates if senders else ():
                 for event in feed_cot.events(u):
                     for s in senders:
@@ -185,6 +180,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
                 while not stop():
                     time.sleep(0.1)
     finally:
+        feed.close()
         if out is not None and out is not sys.stdout:
             out.close()
         for s in senders:

@@ -91,11 +91,13 @@ class LiveSession:
         self.klv_out = klv_out  # a live.klvout.KlvOut: the stream re-sent with the target locations, or None
         self._items: list = []  # with klv_out: the datagram's transport packets to pass on and PES to rebuild
 
-    def feed(self, datagram: bytes) -> list[PacketUpdate]:
+    def feed(self, datagram: bytes, stream: str = "") -> list[PacketUpdate]:
+        """``stream``: the name of the KLV stream a raw (not MPEG-TS) datagram belongs to, where the
+        source demultiplexed it (FFmpeg's "PID n")."""
         c = self.counters
         c.datagrams += 1
         transport = is_transport(datagram)
-        chunks = self._demux(datagram) if transport else [(datagram, "")]
+        chunks = self._demux(datagram) if transport else [(datagram, stream)]
         updates: list[PacketUpdate] = []
         for payload, stream_name in chunks:
             updates += self._packets(payload, stream_name)

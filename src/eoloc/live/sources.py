@@ -1,13 +1,20 @@
 """Where live KLV comes from: a UDP socket (unicast, or a multicast group joined), a raw KLV or
-MPEG-TS file replayed (at its own clock with ``realtime``), or a byte stream such as stdin.
-Each source yields (datagram bytes, arrival time) and ends when ``stop()`` says so; silence is
-reported through ``on_silence(seconds)`` once per silent spell."""
+MPEG-TS file replayed (at its own clock with ``realtime``), a byte stream such as stdin, and the
+network sources FFmpeg opens (through PyAV): RTSP/RTMP (its demultiplexer's KLV data streams),
+TCP/HTTP (a byte stream of MPEG-TS or raw KLV) and SRT (PyAV's FFmpeg has no libsrt: Haivision's
+``srt-live-transmit`` bridges it to a loopback UDP port when it is installed).
+Each source yields (datagram bytes, arrival time) or (KLV bytes, arrival time, stream name) and
+ends when ``stop()`` says so; silence is reported through ``on_silence(seconds)`` once per silent
+spell. :func:`open_source` picks the source for a SOURCE argument."""
 
 from __future__ import annotations
 
 import ipaddress
+import queue
+import shutil
 import socket
 import struct
+import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -43,15 +50,18 @@ def udp_socket(url: str) -> socket.socket:
     return sock
 
 
-def udp_datagrams(sock: socket.socket, stop: Callable[[], bool], *, silence_s: float = 3.0,
-                  on_silence: Callable[[float], None] | None = None) -> Iterator[tuple[bytes, float]]:
-    sock.settimeout(0.2)
+def watch_silence(receive: Callable[[], object], stop: Callable[[], bool], *, silence_s: float = 3.0,
+                  on_silence: Callable[[float], None] | None = None) -> Iterator:
+    """What ``receive()`` returns, until ``stop()`` or it returns END. ``receive`` waits a short
+    while (0.2 s) and returns None when nothing came: after ``silence_s`` of that,
+    ``on_silence(seconds)`` is called once per silent spell."""
     last = time.monotonic()
     silent = False
     while not stop():
-        try:
-            data = sock.recv(MAX_DATAGRAM)
-        except TimeoutError:
+        item = receive()
+        if item is END:
+            return
+        if item is None:
             quiet = time.monotonic() - last
             if quiet > silence_s and not silent:
                 silent = True
@@ -59,7 +69,23 @@ def udp_datagrams(sock: socket.socket, stop: Callable[[], bool], *, silence_s: f
                     on_silence(quiet)
             continue
         last, silent = time.monotonic(), False
-        yield data, time.perf_counter()
+        yield item
+
+
+END = object()  # a source's end, as ``receive`` returns it to watch_silence
+
+
+def udp_datagrams(sock: socket.socket, stop: Callable[[], bool], *, silence_s: float = 3.0,
+                  on_silence: Callable[[float], None] | None = None) -> Iterator[tuple[bytes, float]]:
+    sock.settimeout(0.2)
+
+    def receive():
+        try:
+            return sock.recv(MAX_DATAGRAM), time.perf_counter()
+        except TimeoutError:
+            return None
+
+    return watch_silence(receive, stop, silence_s=silence_s, on_silence=on_silence)
 
 
 class DatagramSink:
@@ -203,3 +229,163 @@ def byte_stream_chunks(read: Callable[[int], bytes], stop: Callable[[], bool]) -
             buf = b""
     if buf:
         yield buf, time.perf_counter()
+
+
+FFMPEG_DEMUX = ("rtsp", "rtsps", "rtmp", "rtmps")  # FFmpeg opens these as containers: their KLV data streams
+FFMPEG_BYTES = ("tcp", "http", "https")  # byte streams of MPEG-TS or raw KLV, read through FFmpeg's protocols
+NETWORK_SCHEMES = (*FFMPEG_DEMUX, *FFMPEG_BYTES, "srt")
+OPEN_TIMEOUT_S = 10.0
+
+
+def scheme_of(source: str) -> str:
+    return urlparse(source).scheme.lower() if "://" in source else ""
+
+
+def in_thread(produce: Callable[[Callable[[], bool]], Iterator], stop: Callable[[], bool], *, silence_s: float,
+              on_silence: Callable[[float], None] | None, name: str) -> Iterator:
+    """The items of ``produce(halted)``, which blocks on the network, read in a background thread
+    and handed over through a queue, so that silence is noticed and ``stop()`` obeyed while a read
+    waits. An error in the reader ends the source with an InputError naming ``name``."""
+    items: queue.Queue = queue.Queue(maxsize=100_000)
+    halted = threading.Event()
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            for item in produce(halted.is_set):
+                items.put(item)
+        except Exception as exc:  # the network source's verdict (a dropped connection, a refused read)
+            failure.append(exc)
+        finally:
+            items.put(END)
+
+    threading.Thread(target=run, daemon=True, name=f"eoloc source {name}").start()
+
+    def receive():
+        try:
+            return items.get(timeout=0.2)
+        except queue.Empty:
+            return None
+
+    try:
+        yield from watch_silence(receive, stop, silence_s=silence_s, on_silence=on_silence)
+    finally:
+        halted.set()
+    if failure:
+        raise InputError(f"{name}: the stream broke off: {failure[0]}") from None
+
+
+def open_ffmpeg(url: str, *, as_bytes: bool):
+    """The PyAV container of a network URL (an InputError naming the URL and FFmpeg's reason when
+    it cannot be opened)."""
+    import av
+
+    options = {"rtsp_transport": "tcp"} if scheme_of(url).startswith("rtsp") else {}
+    try:
+        return av.open(url, format="data" if as_bytes else None, options=options,
+                       timeout=(OPEN_TIMEOUT_S, None))
+    except av.error.FFmpegError as exc:
+        raise InputError(f"{url}: FFmpeg cannot open it: {exc.strerror or exc} (is the sender running, and the "
+                         "address right?)") from None
+
+
+def ffmpeg_klv_packets(container, halted: Callable[[], bool]) -> Iterator[tuple[bytes, float, str]]:
+    """Each KLV data packet an FFmpeg demultiplexer gives (RTSP/RTMP, MPEG-TS over RTP inside),
+    with its arrival time and its stream's name ("PID n" as the transport stream's reader names it)."""
+    data = list(container.streams.data)
+    names = {s.index: f"PID {s.id}" if s.id else f"stream {s.index}" for s in data}
+    for packet in container.demux(*data):
+        if halted():
+            return
+        if packet.size:
+            yield bytes(packet), time.perf_counter(), names[packet.stream.index]
+
+
+def ffmpeg_byte_chunks(container, halted: Callable[[], bool]) -> Iterator[tuple[bytes, float]]:
+    """An FFmpeg byte stream (TCP, HTTP) cut as :func:`byte_stream_chunks` cuts stdin."""
+    packets = container.demux()
+
+    def read(_n: int) -> bytes:
+        for packet in packets:
+            if packet.size:
+                return bytes(packet)
+        return b""
+
+    return byte_stream_chunks(read, halted)
+
+
+def srt_bridge(url: str, sock: socket.socket) -> subprocess.Popen:
+    """``srt-live-transmit URL udp://127.0.0.1:PORT`` (Haivision's SRT tools) feeding ``sock``."""
+    tool = shutil.which("srt-live-transmit")
+    if tool is None:
+        raise InputError(f"{url}: PyAV's FFmpeg has no SRT, and srt-live-transmit (SRT's own bridge) is not installed: "
+                         "install it (Debian/Ubuntu: apt install srt-tools) and eoloc runs it, or relay the stream "
+                         f"yourself: srt-live-transmit {url} udp://127.0.0.1:15000, then eoloc live "
+                         "udp://127.0.0.1:15000")
+    port = sock.getsockname()[1]
+    return subprocess.Popen([tool, "-q", url, f"udp://127.0.0.1:{port}"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def srt_datagrams(url: str, stop: Callable[[], bool], *, silence_s: float,
+                  on_silence: Callable[[float], None] | None) -> Iterator[tuple[bytes, float]]:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.2)
+    bridge = srt_bridge(url, sock)
+
+    def receive():
+        try:
+            return sock.recv(MAX_DATAGRAM), time.perf_counter()
+        except TimeoutError:
+            return END if bridge.poll() is not None else None
+
+    try:
+        yield from watch_silence(receive, stop, silence_s=silence_s, on_silence=on_silence)
+        if bridge.poll() not in (None, 0):
+            why = (bridge.stderr.read() or b"").decode("utf-8", "replace").strip().splitlines()
+            raise InputError(f"{url}: srt-live-transmit stopped (exit {bridge.returncode})"
+                             + (f": {why[-1]}" if why else ""))
+    finally:
+        if bridge.poll() is None:
+            bridge.terminate()
+            try:
+                bridge.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                bridge.kill()
+        sock.close()
+
+
+def open_source(source: str, stop: Callable[[], bool], *, realtime: bool = False, silence_s: float = 3.0,
+                on_silence: Callable[[float], None] | None = None, stdin=None) -> tuple[Iterator, str]:
+    """The chunks of SOURCE (see the module) and a line saying where they come from."""
+    scheme = scheme_of(source)
+    watch = {"silence_s": silence_s, "on_silence": on_silence}
+    if scheme == "udp":
+        return udp_datagrams(udp_socket(source), stop, **watch), f"listening on {source}"
+    if source == "-":
+        return byte_stream_chunks(stdin.read1, stop), "reading stdin"
+    if scheme == "srt":
+        return srt_datagrams(source, stop, **watch), f"receiving {source} (through srt-live-transmit)"
+    if scheme in FFMPEG_DEMUX or scheme in FFMPEG_BYTES:
+        as_bytes = scheme in FFMPEG_BYTES
+        container = open_ffmpeg(source, as_bytes=as_bytes)
+        produce = ffmpeg_byte_chunks if as_bytes else ffmpeg_klv_packets
+        if not as_bytes and not container.streams.data:
+            container.close()
+            raise InputError(f"{source}: FFmpeg finds no data stream in it (KLV carried as MPEG-TS over RTP is "
+                             "read; KLV in its own RTP payload, RFC 6597, FFmpeg does not read: ask the encoder for "
+                             "MPEG-TS, or relay it to UDP with a tool that does)")
+
+        def read(halted: Callable[[], bool]) -> Iterator:
+            try:
+                yield from produce(container, halted)
+            finally:
+                container.close()
+
+        return in_thread(read, stop, name=source, **watch), f"receiving {source} (FFmpeg)"
+    if scheme:
+        raise InputError(f"{source!r}: eoloc live reads udp://, rtsp://, rtmp://, srt://, tcp://, http(s):// URLs, "
+                         "raw KLV or MPEG-TS files, and - (stdin)")
+    return file_datagrams(source, stop, realtime=realtime), f"reading {source}"
