@@ -123,7 +123,7 @@ def test_report_on_change_values_are_carried_between_datagrams(tmp_path):
 
 @pytest.mark.parametrize("args, words", [
     (["udp://nohost", "--ndjson", "x"], "udp://HOST:PORT"),
-    (["rtsp://cam/1", "--ndjson", "x"], "relay with ffmpeg"),
+    (["rtsp://nohost.invalid/1", "--ndjson", "x"], "FFmpeg cannot open it"),
     (["udp://127.0.0.1:1"], "at least one output"),
     (["udp://127.0.0.1:1", "--cot", "http://tak:8087"], "tcp://HOST:PORT"),
     (["udp://127.0.0.1:1", "--cot", "udp://239.2.3.1:6969?ttl=x"], "ttl must be"),

@@ -243,3 +243,62 @@ def test_cot_feed_events_of_one_packet_and_the_silence():
     held = CotFeed(interval_s=10.0)
     u = LiveSession("test").feed(packets[0])[0]
     assert len(held.events(u, now=now)) == 8 and held.events(u, now=now) == [] and held.held == 8
+
+
+def test_cot_carries_the_refined_targets(tmp_path):
+    """--cot-targets both: every fix as before, and each target's refined estimate (RLS here) as
+    its own marker '<uid>-refined' at the estimate's point, ce = its CEP50 / 1.1774 (the sigma
+    of a circular normal error with that CEP50), the model and fix count in the remarks; the
+    same estimates as --ndjson writes. A Kalman estimate carries its speed and course."""
+    from eoloc.live.cot import CotFeed
+    from eoloc.live.refine import TargetFilters
+    from eoloc.live.session import LiveSession
+
+    klv = tmp_path / "circling.klv"
+    klv.write_bytes(circling_flight_klv(30, seed=4, rate_hz=2.0))
+    cot_port = _free_port()
+    out = tmp_path / "live.ndjson"
+    with CotReceiver(f"udp://127.0.0.1:{cot_port}") as rx:
+        r = subprocess.run([EOLOC, "live", str(klv), "--config", str(CONFIG), "--cot", f"udp://127.0.0.1:{cot_port}",
+                            "--cot-targets", "both", "--ndjson", str(out)], capture_output=True, text=True,
+                           timeout=120)
+        time.sleep(0.3)
+    assert r.returncode == 0, r.stderr
+    rows = [json.loads(x) for x in out.read_text().splitlines()]
+    estimates = [f for f in rows if f["properties"]["what"] == "estimate"]
+    fixes = [f for f in rows if f["properties"]["what"] == "target" and f["properties"]["status"] == "OK"]
+    refined = [e for e in rx.events if e.get("uid").endswith("-refined")]
+    plain = [e for e in rx.events if e.get("type") == "a-u-G" and not e.get("uid").endswith("-refined")]
+    assert len(refined) == len(estimates) == 150 and len(plain) == len(fixes) == 150 and rx.bad == []
+    for ev, f in zip(refined, estimates, strict=True):
+        p, (lon, lat, h) = f["properties"], f["geometry"]["coordinates"]
+        assert ev.get("uid") == f"eoloc-stream-{p['target_id']}-refined"
+        pt = ev.find("point")
+        assert abs(float(pt.get("lat")) - lat) < 1e-8 and abs(float(pt.get("lon")) - lon) < 1e-8
+        assert abs(float(pt.get("hae")) - h) < 0.006
+        assert p["cep50_m"] > 0 and abs(float(pt.get("ce")) - p["cep50_m"] / 1.17741) < 0.006
+        assert float(pt.get("le")) == 9999999.0
+        assert f"static (RLS) over {p['n_fixes']} fixes" in ev.find("detail/remarks").text
+    # the estimate converges: the last one of each target has all its fixes behind it
+    last = {e.get("uid"): e for e in refined}
+    assert len(last) == 5 and all("over 30 fixes" in e.find("detail/remarks").text for e in last.values())
+    assert set(last) == {e.get("uid") + "-refined" for e in plain}
+
+    # moving (Kalman): the same uid as the fixes (estimates only), speed and course in <track>
+    session = LiveSession("test", refine=TargetFilters("moving"), budget=misb_setup(
+        eoloc.io.config.load_config(CONFIG))[1])
+    feed = CotFeed(targets="estimates")
+    for raw, _ in split_klv(klv.read_bytes()):
+        for u in session.feed(raw):
+            events = [ET.fromstring(e) for e in feed.events(u)]
+    targets = [e for e in events if e.get("type") == "a-u-G"]
+    assert len(targets) == len(u.estimates) == 5
+    for ev, est in zip(targets, u.estimates, strict=True):
+        p = est["properties"]
+        assert ev.get("uid") == f"eoloc-stream-{p['target_id']}" and p["model"] == "moving (Kalman)"
+        tr = ev.find("detail/track")
+        assert float(tr.get("speed")) == pytest.approx(p["speed_mps"], abs=1e-3)
+        assert float(tr.get("course")) == pytest.approx(p["heading_deg"], abs=1e-3)
+    bad = subprocess.run([EOLOC, "live", str(klv), "--ndjson", "-", "--cot-targets", "estimates"], capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode == 2 and "--cot-targets estimates" in bad.stderr and "Traceback" not in bad.stderr

@@ -46,6 +46,8 @@ Outputs (any combination, at least one):
                     aircraft with its sensor's field of view, the frame centre (sensor point of
                     interest), the footprint as a shape, and each located target with ce/le
                     (1 sigma) from its covariance; stale after 10 packet intervals.
+                    --cot-targets estimates: each target's refined estimate (--refine)
+                    under the same uid instead, ce = its CEP50/1.1774; both: the two.
   --klv-out URL|FILE  the stream re-sent (udp://HOST:PORT, multicast ?ttl=N) or recorded (FILE)
                     with each packet's first located target (lowest VMTI id) in ST 0601 tags
                     40-42 and its CE90/LE90 in 45/46 (tag 42 in the stream's datum); TS in, TS
@@ -80,21 +82,26 @@ datagram's arrival to its outputs sent.
                    "a file.")
 @click.option("--map", "map_at", default=None, metavar="HOST:PORT",
               help="Serve a live map at http://HOST:PORT/live (e.g. 127.0.0.1:8080; 0.0.0.0:8080 for other machines).")
+@click.option("--cot-targets", "cot_targets", type=click.Choice(["fixes", "estimates", "both"]), default="fixes",
+              show_default=True,
+              help="What each target's CoT marker carries: every packet's fix, the target refined across packets "
+                   "(--refine; the same uid, so one marker converges), or both (the estimate as '<uid>-refined').")
 @click.option("--cot-interval", type=click.FloatRange(0.0), default=0.0, show_default=True, metavar="S",
               help="At most one CoT event per target (and per aircraft, footprint) every S seconds; 0: all.")
 @click.option("--refine", type=click.Choice(["static", "moving", "auto", "off"]), default="static", show_default=True,
               help="Refine each VMTI target id across packets: static (RLS, as eoloc track --static; a target "
                    "whose fixes walk gets a warning and their scatter as its uncertainty), moving (Kalman, as "
                    "eoloc track), auto (Kalman once the speed is significant: a drifting attitude bias makes a "
-                   "fixed target look moving too), off. The estimates go to --ndjson and --map.")
+                   "fixed target look moving too), off. The estimates go to --ndjson, --map and (--cot-targets) "
+                   "CoT.")
 @click.option("--realtime", is_flag=True, help="A file SOURCE: replay at the stream's own clock.")
 @click.option("--packets", "max_packets", type=click.IntRange(1), default=None, help="Stop after N good packets.")
 @click.option("--duration", type=click.FloatRange(0.0, min_open=True), default=None, metavar="S",
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
-def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_interval,
-         refine, realtime, max_packets, duration, silence) -> None:
+def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_targets,
+         cot_interval, refine, realtime, max_packets, duration, silence) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cot import CotFeed
     from ..live.senders import cot_sender
@@ -106,11 +113,13 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
         fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
              "--map HOST:PORT")
     map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
+    if cot_targets != "fixes" and (refine == "off" or not cot_urls):
+        fail(f"--cot-targets {cot_targets}: the refined targets need --refine (static, moving or auto) and a --cot URL")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)
     filters = None
-    if refine != "off" and (ndjson is not None or map_at is not None):  # the outputs that carry estimates
+    if refine != "off" and (ndjson is not None or map_at is not None or cot_targets != "fixes"):  # estimates wanted
         from ..live.refine import TargetFilters
 
         filters = TargetFilters(refine)
@@ -120,7 +129,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
 
         rewriter = KlvOut(klv_out)
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=rewriter)
-    feed_cot = CotFeed(interval_s=cot_interval)
+    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets)
     senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
     hub = server = None
     if map_at is not None:

@@ -15,7 +15,13 @@ Per packet, each event one standalone XML document:
 - one event per **located target** (``a-u-G``, uid ``<platform>-<target id>``: a VMTI target
   keeps its marker from packet to packet), ``ce``/``le`` the 1-sigma horizontal and vertical
   errors from its covariance (9999999, unknown, without an error budget), CE90/LE90 in the
-  remarks.
+  remarks;
+- with ``targets="estimates"`` each target's **refined estimate** instead (:mod:`eoloc.live.refine`:
+  RLS for a static target, the Kalman track for a moving one) under the same uid, so the marker
+  converges as fixes accumulate: ``ce`` its CEP50 / 1.1774 (the 1-sigma of a circular normal
+  error with that CEP), ``le`` unknown (the filters refine the horizontal position), the model
+  and fix count in the remarks, a moving target's speed and course in ``<track>``;
+  ``targets="both"``: the fixes, and the estimates as ``<platform>-<target id>-refined``.
 
 ``time``/``start`` are when the event is sent and ``stale`` that plus ``stale_packets`` packet
 intervals of its stream (the median of the last 15 by the ST 0601 time stamps, between ``min_stale_s`` and
@@ -32,13 +38,15 @@ import statistics
 from collections import deque
 from datetime import UTC, datetime, timedelta
 
-from ..io.cot import ce_le, element_xml, event_xml, fix_remarks, iso_utc
+from ..io.cot import UNKNOWN, ce_le, element_xml, event_xml, fix_remarks, iso_utc
 from .update import PacketUpdate
 
 PLATFORM_TYPE = "a-f-A-M-F-Q"  # friendly / air / military / fixed wing / UAV
 TARGET_TYPE = "a-u-G"  # unknown affiliation, ground
 SPI_TYPE = "b-m-p-s-p-i"  # sensor point of interest (MISB ST 0805)
 SHAPE_TYPE = "u-d-f"  # a drawn shape (TAK's freehand polygon)
+TARGET_CHOICES = ("fixes", "estimates", "both")  # what a target's events carry
+CEP50_PER_SIGMA = math.sqrt(2.0 * math.log(2.0))  # CEP50 of a circular normal error, in sigmas (1.1774)
 
 
 class CotFeed:
@@ -46,8 +54,11 @@ class CotFeed:
     optional minimum interval per uid (``interval_s``; ``held`` counts the events left out)."""
 
     def __init__(self, *, uid_prefix: str = "eoloc", stale_packets: float = 10.0, min_stale_s: float = 2.0,
-                 max_stale_s: float = 60.0, interval_s: float = 0.0) -> None:
+                 max_stale_s: float = 60.0, interval_s: float = 0.0, targets: str = "fixes") -> None:
+        if targets not in TARGET_CHOICES:
+            raise ValueError(f"targets must be one of {TARGET_CHOICES}, not {targets!r}")
         self.uid_prefix = uid_prefix
+        self.targets = targets
         self.stale_packets, self.min_stale_s, self.max_stale_s = stale_packets, min_stale_s, max_stale_s
         self.interval_s = interval_s
         self.period_s: dict[str, float] = {}  # stream -> its packet interval (median of the last 15)
@@ -114,7 +125,7 @@ class CotFeed:
                        + element_xml("contact", callsign=f"{name} footprint") + link)
             out.append(event_xml(uid=base + "-footprint", cot_type=SHAPE_TYPE, how="m-i", time=now, stale=stale,
                                  lat=lat, lon=lon, hae=h, detail=detail))
-        for row in u.fixes:
+        for row in u.fixes if self.targets != "estimates" else ():
             if row.get("status") != "OK":
                 continue
             tid = row.get("target_id")
@@ -127,8 +138,31 @@ class CotFeed:
             out.append(event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale,
                                  lat=float(row["lat_deg"]), lon=float(row["lon_deg"]), hae=float(row["h_m"]), ce=ce,
                                  le=le, detail=detail))
+        if self.targets != "fixes":
+            suffix = "-refined" if self.targets == "both" else ""
+            for est in u.estimates:
+                uid = f"{base}-{est['properties']['target_id']}{suffix}"
+                if self._due(uid, now_s):
+                    out.append(self._estimate(est, uid, name, link, now, stale, when))
         self.events_out += len(out)
         return out
+
+    def _estimate(self, est: dict, uid: str, name: str, link: str, now: str, stale: str, when: str) -> bytes:
+        """A target's refined estimate (a live.refine GeoJSON feature) as its marker."""
+        p = est["properties"]
+        lon, lat, h = est["geometry"]["coordinates"]
+        cep = p.get("cep50_m")
+        remarks = [f"eoloc estimate of target {p['target_id']}: {p['model']} over {p['n_fixes']} fixes"]
+        if cep is not None:
+            remarks.append(f"CEP50 {cep:.1f} m")
+        if p.get("warning"):
+            remarks.append(p["warning"])
+        detail = element_xml("contact", callsign=f"{name} {p['target_id']}") + link
+        if p.get("speed_mps") is not None:
+            detail += element_xml("track", course=_fmt(p.get("heading_deg")), speed=_fmt(p["speed_mps"]))
+        detail += element_xml("remarks", f"{'; '.join(remarks)}; {when}")
+        return event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale, lat=lat, lon=lon, hae=h,
+                         ce=cep / CEP50_PER_SIGMA if cep is not None else UNKNOWN, le=UNKNOWN, detail=detail)
 
     def _platform(self, u: PacketUpdate, uid: str, name: str, now: datetime | str, stale: datetime | str,
                   remarks: str) -> bytes:
