@@ -270,3 +270,32 @@ def test_case1_the_old_height_flag_is_refused_naming_both_new_flags(tmp_path):
         r = CliRunner().invoke(main, args)
         assert r.exit_code == 2, (args, r.output)
         assert "--target-height" in r.output and "--aircraft-height" in r.output and "Traceback" not in r.output
+
+
+@pytest.mark.parametrize("rule", [eoloc.rules.AtHeight(100.0), eoloc.rules.AtRange(9_000.0),
+                                  eoloc.rules.OnDEM(eoloc.open_dem(DEMO / "mountain" / "longs_peak_srtmgl3.tif"))],
+                         ids=["height", "range", "dem"])
+def test_a_pixel_outside_the_image_has_no_fix_with_an_uncertainty(rule):
+    """Found through the HTTP API: with an error budget (first-order covariance, and the Monte
+    Carlo chain it shares) a pixel outside the image came back OK with a point and a sigma. The
+    statuses must be those of eoloc.locate for the same pixels, whatever the budget."""
+    from eoloc.accuracy.budget import ErrorBudget
+    from eoloc.accuracy.covariance import locate_with_covariance
+    from eoloc.accuracy.montecarlo import chain_fixes
+
+    pose = Pose(40.23, -105.66, 6500.0, 80.0, 1.0, -1.5, (10.0, -35.0, 0.0))
+    rng = np.random.default_rng(5)
+    u, v = rng.uniform(-100, CAM.width + 100, 400), rng.uniform(-100, CAM.height + 100, 400)
+    budget = ErrorBudget.from_mapping({"yaw_deg": {"normal": 0.05}, "pitch_deg": {"normal": 0.05}, "u_px": {"normal": 0.5},
+                                      "h_m": {"normal": 5.0}})
+    plain = rule.locate(SENSOR, pose, (u, v))
+    outside = np.ravel(plain.status) == Status.OUT_OF_IMAGE
+    assert 50 < outside.sum() < 300  # both kinds of pixel are there
+    fixes, cov = locate_with_covariance(SENSOR, pose, budget, (u, v), rule)
+    assert np.array_equal(np.ravel(fixes.status), np.ravel(plain.status))
+    assert np.all(np.isnan(np.ravel(fixes.lat_deg)[outside]))
+    # the Monte Carlo chain: 50 perturbed rows, each with the same statuses outside the image
+    d = {"yaw_deg": rng.normal(0, 0.05, 50), "u_px": rng.normal(0, 0.5, 50)}
+    mc = chain_fixes(SENSOR, pose, u, v, rule, d, 50)
+    assert mc.status.shape == (50, 400)
+    assert np.all(mc.status[:, outside] == Status.OUT_OF_IMAGE) and not np.any(mc.status[:, ~outside] == Status.OUT_OF_IMAGE)

@@ -114,7 +114,11 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
     xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
                                                principal_point_error_px=(z("cx_px"), z("cy_px")),
                                                focal_scale=pose.focal_scale)
-    f = rule.stop(sensor.rays_from(frame, xn, yn), sensor.ellipsoid, errors=z)
+    # the nominal pixel decides whether a target is in the image (as eoloc.locate): a pixel outside
+    # is OUT_OF_IMAGE in every row, never a point with an uncertainty
+    xn0, yn0 = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
+    outside = sensor.camera.outside(u, v, xn0, yn0, focal_scale=pose.focal_scale)
+    f = rule.stop(sensor.rays_from(frame, xn, yn, outside), sensor.ellipsoid, errors=z)
     shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies
     return Fixes(*(np.broadcast_to(x, shape) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
 
