@@ -181,8 +181,14 @@ def test_arrow_uncertainty_columns_are_the_json_rows_uncertainty():
 
     import pyarrow as pa
 
-    from eoloc.service.api import (ObservationIn, ServiceState, arrow_fixes, locate_observation, read_arrow_request,
-                                   solve_observation)
+    from eoloc.service.api import (
+        ObservationIn,
+        ServiceState,
+        arrow_fixes,
+        locate_observation,
+        read_arrow_request,
+        solve_observation,
+    )
 
     state = ServiceState(load_config(Path(eoloc.__file__).parent / "data" / "demo" / "camera.toml"))
     obs = {"pose": {**S13["pose"], "gimbal_deg": [45.0, -20.0]}, "stop": {"target_height_m": 100.0},

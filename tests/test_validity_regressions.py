@@ -286,8 +286,8 @@ def test_a_pixel_outside_the_image_has_no_fix_with_an_uncertainty(rule):
     pose = Pose(40.23, -105.66, 6500.0, 80.0, 1.0, -1.5, (10.0, -35.0, 0.0))
     rng = np.random.default_rng(5)
     u, v = rng.uniform(-100, CAM.width + 100, 400), rng.uniform(-100, CAM.height + 100, 400)
-    budget = ErrorBudget.from_mapping({"yaw_deg": {"normal": 0.05}, "pitch_deg": {"normal": 0.05}, "u_px": {"normal": 0.5},
-                                      "h_m": {"normal": 5.0}})
+    budget = ErrorBudget.from_mapping({"yaw_deg": {"normal": 0.05}, "pitch_deg": {"normal": 0.05},
+                                       "u_px": {"normal": 0.5}, "h_m": {"normal": 5.0}})
     plain = rule.locate(SENSOR, pose, (u, v))
     outside = np.ravel(plain.status) == Status.OUT_OF_IMAGE
     assert 50 < outside.sum() < 300  # both kinds of pixel are there
@@ -298,4 +298,5 @@ def test_a_pixel_outside_the_image_has_no_fix_with_an_uncertainty(rule):
     d = {"yaw_deg": rng.normal(0, 0.05, 50), "u_px": rng.normal(0, 0.5, 50)}
     mc = chain_fixes(SENSOR, pose, u, v, rule, d, 50)
     assert mc.status.shape == (50, 400)
-    assert np.all(mc.status[:, outside] == Status.OUT_OF_IMAGE) and not np.any(mc.status[:, ~outside] == Status.OUT_OF_IMAGE)
+    assert np.all(mc.status[:, outside] == Status.OUT_OF_IMAGE)
+    assert not np.any(mc.status[:, ~outside] == Status.OUT_OF_IMAGE)

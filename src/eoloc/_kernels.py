@@ -801,10 +801,15 @@ def grid_height(z, lat0, lon0, dlat, dlon, lat, lon):
     ``z[i, j]`` is the post at (lat0 + i dlat, lon0 + j dlon). Outside the posts' extent:
     NaN and inside = False; a cell with a void (NaN) corner gives NaN with inside = True.
     """
+    return grid_height_at(z, (lat - lat0) / dlat, (lon - lon0) / dlon)
+
+
+@compiled(inline=True)
+def grid_height_at(z, fr, fc):
+    """:func:`grid_height` at fractional post indices (row fr, column fc) -> (height, inside):
+    for callers that interpolate the indices themselves (they are linear in lat and lon)."""
     nrow = z.shape[0]
     ncol = z.shape[1]
-    fr = (lat - lat0) / dlat
-    fc = (lon - lon0) / dlon
     eps = 1e-9  # edge posts computed as 999.0000000001 are still edge posts
     inside = (fr >= -eps) & (fr <= nrow - 1.0 + eps) & (fc >= -eps) & (fc <= ncol - 1.0 + eps)
     r0 = _floor_index(pick(inside, fr, 0.0), nrow - 2)

@@ -2,10 +2,11 @@
 
 Ground -> image, one output cell at a time (README "Orthorectification"):
 
-1. ``project_cells``: a cell's latitude and longitude, and the camera-frame position of its
-   ellipsoid point and up normal, interpolated bilinearly from nodes every ``step`` cells that
-   pyproj and the exact geodesy computed (the interpolation error is (step * cell)^2 / 8R: 5 µm
-   at 16 cells of 1 m); the DEM's bilinear height there (or the constant surface); the camera
+1. ``project_cells``: a cell's place in the DEM's grid (fractional row and column: linear in
+   latitude and longitude), and the camera-frame position of its ellipsoid point and up normal,
+   interpolated bilinearly from nodes every ``step`` cells that pyproj and the exact geodesy
+   computed (the interpolation error is (step * cell)^2 / 8R: 5 µm at 16 cells of 1 m); the
+   DEM's bilinear height there (or the constant surface); the camera
    frame point c0 + h n; its pinhole projection, the lens distortion (the same
    ``_kernels.distort`` as every other ground -> pixel path) and its range.
 2. ``fold_tiles``: terrain hides terrain only where the mesh of the cells (two triangles per
@@ -33,9 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import compiled, distort, grid_height
+from ._kernels import compiled, distort, grid_height_at
 
-N_NODE = 8  # per node: lat_deg, lon_deg, camera-frame ellipsoid point (x, y, z), camera-frame up normal (x, y, z)
+N_NODE = 8  # per node: the DEM's fractional row and column there, camera-frame ellipsoid point (x, y, z), up (x, y, z)
 BLOCK = 16  # cells per side of the blocks the z-buffer pass takes or skips whole
 _TRI_EPS = 1e-9  # barycentric slack: a pixel centre on the edge shared by two triangles goes to both
 
@@ -54,16 +55,21 @@ def node_index(n_cells: int, step: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @compiled()
-def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, lat0, lon0, dlat, dlon, h_const, use_dem, fx, fy, cx,
-                  cy, dist_kind, dist_params, r2_max, u, v, rng):
+def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, fx, fy, cx, cy, dist_kind,
+                  dist_params, r2_max, u, v, rng, fold, tile_px, tiles):
     """Pass 1: every cell -> pixel (u, v) and range (m); NaN where it has no ground (off the DEM,
     a void) or does not lie in front of the camera within the lens model's field (r2_max: the
-    largest squared ideal normalised radius the image reaches)."""
+    largest squared ideal normalised radius the image reaches). With ``fold``, also
+    :func:`fold_tiles` with front = +1, each row of quads as soon as its two rows are done;
+    returns its (front faces, back faces), (0, 0) without."""
     rows = u.shape[0]
     cols = u.shape[1]
     n_nodes = nodes.shape[1]
     line = np.empty((n_nodes, N_NODE))  # the nodes interpolated to this row
     h_row = np.empty(cols)
+    n_front = 0
+    n_back = 0
+    area = np.empty((2, cols))  # fold_row's scratch
     for r in range(rows):
         i = row_i0[r]
         a = row_a[r]
@@ -74,11 +80,11 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, lat0, lon0, dlat, 
         for c in range(cols):
             j = col_i0[c]
             b = col_a[c]
-            u[r, c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # latitude, for now
-            v[r, c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # longitude
+            u[r, c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # the DEM's fractional row, for now
+            v[r, c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # and column
         if use_dem:
             for c in range(cols):
-                h_row[c], inside = grid_height(dem_z, lat0, lon0, dlat, dlon, u[r, c], v[r, c])
+                h_row[c], inside = grid_height_at(dem_z, u[r, c], v[r, c])
         else:
             h_row[:] = h_const
         for c in range(cols):
@@ -96,6 +102,11 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, lat0, lon0, dlat, 
             u[r, c] = fx * xn + cx if ok else np.nan
             v[r, c] = fy * yn + cy if ok else np.nan
             rng[r, c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
+        if fold and r > 0:
+            f, bk = fold_row(u, v, r - 1, tile_px, 1.0, tiles, area)
+            n_front += f
+            n_back += bk
+    return n_front, n_back
 
 
 @compiled(inline=True)
@@ -143,53 +154,70 @@ def raster_quad(zbuf, u00, v00, d00, u01, v01, d01, u10, v10, d10, u11, v11, d11
                 cover(zbuf, x, y, u00, v00, d00, u11, v11, d11, u10, v10, d10, inv2)
 
 
-@compiled()
-def fold_tiles(u, v, rng, tile_px, front, tiles):
-    """Mark the image tiles (tile_px square, one tile of margin around) that the mesh's back
-    faces touch: triangles whose doubled signed area in the image has the sign opposite to
-    ``front`` (+1: counter-clockwise in (u, v) faces the camera), and return (how many face each
-    way). The caller checks that the front faces are the majority.
-
-    Terrain hides terrain only where the mesh folds over in the image: a point of the image that
-    several layers of the surface cover is covered by a back-facing triangle too (the layers'
-    orientations add up to the image's one), so the z-buffer is needed in the back faces' tiles
-    only."""
-    rows = u.shape[0]
+@compiled(inline=True)
+def fold_row(u, v, r, tile_px, front, tiles, area):
+    """:func:`fold_tiles` for the quads between cell rows r and r + 1 -> (front faces, back faces);
+    ``area``: scratch of (2, columns). A triangle with a vertex that does not project has a NaN
+    area (u, v are NaN there) and counts neither way. The areas are taken in one branch-free loop
+    (vectorised); the back faces' tiles are marked in a second, only when the row has any."""
     cols = u.shape[1]
     n_ty = tiles.shape[0]
     n_tx = tiles.shape[1]
     n_front = 0
     n_back = 0
-    for r in range(rows - 1):
-        for c in range(cols - 1):
-            d00 = rng[r, c]
-            d11 = rng[r + 1, c + 1]
-            if not ((d00 - d00) == 0.0 and (d11 - d11) == 0.0):
+    for c in range(cols - 1):
+        u00 = u[r, c]
+        v00 = v[r, c]
+        du = u[r + 1, c + 1] - u00
+        dv = v[r + 1, c + 1] - v00
+        # (00, 01, 11) and (00, 11, 10): the second walks the other way round, hence its minus
+        a1 = front * ((u[r, c + 1] - u00) * dv - du * (v[r, c + 1] - v00))
+        a2 = -front * ((u[r + 1, c] - u00) * dv - du * (v[r + 1, c] - v00))
+        area[0, c] = a1
+        area[1, c] = a2
+        n_front += (a1 >= 0.0) + (a2 >= 0.0)
+        n_back += (a1 < 0.0) + (a2 < 0.0)
+    if n_back == 0:
+        return n_front, n_back
+    for c in range(cols - 1):
+        for t in range(2):
+            if not area[t, c] < 0.0:
                 continue
+            uo = u[r, c + 1] if t == 0 else u[r + 1, c]
+            vo = v[r, c + 1] if t == 0 else v[r + 1, c]
             u00 = u[r, c]
             v00 = v[r, c]
             u11 = u[r + 1, c + 1]
             v11 = v[r + 1, c + 1]
-            for t in range(2):
-                ro = rng[r, c + 1] if t == 0 else rng[r + 1, c]
-                if not (ro - ro) == 0.0:
-                    continue
-                uo = u[r, c + 1] if t == 0 else u[r + 1, c]
-                vo = v[r, c + 1] if t == 0 else v[r + 1, c]
-                area = (uo - u00) * (v11 - v00) - (u11 - u00) * (vo - v00)
-                if t == 1:
-                    area = -area  # (00, 11, 10) walks the other way round than (00, 01, 11)
-                if area * front >= 0.0:
-                    n_front += 1
-                    continue
-                n_back += 1
-                tx0 = max(int(np.floor(min(u00, u11, uo) / tile_px)) - 1, 0)
-                tx1 = min(int(np.floor(max(u00, u11, uo) / tile_px)) + 1, n_tx - 1)
-                ty0 = max(int(np.floor(min(v00, v11, vo) / tile_px)) - 1, 0)
-                ty1 = min(int(np.floor(max(v00, v11, vo) / tile_px)) + 1, n_ty - 1)
-                for ty in range(ty0, ty1 + 1):
-                    for tx in range(tx0, tx1 + 1):
-                        tiles[ty, tx] = 1
+            tx0 = max(int(np.floor(min(u00, u11, uo) / tile_px)) - 1, 0)
+            tx1 = min(int(np.floor(max(u00, u11, uo) / tile_px)) + 1, n_tx - 1)
+            ty0 = max(int(np.floor(min(v00, v11, vo) / tile_px)) - 1, 0)
+            ty1 = min(int(np.floor(max(v00, v11, vo) / tile_px)) + 1, n_ty - 1)
+            for ty in range(ty0, ty1 + 1):
+                for tx in range(tx0, tx1 + 1):
+                    tiles[ty, tx] = 1
+    return n_front, n_back
+
+
+@compiled()
+def fold_tiles(u, v, rng, tile_px, front, tiles):
+    """Mark the image tiles (tile_px square, one tile of margin around) that the mesh's back
+    faces touch: triangles whose doubled signed area in the image has the sign opposite to
+    ``front`` (+1: counter-clockwise in (u, v) faces the camera), and return (how many face each
+    way). The caller checks that the front faces are the majority. (``project_cells`` runs the
+    same test with front = +1 as it goes, row by row, while the rows are in cache.)
+
+    Terrain hides terrain only where the mesh folds over in the image: a point of the image that
+    several layers of the surface cover is covered by a back-facing triangle too (the layers'
+    orientations add up to the image's one), so the z-buffer is needed in the back faces' tiles
+    only."""
+    n_front = 0
+    n_back = 0
+    area = np.empty((2, u.shape[1]))
+    for r in range(u.shape[0] - 1):
+        f, b = fold_row(u, v, r, tile_px, front, tiles, area)
+        n_front += f
+        n_back += b
     return n_front, n_back
 
 

@@ -266,7 +266,13 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     la, lo = np.radians(lat), np.radians(lon)
     up = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
     nodes = np.empty((nr, nc, _ortho.N_NODE))
-    nodes[..., 0], nodes[..., 1] = lat, lon
+    if isinstance(surface, DEM):  # the DEM's fractional row and column (linear in lat, lon: interpolated as they are)
+        g = surface.grid
+        nodes[..., 0], nodes[..., 1] = (lat - g.lat0) / g.dlat, (lon - g.lon0) / g.dlon
+        dem = (g.z, 0.0, True)
+    else:
+        nodes[..., 0], nodes[..., 1] = 0.0, 0.0
+        dem = (np.zeros((2, 2)), float(surface), False)
     nodes[..., 2:5] = (p0 - o) @ R  # R^T (p - o), row vectors
     nodes[..., 5:8] = up @ R
     row_i0, row_a = _ortho.node_index(rows, NODE_STEP)
@@ -275,23 +281,19 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     dist = cam.distortion
     kind, dp = (dist.kind, np.asarray(dist.packed, float)) if dist is not None else (_kernels.DIST_NONE, np.zeros(1))
     r2_max = _ideal_radius2(cam, fs) * 1.02**2
-    if isinstance(surface, DEM):
-        g = surface.grid
-        dem = (g.z, float(g.lat0), float(g.lon0), float(g.dlat), float(g.dlon), 0.0, True)
-    else:
-        dem = (np.zeros((2, 2)), 0.0, 0.0, 1.0, 1.0, float(surface), False)
     u, v, rng = (np.empty((rows, cols)) for _ in range(3))
-    bad = bool(np.any(frame.invalid))
-    if bad:
-        u[:], v[:], rng[:] = np.nan, np.nan, np.nan
-    else:
-        _nb.ortho_project_cells(nodes, row_i0, row_a, col_i0, col_a, *dem, cam.fx * fs, cam.fy * fs, cam.cx, cam.cy,
-                                int(kind), dp, r2_max, u, v, rng)
     use_zbuf = occlusion and isinstance(surface, DEM)
-    zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf)
-    if use_zbuf:  # only where the terrain folds over in the image (eoloc._ortho.fold_tiles)
-        tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)), np.uint8)
-        n_front, n_back = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, 1.0, tiles)
+    zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf, np.float32)  # ranges to mm: ample
+    # the image tiles the mesh's back faces touch: only there can terrain hide terrain (eoloc._ortho.fold_tiles)
+    tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)) if use_zbuf else (1, 1), np.uint8)
+    if bool(np.any(frame.invalid)):
+        u[:], v[:], rng[:] = np.nan, np.nan, np.nan
+        n_front = n_back = 0
+    else:
+        n_front, n_back = _nb.ortho_project_cells(nodes, row_i0, row_a, col_i0, col_a, *dem, cam.fx * fs, cam.fy * fs,
+                                                  cam.cx, cam.cy, int(kind), dp, r2_max, u, v, rng, use_zbuf,
+                                                  FOLD_TILE_PX, tiles)
+    if use_zbuf:
         if n_back > n_front:  # a mirrored view: clockwise triangles face the camera
             tiles[:] = 0
             n_back, n_front = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, -1.0, tiles)

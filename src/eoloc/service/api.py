@@ -266,7 +266,8 @@ def arrow_fixes(f, u: np.ndarray, v: np.ndarray, unc: dict | None) -> bytes:
 
     ok = np.ravel(f.ok)
     failed = ~ok
-    cols = {name: pa.array(np.ravel(getattr(f, name)), mask=failed) for name in ("lat_deg", "lon_deg", "h_m", "range_m")}
+    cols = {name: pa.array(np.ravel(getattr(f, name)), mask=failed)
+            for name in ("lat_deg", "lon_deg", "h_m", "range_m")}
     codes = np.ravel(f.status).astype(np.int32)
     cols["status"] = pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(STATUS_NAMES.tolist()))
     cols["u_px"], cols["v_px"] = pa.array(u), pa.array(v)
