@@ -56,12 +56,13 @@ def node_index(n_cells: int, step: int) -> tuple[np.ndarray, np.ndarray]:
 
 @compiled()
 def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, fx, fy, cx, cy, dist_kind,
-                  dist_params, r2_max, u, v, rng, fold, tile_px, tiles):
+                  dist_params, r2_max, u, v, rng, fold, tile_px, tiles, boxes):
     """Pass 1: every cell -> pixel (u, v) and range (m); NaN where it has no ground (off the DEM,
     a void) or does not lie in front of the camera within the lens model's field (r2_max: the
     largest squared ideal normalised radius the image reaches). With ``fold``, also
-    :func:`fold_tiles` with front = +1, each row of quads as soon as its two rows are done;
-    returns its (front faces, back faces), (0, 0) without."""
+    :func:`fold_tiles` with front = +1, each row of quads as soon as its two rows are done, and
+    the image bounding boxes of the z-buffer pass's blocks of cells (``boxes``, see
+    :func:`block_boxes`); returns the fold test's (front faces, back faces), (0, 0) without."""
     rows = u.shape[0]
     cols = u.shape[1]
     n_nodes = nodes.shape[1]
@@ -102,11 +103,50 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, 
             u[r, c] = fx * xn + cx if ok else np.nan
             v[r, c] = fy * yn + cy if ok else np.nan
             rng[r, c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
-        if fold and r > 0:
-            f, bk = fold_row(u, v, r - 1, tile_px, 1.0, tiles, area)
-            n_front += f
-            n_back += bk
+        if fold:
+            box_row(u, v, r, boxes)
+            if r > 0:
+                f, bk = fold_row(u, v, r - 1, tile_px, 1.0, tiles, area)
+                n_front += f
+                n_back += bk
     return n_front, n_back
+
+
+def block_boxes(rows: int, cols: int) -> np.ndarray:
+    """The blocks' image bounding boxes to be filled by :func:`project_cells` (umin, umax, vmin,
+    vmax per block of BLOCK x BLOCK quads, i.e. BLOCK + 1 cells a side; empty: +inf, -inf)."""
+    boxes = np.empty((max(-(-(rows - 1) // BLOCK), 1), max(-(-(cols - 1) // BLOCK), 1), 4))
+    boxes[..., 0::2], boxes[..., 1::2] = np.inf, -np.inf
+    return boxes
+
+
+@compiled(inline=True)
+def box_row(u, v, r, boxes):
+    """Widen the boxes of the blocks that cell row r belongs to (a row on a block boundary belongs
+    to the blocks above and below it, as a column does to those left and right)."""
+    cols = u.shape[1]
+    n_br = boxes.shape[0]
+    for bc in range(boxes.shape[1]):
+        umin = np.inf
+        umax = -np.inf
+        vmin = np.inf
+        vmax = -np.inf
+        for c in range(bc * BLOCK, min(bc * BLOCK + BLOCK + 1, cols)):
+            uc = u[r, c]
+            vc = v[r, c]
+            if (uc - uc) == 0.0:
+                umin = min(umin, uc)
+                umax = max(umax, uc)
+                vmin = min(vmin, vc)
+                vmax = max(vmax, vc)
+        if not umin <= umax:
+            continue
+        for br in range(r // BLOCK - (1 if r % BLOCK == 0 else 0), r // BLOCK + 1):
+            if br >= 0 and br < n_br:
+                boxes[br, bc, 0] = min(boxes[br, bc, 0], umin)
+                boxes[br, bc, 1] = max(boxes[br, bc, 1], umax)
+                boxes[br, bc, 2] = min(boxes[br, bc, 2], vmin)
+                boxes[br, bc, 3] = max(boxes[br, bc, 3], vmax)
 
 
 @compiled(inline=True)
@@ -222,11 +262,12 @@ def fold_tiles(u, v, rng, tile_px, front, tiles):
 
 
 @compiled()
-def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
+def rasterize_depth(u, v, rng, tile_px, tiles, boxes, zbuf):
     """Pass 2: the z-buffer (image rows x columns, filled with +inf by the caller), in the marked
     tiles, of the mesh whose vertices are the cells (triangles (r, c) (r, c+1) (r+1, c+1) and
     (r, c) (r+1, c+1) (r+1, c), where all three vertices project). The cells are taken in blocks
-    of BLOCK x BLOCK; a block whose image bounding box meets no marked tile is skipped."""
+    of BLOCK x BLOCK quads; a block whose image bounding box (``boxes``, from project_cells) meets
+    no marked tile is skipped."""
     rows = u.shape[0]
     cols = u.shape[1]
     n_ty = tiles.shape[0]
@@ -238,21 +279,10 @@ def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
             sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
     for br in range(0, rows - 1, BLOCK):
         for bc in range(0, cols - 1, BLOCK):
-            r1 = min(br + BLOCK + 1, rows)
-            c1 = min(bc + BLOCK + 1, cols)
-            umin = np.inf
-            umax = -np.inf
-            vmin = np.inf
-            vmax = -np.inf
-            for r in range(br, r1):
-                for c in range(bc, c1):
-                    uc = u[r, c]
-                    vc = v[r, c]
-                    if (uc - uc) == 0.0:
-                        umin = min(umin, uc)
-                        umax = max(umax, uc)
-                        vmin = min(vmin, vc)
-                        vmax = max(vmax, vc)
+            umin = boxes[br // BLOCK, bc // BLOCK, 0]
+            umax = boxes[br // BLOCK, bc // BLOCK, 1]
+            vmin = boxes[br // BLOCK, bc // BLOCK, 2]
+            vmax = boxes[br // BLOCK, bc // BLOCK, 3]
             if not umin <= umax:
                 continue
             tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
@@ -261,6 +291,8 @@ def rasterize_depth(u, v, rng, tile_px, tiles, zbuf):
             ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
             if sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] == 0:
                 continue
+            r1 = min(br + BLOCK + 1, rows)
+            c1 = min(bc + BLOCK + 1, cols)
             for r in range(br, r1 - 1):
                 for c in range(bc, c1 - 1):
                     d00 = rng[r, c]
@@ -374,5 +406,5 @@ def sample_bands(image, u, v, valid, bilinear, is_int, nodata, out):
                     out[b, r, c] = image[b, yi, xi]
 
 
-__all__ = ["N_NODE", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells", "rasterize_depth",
-           "sample_bands"]
+__all__ = ["N_NODE", "block_boxes", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells",
+           "rasterize_depth", "sample_bands"]
