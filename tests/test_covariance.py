@@ -80,10 +80,12 @@ def test_nadir_pixel_error_closed_form():
 
 def test_failed_and_invalid_targets_get_no_covariance():
     scn = scenarios.q_ellipsoid()
-    sky = (scn.sensor.camera.cx, -1e6)  # far above the top of the image: above the horizon
+    sky = (scn.sensor.camera.cx, -1e6)  # far above the top of the image (its ray would miss the Earth)
     px = np.array([scn.sensor.camera.centre_px, sky])
     fixes, cov = locate_with_covariance(scn.sensor, scn.pose, scn.budget, px, height_m=5083.0)
-    assert list(fixes.status) == [Status.OK, Status.NO_INTERSECTION]
+    # outside the image: OUT_OF_IMAGE, as eoloc.locate says (it was NO_INTERSECTION, a point's status, before)
+    assert list(fixes.status) == [Status.OK, Status.OUT_OF_IMAGE]
+    assert list(fixes.status) == list(eoloc.rules.AtHeight(5083.0).locate(scn.sensor, scn.pose, px).status)
     assert np.all(np.isfinite(cov.cov_enu[0])) and np.all(np.isnan(cov.cov_enu[1]))
     assert np.isinf(cov.nonlinearity[1]) and not cov.linear()[1]
     bad = Pose(np.nan, 80.97, 18_000.0, 45.0, 3.5, 0.0, (50.0, -2.6))
