@@ -199,3 +199,73 @@ def test_unreachable_or_unsupported_sources_are_named_without_a_traceback(tmp_pa
                        timeout=60, env=env)
     assert r.returncode != 0 and "Traceback" not in r.stderr
     assert "apt install srt-tools" in r.stderr and "srt-live-transmit srt://127.0.0.1:9 udp://" in r.stderr
+
+
+def _targets(lines: list[str]) -> dict:
+    """(stream, packet time, target id) -> the target's coordinates, of NDJSON lines."""
+    out = {}
+    for line in lines:
+        f = json.loads(line)
+        p = f["properties"]
+        if p["what"] == "target" and f["geometry"] is not None:
+            out[(p["stream"], p["time_utc"], p["target_id"])] = f["geometry"]["coordinates"]
+    return out
+
+
+def test_rtsp_server_restarting_is_reconnected_and_nothing_is_lost_or_doubled(stream):
+    """The RTSP server dies mid-stream and comes back a second later on the same port, serving the
+    stream from its start: eoloc live reconnects (with back-off, saying so), drops the packets it
+    had already (duplicates) and ends with every packet once: the file's targets exactly."""
+    ts, ref = stream
+    port = _free_port(socket.SOCK_STREAM)
+
+    def serve():
+        proc = subprocess.Popen([SYSTEM_PYTHON, str(RTSP_SERVER), str(ts), str(port)], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        assert proc.stdout.readline().strip() == "ready"
+        return proc
+
+    servers = [serve()]
+
+    def restart(proc) -> None:
+        deadline = time.monotonic() + 30
+        while not any('"what": "target"' in line for line in out_lines):  # the first server's packets arrive
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(1.0)
+        servers[0].kill()
+        servers[0].wait(timeout=10)
+        time.sleep(1.0)
+        servers.append(serve())
+
+    out_lines: list[str] = []
+    try:
+        lines, summary, log = _live_collect(f"rtsp://127.0.0.1:{port}/stream", restart, out_lines)
+    finally:
+        for s in servers:
+            s.kill()
+            s.wait(timeout=10)
+    assert summary["packets"] == N_PACKETS and summary["fixes_ok"] == N_TARGETS and summary["corrupt"] == 0
+    assert summary["streams"] == {"PID 256": 40, "PID 257": 40}
+    assert summary["reconnects"] == 1 and summary["duplicates"] >= 5, summary  # the replayed start: dropped
+    assert "reconnecting in 0.5 s" in log and "reconnected" in log
+    assert _targets(lines) == _targets(ref)
+
+
+def _live_collect(source: str, started, out_lines: list[str]) -> tuple[list[str], dict, str]:
+    """As :func:`_live`, the NDJSON lines also appended to ``out_lines`` as they come (for
+    ``started`` to watch); returns the log too."""
+    proc = subprocess.Popen([EOLOC, "live", source, "--ndjson", "-", "--packets", str(N_PACKETS)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    err: list[str] = []
+    readers = [threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True),
+               threading.Thread(target=lambda: out_lines.extend(proc.stdout), daemon=True)]
+    for r in readers:
+        r.start()
+    started(proc)
+    proc.wait(timeout=120)
+    for r in readers:
+        r.join()
+    log = "".join(err)
+    assert proc.returncode == 0 and "Traceback" not in log, log
+    return sorted(line.rstrip("\n") for line in out_lines), _summary(log), log

@@ -26,7 +26,9 @@ eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
   rtsp://HOST:PORT/PATH or rtmp://... (through FFmpeg: each KLV data stream of the session,
   MPEG-TS over RTP included, RTSP over TCP); tcp://HOST:PORT or http(s)://... (a byte stream
   of MPEG-TS or raw KLV, through FFmpeg); srt://HOST:PORT (caller; srt://:PORT listens),
-  bridged by srt-live-transmit (apt install srt-tools) since PyAV's FFmpeg has no SRT.
+  bridged by srt-live-transmit (apt install srt-tools) since PyAV's FFmpeg has no SRT. RTSP,
+  RTMP and TCP sessions that end or break off (an encoder restarting) are opened again, with
+  back-off (0.5 s doubling to 8 s); the first connection must succeed.
   Each packet is decoded as `eoloc klv` decodes files (checksums, report-on-change values carried
   from packet to packet); its frame centre, footprint (the four corners; on --dem the image
   border traced on the terrain) and VMTI targets are located on --dem, else on the packet's
@@ -155,8 +157,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
-    feed, where = open_source(source, stop, realtime=realtime, silence_s=silence, on_silence=on_silence,
-                              stdin=sys.stdin.buffer)
+    feed, where, source_state = open_source(source, stop, realtime=realtime, silence_s=silence,
+                                            on_silence=on_silence, on_event=lambda m: warn(m, "source"),
+                                            stdin=sys.stdin.buffer)
     err_console.print(f"eoloc live: {where} (Ctrl-C stops)")
     out = None if ndjson is None else sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
     seen_issues = 0
@@ -198,8 +201,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
             server.close()
         if rewriter is not None:
             rewriter.close()
-    summary = session.counters.summary() | {"streams": session.streams, "cot_events": feed_cot.events_out,
-                                            "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
+    summary = session.counters.summary() | source_state.summary() | {
+        "streams": session.streams, "cot_events": feed_cot.events_out,
+        "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
     if hub is not None:
         summary["map"] = hub.summary()
     if rewriter is not None:

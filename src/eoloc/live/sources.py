@@ -233,8 +233,10 @@ def byte_stream_chunks(read: Callable[[int], bytes], stop: Callable[[], bool]) -
 
 FFMPEG_DEMUX = ("rtsp", "rtsps", "rtmp", "rtmps")  # FFmpeg opens these as containers: their KLV data streams
 FFMPEG_BYTES = ("tcp", "http", "https")  # byte streams of MPEG-TS or raw KLV, read through FFmpeg's protocols
+RECONNECTING = ("rtsp", "rtsps", "rtmp", "rtmps", "tcp")  # live sessions: opened again when they end or break
 NETWORK_SCHEMES = (*FFMPEG_DEMUX, *FFMPEG_BYTES, "srt")
 OPEN_TIMEOUT_S = 10.0
+RECONNECT_S = (0.5, 8.0)  # the wait before the first attempt to reconnect, doubled per failure up to the second
 
 
 def scheme_of(source: str) -> str:
@@ -357,17 +359,72 @@ def srt_datagrams(url: str, stop: Callable[[], bool], *, silence_s: float,
         sock.close()
 
 
+class SourceState:
+    """What a source did besides its chunks, for the summary: ``reconnects`` (network sessions
+    opened again after they ended or broke off)."""
+
+    def __init__(self) -> None:
+        self.reconnects = 0
+
+    def summary(self) -> dict:
+        return {"reconnects": self.reconnects}
+
+
+def reconnecting(url: str, first, produce: Callable, state: SourceState,
+                 on_event: Callable[[str], None]) -> Callable[[Callable[[], bool]], Iterator]:
+    """``produce(container, halted)`` over the FFmpeg session of ``url``, opened again whenever it
+    ends or breaks off (an encoder or server restarting), with back-off between the attempts
+    (RECONNECT_S), until ``halted()``. ``first``: the container already open."""
+    import av
+
+    def read(halted: Callable[[], bool]) -> Iterator:
+        container = first
+        as_bytes = container.format.name == "data"
+        while True:
+            try:
+                yield from produce(container, halted)
+                why = "the stream ended"
+            except (av.error.FFmpegError, OSError) as exc:
+                why = f"the stream broke off ({exc})"
+            finally:
+                container.close()
+            delay = RECONNECT_S[0]
+            while not halted():
+                on_event(f"{url}: {why}; reconnecting in {delay:g} s")
+                until = time.monotonic() + delay
+                while time.monotonic() < until and not halted():
+                    time.sleep(0.05)
+                if halted():
+                    break
+                try:
+                    container = open_ffmpeg(url, as_bytes=as_bytes)
+                    break
+                except InputError as exc:
+                    why = str(exc).removeprefix(f"{url}: ")
+                    delay = min(2.0 * delay, RECONNECT_S[1])
+            if halted():
+                return
+            state.reconnects += 1
+            on_event(f"{url}: reconnected")
+
+    return read
+
+
 def open_source(source: str, stop: Callable[[], bool], *, realtime: bool = False, silence_s: float = 3.0,
-                on_silence: Callable[[float], None] | None = None, stdin=None) -> tuple[Iterator, str]:
-    """The chunks of SOURCE (see the module) and a line saying where they come from."""
+                on_silence: Callable[[float], None] | None = None, on_event: Callable[[str], None] | None = None,
+                stdin=None) -> tuple[Iterator, str, SourceState]:
+    """The chunks of SOURCE (see the module), a line saying where they come from, and its state.
+    RTSP, RTMP and TCP sessions are opened again when they end or break off (``on_event`` hears
+    of it); the first opening must succeed (a wrong address is an InputError at once)."""
     scheme = scheme_of(source)
     watch = {"silence_s": silence_s, "on_silence": on_silence}
+    state = SourceState()
     if scheme == "udp":
-        return udp_datagrams(udp_socket(source), stop, **watch), f"listening on {source}"
+        return udp_datagrams(udp_socket(source), stop, **watch), f"listening on {source}", state
     if source == "-":
-        return byte_stream_chunks(stdin.read1, stop), "reading stdin"
+        return byte_stream_chunks(stdin.read1, stop), "reading stdin", state
     if scheme == "srt":
-        return srt_datagrams(source, stop, **watch), f"receiving {source} (through srt-live-transmit)"
+        return srt_datagrams(source, stop, **watch), f"receiving {source} (through srt-live-transmit)", state
     if scheme in FFMPEG_DEMUX or scheme in FFMPEG_BYTES:
         as_bytes = scheme in FFMPEG_BYTES
         container = open_ffmpeg(source, as_bytes=as_bytes)
@@ -377,15 +434,17 @@ def open_source(source: str, stop: Callable[[], bool], *, realtime: bool = False
             raise InputError(f"{source}: FFmpeg finds no data stream in it (KLV carried as MPEG-TS over RTP is "
                              "read; KLV in its own RTP payload, RFC 6597, FFmpeg does not read: ask the encoder for "
                              "MPEG-TS, or relay it to UDP with a tool that does)")
+        if scheme in RECONNECTING:
+            read = reconnecting(source, container, produce, state, on_event or (lambda message: None))
+        else:
+            def read(halted: Callable[[], bool]) -> Iterator:
+                try:
+                    yield from produce(container, halted)
+                finally:
+                    container.close()
 
-        def read(halted: Callable[[], bool]) -> Iterator:
-            try:
-                yield from produce(container, halted)
-            finally:
-                container.close()
-
-        return in_thread(read, stop, name=source, **watch), f"receiving {source} (FFmpeg)"
+        return in_thread(read, stop, name=source, **watch), f"receiving {source} (FFmpeg)", state
     if scheme:
         raise InputError(f"{source!r}: eoloc live reads udp://, rtsp://, rtmp://, srt://, tcp://, http(s):// URLs, "
                          "raw KLV or MPEG-TS files, and - (stdin)")
-    return file_datagrams(source, stop, realtime=realtime), f"reading {source}"
+    return file_datagrams(source, stop, realtime=realtime), f"reading {source}", state
