@@ -23,6 +23,10 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
     Degrees WGS-84, heights ellipsoidal metres, angles as in the README's conventions; a fix that
     failed has its status and no coordinates. Errors: JSON naming the field (HTTP 422); bodies
     over --max-body-mb: 413.
+  POST /v1/locate/arrow  the same observation with its pixels as Arrow columns: an Arrow IPC
+    stream (content-type application/vnd.apache.arrow.stream) of u_px, v_px whose schema
+    metadata 'eoloc' holds the observation's JSON without pixels -> an Arrow IPC stream of the
+    fixes (null coordinates where a fix failed): big batches with no JSON to parse.
   GET /v1/health   alive, uptime, requests served, the config and DEM names.
   --dem NAME=PATH (repeatable) makes the DEM usable as {"dem": NAME}; --dem PATH names it by its
   file name without the extension; the same NAME repeated joins tiles into one DEM.
