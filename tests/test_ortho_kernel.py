@@ -119,7 +119,7 @@ def test_no_fold_means_no_hiding_and_the_camera_position_is_the_range_origin():
     on = R.frame_pixels(sensor, steep, _hills(), grid)
     off = R.frame_pixels(sensor, steep, _hills(), grid, occlusion=False)
     tiles = np.zeros((19, 25), np.uint8)
-    n_front, n_back = _nb.ortho_fold_tiles(on.u_px, on.v_px, on.range_m, R.FOLD_TILE_PX, 1.0, tiles)
+    n_front, n_back = _nb.ortho_fold_tiles(on.u_px, on.v_px, R.FOLD_TILE_PX, 1.0, tiles)
     assert n_front > 10_000 and n_back == 0 and not tiles.any()  # no fold: the z-buffer pass is skipped
     np.testing.assert_array_equal(on.valid, off.valid)
     rows, cols = np.nonzero(on.valid)

@@ -240,7 +240,7 @@ def fold_row(u, v, r, tile_px, front, tiles, area):
 
 
 @compiled()
-def fold_tiles(u, v, rng, tile_px, front, tiles):
+def fold_tiles(u, v, tile_px, front, tiles):
     """Mark the image tiles (tile_px square, one tile of margin around) that the mesh's back
     faces touch: triangles whose doubled signed area in the image has the sign opposite to
     ``front`` (+1: counter-clockwise in (u, v) faces the camera), and return (how many face each

@@ -297,7 +297,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     if use_zbuf:
         if n_back > n_front:  # a mirrored view: clockwise triangles face the camera
             tiles[:] = 0
-            n_back, n_front = _nb.ortho_fold_tiles(u, v, rng, FOLD_TILE_PX, -1.0, tiles)
+            n_back, n_front = _nb.ortho_fold_tiles(u, v, FOLD_TILE_PX, -1.0, tiles)
         if n_back:
             _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, boxes, zbuf)
     valid = np.empty((rows, cols), np.uint8)

@@ -76,14 +76,17 @@ END = object()  # a source's end, as ``receive`` returns it to watch_silence
 
 
 def udp_datagrams(sock: socket.socket, stop: Callable[[], bool], *, silence_s: float = 3.0,
-                  on_silence: Callable[[float], None] | None = None) -> Iterator[tuple[bytes, float]]:
+                  on_silence: Callable[[float], None] | None = None,
+                  ended: Callable[[], bool] = lambda: False) -> Iterator[tuple[bytes, float]]:
+    """The datagrams of ``sock`` with their arrival times, until ``stop()``, or ``ended()`` in a
+    quiet moment (whoever feeds the socket is gone)."""
     sock.settimeout(0.2)
 
     def receive():
         try:
             return sock.recv(MAX_DATAGRAM), time.perf_counter()
         except TimeoutError:
-            return None
+            return END if ended() else None
 
     return watch_silence(receive, stop, silence_s=silence_s, on_silence=on_silence)
 
@@ -234,7 +237,6 @@ def byte_stream_chunks(read: Callable[[int], bytes], stop: Callable[[], bool]) -
 FFMPEG_DEMUX = ("rtsp", "rtsps", "rtmp", "rtmps")  # FFmpeg opens these as containers: their KLV data streams
 FFMPEG_BYTES = ("tcp", "http", "https")  # byte streams of MPEG-TS or raw KLV, read through FFmpeg's protocols
 RECONNECTING = ("rtsp", "rtsps", "rtmp", "rtmps", "tcp")  # live sessions: opened again when they end or break
-NETWORK_SCHEMES = (*FFMPEG_DEMUX, *FFMPEG_BYTES, "srt")
 OPEN_TIMEOUT_S = 10.0
 RECONNECT_S = (0.5, 8.0)  # the wait before the first attempt to reconnect, doubled per failure up to the second
 
@@ -334,17 +336,10 @@ def srt_datagrams(url: str, stop: Callable[[], bool], *, silence_s: float,
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 1024 * 1024)
     sock.bind(("127.0.0.1", 0))
-    sock.settimeout(0.2)
     bridge = srt_bridge(url, sock)
-
-    def receive():
-        try:
-            return sock.recv(MAX_DATAGRAM), time.perf_counter()
-        except TimeoutError:
-            return END if bridge.poll() is not None else None
-
     try:
-        yield from watch_silence(receive, stop, silence_s=silence_s, on_silence=on_silence)
+        yield from udp_datagrams(sock, stop, silence_s=silence_s, on_silence=on_silence,
+                                 ended=lambda: bridge.poll() is not None)
         if bridge.poll() not in (None, 0):
             why = (bridge.stderr.read() or b"").decode("utf-8", "replace").strip().splitlines()
             raise InputError(f"{url}: srt-live-transmit stopped (exit {bridge.returncode})"
@@ -370,24 +365,28 @@ class SourceState:
         return {"reconnects": self.reconnects}
 
 
-def reconnecting(url: str, first, produce: Callable, state: SourceState,
-                 on_event: Callable[[str], None]) -> Callable[[Callable[[], bool]], Iterator]:
-    """``produce(container, halted)`` over the FFmpeg session of ``url``, opened again whenever it
-    ends or breaks off (an encoder or server restarting), with back-off between the attempts
-    (RECONNECT_S), until ``halted()``. ``first``: the container already open."""
+def session_reader(url: str, first, produce: Callable, *, as_bytes: bool, again: bool, state: SourceState,
+                   on_event: Callable[[str], None]) -> Callable[[Callable[[], bool]], Iterator]:
+    """``produce(container, halted)`` over the FFmpeg session of ``url`` (``first``: the container
+    already open). With ``again`` the session is opened again whenever it ends or breaks off (an
+    encoder or server restarting), with back-off between the attempts (RECONNECT_S), until
+    ``halted()``; without, its end is the source's end and its error the source's error."""
     import av
 
     def read(halted: Callable[[], bool]) -> Iterator:
         container = first
-        as_bytes = container.format.name == "data"
         while True:
             try:
                 yield from produce(container, halted)
                 why = "the stream ended"
             except (av.error.FFmpegError, OSError) as exc:
+                if not again:
+                    raise
                 why = f"the stream broke off ({exc})"
             finally:
                 container.close()
+            if not again:
+                return
             delay = RECONNECT_S[0]
             while not halted():
                 on_event(f"{url}: {why}; reconnecting in {delay:g} s")
@@ -434,15 +433,8 @@ def open_source(source: str, stop: Callable[[], bool], *, realtime: bool = False
             raise InputError(f"{source}: FFmpeg finds no data stream in it (KLV carried as MPEG-TS over RTP is "
                              "read; KLV in its own RTP payload, RFC 6597, FFmpeg does not read: ask the encoder for "
                              "MPEG-TS, or relay it to UDP with a tool that does)")
-        if scheme in RECONNECTING:
-            read = reconnecting(source, container, produce, state, on_event or (lambda message: None))
-        else:
-            def read(halted: Callable[[], bool]) -> Iterator:
-                try:
-                    yield from produce(container, halted)
-                finally:
-                    container.close()
-
+        read = session_reader(source, container, produce, as_bytes=as_bytes, again=scheme in RECONNECTING, state=state,
+                              on_event=on_event or (lambda message: None))
         return in_thread(read, stop, name=source, **watch), f"receiving {source} (FFmpeg)", state
     if scheme:
         raise InputError(f"{source!r}: eoloc live reads udp://, rtsp://, rtmp://, srt://, tcp://, http(s):// URLs, "

@@ -257,25 +257,17 @@ def read_arrow_request(body: bytes) -> tuple[ObservationIn, np.ndarray, np.ndarr
 
 
 def arrow_fixes(f, u: np.ndarray, v: np.ndarray, unc: dict | None) -> bytes:
-    """The fixes as an Arrow IPC stream: coordinates null where the fix failed (never a plausible
-    point), the status as dictionary-encoded text."""
+    """The fixes as an Arrow IPC stream: the columns eoloc's GeoParquet has (``fix_records`` as
+    ``arrow_table`` makes them: coordinates null where the fix failed, never a plausible point),
+    then u_px, v_px and the uncertainty columns."""
     import pyarrow as pa
 
     from .. import __version__
-    from ..io.export import STATUS_NAMES
+    from ..io.export import fix_records
+    from ..io.geotable import arrow_table
 
-    ok = np.ravel(f.ok)
-    failed = ~ok
-    cols = {name: pa.array(np.ravel(getattr(f, name)), mask=failed)
-            for name in ("lat_deg", "lon_deg", "h_m", "range_m")}
-    codes = np.ravel(f.status).astype(np.int32)
-    cols["status"] = pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(STATUS_NAMES.tolist()))
-    cols["u_px"], cols["v_px"] = pa.array(u), pa.array(v)
-    for name, c in (unc or {}).items():
-        c = np.ravel(np.asarray(c, dtype=np.float64))
-        cols[name] = pa.array(c, mask=~np.isfinite(c))
-    table = pa.table(cols).replace_schema_metadata({"eoloc": __version__, "crs": "EPSG:4979 (WGS-84 lat, lon, "
-                                                    "ellipsoidal h)"})
+    table = arrow_table(fix_records(f, after={"u_px": u, "v_px": v, **(unc or {})}))
+    table = table.replace_schema_metadata({"eoloc": __version__, "crs": "EPSG:4979 (WGS-84 lat, lon, ellipsoidal h)"})
     sink = pa.BufferOutputStream()
     with pa.ipc.new_stream(sink, table.schema) as writer:
         writer.write_table(table)
