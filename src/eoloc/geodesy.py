@@ -8,6 +8,7 @@ at every latitude including the poles (tests/test_geodesy.py).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -28,6 +29,7 @@ __all__ = [
     "enu_to_ecef",
     "geodetic_to_ecef",
     "geodetic_to_ned",
+    "look_angles",
     "ned_to_ecef",
 ]
 
@@ -158,6 +160,28 @@ def geodetic_to_ned(lat, lon, h, lat0, lon0, h0, *, degrees: bool = True, ell: E
     """NED offsets (..., 3) in metres of geodetic points from the origin (lat0, lon0, h0)."""
     p = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat, lon, h, degrees=degrees, ell=ell)), -1)
     return ecef_to_ned(p, lat0, lon0, h0, degrees=degrees, ell=ell)
+
+
+def look_angles(lat0_deg: float, lon0_deg: float, h0_m: float, lat_deg: float, lon_deg: float, h_m: float,
+                ell: Ellipsoid = WGS84) -> tuple[float, float]:
+    """Azimuth (degrees from true north, [0, 360)) and elevation (degrees, negative below the
+    horizon) of one point seen from another, both geodetic (degrees, ellipsoidal m): the line of
+    sight in the observer's local NED frame. Plain floats, for one point at a time (a live
+    packet's look at its frame centre: no array set-up); :func:`geodetic_to_ned` for arrays."""
+    def ecef(lat: float, lon: float, h: float) -> tuple[float, float, float]:
+        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+        n = ell.a / math.sqrt(1.0 - ell.e2 * sl * sl)
+        return (n + h) * cl * co, (n + h) * cl * so, (n * (1.0 - ell.e2) + h) * sl
+
+    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    x0, y0, z0 = ecef(lat0, lon0, h0_m)
+    x, y, z = ecef(math.radians(lat_deg), math.radians(lon_deg), h_m)
+    dx, dy, dz = x - x0, y - y0, z - z0
+    sl, cl, so, co = math.sin(lat0), math.cos(lat0), math.sin(lon0), math.cos(lon0)
+    north = -sl * co * dx - sl * so * dy + cl * dz
+    east = -so * dx + co * dy
+    down = -cl * co * dx - cl * so * dy - sl * dz
+    return math.degrees(math.atan2(east, north)) % 360.0, math.degrees(math.atan2(-down, math.hypot(north, east)))
 
 
 def horizontal_distance_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> np.ndarray:

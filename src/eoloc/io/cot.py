@@ -42,12 +42,12 @@ def ce_le(row: dict) -> tuple[float, float]:
     return ce, (su if math.isfinite(su) else UNKNOWN)
 
 
-_PLAIN = frozenset("0123456789.-+,eE ")
+_SPECIAL = frozenset("&<>\"'\n\r\t")  # what an attribute value may not hold as it is
 
 
 def _attr(v) -> str:
     v = str(v)
-    return f'"{v}"' if _PLAIN.issuperset(v) else quoteattr(v)  # numbers need no escaping (the common case)
+    return f'"{v}"' if _SPECIAL.isdisjoint(v) else quoteattr(v)  # most values need no escaping
 
 
 def element_xml(tag: str, text: str | None = None, /, **attrs) -> str:
@@ -62,7 +62,7 @@ def event_xml(*, uid: str, cot_type: str, how: str, time: datetime | str, stale:
     (from :func:`element_xml`); times as datetimes or already as :func:`iso_utc` text."""
     t = time if isinstance(time, str) else iso_utc(time)
     stale = stale if isinstance(stale, str) else iso_utc(stale)
-    return (f'<?xml version="1.0" encoding="utf-8"?>\n<event version="2.0" uid={quoteattr(uid)} '
+    return (f'<?xml version="1.0" encoding="utf-8"?>\n<event version="2.0" uid={_attr(uid)} '
             f'type="{cot_type}" how="{how}" time="{t}" start="{t}" stale="{stale}">'
             f'<point lat="{lat:.8f}" lon="{lon:.8f}" hae="{hae:.2f}" ce="{ce:.2f}" le="{le:.2f}"/>'
             f"<detail>{detail}</detail></event>").encode()

@@ -6,7 +6,7 @@ apart on arrival. Transport streams go through one demultiplexer kept for the wh
 (stanag4609's, as for files), so a KLV packet split over several datagrams is put back
 together; each KLV PID is its own stream ("PID 497"). Packets are framed and decoded with the
 same tolerant reader as files (:func:`eoloc.io.klv.reader.decode_klv_bytes`) and worked out by
-:func:`eoloc.live.update.locate_packet`. What ST 0601 sends only when it changes
+:class:`eoloc.live.update.PacketLocator`. What ST 0601 sends only when it changes
 (report-on-change) is carried from packet to packet per stream. With ``refine`` (a
 :class:`eoloc.live.refine.TargetFilters`) each target id is also refined across packets.
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .update import PacketUpdate, locate_packet
+from .update import PacketLocator, PacketUpdate
 
 RESTART_S = 2.0  # a time stamp this far behind the newest one: the encoder restarted its clock
 TS_PACKET = 188
@@ -73,10 +73,9 @@ class LiveSession:
 
     def __init__(self, source: str, *, dem=None, sensor=None, budget=None, recent: int = 512,
                  restart_s: float = RESTART_S, refine=None, klv_out=None) -> None:
-        from ..misb import misb_sensor
-
         self.source, self.dem, self.budget = source, dem, budget
-        self.sensor = sensor or misb_sensor()
+        self.locator = PacketLocator(dem=dem, sensor=sensor, budget=budget)
+        self.sensor = self.locator.sensor
         self.counters = Counters()
         self.carry: dict[str, object] = {}  # stream -> the packet holding every value known so far
         self.recent: OrderedDict[bytes, None] = OrderedDict()
@@ -206,8 +205,7 @@ class LiveSession:
             known = replace(pkt, fields={**(carried.fields if carried else {}), **pkt.fields})
             if not late:  # a late packet's values are older than those carried: they do not replace them
                 self.carry[pkt.stream] = known
-            u = locate_packet(self.source, pkt, known, late=late, dem=self.dem, sensor=self.sensor,
-                              budget=self.budget)
+            u = self.locator.locate(self.source, pkt, known, late=late)
             if self.refine is not None:
                 self.refine.update(u)
             if self.klv_out is not None:

@@ -183,6 +183,34 @@ def _stream_columns(packets: list[KLVPacket], geoid, report_on_change: bool) -> 
     return cols
 
 
+def packet_view(fields: dict[int, Any], geoid=None) -> dict[str, float]:
+    """One packet's time, pose and view as plain floats, named and converted as
+    :func:`klv_telemetry`'s columns (tag preferences, MSL -> ellipsoidal through the geoid;
+    NaN where absent): time_s, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, gimbal1_deg,
+    gimbal2_deg, sensor_roll_deg, hfov_deg, vfov_deg, fc_lat_deg, fc_lon_deg, fc_h_m. ``fields``
+    already holds every value the packet stands for (report-on-change carried by the caller):
+    the live path's one packet at a time, without building a table."""
+    from ...terrain.geoid import default_geoid
+
+    def val(tag: int) -> float:
+        return num(fields.get(tag))
+
+    def prefer(a: int, b: int) -> float:
+        x = val(a)
+        return x if math.isfinite(x) else val(b)
+
+    lat, lon, fc_lat, fc_lon = val(13), val(14), val(23), val(24)
+    h, fc_h = val(75), val(78)
+    if not (math.isfinite(h) and math.isfinite(fc_h)):  # MSL: one geoid look-up for both points
+        n_sensor, n_fc = (geoid or default_geoid()).undulation(np.array([lat, fc_lat]), np.array([lon, fc_lon]))
+        h = h if math.isfinite(h) else val(15) + float(n_sensor)
+        fc_h = fc_h if math.isfinite(fc_h) else val(25) + float(n_fc)
+    return {"time_s": packet_time_s(fields), "lat_deg": lat, "lon_deg": lon, "h_m": h, "yaw_deg": val(5),
+            "pitch_deg": prefer(90, 6), "roll_deg": prefer(91, 7), "gimbal1_deg": val(18), "gimbal2_deg": val(19),
+            "sensor_roll_deg": val(20), "hfov_deg": val(16), "vfov_deg": val(17), "fc_lat_deg": fc_lat,
+            "fc_lon_deg": fc_lon, "fc_h_m": fc_h}
+
+
 # -- ST 0903 VMTI -------------------------------------------------------------------------------
 
 DETECTION_COLUMNS = ("stream", "frame", "time_s", "target_id", "u_px", "v_px", "bbox_u0", "bbox_v0", "bbox_u1",
@@ -203,7 +231,7 @@ def vmti_detections(stream: KLVStream, *, pixels_from: int = 1) -> Table:
     standard). ST 0903 pixel numbers are 1-based (row - 1) x width + column, rows/columns (tags
     19/20) 1-based; ``pixels_from=0`` reads them as 0-based (an encoder that numbers from 0).
     """
-    out: dict[str, list] = {k: [] for k in DETECTION_COLUMNS}
+    rows: list[tuple] = []  # one tuple per detection, in DETECTION_COLUMNS order
     issues = []
     size: dict[str, tuple[float, float]] = {}
     fc: dict[str, tuple[float, float]] = {}
@@ -220,9 +248,10 @@ def vmti_detections(stream: KLVStream, *, pixels_from: int = 1) -> Table:
         size[p.stream] = (w, hgt)
         t = packet_time_s(vals)
         fc_lat, fc_lon = fc.get(p.stream, (math.nan, math.nan))
+        vm_hfov, vm_vfov = num(vm.value(11)), num(vm.value(12))
         for tg in vm.targets:
             u, v = vmti_centroid(tg, w, pixels_from)
-            if not (np.isfinite(u) and np.isfinite(v)):
+            if not (math.isfinite(u) and math.isfinite(v)):
                 issues.append(f"packet {p.index}: VMTI target {tg.target_id} has no usable centroid "
                               f"(frame width {w}); skipped")
                 continue
@@ -234,14 +263,11 @@ def vmti_detections(stream: KLVStream, *, pixels_from: int = 1) -> Table:
             else:
                 elat, elon = fc_lat + num(tg.value(10)), fc_lon + num(tg.value(11))
                 eh = num(tg.value(12))
-            for key, val in (("stream", p.stream), ("frame", p.index), ("time_s", t), ("target_id", str(tg.target_id)),
-                             ("u_px", u), ("v_px", v), ("bbox_u0", u0), ("bbox_v0", v0), ("bbox_u1", u1),
-                             ("bbox_v1", v1), ("frame_width", w), ("frame_height", hgt),
-                             ("vmti_hfov_deg", num(vm.value(11))), ("vmti_vfov_deg", num(vm.value(12))),
-                             ("encoder_lat_deg", elat), ("encoder_lon_deg", elon), ("encoder_h_m", eh)):
-                out[key].append(val)
+            rows.append((p.stream, p.index, t, str(tg.target_id), u, v, u0, v0, u1, v1, w, hgt, vm_hfov, vm_vfov,
+                         elat, elon, eh))
+    columns = list(zip(*rows, strict=True)) if rows else [()] * len(DETECTION_COLUMNS)
     cols = {k: np.array(val, dtype=object if k in ("target_id", "stream") else np.float64)
-            for k, val in out.items()}
+            for k, val in zip(DETECTION_COLUMNS, columns, strict=True)}
     cols["target_id"] = cols["target_id"].astype(str)
     cols["stream"] = cols["stream"].astype(str)
     return Table(stream.path, cols, cols["frame"].astype(np.int64), [Issue(stream.path, 0, m) for m in issues])

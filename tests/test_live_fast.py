@@ -1,0 +1,147 @@
+"""The live path's two drivers give the same numbers: the per-ray driver (each ray of a packet
+through the single-target kernel, what `eoloc live` runs on the frame-centre elevation) against
+the batch driver (`eoloc klv`'s own functions on a one-packet stream), over hostile packets drawn
+by hypothesis — poses anywhere on the Earth, rays above the horizon, frame centres above the
+aircraft, fields of view of 0 and 180 degrees, tags left out, VMTI frames of their own size and
+field of view — and over real streams; and the scalar look angles against pymap3d."""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pymap3d
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import eoloc
+from eoloc.geodesy import look_angles
+from eoloc.io.klv.encode import encode_uas_packet, encode_vmti
+from eoloc.io.klv.reader import decode_klv_bytes
+from eoloc.io.klv.synthetic import circling_flight_klv
+from eoloc.live.update import PacketLocator, locate_packet
+
+FLIGHT = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "flight.klv"
+LOCATOR = PacketLocator()
+
+
+def _decoded(raw: bytes):
+    return decode_klv_bytes(raw, "test", first_index=0, stream="", container="klv").packets
+
+
+def _same_numbers(a, b, what: str) -> None:
+    """Equal where both are numbers to 1e-9 (degrees) / 1e-6 (m) — the two drivers round the
+    normalised image coordinates differently in the last bit — and equal otherwise."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert list(a) == list(b), what
+        for k in a:
+            _same_numbers(a[k], b[k], f"{what}.{k}")
+    elif isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        assert len(a) == len(b), what
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same_numbers(x, y, f"{what}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert a == b or (math.isnan(a) and math.isnan(b)) or abs(a - b) <= 1e-6 * max(1.0, abs(a) / 1e3), \
+            (what, a, b)
+    else:
+        assert a == b, (what, a, b)
+
+
+def _assert_drivers_agree(raw: bytes) -> int:
+    """Both drivers on each packet of ``raw``; the number of OK fixes compared."""
+    ok = 0
+    for packet in _decoded(raw):
+        fast = LOCATOR.locate("test", packet)
+        batch = locate_packet("test", packet)
+        for name in ("stream", "index", "late", "platform", "look", "centre", "footprint", "time_utc"):
+            _same_numbers(getattr(fast, name), getattr(batch, name), name)
+        _same_numbers(fast.time_s, batch.time_s, "time_s")
+        _same_numbers(fast.fixes, batch.fixes, "fixes")
+        ok += sum(r["status"] == "OK" for r in fast.fixes)
+    return ok
+
+
+def test_per_ray_driver_is_the_one_live_uses_on_heights():
+    assert PacketLocator().per_ray
+    from eoloc.terrain import open_dem
+
+    dem = open_dem(FLIGHT.parent / "longs_peak_srtmgl3.tif")
+    assert not PacketLocator(dem=dem).per_ray  # a DEM: the batch driver, its terrain march
+
+
+@pytest.mark.parametrize("raw", [FLIGHT.read_bytes(), circling_flight_klv(60, seed=3, n_targets=20)],
+                         ids=["mountain flight", "circling flight"])
+def test_drivers_agree_on_real_and_synthetic_streams(raw):
+    assert _assert_drivers_agree(raw) > 50
+
+
+# ST 0601 value ranges (tag: (lo, hi)) as the encoder takes them
+RANGES = {5: (0.0, 360.0), 6: (-20.0, 20.0), 7: (-50.0, 50.0), 13: (-90.0, 90.0), 14: (-180.0, 180.0),
+          15: (-900.0, 19000.0), 16: (0.0, 180.0), 17: (0.0, 180.0), 18: (0.0, 360.0), 19: (-180.0, 180.0),
+          20: (0.0, 360.0), 25: (-900.0, 19000.0)}
+
+
+@st.composite
+def hostile_packets(draw) -> bytes:
+    values = {tag: draw(st.floats(lo, hi, allow_nan=False)) for tag, (lo, hi) in RANGES.items()}
+    # the frame centre's position: near the aircraft (its geoid there), anywhere, or left out
+    values[23] = float(np.clip(values[13] + draw(st.floats(-0.2, 0.2)), -90, 90))
+    values[24] = float(np.clip(values[14] + draw(st.floats(-0.2, 0.2)), -180, 180))
+    values[2] = datetime.fromtimestamp(1.7e9 + draw(st.floats(0, 1e6)), UTC)
+    if draw(st.booleans()):  # a down-looking sensor, so that many rays reach the ground
+        values[19] = draw(st.floats(-90.0, -10.0))
+        values[25] = max(values[15] - draw(st.floats(100.0, 5000.0)), -900.0)
+    for tag in draw(st.sets(st.sampled_from([5, 6, 7, 13, 14, 15, 16, 17, 18, 19, 20, 23, 24, 25]), max_size=3)):
+        values.pop(tag, None)
+    width, height = draw(st.integers(1, 4096)), draw(st.integers(1, 4096))
+    n = draw(st.integers(0, 6))
+    targets = [(k + 1, draw(st.floats(0, width - 1)), draw(st.floats(0, height - 1))) for k in range(n)]
+    own_fov = draw(st.booleans())
+    values[74] = encode_vmti(targets, width, height,
+                             hfov_deg=draw(st.floats(0.0, 180.0)) if own_fov else None,
+                             vfov_deg=draw(st.floats(0.0, 180.0)) if own_fov else None)
+    return encode_uas_packet(values)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(hostile_packets())
+def test_drivers_agree_on_hostile_packets(raw):
+    _assert_drivers_agree(raw)
+
+
+def test_hostile_packets_reach_every_status():
+    """The strategy above is not toothless: drawn many times, its packets give fixes and failures."""
+    from hypothesis import find
+
+    seen: set[str] = set()
+
+    def statuses(raw: bytes) -> bool:
+        for p in _decoded(raw):
+            seen.update(r["status"] for r in LOCATOR.locate("t", p).fixes)
+        return {"OK", "NO_INTERSECTION", "INVALID_INPUT"} <= seen
+
+    find(hostile_packets(), statuses, settings=settings(max_examples=2000, deadline=None,
+                                                         suppress_health_check=list(HealthCheck)))
+    assert {"OK", "NO_INTERSECTION", "INVALID_INPUT"} <= seen
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-89.9, 89.9), st.floats(-180, 180), st.floats(-500, 20000), st.floats(-0.5, 0.5),
+       st.floats(-0.5, 0.5), st.floats(-500, 9000))
+def test_look_angles_against_pymap3d(lat0, lon0, h0, dlat, dlon, h):
+    lat, lon = float(np.clip(lat0 + dlat, -90, 90)), lon0 + dlon
+    az, el = look_angles(lat0, lon0, h0, lat, lon, h)
+    # pymap3d's NED offset (its geodetic2aer rounds the offset to the millimetre: not used)
+    n, e, d = pymap3d.geodetic2ned(lat, lon, h, lat0, lon0, h0)
+    slant = math.sqrt(n * n + e * e + d * d)
+    if slant < 1.0:
+        return  # the direction of a point a metre away is all rounding
+    tol = math.degrees(1e-6 / slant)  # a micrometre of ECEF rounding seen across the slant range
+    assert abs(el - math.degrees(math.atan2(-d, math.hypot(n, e)))) < tol
+    horizontal = math.hypot(n, e)
+    if horizontal > 1e-3:  # azimuth defined: not straight above or below
+        az_ref = math.degrees(math.atan2(e, n)) % 360.0
+        assert abs((az - az_ref + 180.0) % 360.0 - 180.0) < math.degrees(1e-6 / horizontal)
