@@ -236,3 +236,51 @@ def test_march_knot_interpolation_is_exact_to_a_micrometre(lat, lon, h, az, off_
     assert abs(hh - h_x) < 1e-6
     assert abs(lat - 1.0 + fr * dlat - lat_x) * 111_000.0 < 1e-6
     assert abs(dlon_deg) * 111_000.0 * np.cos(np.radians(lat_x)) < 1e-6
+
+
+def test_march_split_over_threads_equals_one_thread(front_range):
+    """A large batch is marched in chunks on several threads: the same fixes, bit for bit, as on
+    one thread, every status included (rays off the grid, above the horizon, on the terrain)."""
+    from eoloc._backend import MIN_CHUNK, use_threads
+    from eoloc.rules import OnDEM
+
+    rng = np.random.default_rng(5)
+    n = 6 * MIN_CHUNK + 123  # chunks of uneven length
+    lat0, lon0 = front_range.bounds[1] + 0.1, front_range.bounds[0] + 0.1
+    pose = Pose(lat0, lon0, 6000.0, 0.0, 0.0, 0.0, (rng.uniform(0, 360, n), rng.uniform(-90, 5, n)))
+    rule = OnDEM(front_range)
+    with use_threads(1):
+        one = rule.locate(SENSOR, pose)
+    with use_threads(3):
+        many = rule.locate(SENSOR, pose)
+    assert len(set(np.unique(one.status)) & {Status.OK, Status.OUT_OF_COVERAGE, Status.NO_INTERSECTION}) == 3
+    for name in ("lat_deg", "lon_deg", "h_m", "range_m", "status"):
+        assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
+
+
+def test_in_chunks_covers_every_element_once_and_passes_errors_on():
+    from eoloc._backend import MIN_CHUNK, in_chunks, use_threads
+
+    n = 5 * MIN_CHUNK + 7
+    seen = np.zeros(n, np.int64)
+    with use_threads(2):
+        in_chunks(n, lambda i, j: seen.__setitem__(slice(i, j), seen[i:j] + 1))
+    assert (seen == 1).all()
+
+    def fails(i, j):
+        if i > 0:
+            raise ZeroDivisionError("a chunk failed")
+
+    with use_threads(2), pytest.raises(ZeroDivisionError):
+        in_chunks(n, fails)
+
+
+def test_eoloc_threads_must_be_a_number(monkeypatch):
+    import eoloc.errors
+    from eoloc import _backend
+
+    monkeypatch.setenv("EOLOC_THREADS", "many")
+    with pytest.raises(eoloc.errors.ConfigError, match="EOLOC_THREADS='many': give a whole number"):
+        _backend.default_threads()
+    monkeypatch.setenv("EOLOC_THREADS", "1")
+    assert _backend.default_threads() == 1

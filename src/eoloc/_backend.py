@@ -6,6 +6,11 @@ and atan2 (numba evaluates them by the fdlibm polynomials of ``_kernels``, numpy
 ufuncs), so results agree to 1e-8 m, times the geometry's own amplification of a last-bit change
 (1/sin of the grazing angle for a ray meeting a surface; tested). ``auto``, the default, is numba
 where it is installed. Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
+
+The heaviest compiled driver (the terrain march) splits large batches over threads
+(:func:`in_chunks`; the compiled loops release the GIL): as many as the process may use, or
+``EOLOC_THREADS`` (1 in Dask's local worker processes, which are the parallelism there), or
+:func:`use_threads`.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ import contextlib
 import functools
 import importlib.util
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -38,6 +43,11 @@ def get_backend() -> str:
 
 def _resolve() -> str:
     name = _state["name"]
+    if name not in (*BACKENDS, "auto"):  # only from the environment: set_backend checks its argument
+        from .errors import ConfigError
+
+        raise ConfigError(f"EOLOC_BACKEND={name!r} is not a backend: set it to one of {(*BACKENDS, 'auto')} "
+                          "or unset it")
     if name == "auto":
         name = available_backends()[0]
     elif name not in available_backends():
@@ -58,7 +68,7 @@ def set_backend(name: str) -> None:
     _resolve()
 
 
-set_backend(os.environ.get("EOLOC_BACKEND", "auto") or "auto")
+_state["name"] = (os.environ.get("EOLOC_BACKEND", "") or "auto").strip().lower()  # checked on first use
 
 
 @contextlib.contextmanager
@@ -82,6 +92,82 @@ def few_targets() -> Iterator[None]:
         return
     with use_backend("numpy"):
         yield
+
+
+def default_threads() -> int:
+    """``EOLOC_THREADS`` when set, else the CPUs this process may run on."""
+    text = os.environ.get("EOLOC_THREADS", "").strip()
+    if text:
+        try:
+            return max(1, int(text))
+        except ValueError:
+            from .errors import ConfigError
+
+            raise ConfigError(f"EOLOC_THREADS={text!r}: give a whole number of threads (1: no threads) or "
+                              "unset it") from None
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+_threads = {"n": 0}
+
+
+def threads() -> int:
+    """How many threads a large compiled batch is split over."""
+    if not _threads["n"]:
+        _threads["n"] = default_threads()
+    return _threads["n"]
+
+
+@contextlib.contextmanager
+def use_threads(n: int) -> Iterator[None]:
+    """Context manager: large batches split over ``n`` threads (1: none) in the enclosed code."""
+    previous = _threads["n"]
+    _threads["n"] = max(1, int(n))
+    try:
+        yield
+    finally:
+        _threads["n"] = previous
+
+
+@functools.cache
+def _pool():
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(max(1, threads() - 1), thread_name_prefix="eoloc kernel")
+
+
+MIN_CHUNK = 8192  # elements: below this a batch is not worth a thread
+
+
+def in_chunks(n: int, work: Callable[[int, int], None]) -> None:
+    """``work(start, stop)`` over [0, n) in contiguous chunks (2 per thread, so an uneven chunk
+    does not hold the rest up) taken in turn by :func:`threads` threads, the calling thread
+    among them; one call when the batch is small or one thread is wanted. ``work`` must only
+    write its own slice (the compiled drivers: they release the GIL, so the chunks run at once)."""
+    k = min(2 * threads(), n // MIN_CHUNK) if threads() > 1 else 1
+    if k <= 1:
+        work(0, n)
+        return
+    import itertools
+    import threading
+
+    chunks = itertools.pairwise([n * i // k for i in range(k + 1)])
+    lock = threading.Lock()
+
+    def take_turns() -> None:
+        while True:
+            with lock:
+                chunk = next(chunks, None)
+            if chunk is None:
+                return
+            work(*chunk)
+
+    helpers = [_pool().submit(take_turns) for _ in range(min(threads(), k) - 1)]
+    try:
+        take_turns()
+    finally:
+        for f in helpers:
+            f.result()
 
 
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)

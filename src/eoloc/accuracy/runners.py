@@ -68,7 +68,9 @@ def dask_mapper(address: str) -> Iterator[DaskMapper]:
         raise RuntimeError("--dask needs dask.distributed: pip install 'dask[distributed]'") from exc
     if address == "local" or address.startswith("local:"):
         workers = int(address.split(":", 1)[1]) if ":" in address else 2
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+        # the worker processes are the parallelism: their kernels stay on one thread each
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                          env={"EOLOC_THREADS": "1"}) as cluster, \
                 Client(cluster) as client:
             yield DaskMapper(client)
         return

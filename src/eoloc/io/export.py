@@ -22,13 +22,16 @@ for _s in Status:
 
 
 def fix_records(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
-                after: Mapping[str, Sequence] | None = None) -> Records:
+                after: Mapping[str, Sequence] | None = None, *, status_codes: bool = False) -> Records:
     """The fixes as records: the ``extra`` columns first (ids, times, pixels), then the fix
     (lat_deg, lon_deg, h_m, range_m, status by name), then the ``after`` columns (e.g. its
-    uncertainty)."""
+    uncertainty). ``status_codes``: the status as its int8 code instead of its name (for a
+    writer that names it from :data:`STATUS_NAMES` itself, e.g. ``geotable.arrow_table``'s
+    ``labels``)."""
     cols = {k: np.asarray(v).ravel() for k, v in (extra or {}).items()}
     cols.update({k: np.ravel(getattr(fixes, k)).astype(np.float64) for k in FIX_COLUMNS[:-1]})
-    cols["status"] = STATUS_NAMES[np.ravel(fixes.status).astype(np.intp)]
+    codes = np.ravel(fixes.status)
+    cols["status"] = codes.astype(np.int8) if status_codes else STATUS_NAMES[codes.astype(np.intp)]
     cols.update({k: np.asarray(v).ravel() for k, v in (after or {}).items()})
     return Records(cols)
 

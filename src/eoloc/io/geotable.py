@@ -91,11 +91,19 @@ def geo_table(records: Records, features: list[dict] | None = None):
     return table.append_column("geometry", pa.array(wkb.tolist(), type=pa.binary())), meta
 
 
-def arrow_table(records: Records):
-    """The records as a pyarrow table (no geometry): floats with nulls, integers, booleans, text."""
+def arrow_table(records: Records, *, labels: dict[str, np.ndarray] | None = None):
+    """The records as a pyarrow table (no geometry): floats with nulls, integers, booleans, text.
+    ``labels``: columns held as integer codes, written as the text ``labels[name][code]`` (by
+    Arrow's dictionary cast, without a Python string per row)."""
     import pyarrow as pa
 
-    return pa.table({k: _column(v) for k, v in records.columns.items() if k != "geometry"})
+    def column(k: str, v: np.ndarray):
+        if labels and k in labels:
+            names = pa.array(list(labels[k]), type=pa.string())
+            return pa.DictionaryArray.from_arrays(pa.array(v.astype(np.int32)), names).cast(pa.string())
+        return _column(v)
+
+    return pa.table({k: column(k, v) for k, v in records.columns.items() if k != "geometry"})
 
 
 def write_geoparquet(path: str | Path, records: Records, features: list[dict] | None = None) -> Path:

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _march, geodesy
-from .._backend import get_backend
+from .._backend import get_backend, in_chunks
 from ..geodesy import WGS84, Ellipsoid
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
@@ -80,8 +80,13 @@ class OnDEM(StopRule):
 
                 n = flat[0].size
                 out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
-                _nb.terrain_march(n, *flat, g.z, self.dem.block_max, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax,
-                                  fine, coarse, margin, a, b, e2, ep2, *out)
+                bmax = self.dem.block_max
+
+                def part(i: int, j: int) -> None:  # one contiguous slice of the rays, on a thread of its own
+                    _nb.terrain_march(j - i, *(x[i:j] for x in flat), g.z, bmax, g.lat0, g.lon0, g.dlat, g.dlon,
+                                      hmin, hmax, fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
+
+                in_chunks(n, part)
             else:
                 out = _march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
         return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid, rays.out_of_image)

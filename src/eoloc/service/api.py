@@ -263,10 +263,11 @@ def arrow_fixes(f, u: np.ndarray, v: np.ndarray, unc: dict | None) -> bytes:
     import pyarrow as pa
 
     from .. import __version__
-    from ..io.export import fix_records
+    from ..io.export import STATUS_NAMES, fix_records
     from ..io.geotable import arrow_table
 
-    table = arrow_table(fix_records(f, after={"u_px": u, "v_px": v, **(unc or {})}))
+    records = fix_records(f, after={"u_px": u, "v_px": v, **(unc or {})}, status_codes=True)
+    table = arrow_table(records, labels={"status": STATUS_NAMES})
     table = table.replace_schema_metadata({"eoloc": __version__, "crs": "EPSG:4979 (WGS-84 lat, lon, ellipsoidal h)"})
     sink = pa.BufferOutputStream()
     with pa.ipc.new_stream(sink, table.schema) as writer:
