@@ -165,24 +165,26 @@ try:
     # one ray at a time: the fast path, and the exact one where it is undecided (a branch)
     _g["stop_at_ellipsoid"] = njit(**_JIT)(
         pytypes.FunctionType(K.stop_at_ellipsoid_scalar.__code__, _g, "stop_at_ellipsoid"))
-    def _with_twins(module) -> dict:
+    def _with_twins(module, separate: tuple[str, ...] = ()) -> dict:
         """A driver module's own marked functions compiled with the kernels' twins in their
-        globals (the kernels it imports are the twins themselves, not compiled again)."""
+        globals (the kernels it imports are the twins themselves, not compiled again); those
+        named in ``separate`` take arrays that never overlap (see :func:`_driver`)."""
         ns = dict(vars(module))
         ns.update({name: _g[name] for name in (*_kernels, "pick", "_floor_index", "sincos", "atan2")})
         for name, how in _marked(module).items():
             fn = getattr(module, name)
             if fn.__module__ == module.__name__:
                 opts = {"forceinline": True} if how == "inline" else {}
-                ns[name] = njit(**opts, **_JIT)(pytypes.FunctionType(fn.__code__, ns, name, fn.__defaults__))
+                compile_ = _driver if name in separate else njit(**opts, **_JIT)
+                ns[name] = compile_(pytypes.FunctionType(fn.__code__, ns, name, fn.__defaults__))
         return ns
 
     _march_ray = _with_twins(M)["march_ray"]  # the M4 march
-    _go = _with_twins(O)  # M5 orthorectification: the passes over the output cells
+    _go = _with_twins(O, separate=("project_cells",))  # M5 orthorectification: the passes over the output cells
     ortho_project_cells = _go["project_cells"]
     ortho_rasterize_depth = _go["rasterize_depth"]
     ortho_fold_tiles = _go["fold_tiles"]
-    ortho_mark_visible = _go["mark_visible"]
+    ortho_hide_folded = _go["hide_folded"]
     ortho_sample_bands = _go["sample_bands"]
 
     @_driver

@@ -8,7 +8,9 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    computed (the interpolation error is (step * cell)^2 / 8R: 5 µm at 16 cells of 1 m); the
    DEM's bilinear height there (or the constant surface); the camera
    frame point c0 + h n; its pinhole projection, the lens distortion (the same
-   ``_kernels.distort`` as every other ground -> pixel path) and its range.
+   ``_kernels.distort`` as every other ground -> pixel path) and its range; whether it lies in
+   the image, with the sampling maps for OpenCV's remap (final wherever nothing hides it). Per
+   row, by node interval, so that the node values are constants of loops LLVM vectorises.
 2. ``fold_tiles``: terrain hides terrain only where the mesh of the cells (two triangles per
    2 x 2 cells) folds over in the image, i.e. near its back-facing triangles; the image tiles
    they touch are marked. No back face: nothing is hidden and the z-buffer is skipped.
@@ -16,12 +18,12 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    meet a marked tile: every triangle rasterised at the pixel centres it covers with its
    interpolated range, the nearest kept. A triangulated surface covers its image without gaps,
    so no pixel behind a ridge is left open.
-4. ``mark_visible``: a cell is seen when it lies in the image and its range is no more than the
-   farthest of the z-buffer's at the four pixel centres around its pixel, plus a slack for the
-   mesh's curvature (about one cell's range change, ``range_slack``). A linear surface's range at
-   a point inside a square is at most its largest at the corners, so a cell on the nearest
-   surface passes, and a cell is hidden only when nearer terrain covers all four: at a silhouette
-   the sub-cell doubt goes to "seen". It also writes the sampling maps for OpenCV's remap.
+4. ``hide_folded``: in those blocks only, a cell in the image is hidden when its range is more
+   than the farthest of the z-buffer's at the four pixel centres around its pixel, plus a slack
+   for the mesh's curvature (about one cell's range change, ``range_slack``). A linear surface's
+   range at a point inside a square is at most its largest at the corners, so a cell on the
+   nearest surface passes, and a cell is hidden only when nearer terrain covers all four: at a
+   silhouette the sub-cell doubt goes to "seen".
 5. ``sample_bands``: nearest or exact bilinear sampling (uint8/uint16 bilinear goes
    through OpenCV's remap, eoloc.rectify.resample).
 
@@ -55,11 +57,14 @@ def node_index(n_cells: int, step: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @compiled()
-def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, fx, fy, cx, cy, dist_kind,
-                  dist_params, r2_max, u, v, rng, fold, tile_px, tiles, boxes):
+def project_cells(nodes, row_i0, row_a, step, col_a, dem_z, h_const, use_dem, fx, fy, cx, cy, dist_kind,
+                  dist_params, r2_max, width, height, u, v, rng, valid, map_x, map_y, fold, tile_px, tiles, boxes):
     """Pass 1: every cell -> pixel (u, v) and range (m); NaN where it has no ground (off the DEM,
     a void) or does not lie in front of the camera within the lens model's field (r2_max: the
-    largest squared ideal normalised radius the image reaches). With ``fold``, also
+    largest squared ideal normalised radius the image reaches). And whether the cell lies in the
+    ``width`` x ``height`` image, with the sampling maps OpenCV's remap takes (see
+    :func:`seen_maps`): final, unless the z-buffer pass (:func:`hide_folded`) finds the cell
+    hidden by nearer terrain. With ``fold``, also
     :func:`fold_tiles` with front = +1, each row of quads as soon as its two rows are done, and
     the image bounding boxes of the z-buffer pass's blocks of cells (``boxes``, see
     :func:`block_boxes`); returns the fold test's (front faces, back faces), (0, 0) without."""
@@ -68,6 +73,10 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, 
     n_nodes = nodes.shape[1]
     line = np.empty((n_nodes, N_NODE))  # the nodes interpolated to this row
     h_row = np.empty(cols)
+    fr_row = np.empty(cols)
+    fc_row = np.empty(cols)
+    xs = np.empty(cols)  # ideal normalised image coordinates (NaN: no pixel)
+    ys = np.empty(cols)
     n_front = 0
     n_back = 0
     area = np.empty((2, cols))  # fold_row's scratch
@@ -77,32 +86,50 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, 
         for j in range(n_nodes):
             for k in range(N_NODE):
                 line[j, k] = (1.0 - a) * nodes[i, j, k] + a * nodes[i + 1, j, k]
-        # three loops: the DEM's lookups (gathers) kept out of the two that LLVM vectorises
-        for c in range(cols):
-            j = col_i0[c]
-            b = col_a[c]
-            u[r, c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # the DEM's fractional row, for now
-            v[r, c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # and column
+        # by node interval (the nodes' values constant in the inner loops, which LLVM vectorises),
+        # the DEM's lookups (gathers) in a loop of their own
+        for j in range(n_nodes - 1):
+            c0, c1 = node_span(j, step, n_nodes, cols)
+            for c in range(c0, c1):
+                b = col_a[c]
+                fr_row[c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # the DEM's fractional row
+                fc_row[c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # and column
         if use_dem:
             for c in range(cols):
-                h_row[c], inside = grid_height_at(dem_z, u[r, c], v[r, c])
+                h_row[c], inside = grid_height_at(dem_z, fr_row[c], fc_row[c])
         else:
             h_row[:] = h_const
-        for c in range(cols):
-            j = col_i0[c]
-            b = col_a[c]
-            h = h_row[c]
-            X = (1.0 - b) * (line[j, 2] + h * line[j, 5]) + b * (line[j + 1, 2] + h * line[j + 1, 5])
-            Y = (1.0 - b) * (line[j, 3] + h * line[j, 6]) + b * (line[j + 1, 3] + h * line[j + 1, 6])
-            Z = (1.0 - b) * (line[j, 4] + h * line[j, 7]) + b * (line[j + 1, 4] + h * line[j + 1, 7])
-            xn = X / Z
-            yn = Y / Z
-            ok = Z > 0.0 and xn * xn + yn * yn <= r2_max  # False for NaN (no ground)
-            if dist_kind != 0:
-                xn, yn = distort(dist_kind, dist_params, xn, yn)
-            u[r, c] = fx * xn + cx if ok else np.nan
-            v[r, c] = fy * yn + cy if ok else np.nan
-            rng[r, c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
+        ur = u[r]
+        vr = v[r]
+        rr = rng[r]
+        for j in range(n_nodes - 1):
+            c0, c1 = node_span(j, step, n_nodes, cols)
+            pxa, pya, pza, qxa, qya, qza = line[j, 2], line[j, 3], line[j, 4], line[j, 5], line[j, 6], line[j, 7]
+            pxb, pyb, pzb, qxb, qyb, qzb = (line[j + 1, 2], line[j + 1, 3], line[j + 1, 4], line[j + 1, 5],
+                                            line[j + 1, 6], line[j + 1, 7])
+            for c in range(c0, c1):
+                b = col_a[c]
+                h = h_row[c]
+                X = (1.0 - b) * (pxa + h * qxa) + b * (pxb + h * qxb)
+                Y = (1.0 - b) * (pya + h * qya) + b * (pyb + h * qyb)
+                Z = (1.0 - b) * (pza + h * qza) + b * (pzb + h * qzb)
+                xn = X / Z
+                yn = Y / Z
+                ok = (Z > 0.0) & (xn * xn + yn * yn <= r2_max)  # False for NaN (no ground)
+                xs[c] = xn if ok else np.nan
+                ys[c] = yn if ok else np.nan
+                rr[c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
+        if dist_kind == 0:
+            for c in range(cols):
+                ur[c] = fx * xs[c] + cx
+                vr[c] = fy * ys[c] + cy
+        else:
+            for c in range(cols):
+                xd, yd = distort(dist_kind, dist_params, xs[c], ys[c])
+                ur[c] = fx * xd + cx
+                vr[c] = fy * yd + cy
+        for c in range(cols):  # a loop of its own, on the row still in cache: it vectorises too
+            valid[r, c], map_x[r, c], map_y[r, c] = seen_maps(u[r, c], v[r, c], width, height)
         if fold:
             box_row(u, v, r, boxes)
             if r > 0:
@@ -110,6 +137,14 @@ def project_cells(nodes, row_i0, row_a, col_i0, col_a, dem_z, h_const, use_dem, 
                 n_front += f
                 n_back += bk
     return n_front, n_back
+
+
+@compiled(inline=True)
+def node_span(j, step, n_nodes, cols):
+    """The cells [c0, c1) between node j and node j + 1 (the last interval takes the rest, as
+    :func:`node_index` puts them there)."""
+    c0 = j * step
+    return c0, (cols if j == n_nodes - 2 else min(c0 + step, cols))
 
 
 def block_boxes(rows: int, cols: int) -> np.ndarray:
@@ -340,32 +375,68 @@ def range_slack(u, v, rng, r, c):
     return step * max(1.0, 1.5 / size) if size > 0.0 else step
 
 
+@compiled(inline=True)
+def seen_maps(uc, vc, width, height):
+    """(1 if pixel (uc, vc) lies in the image — within the outer edges of the edge pixels — else
+    0, and the sampling maps OpenCV's remap takes (float32): the pixel, clamped to the outermost
+    pixel centres (a read past them takes the edge pixel), or -16 (outside: nodata))."""
+    seen = uc >= -0.5 and uc <= width - 0.5 and vc >= -0.5 and vc <= height - 0.5
+    return (1 if seen else 0), (min(max(uc, 0.0), width - 1.0) if seen else -16.0), \
+        (min(max(vc, 0.0), height - 1.0) if seen else -16.0)
+
+
 @compiled()
-def mark_visible(u, v, rng, zbuf, use_zbuf, width, height, valid, map_x, map_y):
-    """Pass 3: valid[r, c] = 1 where the cell lies in the image (its pixel within the outer edges
-    of the edge pixels) and, with the z-buffer, nearer terrain does not cover its pixel; and the
-    sampling maps OpenCV's remap takes (float32): the pixel, clamped to the outermost pixel
-    centres (a read past them takes the edge pixel), or -16 (outside: nodata) where not seen."""
+def hide_folded(u, v, rng, zbuf, tile_px, tiles, boxes, width, height, valid, map_x, map_y):
+    """Pass 3: the cells nearer terrain hides, taken out of ``valid`` and the maps: a cell whose
+    range is beyond the z-buffer's at the four pixel centres around its pixel (by more than the
+    mesh's own curvature there, :func:`range_slack`). Only the blocks of cells whose image box
+    (``boxes``) meets a marked tile are visited: elsewhere the mesh does not fold over, so nothing
+    there is hidden (:func:`fold_tiles`)."""
     rows = u.shape[0]
     cols = u.shape[1]
-    for r in range(rows):
-        for c in range(cols):
-            uc = u[r, c]
-            vc = v[r, c]
-            seen = uc >= -0.5 and uc <= width - 0.5 and vc >= -0.5 and vc <= height - 0.5
-            if seen and use_zbuf:
-                x0 = min(max(int(np.floor(uc)), 0), width - 1)
-                y0 = min(max(int(np.floor(vc)), 0), height - 1)
-                x1 = min(x0 + 1, width - 1)
-                y1 = min(y0 + 1, height - 1)
-                z = max(zbuf[y0, x0], zbuf[y0, x1], zbuf[y1, x0], zbuf[y1, x1])
-                d = rng[r, c]
-                if d > z:
-                    slack = range_slack(u, v, rng, r, c)
-                    seen = not (d > z + slack + 1e-4 * d + 0.01)  # NaN slack: seen
-            valid[r, c] = 1 if seen else 0
-            map_x[r, c] = min(max(uc, 0.0), width - 1.0) if seen else -16.0
-            map_y[r, c] = min(max(vc, 0.0), height - 1.0) if seen else -16.0
+    n_ty = tiles.shape[0]
+    n_tx = tiles.shape[1]
+    sat = np.zeros((n_ty + 1, n_tx + 1), np.int64)
+    for ty in range(n_ty):
+        for tx in range(n_tx):
+            sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
+    hidden = 0
+    for br in range(0, rows, BLOCK):
+        for bc in range(0, cols, BLOCK):
+            b_r = min(br // BLOCK, boxes.shape[0] - 1)
+            b_c = min(bc // BLOCK, boxes.shape[1] - 1)
+            umin = boxes[b_r, b_c, 0]
+            umax = boxes[b_r, b_c, 1]
+            vmin = boxes[b_r, b_c, 2]
+            vmax = boxes[b_r, b_c, 3]
+            if not umin <= umax:
+                continue
+            tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
+            tx1 = min(max(int(np.floor(umax / tile_px)), 0), n_tx - 1)
+            ty0 = min(max(int(np.floor(vmin / tile_px)), 0), n_ty - 1)
+            ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
+            if sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] == 0:
+                continue
+            for r in range(br, min(br + BLOCK, rows)):
+                for c in range(bc, min(bc + BLOCK, cols)):
+                    if valid[r, c] == 0:
+                        continue
+                    uc = u[r, c]
+                    vc = v[r, c]
+                    x0 = min(max(int(np.floor(uc)), 0), width - 1)
+                    y0 = min(max(int(np.floor(vc)), 0), height - 1)
+                    x1 = min(x0 + 1, width - 1)
+                    y1 = min(y0 + 1, height - 1)
+                    z = max(zbuf[y0, x0], zbuf[y0, x1], zbuf[y1, x0], zbuf[y1, x1])
+                    d = rng[r, c]
+                    if d > z:
+                        slack = range_slack(u, v, rng, r, c)
+                        if d > z + slack + 1e-4 * d + 0.01:  # NaN slack: seen
+                            valid[r, c] = 0
+                            map_x[r, c] = -16.0
+                            map_y[r, c] = -16.0
+                            hidden += 1
+    return hidden
 
 
 @compiled()
@@ -406,5 +477,5 @@ def sample_bands(image, u, v, valid, bilinear, is_int, nodata, out):
                     out[b, r, c] = image[b, yi, xi]
 
 
-__all__ = ["N_NODE", "block_boxes", "fold_tiles", "mark_visible", "node_count", "node_index", "project_cells",
+__all__ = ["N_NODE", "block_boxes", "fold_tiles", "hide_folded", "node_count", "node_index", "project_cells",
            "rasterize_depth", "sample_bands"]

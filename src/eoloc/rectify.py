@@ -276,33 +276,35 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     nodes[..., 2:5] = (p0 - o) @ R  # R^T (p - o), row vectors
     nodes[..., 5:8] = up @ R
     row_i0, row_a = _ortho.node_index(rows, NODE_STEP)
-    col_i0, col_a = _ortho.node_index(cols, NODE_STEP)
+    _, col_a = _ortho.node_index(cols, NODE_STEP)
     fs = float(np.ravel(pose.focal_scale)[0])
     dist = cam.distortion
     kind, dp = (dist.kind, np.asarray(dist.packed, float)) if dist is not None else (_kernels.DIST_NONE, np.zeros(1))
     r2_max = _ideal_radius2(cam, fs) * 1.02**2
     u, v, rng = (np.empty((rows, cols)) for _ in range(3))
+    valid = np.empty((rows, cols), np.uint8)
+    map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
     use_zbuf = occlusion and isinstance(surface, DEM)
     zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf, np.float32)  # ranges to mm: ample
     # the image tiles the mesh's back faces touch: only there can terrain hide terrain (eoloc._ortho.fold_tiles)
     tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)) if use_zbuf else (1, 1), np.uint8)
     boxes = _ortho.block_boxes(rows, cols) if use_zbuf else np.zeros((1, 1, 4))  # the z-buffer blocks' image boxes
     if bool(np.any(frame.invalid)):
-        u[:], v[:], rng[:] = np.nan, np.nan, np.nan
+        u[:], v[:], rng[:], valid[:], map_x[:], map_y[:] = np.nan, np.nan, np.nan, 0, -16.0, -16.0
         n_front = n_back = 0
     else:
-        n_front, n_back = _nb.ortho_project_cells(nodes, row_i0, row_a, col_i0, col_a, *dem, cam.fx * fs, cam.fy * fs,
-                                                  cam.cx, cam.cy, int(kind), dp, r2_max, u, v, rng, use_zbuf,
-                                                  FOLD_TILE_PX, tiles, boxes)
+        n_front, n_back = _nb.ortho_project_cells(nodes, row_i0, row_a, NODE_STEP, col_a, *dem, cam.fx * fs,
+                                                  cam.fy * fs, cam.cx, cam.cy, int(kind), dp, r2_max, cam.width,
+                                                  cam.height, u, v, rng, valid, map_x, map_y, use_zbuf, FOLD_TILE_PX,
+                                                  tiles, boxes)
     if use_zbuf:
         if n_back > n_front:  # a mirrored view: clockwise triangles face the camera
             tiles[:] = 0
             n_back, n_front = _nb.ortho_fold_tiles(u, v, FOLD_TILE_PX, -1.0, tiles)
-        if n_back:
+        if n_back:  # terrain can hide terrain only where the mesh folds over: the z-buffer there
             _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, boxes, zbuf)
-    valid = np.empty((rows, cols), np.uint8)
-    map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
-    _nb.ortho_mark_visible(u, v, rng, zbuf, use_zbuf, cam.width, cam.height, valid, map_x, map_y)
+            _nb.ortho_hide_folded(u, v, rng, zbuf, FOLD_TILE_PX, tiles, boxes, cam.width, cam.height, valid, map_x,
+                                  map_y)
     return FramePixels(u, v, rng, valid.view(bool), map_x, map_y)
 
 
