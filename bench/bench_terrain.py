@@ -62,6 +62,8 @@ def main(n: int) -> list[str]:
     with eoloc.use_backend("numba"):
         t_nb = best_time(lambda: eoloc.stop_at_dem(r, dem, sensor=sensor), repeat=3)
         f = eoloc.stop_at_dem(r, dem, sensor=sensor)
+        with eoloc.use_threads(1):
+            t_nb1 = best_time(lambda: eoloc.stop_at_dem(r, dem, sensor=sensor), repeat=3)
     k = min(n, 20_000)
     _, rk = rays(k)
     with eoloc.use_backend("numpy"):
@@ -70,9 +72,11 @@ def main(n: int) -> list[str]:
     _, rn = rays(kn)
     t_naive = best_time(lambda: naive_march(rn, dem, dem.spacing_m / 2), repeat=1)
     naive_rate = kn / t_naive
-    lines.append(row(f"M4 ray-DEM, 30 m DEM, obliques 0-80 deg, numba, n={n:,} ({f.ok.mean():.0%} OK)",
-                     f"{n / t_nb / 1e3:.0f} k rays/s", f"naive half-cell march (numpy) {naive_rate / 1e3:.1f} k/s",
-                     n / t_nb / naive_rate))
+    lines.append(row(f"M4 ray-DEM, 30 m DEM, obliques 0-80 deg, numba, n={n:,} ({f.ok.mean():.0%} OK), one thread",
+                     f"{n / t_nb1 / 1e3:.0f} k rays/s", f"naive half-cell march (numpy) {naive_rate / 1e3:.1f} k/s",
+                     n / t_nb1 / naive_rate))
+    lines.append(row(f"M4 ray-DEM, same, numba on {eoloc.threads()} threads (eoloc._backend.in_chunks)",
+                     f"{n / t_nb / 1e3:.0f} k rays/s", f"one thread {n / t_nb1 / 1e3:.0f} k rays/s", t_nb1 / t_nb))
     lines.append(row(f"M4 ray-DEM, same, numpy lockstep, n={k:,}", f"{k / t_np / 1e3:.0f} k rays/s",
                      f"naive half-cell march (numpy) {naive_rate / 1e3:.1f} k/s", k / t_np / naive_rate))
     cam = Camera.from_focal_mm(50, 5.5, 1024, 768)

@@ -241,7 +241,8 @@ def test_march_knot_interpolation_is_exact_to_a_micrometre(lat, lon, h, az, off_
 def test_march_split_over_threads_equals_one_thread(front_range):
     """A large batch is marched in chunks on several threads: the same fixes, bit for bit, as on
     one thread, every status included (rays off the grid, above the horizon, on the terrain)."""
-    from eoloc._backend import MIN_CHUNK, use_threads
+    from eoloc import use_threads
+    from eoloc._backend import MIN_CHUNK
     from eoloc.rules import OnDEM
 
     rng = np.random.default_rng(5)

@@ -13,7 +13,7 @@ Conventions (one per concept, everywhere in the library):
 - Results: :class:`Fixes` with a per-target :class:`Status`; NaN coordinates where not OK.
 """
 
-from ._backend import available_backends, get_backend, set_backend, use_backend
+from ._backend import available_backends, get_backend, set_backend, threads, use_backend, use_threads
 from .errors import EolocError
 from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
 from .result import Fixes, Status
@@ -76,5 +76,7 @@ __all__ = [
     "stop_at_dem",
     "stop_at_ellipsoid",
     "stop_at_range",
+    "threads",
     "use_backend",
+    "use_threads",
 ]
