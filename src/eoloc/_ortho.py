@@ -297,6 +297,37 @@ def fold_tiles(u, v, tile_px, front, tiles):
 
 
 @compiled()
+def marked_table(tiles):
+    """Summed-area table of the marked tiles: whether a box holds any, in O(1) (:func:`box_marked`)."""
+    n_ty = tiles.shape[0]
+    n_tx = tiles.shape[1]
+    sat = np.zeros((n_ty + 1, n_tx + 1), np.int64)
+    for ty in range(n_ty):
+        for tx in range(n_tx):
+            sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
+    return sat
+
+
+@compiled(inline=True)
+def box_marked(boxes, b_r, b_c, tile_px, sat):
+    """Whether block (b_r, b_c)'s image box (``boxes``, from :func:`project_cells`) meets a marked
+    tile (``sat``: :func:`marked_table`); False for a block with no projected cell."""
+    umin = boxes[b_r, b_c, 0]
+    umax = boxes[b_r, b_c, 1]
+    vmin = boxes[b_r, b_c, 2]
+    vmax = boxes[b_r, b_c, 3]
+    if not umin <= umax:
+        return False
+    n_ty = sat.shape[0] - 1
+    n_tx = sat.shape[1] - 1
+    tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
+    tx1 = min(max(int(np.floor(umax / tile_px)), 0), n_tx - 1)
+    ty0 = min(max(int(np.floor(vmin / tile_px)), 0), n_ty - 1)
+    ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
+    return sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] != 0
+
+
+@compiled()
 def rasterize_depth(u, v, rng, tile_px, tiles, boxes, zbuf):
     """Pass 2: the z-buffer (image rows x columns, filled with +inf by the caller), in the marked
     tiles, of the mesh whose vertices are the cells (triangles (r, c) (r, c+1) (r+1, c+1) and
@@ -305,26 +336,10 @@ def rasterize_depth(u, v, rng, tile_px, tiles, boxes, zbuf):
     no marked tile is skipped."""
     rows = u.shape[0]
     cols = u.shape[1]
-    n_ty = tiles.shape[0]
-    n_tx = tiles.shape[1]
-    # summed-area table of the marked tiles: any marked tile in a box in O(1)
-    sat = np.zeros((n_ty + 1, n_tx + 1), np.int64)
-    for ty in range(n_ty):
-        for tx in range(n_tx):
-            sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
+    sat = marked_table(tiles)
     for br in range(0, rows - 1, BLOCK):
         for bc in range(0, cols - 1, BLOCK):
-            umin = boxes[br // BLOCK, bc // BLOCK, 0]
-            umax = boxes[br // BLOCK, bc // BLOCK, 1]
-            vmin = boxes[br // BLOCK, bc // BLOCK, 2]
-            vmax = boxes[br // BLOCK, bc // BLOCK, 3]
-            if not umin <= umax:
-                continue
-            tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
-            tx1 = min(max(int(np.floor(umax / tile_px)), 0), n_tx - 1)
-            ty0 = min(max(int(np.floor(vmin / tile_px)), 0), n_ty - 1)
-            ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
-            if sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] == 0:
+            if not box_marked(boxes, br // BLOCK, bc // BLOCK, tile_px, sat):
                 continue
             r1 = min(br + BLOCK + 1, rows)
             c1 = min(bc + BLOCK + 1, cols)
@@ -394,28 +409,13 @@ def hide_folded(u, v, rng, zbuf, tile_px, tiles, boxes, width, height, valid, ma
     there is hidden (:func:`fold_tiles`)."""
     rows = u.shape[0]
     cols = u.shape[1]
-    n_ty = tiles.shape[0]
-    n_tx = tiles.shape[1]
-    sat = np.zeros((n_ty + 1, n_tx + 1), np.int64)
-    for ty in range(n_ty):
-        for tx in range(n_tx):
-            sat[ty + 1, tx + 1] = sat[ty, tx + 1] + sat[ty + 1, tx] - sat[ty, tx] + tiles[ty, tx]
+    sat = marked_table(tiles)
     hidden = 0
     for br in range(0, rows, BLOCK):
         for bc in range(0, cols, BLOCK):
-            b_r = min(br // BLOCK, boxes.shape[0] - 1)
-            b_c = min(bc // BLOCK, boxes.shape[1] - 1)
-            umin = boxes[b_r, b_c, 0]
-            umax = boxes[b_r, b_c, 1]
-            vmin = boxes[b_r, b_c, 2]
-            vmax = boxes[b_r, b_c, 3]
-            if not umin <= umax:
-                continue
-            tx0 = min(max(int(np.floor(umin / tile_px)), 0), n_tx - 1)
-            tx1 = min(max(int(np.floor(umax / tile_px)), 0), n_tx - 1)
-            ty0 = min(max(int(np.floor(vmin / tile_px)), 0), n_ty - 1)
-            ty1 = min(max(int(np.floor(vmax / tile_px)), 0), n_ty - 1)
-            if sat[ty1 + 1, tx1 + 1] - sat[ty0, tx1 + 1] - sat[ty1 + 1, tx0] + sat[ty0, tx0] == 0:
+            # (the last row or column of cells belongs to the last block)
+            if not box_marked(boxes, min(br // BLOCK, boxes.shape[0] - 1), min(bc // BLOCK, boxes.shape[1] - 1),
+                              tile_px, sat):
                 continue
             for r in range(br, min(br + BLOCK, rows)):
                 for c in range(bc, min(bc + BLOCK, cols)):
