@@ -166,14 +166,13 @@ def box_row(u, v, r, boxes):
         umax = -np.inf
         vmin = np.inf
         vmax = -np.inf
-        for c in range(bc * BLOCK, min(bc * BLOCK + BLOCK + 1, cols)):
+        for c in range(bc * BLOCK, min(bc * BLOCK + BLOCK + 1, cols)):  # branch-free: NaN never wins
             uc = u[r, c]
             vc = v[r, c]
-            if (uc - uc) == 0.0:
-                umin = min(umin, uc)
-                umax = max(umax, uc)
-                vmin = min(vmin, vc)
-                vmax = max(vmax, vc)
+            umin = uc if uc < umin else umin
+            umax = uc if uc > umax else umax
+            vmin = vc if vc < vmin else vmin
+            vmax = vc if vc > vmax else vmax
         if not umin <= umax:
             continue
         for br in range(r // BLOCK - (1 if r % BLOCK == 0 else 0), r // BLOCK + 1):
@@ -197,7 +196,7 @@ def cover(zbuf, x, y, ua, va, da, ub, vb, db, uc, vc, dc, inv):
             zbuf[y, x] = z
 
 
-@compiled()
+@compiled(inline=True)
 def raster_quad(zbuf, u00, v00, d00, u01, v01, d01, u10, v10, d10, u11, v11, d11):
     """Rasterise the two triangles (00, 01, 11) and (00, 11, 10) of a mesh quad into the z-buffer
     (either may be missing: a NaN range) at the pixel centres (integer u, v) they cover."""
