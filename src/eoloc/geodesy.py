@@ -27,10 +27,12 @@ __all__ = [
     "ecef_to_geodetic",
     "ecef_to_ned",
     "enu_to_ecef",
+    "from_frame",
     "geodetic_to_ecef",
     "geodetic_to_ned",
     "look_angles",
     "ned_to_ecef",
+    "to_frame",
 ]
 
 
@@ -122,18 +124,28 @@ def R_ecef_enu(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.nd
     return R_ecef_ned(lat, lon, degrees=degrees) @ _NED_TO_ENU
 
 
+def to_frame(p_ecef: ArrayLike, origin_ecef: ArrayLike, R: ArrayLike) -> np.ndarray:
+    """ECEF points (..., 3) in the local frame with origin ``origin_ecef`` (..., 3) whose axes are
+    the columns of ``R`` (..., 3, 3), e.g. :func:`R_ecef_enu`: R^T (p - o). For frames kept
+    from call to call (a target's first fix); :func:`ecef_to_enu` builds them each time."""
+    return np.einsum("...ji,...j->...i", R, np.asarray(p_ecef, dtype=np.float64) - origin_ecef)
+
+
+def from_frame(v: ArrayLike, origin_ecef: ArrayLike, R: ArrayLike) -> np.ndarray:
+    """The inverse of :func:`to_frame`: local vectors (..., 3) back to ECEF points, R v + o."""
+    return np.einsum("...ij,...j->...i", R, np.asarray(v, dtype=np.float64)) + origin_ecef
+
+
+def _origin(lat0, lon0, h0, degrees, ell) -> np.ndarray:
+    return np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat0, lon0, h0, degrees=degrees, ell=ell)), -1)
+
+
 def _local(p_ecef, lat0, lon0, h0, degrees, ell, R_fn):
-    p_ecef = np.asarray(p_ecef, dtype=np.float64)
-    o = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat0, lon0, h0, degrees=degrees, ell=ell)), -1)
-    R = R_fn(lat0, lon0, degrees=degrees)
-    return np.einsum("...ji,...j->...i", R, p_ecef - o)
+    return to_frame(p_ecef, _origin(lat0, lon0, h0, degrees, ell), R_fn(lat0, lon0, degrees=degrees))
 
 
 def _from_local(v, lat0, lon0, h0, degrees, ell, R_fn):
-    v = np.asarray(v, dtype=np.float64)
-    o = np.stack(np.broadcast_arrays(*geodetic_to_ecef(lat0, lon0, h0, degrees=degrees, ell=ell)), -1)
-    R = R_fn(lat0, lon0, degrees=degrees)
-    return np.einsum("...ij,...j->...i", R, v) + o
+    return from_frame(v, _origin(lat0, lon0, h0, degrees, ell), R_fn(lat0, lon0, degrees=degrees))
 
 
 def ecef_to_ned(p_ecef: ArrayLike, lat0, lon0, h0, *, degrees: bool = True, ell: Ellipsoid = WGS84):

@@ -40,6 +40,8 @@ class _Stream:
     def __init__(self, forgetting: float, tracker) -> None:
         self.slot: dict[str, int] = {}  # target id -> its place in the arrays below
         self.origin = np.zeros((0, 3))  # each target's first fix (lat, lon, h): its RLS frame
+        self.origin_ecef = np.zeros((0, 3))  # that frame's origin (ECEF m) and axes (R_ecef_enu), kept
+        self.R_ecef_enu = np.zeros((0, 3, 3))
         self.first_sigma_h = np.zeros(0)
         self.rls = RLSState.empty(0, forgetting)
         self.tracker = tracker  # a sequence.track.Tracker in one ENU frame, or None (static)
@@ -91,13 +93,16 @@ class TargetFilters:
             for t in new:
                 st.slot[t] = len(st.slot)
             st.origin = np.concatenate([st.origin, np.c_[lat[first], lon[first], h[first]]])
+            o = np.stack(geodesy.geodetic_to_ecef(lat[first], lon[first], h[first]), -1)
+            st.origin_ecef = np.concatenate([st.origin_ecef, o])
+            st.R_ecef_enu = np.concatenate([st.R_ecef_enu, geodesy.R_ecef_enu(lat[first], lon[first])])
             st.first_sigma_h = np.concatenate([st.first_sigma_h, np.sqrt(R[first, 0, 0] + R[first, 1, 1])])
             st.rls.grow(len(new))
         k = np.array([st.slot[t] for t in ids])
         p = np.stack(geodesy.geodetic_to_ecef(lat, lon, h), -1)
         n_slots = len(st.slot)
         z = np.zeros((n_slots, 3))
-        z[k] = geodesy.ecef_to_enu(p, st.origin[k, 0], st.origin[k, 1], st.origin[k, 2])
+        z[k] = geodesy.to_frame(p, st.origin_ecef[k], st.R_ecef_enu[k])  # ENU at each target's first fix
         RK = np.broadcast_to(np.eye(3), (n_slots, 3, 3)).copy()
         RK[k] = R
         use = np.zeros(n_slots, dtype=bool)
@@ -119,8 +124,7 @@ class TargetFilters:
         rls = st.rls
         cov = rls.covariance()[k]
         ratio = rls.scatter_ratio()[k]
-        o = st.origin[k]
-        e = geodesy.enu_to_ecef(rls.x[k], o[:, 0], o[:, 1], o[:, 2])
+        e = geodesy.from_frame(rls.x[k], st.origin_ecef[k], st.R_ecef_enu[k])
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
         sig = error_ellipses(cov[:, :2, :2])
         cep = cep_zero_mean(sig[:, 0], sig[:, 1], 0.5)
