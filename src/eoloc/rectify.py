@@ -220,7 +220,8 @@ def transformer(src: pyproj.CRS, dst: pyproj.CRS) -> pyproj.Transformer:
 
 
 FOLD_TILE_PX = 16  # image tiles where the terrain folds over get the z-buffer
-NODE_STEP = 16  # cells between the nodes where pyproj and the exact geodesy are evaluated
+NODE_STEP = 32  # cells between the nodes where pyproj and the exact geodesy are evaluated (< 1e-4 px, 0.4 mm
+# of range off the exact path at 3 m cells; 16: 4x less, but the per-row loops between nodes too short to vectorise)
 
 
 @dataclass(frozen=True)
