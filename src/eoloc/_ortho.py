@@ -409,7 +409,6 @@ def hide_folded(u, v, rng, zbuf, tile_px, tiles, boxes, width, height, valid, ma
     rows = u.shape[0]
     cols = u.shape[1]
     sat = marked_table(tiles)
-    hidden = 0
     for br in range(0, rows, BLOCK):
         for bc in range(0, cols, BLOCK):
             # (the last row or column of cells belongs to the last block)
@@ -434,8 +433,6 @@ def hide_folded(u, v, rng, zbuf, tile_px, tiles, boxes, width, height, valid, ma
                             valid[r, c] = 0
                             map_x[r, c] = -16.0
                             map_y[r, c] = -16.0
-                            hidden += 1
-    return hidden
 
 
 @compiled()

@@ -179,20 +179,13 @@ def look_angles(lat0_deg: float, lon0_deg: float, h0_m: float, lat_deg: float, l
     """Azimuth (degrees from true north, [0, 360)) and elevation (degrees, negative below the
     horizon) of one point seen from another, both geodetic (degrees, ellipsoidal m): the line of
     sight in the observer's local NED frame. Plain floats, for one point at a time (a live
-    packet's look at its frame centre: no array set-up); :func:`geodetic_to_ned` for arrays."""
-    def ecef(lat: float, lon: float, h: float) -> tuple[float, float, float]:
-        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-        n = ell.a / math.sqrt(1.0 - ell.e2 * sl * sl)
-        return (n + h) * cl * co, (n + h) * cl * so, (n * (1.0 - ell.e2) + h) * sl
-
+    packet's look at its frame centre: no array set-up); :func:`geodetic_to_ned` for arrays. The
+    kernels' own formulas (:mod:`eoloc._kernels`), evaluated on the two points."""
+    K = _kernels
     lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
-    x0, y0, z0 = ecef(lat0, lon0, h0_m)
-    x, y, z = ecef(math.radians(lat_deg), math.radians(lon_deg), h_m)
-    dx, dy, dz = x - x0, y - y0, z - z0
-    sl, cl, so, co = math.sin(lat0), math.cos(lat0), math.sin(lon0), math.cos(lon0)
-    north = -sl * co * dx - sl * so * dy + cl * dz
-    east = -so * dx + co * dy
-    down = -cl * co * dx - cl * so * dy - sl * dz
+    x0, y0, z0 = K.geodetic_to_ecef(lat0, lon0, h0_m, ell.a, ell.e2)
+    x, y, z = K.geodetic_to_ecef(math.radians(lat_deg), math.radians(lon_deg), h_m, ell.a, ell.e2)
+    north, east, down = (float(c) for c in K.mat_t_vec(K.r_ecef_ned(lat0, lon0), x - x0, y - y0, z - z0))
     return math.degrees(math.atan2(east, north)) % 360.0, math.degrees(math.atan2(-down, math.hypot(north, east)))
 
 

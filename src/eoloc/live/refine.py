@@ -39,9 +39,8 @@ UNWEIGHTED_SIGMA_M = 10.0  # the weight of a fix without a covariance (all alike
 class _Stream:
     def __init__(self, forgetting: float, tracker) -> None:
         self.slot: dict[str, int] = {}  # target id -> its place in the arrays below
-        self.origin = np.zeros((0, 3))  # each target's first fix (lat, lon, h): its RLS frame
-        self.origin_ecef = np.zeros((0, 3))  # that frame's origin (ECEF m) and axes (R_ecef_enu), kept
-        self.R_ecef_enu = np.zeros((0, 3, 3))
+        self.origin_ecef = np.zeros((0, 3))  # each target's RLS frame: ENU at its first fix (origin, ECEF m)
+        self.R_ecef_enu = np.zeros((0, 3, 3))  # and axes
         self.first_sigma_h = np.zeros(0)
         self.rls = RLSState.empty(0, forgetting)
         self.tracker = tracker  # a sequence.track.Tracker in one ENU frame, or None (static)
@@ -92,7 +91,6 @@ class TargetFilters:
             first = np.array([int(np.flatnonzero(ids == t)[0]) for t in new])
             for t in new:
                 st.slot[t] = len(st.slot)
-            st.origin = np.concatenate([st.origin, np.c_[lat[first], lon[first], h[first]]])
             o = np.stack(geodesy.geodetic_to_ecef(lat[first], lon[first], h[first]), -1)
             st.origin_ecef = np.concatenate([st.origin_ecef, o])
             st.R_ecef_enu = np.concatenate([st.R_ecef_enu, geodesy.R_ecef_enu(lat[first], lon[first])])

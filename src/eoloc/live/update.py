@@ -166,9 +166,7 @@ class PacketLocator:
         INVALID_INPUT where the pose, the height or the pixel is not a number (as the batch path)."""
         if not (usable and math.isfinite(u) and math.isfinite(v)):
             return math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT
-        lat, lon, h, g1, g2 = pose[0], pose[1], pose[2], pose[6], pose[7]
-        return sensor.locate_one(lat, lon, h, pose[3], pose[4], pose[5], g1, g2, u, v, g3_deg=pose[8],
-                                 height_m=height_m)
+        return sensor.locate_one(*pose[:8], u, v, g3_deg=pose[8], height_m=height_m)
 
     def _frame_sensor(self, hfov: float, vfov: float, width: int, height: int):
         """The sensor of a VMTI frame: a pinhole over its size with the given fields of view."""
@@ -194,20 +192,23 @@ class PacketLocator:
         ok_frame = np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
             (vfov > 0) & (vfov < 180)
         outside = np.zeros(len(det), bool)
+        sensors = [None] * len(det)  # each target's frame sensor (None: no usable frame)
         for key in {(float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])) for i in np.flatnonzero(ok_frame)}:
             idx = np.flatnonzero(ok_frame & (hfov == key[0]) & (vfov == key[1]) & (w == key[2]) & (h == key[3]))
-            cam = self._frame_sensor(*key).camera
+            sensor = self._frame_sensor(*key)
+            cam = sensor.camera
             outside[idx] = cam.outside(u[idx], v[idx], *cam.pixel_to_normalized(u[idx], v[idx]))
+            for i in idx:
+                sensors[i] = sensor
         iso = utc_times(d["time_s"], "unix")
         rows = []
         for i in range(len(det)):
-            if not ok_frame[i]:
+            if sensors[i] is None:
                 fix = (math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT)
             elif outside[i] and usable:
                 fix = (math.nan, math.nan, math.nan, math.nan, Status.OUT_OF_IMAGE)
             else:
-                fix = self._ray(self._frame_sensor(float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])), pose,
-                                usable, surface_h, float(u[i]), float(v[i]))
+                fix = self._ray(sensors[i], pose, usable, surface_h, float(u[i]), float(v[i]))
             status = int(fix[4])
             good = status == Status.OK
             rows.append({"stream": str(d["stream"][i]), "frame": int(d["frame"][i]), "time_s": _finite(d["time_s"][i]),
