@@ -141,17 +141,21 @@ def test_backends_agree_to_1e8_m():
         assert np.max(np.abs(a[5] - b[5])) < 1e-8
 
 
-def test_auto_backend_is_numba_where_installed():
-    """``auto`` runs every kernel on numba when it is there, large atan2-heavy batches included
-    (numba's vectorised loops now beat numpy's SIMD ufuncs on them, bench/RESULTS.md): a big
-    ECEF -> geodetic batch under auto is numba's bit for bit, and not numpy's (their atan2 differ
-    in the last bit somewhere in 200 000 points, which is what makes this check able to fail)."""
+def test_auto_backend_is_numba_once_loaded():
+    """Once numba is loaded, ``auto`` runs every kernel on it, large atan2-heavy batches included
+    (numba's vectorised loops beat numpy's SIMD ufuncs on them, bench/RESULTS.md): a big ECEF ->
+    geodetic batch under auto is numba's bit for bit, and not numpy's (their atan2 differ in the
+    last bit somewhere in 200 000 points, which is what makes this check able to fail)."""
+    if "numba" not in eoloc.available_backends():
+        pytest.skip("numba not installed: auto is numpy, nothing to route")
+    import importlib
+
+    importlib.import_module("eoloc._nb")  # loaded: auto has nothing left to rent
+
     lat, lon, h = _sample(200_000, 4)
     x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
     with eoloc.use_backend("auto"):
         auto = eoloc.ecef_to_geodetic(x, y, z)
-    if "numba" not in eoloc.available_backends():
-        pytest.skip("numba not installed: auto is numpy, nothing to route")
     forced = {}
     for b in ("numba", "numpy"):
         with eoloc.use_backend(b):
@@ -159,6 +163,45 @@ def test_auto_backend_is_numba_where_installed():
     for a, n in zip(auto, forced["numba"], strict=True):
         np.testing.assert_array_equal(a, n)
     assert any(np.any(a != n) for a, n in zip(auto[:2], forced["numpy"][:2], strict=True))
+
+
+AUTO_RENTS = """
+import sys, numpy as np, eoloc
+from eoloc import _backend, _kernels
+rng = np.random.default_rng(3)
+def batch(n):
+    lat, lon, h = rng.uniform(-89, 89, n), rng.uniform(-180, 180, n), rng.uniform(-500, 9000, n)
+    return eoloc.ecef_to_geodetic(*eoloc.geodetic_to_ecef(lat, lon, h))
+small = [batch(20_000) for _ in range(3)]
+sig = _kernels.SIGNATURES
+counted = 3 * 20_000 * (sig["geodetic_to_ecef"].numpy_ns + sig["ecef_to_geodetic"].numpy_ns)
+print("after small", _backend.numba_loaded(), "numba" in sys.modules, _backend._rent["spent_ns"] == counted)
+_backend.NUMBA_LOAD_NS = _backend._rent["spent_ns"] + 1e6   # a budget the next batch passes
+lat, lon, h = rng.uniform(-89, 89, 200_000), rng.uniform(-180, 180, 200_000), rng.uniform(-500, 9000, 200_000)
+x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
+print("after big", _backend.numba_loaded())
+auto = eoloc.ecef_to_geodetic(x, y, z)
+with eoloc.use_backend("numba"):
+    numba = eoloc.ecef_to_geodetic(x, y, z)
+print("same as numba", all(np.array_equal(a, b) for a, b in zip(auto, numba)))
+"""
+
+
+def test_auto_rents_numpy_until_numba_pays_for_its_loading():
+    """A fresh process under ``auto`` runs small batches on numpy without importing numba (its
+    loading costs more than they take), counting their work (elements x the kernel's numpy_ns);
+    the first batch that would take the count past the budget loads numba, and from then on auto
+    is numba's bit for bit."""
+    if "numba" not in eoloc.available_backends():
+        pytest.skip("numba not installed: auto is numpy")
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "EOLOC_BACKEND"}
+    out = subprocess.run([sys.executable, "-c", AUTO_RENTS], capture_output=True, text=True, env=env, check=True)
+    assert out.stdout.splitlines() == ["after small False False True", "after big True", "same as numba True"], \
+        out.stdout
 
 
 def test_use_backend_restores_the_previous_backend():

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 import eoloc
 from eoloc.cli import main
@@ -395,3 +397,60 @@ def test_detections_that_cannot_be_paired_or_are_empty_are_named(tmp_path):
     r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), str(header_only), "--config",
                                   str(DEMO / "camera.toml"), "--target-height", "0", "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2 and "no usable record" in r.output and not (tmp_path / "o2").exists()
+
+
+def test_many_targets_per_image_share_its_camera_frame_and_get_the_same_fixes(tmp_path):
+    """With more detections than telemetry records, each record's camera frame is computed once
+    and shared by its targets (pose_index): the fixes are the per-target path's, number for number,
+    with a zoomed record, an unusable pose (INVALID_INPUT), an unmatched detection (NO_TELEMETRY)
+    and a pixel outside the image (OUT_OF_IMAGE) among them."""
+    from eoloc.io.telemetry import telemetry_pose
+
+    rng = np.random.default_rng(5)
+    tel_lines = ["time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,azimuth_deg,elevation_deg,hfov_deg"]
+    for k in range(40):
+        pitch = "nan" if k == 7 else f"{rng.normal(0, 2):.3f}"
+        tel_lines.append(f"{k * 0.1:.1f},{45 + k * 1e-4:.6f},7.0,3000,{rng.uniform(0, 360):.3f},{pitch},"
+                         f"{rng.normal(0, 2):.3f},{rng.uniform(-180, 180):.3f},{rng.uniform(-80, -30):.3f},"
+                         f"{20 if k == 3 else 40}")
+    det_lines = ["time_s,target_id,u_px,v_px"]
+    for j in range(400):
+        t = 99.0 if j == 11 else rng.integers(0, 40) * 0.1
+        u = 5000.0 if j == 12 else rng.uniform(0, 1023)
+        det_lines.append(f"{t:.1f},T{j % 9},{u:.3f},{rng.uniform(0, 767):.3f}")
+    tel = read_telemetry(_write(tmp_path / "t.csv", "\n".join(tel_lines) + "\n"))
+    det = read_detections(_write(tmp_path / "d.csv", "\n".join(det_lines) + "\n"))
+    sensor = eoloc.SensorModel(eoloc.Camera(1024, 768, 1200.0, 1200.0, 511.5, 383.5))
+    rule = eoloc.AtHeight(250.0)
+    shared = locate_tables(sensor, tel, det, rule).fixes
+    record = match_detections(tel, det).record
+    pose = telemetry_pose(tel, np.where(record >= 0, record, 0), sensor.camera)
+    alone = rule.locate(sensor, pose, (det.columns["u_px"], det.columns["v_px"]))
+    Status = eoloc.Status
+    assert set(shared.status.tolist()) == {Status.OK, Status.INVALID_INPUT, Status.NO_TELEMETRY,
+                                           Status.OUT_OF_IMAGE}
+    own = record >= 0
+    np.testing.assert_array_equal(shared.status[own], alone.status[own])
+    for name in ("lat_deg", "lon_deg", "h_m", "range_m"):
+        np.testing.assert_array_equal(getattr(shared, name)[own], getattr(alone, name)[own])
+
+
+@settings(max_examples=150, deadline=None)
+@given(tel_frames=st.lists(st.one_of(st.integers(-5, 30).map(float), st.just(np.nan)), min_size=1, max_size=25),
+       det_frames=st.lists(st.one_of(st.integers(-8, 35).map(float), st.just(np.nan)), min_size=1, max_size=40))
+def test_frame_matching_agrees_with_a_dict_of_frame_numbers(tel_frames, det_frames):
+    """Pairing by frame number (vectorised) is what a dict {frame: last record with it} gives:
+    duplicated frames go to their last record, unknown and missing frames to -1."""
+    from eoloc.io.table import Table
+
+    def table(frames):
+        n = len(frames)
+        return Table("x.csv", {"frame": np.array(frames, dtype=float), "time_s": np.full(n, np.nan)},
+                     np.arange(2, n + 2))
+
+    lookup = {int(f): i for i, f in enumerate(tel_frames) if np.isfinite(f)}
+    expected = [lookup.get(int(f), -1) if np.isfinite(f) else -1 for f in det_frames]
+    assume(lookup and np.isfinite(det_frames).any())  # else nothing to pair by (a TableError, tested elsewhere)
+    got = match_detections(table(tel_frames), table(det_frames))
+    assert got.record.tolist() == expected
+    assert sorted(i.line for i in got.issues) == [j + 2 for j, r in enumerate(expected) if r < 0]

@@ -141,6 +141,43 @@ def test_file_mode_json_kml_cot_and_utc_times(tmp_path):
     assert len(cots) == len(set(cots)) == n_ok
 
 
+RUN_COMMAND = """
+import atexit, sys
+atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb")
+                                                 if sys.modules.get(m) is not None), file=sys.stderr))
+from eoloc.cli import run
+sys.argv = ["eoloc", *sys.argv[1:]]
+run()
+"""
+
+
+def test_the_command_loads_neither_pandas_nor_numba_for_work_numpy_does_faster(tmp_path):
+    """The `eoloc` command on the demo files at a height: the same fixes.csv as the library in this
+    process, without importing pandas (pyarrow would, where it is installed; eoloc does not use
+    it) or loading numba (0.7-1.5 s to load for milliseconds of work: numpy runs it)."""
+    import subprocess
+    import sys
+
+    args = [str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config", str(DEMO / "camera.toml"),
+            "--target-height", "600", "-f", "csv"]
+    env = {k: v for k, v in __import__("os").environ.items() if k != "EOLOC_BACKEND"}
+    out = subprocess.run([sys.executable, "-c", RUN_COMMAND, "locate", *args, "--out", str(tmp_path / "cmd")],
+                         capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr
+    assert "loaded: []" in out.stderr, out.stderr
+    r = CliRunner().invoke(main, ["locate", *args, "--out", str(tmp_path / "lib")])
+    assert r.exit_code == 0, r.output
+    with open(tmp_path / "cmd" / "fixes.csv") as a, open(tmp_path / "lib" / "fixes.csv") as b:
+        rows_cmd, rows_lib = list(csv.DictReader(a)), list(csv.DictReader(b))
+    assert len(rows_cmd) == len(rows_lib) == len(read_detections(DEMO / "detections.csv"))
+    for x, y in zip(rows_cmd, rows_lib, strict=True):
+        assert x["status"] == y["status"] and x["target_id"] == y["target_id"]
+        for k in ("lat_deg", "lon_deg"):  # numpy and numba agree to 1e-8 m; the file rounds to 1e-9 deg
+            assert x[k] == "" == y[k] or abs(float(x[k]) - float(y[k])) <= 2e-9
+        for k in ("h_m", "range_m"):
+            assert x[k] == "" == y[k] or abs(float(x[k]) - float(y[k])) <= 2e-4
+
+
 _cell = st.one_of(st.floats(allow_nan=False, allow_infinity=False, width=32).map(repr),
                   st.sampled_from(["", "x", "inf", "nan", " 3 ", "1e400", "-0"]))
 

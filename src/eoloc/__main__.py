@@ -1,5 +1,5 @@
 """`python -m eoloc ...`: the same as the `eoloc` command."""
 
-from .cli import main
+from .cli import run
 
-main(prog_name="eoloc")
+run()

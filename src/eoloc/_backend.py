@@ -7,10 +7,17 @@ ufuncs), so results agree to 1e-8 m, times the geometry's own amplification of a
 (1/sin of the grazing angle for a ray meeting a surface; tested). ``auto``, the default, is numba
 where it is installed. Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
 
-The heaviest compiled driver (the terrain march) splits large batches over threads
-(:func:`in_chunks`; the compiled loops release the GIL): as many as the process may use, or
-``EOLOC_THREADS`` (1 in Dask's local worker processes, which are the parallelism there), or
-:func:`use_threads`.
+Loading numba costs a process 0.7-1.5 s (its import, its target's set-up, the cached kernels;
+minutes when the cache is cold), more than a million targets take on numpy. So under ``auto``
+the kernels of :func:`run` rent numpy until numba is worth buying, as in the ski-rental problem:
+while numba is not loaded, a call runs on numpy if the numpy work counted so far plus this call's
+(its elements times the kernel's measured ``numpy_ns``) stays under :data:`NUMBA_LOAD_NS`; the
+first call that would pass it loads numba, and from then on everything runs on numba. The count
+is of work, not of time, so the same calls make the same choices on every run (results do not
+depend on the machine's load). A one-shot command on a million targets at a height never loads
+numba; a server loads it within its first half second of work, and pays at most about twice the
+cheaper of the two. Work done in pieces (Monte Carlo, sweeps, batches: :func:`compiled`) and
+the compiled-only paths (the terrain march, orthorectification) load numba directly.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import contextlib
 import functools
 import importlib.util
 import os
+import sys
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -171,6 +179,32 @@ def in_chunks(n: int, work: Callable[[int, int], None]) -> None:
 
 
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
+NUMBA_LOAD_NS = 5e8  # numpy work (ns) a process does under auto before it loads numba (see the module doc)
+_rent = {"spent_ns": 0.0}
+
+
+def numba_loaded() -> bool:
+    """Whether this process has loaded eoloc's compiled kernels (numba)."""
+    return "eoloc._nb" in sys.modules
+
+
+def compiled() -> None:
+    """Under ``auto``, load numba now where it is installed: for work done in pieces (Monte Carlo
+    chunks, sweep points, batch files), which is large, and whose pieces must run the same
+    kernels in this process and on any Dask worker."""
+    if _state["name"] == "auto" and get_backend() == "numba":
+        from . import _nb  # noqa: F401
+
+
+def _rents(sig, n: int) -> bool:
+    """Under auto with numba not loaded: whether this call runs on numpy (and is counted)."""
+    if _state["name"] != "auto" or numba_loaded():
+        return False
+    cost = n * sig.numpy_ns
+    if _rent["spent_ns"] + cost > NUMBA_LOAD_NS:
+        return False
+    _rent["spent_ns"] += cost
+    return True
 
 
 def run(name: str, *args):
@@ -206,12 +240,12 @@ def run(name: str, *args):
     outs = []
     for o in sig.outputs:
         outs.extend(np.empty(n, dtype=np.int8 if o == "status" else np.float64) for _ in range(sig.width(o)))
-    if get_backend() == "numba":
+    if get_backend() == "numpy" or _rents(sig, n):
+        _run_numpy(sig, n, flat_in, outs)
+    else:
         from . import _nb
 
         getattr(_nb, name)(n, *flat_in, *outs)
-    else:
-        _run_numpy(sig, n, flat_in, outs)
     shaped = iter([o.reshape(shape) for o in outs])
     return tuple(tuple(next(shaped) for _ in range(9)) if sig.width(o) == 9 else next(shaped) for o in sig.outputs)
 

@@ -861,32 +861,34 @@ class Signature:
     (``constants``; ``ints`` among them are integers) and its outputs. A name starting with
     ``R_`` is a rotation: 9 numbers, given as one argument (a 9-tuple or an array with 9 in its
     first axis) and returned as a 9-tuple; a driver sees it as 9 flat arrays. An output named
-    ``status`` is int8."""
+    ``status`` is int8. ``numpy_ns``: the numpy path's time per element (ns, measured on the
+    bench machine), which the ``auto`` backend counts against numba's loading time."""
 
     name: str
     params: tuple[str, ...]
     outputs: tuple[str, ...]
     constants: frozenset[str] = frozenset()
     ints: frozenset[str] = frozenset()
+    numpy_ns: float = 100.0
 
     @staticmethod
     def width(name: str) -> int:
         return 9 if name.startswith("R_") else 1
 
 
-def declare(fn, outputs: str, constants: str = "", ints: str = "") -> Signature:
+def declare(fn, outputs: str, constants: str = "", ints: str = "", *, numpy_ns: float) -> Signature:
     code = fn.__code__
     return Signature(fn.__name__, code.co_varnames[:code.co_argcount], tuple(outputs.split()),
-                     frozenset(constants.split()) | frozenset(ints.split()), frozenset(ints.split()))
+                     frozenset(constants.split()) | frozenset(ints.split()), frozenset(ints.split()), numpy_ns)
 
 
-SIGNATURES = {s.name: s for s in (
-    declare(geodetic_to_ecef, "x y z", "a e2"),
-    declare(ecef_to_geodetic, "lat lon h", "a b e2 ep2"),
-    declare(camera_frame, "R_ecef_cam ox oy oz", "a e2", ints="kind"),
-    declare(ray_direction, "dx dy dz"),
-    declare(project_point, "xn yn depth"),
-    declare(stop_at_range, "lat lon h t status", "a b e2 ep2"),
-    declare(stop_at_ellipsoid, "lat lon h t status", "a b e2 ep2"),
-    declare(flat_target, "lat lon h t status", "a b e2 ep2"),
+SIGNATURES = {s.name: s for s in (  # numpy_ns: 2^20 elements, best of 5, 2026-11-24 (bench/RESULTS.md)
+    declare(geodetic_to_ecef, "x y z", "a e2", numpy_ns=50),
+    declare(ecef_to_geodetic, "lat lon h", "a b e2 ep2", numpy_ns=30),
+    declare(camera_frame, "R_ecef_cam ox oy oz", "a e2", ints="kind", numpy_ns=350),
+    declare(ray_direction, "dx dy dz", numpy_ns=13),
+    declare(project_point, "xn yn depth", numpy_ns=16),
+    declare(stop_at_range, "lat lon h t status", "a b e2 ep2", numpy_ns=45),
+    declare(stop_at_ellipsoid, "lat lon h t status", "a b e2 ep2", numpy_ns=90),
+    declare(flat_target, "lat lon h t status", "a b e2 ep2", numpy_ns=70),
 )}

@@ -81,33 +81,43 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         file_range = det.columns["range_m"]
         range_source = (det.path, det.line)
     has_pose = record >= 0
+    pose_index = None
     if not (interpolate and det is not None):
-        pose = telemetry_pose(tel, np.where(has_pose, record, 0), sensor.camera)
+        index = np.where(has_pose, record, 0)
+        if det is not None and len(tel) < len(det):  # several targets per image: each frame computed once
+            pose, pose_index = telemetry_pose(tel, camera=sensor.camera), index
+        else:
+            pose = telemetry_pose(tel, index, sensor.camera)
     if isinstance(rule, str):  # RANGE_FROM_FILES: M1 with each target's own range
         rule = AtRange(np.asarray(file_range))
         path, lines = range_source
         for j in np.flatnonzero(~np.isfinite(rule.range_m) & has_pose):
             issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "
                                                      "a constant --range R, or use --target-height H"))
-    fixes, cov = locate_by_rule(sensor, pose, (u, v), rule, budget=budget)
+    fixes, cov = locate_by_rule(sensor, pose, (u, v), rule, budget=budget, pose_index=pose_index)
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     comp = None
     if compensation is not None:
         from .accuracy.compensation import compensate
 
-        fixes, comp = compensate(compensation, sensor, pose, fixes, (u, v), rule=rule)
+        per_target = pose if pose_index is None else pose.take(pose_index)
+        fixes, comp = compensate(compensation, sensor, per_target, fixes, (u, v), rule=rule)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
     return Located(fixes, extra, issues, cov, comp)
 
 
-def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule,
-                   budget: ErrorBudget | None = None) -> tuple[Fixes, FixCovariance | None]:
-    """Fixes by stop ``rule`` and, with an error ``budget``, their first-order covariance (else None)."""
+def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule, budget: ErrorBudget | None = None,
+                   pose_index: np.ndarray | None = None) -> tuple[Fixes, FixCovariance | None]:
+    """Fixes by stop ``rule`` and, with an error ``budget``, their first-order covariance (else
+    None); ``pose_index``: each pixel's element of ``pose`` (see :meth:`SensorModel.rays`)."""
     if budget is not None:
         from .accuracy.covariance import locate_with_covariance
 
-        return locate_with_covariance(sensor, pose, budget, pixels, rule)
-    return rule.locate(sensor, pose, pixels), None
+        return locate_with_covariance(sensor, pose if pose_index is None else pose.take(pose_index), budget,
+                                      pixels, rule)
+    if pose_index is None:
+        return rule.locate(sensor, pose, pixels), None
+    return rule.locate(sensor, pose, pixels, pose_index=pose_index), None
 
 
 def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float, camera):

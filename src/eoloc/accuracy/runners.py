@@ -2,7 +2,8 @@
 
 A *mapper* is ``mapper(fn, args_list, on_done=None) -> [fn(*args) for args in args_list]`` (in
 order); ``on_done(i)`` is called as item i finishes (progress bars). Monte Carlo chunks and sweep
-points are independent and seeded by their index, so every mapper gives identical results.
+points are independent and seeded by their index, and every mapper runs them on the compiled
+kernels (:func:`eoloc._backend.compiled`), so every mapper gives identical results.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
+
+from .._backend import compiled
 
 
 class Mapper(Protocol):
@@ -19,6 +22,7 @@ class Mapper(Protocol):
 
 def local_map(fn: Callable, args_list: Sequence[tuple], on_done: Callable[[int], None] | None = None) -> list:
     """Compute every item in this process, in order."""
+    compiled()
     out = []
     for i, args in enumerate(args_list):
         out.append(fn(*args))
@@ -47,7 +51,7 @@ class DaskMapper:
         # key, which the first call's release can take away from the second: 'lost dependencies')
         # (the value goes in a list: scatter takes a dict's keys as data keys, which would collide too)
         sent = {j: self.client.scatter([args_list[0][j]], broadcast=True, hash=False)[0] for j in shared}
-        futures = [self.client.submit(fn, *(sent.get(j, a[j]) for j in range(width)), pure=False)
+        futures = [self.client.submit(compiled_item, fn, *(sent.get(j, a[j]) for j in range(width)), pure=False)
                    for a in args_list]
         index = {f.key: i for i, f in enumerate(futures)}
         for fut in as_completed(futures):
@@ -56,6 +60,12 @@ class DaskMapper:
             if on_done is not None:
                 on_done(index[fut.key])
         return self.client.gather(futures)
+
+
+def compiled_item(fn: Callable, *args) -> Any:
+    """One item on a worker, on the compiled kernels as in :func:`local_map`."""
+    compiled()
+    return fn(*args)
 
 
 @contextlib.contextmanager

@@ -5,6 +5,8 @@ in COMMANDS below."""
 
 from __future__ import annotations
 
+import importlib.abc
+import sys
 from importlib import import_module
 
 from .main import main
@@ -33,4 +35,24 @@ COMMANDS = (  # (module, command object name): registered in this order
 for _module, _name in COMMANDS:
     main.add_command(getattr(import_module(f".{_module}", __name__), _name))
 
-__all__ = ["main"]
+
+
+def run() -> None:
+    """The ``eoloc`` command (console script and ``python -m eoloc``).
+
+    pyarrow imports pandas, where it happens to be installed, at its first conversion of a numpy
+    array (0.14 s). eoloc does not use pandas (it is not one of its dependencies), so the command
+    runs as it does where pandas is absent: an import of pandas in this process finds nothing."""
+    if "pandas" not in sys.modules:
+        sys.meta_path.insert(0, _WithoutPandas())
+    main(prog_name="eoloc")
+
+
+class _WithoutPandas(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "pandas" or name.startswith("pandas."):
+            raise ModuleNotFoundError(f"No module named {name!r} (the eoloc command does not use pandas)", name=name)
+        return None
+
+
+__all__ = ["main", "run"]

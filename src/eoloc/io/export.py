@@ -109,13 +109,16 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = recs.names or list(FIX_COLUMNS)
-    quote = any(v.dtype == object and _needs_quotes(v) for v in recs.columns.values())
+    text = {k: _csv_array(k, v) for k, v in recs.columns.items() if v.dtype == object}  # converted once
+    quote = any(needs_quotes(a) for a in text.values())
     options = pacsv.WriteOptions(include_header=False, quoting_style="needed" if quote else "none")
 
     def render(start: int) -> bytes:  # conversion, rounding and rendering of one chunk (GIL mostly released)
         part = recs.slice(start, start + CSV_CHUNK)
+        table = pa.table({k: text[k].slice(start, CSV_CHUNK) if k in text else _csv_array(k, v)
+                          for k, v in part.columns.items()})
         sink = pa.BufferOutputStream()
-        pacsv.write_csv(pa.table({k: _csv_array(k, v) for k, v in part.columns.items()}), sink, options)
+        pacsv.write_csv(table, sink, options)
         return sink.getvalue().to_pybytes()
 
     header = io.StringIO()
@@ -150,10 +153,15 @@ def _csv_array(name: str, v: np.ndarray):
     return pa.array(cells, type=pa.string())
 
 
-def _needs_quotes(v: np.ndarray) -> bool:
-    """Whether a text column has a cell that CSV must quote (a comma, quote or line break)."""
-    text = "".join(x for x in v.tolist() if isinstance(x, str))
-    return any(c in text for c in ',"\n\r')
+_QUOTED = np.zeros(256, dtype=bool)
+_QUOTED[[ord(c) for c in ',"\n\r']] = True  # the bytes that make CSV quote a cell
+
+
+def needs_quotes(text) -> bool:
+    """Whether a pyarrow string array has a cell that CSV must quote (a comma, quote or line
+    break): a look at its character bytes, whatever their cells."""
+    data = text.buffers()[2]
+    return data is not None and bool(_QUOTED[np.frombuffer(data, dtype=np.uint8)].any())
 
 
 def _fmt(key: str, v) -> str:

@@ -13,7 +13,6 @@ Detections, one row per target seen in an image:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -326,10 +325,16 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
 
         raise TableError(f"{det.path} gives {gives('detections')} and {tel.path} {gives('telemetry')}: nothing to "
                          "pair them by; add the same column (frame, or time_s) to both files")
-    if use_frames:
-        lookup = {int(f): i for i, f in enumerate(tel.columns["frame"]) if math.isfinite(f)}
-        for j, f in enumerate(det.columns["frame"]):
-            record[j] = lookup.get(int(f), -1) if math.isfinite(f) else -1
+    if use_frames:  # the last record of a frame number, as a dict of them would keep
+        ft, fd = tel.columns["frame"], det.columns["frame"]
+        good = np.flatnonzero(np.isfinite(ft))
+        order = good[np.argsort(ft[good].astype(np.int64), kind="stable")]
+        keys = ft[order].astype(np.int64)
+        wanted = np.isfinite(fd)
+        q = np.where(wanted, fd, 0.0).astype(np.int64)
+        if keys.size:
+            pos = np.maximum(np.searchsorted(keys, q, side="right") - 1, 0)
+            record = np.where(wanted & (keys[pos] == q), order[pos], -1)
     else:
         tt = tel.columns["time_s"]
         good = np.flatnonzero(np.isfinite(tt))

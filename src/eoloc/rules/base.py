@@ -42,9 +42,11 @@ class StopRule:
         """Where each ray ends, with the rule's own error sources perturbed by ``errors``."""
         raise NotImplementedError
 
-    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None) -> Fixes:
-        """Pixels (default: the principal point) of ``pose`` to the ground by this rule."""
-        return self.stop(sensor.rays(pose, pixels), sensor.ellipsoid)
+    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None,
+               pose_index: ArrayLike | None = None) -> Fixes:
+        """Pixels (default: the principal point) of ``pose`` to the ground by this rule
+        (``pose_index``: each pixel's element of ``pose``, see :meth:`SensorModel.rays`)."""
+        return self.stop(sensor.rays(pose, pixels, pose_index), sensor.ellipsoid)
 
     def terrain_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray | None:
         """Heights (ellipsoidal m) of the terrain map this rule stops on, at (lat, lon); None for

@@ -49,7 +49,9 @@ class FlatGround(StopRule):
         raise TypeError("FlatGround needs the camera and the main target's ray: use "
                         "eoloc.locate(sensor, pose, FlatGround(...), pixels)")
 
-    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None) -> Fixes:
+    def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None,
+               pose_index: ArrayLike | None = None) -> Fixes:
+        pose = pose if pose_index is None else pose.take(pose_index)
         return locate_flat(sensor, pose, self.main_range_m, pixels, main_pixel=self.main_pixel)
 
     @property

@@ -126,6 +126,14 @@ class CameraFrame:
     def R_ecef_cam(self) -> np.ndarray:
         return as_matrix(self.R)
 
+    def take(self, index) -> CameraFrame:
+        """The frames at ``index`` (targets that share a pose share its frame, computed once)."""
+        def pick(x):
+            return x if np.ndim(x) == 0 else np.asarray(x)[index]
+
+        return CameraFrame(tuple(pick(r) for r in self.R), pick(self.ox), pick(self.oy), pick(self.oz),
+                           pick(self.invalid))
+
 
 @dataclass(frozen=True)
 class SensorModel:
@@ -214,14 +222,19 @@ class SensorModel:
         u, v = split_pixels(pixels, self.camera)
         return self.camera.pixel_to_normalized(u, v, focal_scale=focal_scale)
 
-    def rays(self, pose: Pose, pixels: ArrayLike | None = None) -> Rays:
+    def rays(self, pose: Pose, pixels: ArrayLike | None = None, pose_index: ArrayLike | None = None) -> Rays:
         """Rays through ``pixels`` ((u, v) pair of arrays or an (..., 2) array; None = principal point).
         Pixels outside the image (see :meth:`Camera.outside`) are marked ``out_of_image``: every
-        stop rule gives them OUT_OF_IMAGE."""
+        stop rule gives them OUT_OF_IMAGE. ``pose_index``: each pixel's element of ``pose`` (many
+        targets per image: each image's camera frame is computed once), instead of broadcasting."""
+        frame = self.camera_frame(pose)
+        focal = pose.focal_scale
+        if pose_index is not None:
+            frame = frame.take(pose_index)
+            focal = focal if np.ndim(focal) == 0 else focal[pose_index]
         u, v = split_pixels(pixels, self.camera)
-        xn, yn = self.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
-        return self.rays_from(self.camera_frame(pose), xn, yn,
-                              self.camera.outside(u, v, xn, yn, focal_scale=pose.focal_scale))
+        xn, yn = self.camera.pixel_to_normalized(u, v, focal_scale=focal)
+        return self.rays_from(frame, xn, yn, self.camera.outside(u, v, xn, yn, focal_scale=focal))
 
     def ground_to_image(self, pose: Pose, p_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Project ECEF points (..., 3) into the image: pixels (u, v); NaN where the point is behind
