@@ -16,7 +16,7 @@ first call that would pass it loads numba, and from then on everything runs on n
 is of work, not of time, so the same calls make the same choices on every run (results do not
 depend on the machine's load). A one-shot command on a million targets at a height never loads
 numba; a server loads it within its first half second of work, and pays at most about twice the
-cheaper of the two. Work done in pieces (Monte Carlo, sweeps, batches: :func:`compiled`) and
+cheaper of the two. Work done in pieces (Monte Carlo, sweeps, batches: :func:`load_compiled`) and
 the compiled-only paths (the terrain march, orthorectification) load numba directly.
 """
 
@@ -188,7 +188,7 @@ def numba_loaded() -> bool:
     return "eoloc._nb" in sys.modules
 
 
-def compiled() -> None:
+def load_compiled() -> None:
     """Under ``auto``, load numba now where it is installed: for work done in pieces (Monte Carlo
     chunks, sweep points, batch files), which is large, and whose pieces must run the same
     kernels in this process and on any Dask worker."""

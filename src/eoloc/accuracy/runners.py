@@ -3,7 +3,7 @@
 A *mapper* is ``mapper(fn, args_list, on_done=None) -> [fn(*args) for args in args_list]`` (in
 order); ``on_done(i)`` is called as item i finishes (progress bars). Monte Carlo chunks and sweep
 points are independent and seeded by their index, and every mapper runs them on the compiled
-kernels (:func:`eoloc._backend.compiled`), so every mapper gives identical results.
+kernels (:func:`eoloc._backend.load_compiled`), so every mapper gives identical results.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
-from .._backend import compiled
+from .._backend import load_compiled
 
 
 class Mapper(Protocol):
@@ -22,7 +22,7 @@ class Mapper(Protocol):
 
 def local_map(fn: Callable, args_list: Sequence[tuple], on_done: Callable[[int], None] | None = None) -> list:
     """Compute every item in this process, in order."""
-    compiled()
+    load_compiled()
     out = []
     for i, args in enumerate(args_list):
         out.append(fn(*args))
@@ -64,7 +64,7 @@ class DaskMapper:
 
 def compiled_item(fn: Callable, *args) -> Any:
     """One item on a worker, on the compiled kernels as in :func:`local_map`."""
-    compiled()
+    load_compiled()
     return fn(*args)
 
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._backend import load_compiled
 from ..io.export import STATUS_NAMES, fix_records, utc_times, with_utc
 from ..result import Status
 
@@ -106,6 +107,7 @@ class PacketLocator:
         # the frame's own rays in normalised image coordinates: a camera whose pixels are them
         self.view = replace(self.sensor, camera=Camera(1, 1, 1.0, 1.0, 0.0, 0.0))
         self.frames: dict[tuple, object] = {}  # (hfov, vfov, width, height) -> the VMTI frame's sensor
+        load_compiled()  # a live session runs for long: numba loaded now, not in the first packet's time
 
     def locate(self, source: str, packet, known=None, *, late: bool = False) -> PacketUpdate:
         """The :class:`PacketUpdate` of ``packet`` (a :class:`~eoloc.io.klv.reader.KLVPacket`).

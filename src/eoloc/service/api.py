@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from starlette.requests import Request  # at module level: FastAPI resolves the routes' annotations here
 
+from .._backend import load_compiled
 from ..errors import EolocError
 from ..io.config import CameraConfig
 
@@ -302,6 +303,7 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
 
     @contextlib.asynccontextmanager
     async def lifespan(app):
+        load_compiled()  # a service runs for long: numba loaded at start, not in a request's time
         beat = None
         if hub is not None:
             hub.loop = asyncio.get_running_loop()
