@@ -13,29 +13,40 @@ Conventions (one per concept, everywhere in the library):
 - Results: :class:`Fixes` with a per-target :class:`Status`; NaN coordinates where not OK.
 """
 
+from importlib import import_module
+
 from ._backend import available_backends, get_backend, set_backend, threads, use_backend, use_threads
 from .errors import EolocError
-from .geodesy import WGS84, Ellipsoid, ecef_to_geodetic, geodetic_to_ecef
-from .result import Fixes, Status
-from .rules import (
-    AtHeight,
-    AtRange,
-    FlatGround,
-    MultiView,
-    OnDEM,
-    StopRule,
-    locate,
-    locate_dem,
-    locate_ellipsoid,
-    locate_flat,
-    locate_range,
-    stop_at_dem,
-    stop_at_ellipsoid,
-    stop_at_range,
-)
-from .sensor import AzElGimbal, Camera, FixedMount, Pose, Rays, RollPitchGimbal, SensorModel
-from .sensor.distortion import BrownConrady, DistortionRatio
-from .terrain import DEM, open_dem
+
+_WHERE = {  # the rest of the API, loaded on first use (so that `eoloc --help` loads no kernels)
+    "WGS84": "geodesy", "Ellipsoid": "geodesy", "ecef_to_geodetic": "geodesy", "geodetic_to_ecef": "geodesy",
+    "Fixes": "result", "Status": "result",
+    **dict.fromkeys(("AtHeight", "AtRange", "FlatGround", "MultiView", "OnDEM", "StopRule", "locate", "locate_dem",
+                     "locate_ellipsoid", "locate_flat", "locate_range", "stop_at_dem", "stop_at_ellipsoid",
+                     "stop_at_range"), "rules"),
+    **dict.fromkeys(("AzElGimbal", "Camera", "FixedMount", "Pose", "Rays", "RollPitchGimbal", "SensorModel"),
+                    "sensor"),
+    "BrownConrady": "sensor.distortion", "DistortionRatio": "sensor.distortion",
+    "DEM": "terrain", "open_dem": "terrain",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    try:  # a submodule (eoloc.geodesy, ...), as an eager package would have it after its imports
+        return import_module(f".{name}", __name__)
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
 
 __version__ = "0.1.0"
 

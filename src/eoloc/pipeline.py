@@ -13,7 +13,7 @@ import numpy as np
 from .errors import InputError
 from .io.table import Issue, Table
 from .io.telemetry import match_detections, telemetry_pose
-from .result import Fixes, Status, with_status
+from .result import RANGE_FROM_FILES, Fixes, Status, with_status
 from .rules import AtRange, StopRule, rule_from_options
 from .sensor import Pose, SensorModel
 
@@ -21,7 +21,6 @@ if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only
     from .accuracy.budget import ErrorBudget
     from .accuracy.covariance import FixCovariance
 
-RANGE_FROM_FILES = "files"
 
 
 @dataclass

@@ -5,7 +5,6 @@ in COMMANDS below."""
 
 from __future__ import annotations
 
-import importlib.abc
 import sys
 from importlib import import_module
 
@@ -48,7 +47,7 @@ def run() -> None:
     main(prog_name="eoloc")
 
 
-class _WithoutPandas(importlib.abc.MetaPathFinder):
+class _WithoutPandas:  # a meta path finder (importlib.abc would cost 30 ms of imports)
     def find_spec(self, name, path=None, target=None):
         if name == "pandas" or name.startswith("pandas."):
             raise ModuleNotFoundError(f"No module named {name!r} (the eoloc command does not use pandas)", name=name)

@@ -5,12 +5,15 @@ off it (a line every few seconds, so logs of long jobs show they are alive)."""
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import click
 
-from ..pipeline import RANGE_FROM_FILES
-from ..rules import StopRule, rule_from_options
+from ..result import RANGE_FROM_FILES
 from .main import err_console
+
+if TYPE_CHECKING:  # the rules load the sensor model and the kernels: imported when a command runs
+    from ..rules import StopRule
 
 
 def load_config(config_path):
@@ -38,6 +41,8 @@ def stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
                                "(ellipsoidal metres) or --dem FILE (terrain)")
     if range_opt == RANGE_FROM_FILES:
         return RANGE_FROM_FILES
+    from ..rules import rule_from_options
+
     return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
 
 

@@ -7,8 +7,7 @@ import json
 import click
 import numpy as np
 
-from ..pipeline import RANGE_FROM_FILES
-from ..result import Status
+from ..result import RANGE_FROM_FILES, Status
 from .common import load_config, open_dem, stop_rule
 from .main import console, err_console, fail, report_issues, warn
 from .options import (

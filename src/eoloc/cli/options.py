@@ -8,7 +8,7 @@ import math
 
 import click
 
-from ..pipeline import RANGE_FROM_FILES
+from ..result import RANGE_FROM_FILES
 
 CONVENTIONS = """
 \b

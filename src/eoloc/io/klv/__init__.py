@@ -2,10 +2,25 @@
 ST 0903 VMTI targets and ST 1607 nested sets, decoded tolerantly (:mod:`.reader`), mapped into
 eoloc tables (:mod:`.telemetry`), and written back (:mod:`.encode`)."""
 
-from .eg0104 import EG0104_KEY, encode_eg0104
-from .encode import build_uas_packet, encode_uas_packet, encode_vmti, frame_uas_packet, uas_items, with_target_location
-from .reader import UAS_KEY, KLVIssue, KLVPacket, KLVStream, StreamNote, decode_klv_bytes, read_klv
-from .telemetry import TAGS, klv_telemetry, vmti_detections
+from importlib import import_module
+
+_WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventions alone at start-up)
+    "EG0104_KEY": "eg0104", "encode_eg0104": "eg0104",
+    "build_uas_packet": "encode", "encode_uas_packet": "encode", "encode_vmti": "encode",
+    "frame_uas_packet": "encode", "uas_items": "encode", "with_target_location": "encode",
+    "UAS_KEY": "reader", "KLVIssue": "reader", "KLVPacket": "reader", "KLVStream": "reader",
+    "StreamNote": "reader", "decode_klv_bytes": "reader", "read_klv": "reader",
+    "TAGS": "telemetry", "klv_telemetry": "telemetry", "vmti_detections": "telemetry",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote", "build_uas_packet",
            "decode_klv_bytes", "encode_eg0104", "encode_uas_packet", "encode_vmti", "frame_uas_packet",
