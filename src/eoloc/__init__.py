@@ -13,9 +13,8 @@ Conventions (one per concept, everywhere in the library):
 - Results: :class:`Fixes` with a per-target :class:`Status`; NaN coordinates where not OK.
 """
 
-from importlib import import_module
-
 from ._backend import available_backends, get_backend, set_backend, threads, use_backend, use_threads
+from ._lazy import lazy_attributes
 from .errors import EolocError
 
 _WHERE = {  # the rest of the API, loaded on first use (so that `eoloc --help` loads no kernels)
@@ -31,17 +30,7 @@ _WHERE = {  # the rest of the API, loaded on first use (so that `eoloc --help` l
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    try:  # a submodule (eoloc.geodesy, ...), as an eager package would have it after its imports
-        return import_module(f".{name}", __name__)
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__name__}.{name}":
-            raise
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _WHERE)
 
 
 def __dir__() -> list[str]:

@@ -15,9 +15,10 @@ while numba is not loaded, a call runs on numpy if the numpy work counted so far
 first call that would pass it loads numba, and from then on everything runs on numba. The count
 is of work, not of time, so the same calls make the same choices on every run (results do not
 depend on the machine's load). A one-shot command on a million targets at a height never loads
-numba; a server loads it within its first half second of work, and pays at most about twice the
-cheaper of the two. Work done in pieces (Monte Carlo, sweeps, batches: :func:`load_compiled`) and
-the compiled-only paths (the terrain march, orthorectification) load numba directly.
+numba; a process that keeps computing loads it within its first half second of work, and pays at
+most about twice the cheaper of the two. Work done in pieces (Monte Carlo, sweeps, batches), the
+service and live sessions load it up front (:func:`load_compiled`), and the compiled-only paths
+(the terrain march, orthorectification) load it directly.
 """
 
 from __future__ import annotations
@@ -191,7 +192,8 @@ def numba_loaded() -> bool:
 def load_compiled() -> None:
     """Under ``auto``, load numba now where it is installed: for work done in pieces (Monte Carlo
     chunks, sweep points, batch files), which is large, and whose pieces must run the same
-    kernels in this process and on any Dask worker."""
+    kernels in this process and on any Dask worker; and for long-running processes (the service,
+    live sessions), so that the load is not paid in a request's or a packet's time."""
     if _state["name"] == "auto" and get_backend() == "numba":
         from . import _nb  # noqa: F401
 

@@ -22,7 +22,6 @@ if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only
     from .accuracy.covariance import FixCovariance
 
 
-
 @dataclass
 class Located:
     """Fixes, the per-target descriptive columns (time, frame, id, pixel, source line) and issues."""

@@ -1,7 +1,7 @@
 """Accuracy analysis: error budgets, Monte Carlo through the same kernels, CEP, sensitivities,
 first-order covariance of every fix."""
 
-from importlib import import_module
+from .._lazy import lazy_attributes
 
 # names -> their module, imported on first use (PEP 562): `from eoloc.accuracy import ErrorBudget`
 # must not load Monte Carlo, CEP quadrature and scipy (start-up of the command line)
@@ -39,14 +39,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
-    if name == "scenarios":
-        return import_module(".scenarios", __name__)
-    if name in _WHERE:
-        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _WHERE)
 
 
 __all__ = [

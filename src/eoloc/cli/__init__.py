@@ -35,7 +35,6 @@ for _module, _name in COMMANDS:
     main.add_command(getattr(import_module(f".{_module}", __name__), _name))
 
 
-
 def run() -> None:
     """The ``eoloc`` command (console script and ``python -m eoloc``).
 

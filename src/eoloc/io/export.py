@@ -110,7 +110,7 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     names = recs.names or list(FIX_COLUMNS)
     text = {k: _csv_array(k, v) for k, v in recs.columns.items() if v.dtype == object}  # converted once
-    quote = any(needs_quotes(a) for a in text.values())
+    quote = any(_needs_quotes(a) for a in text.values())
     options = pacsv.WriteOptions(include_header=False, quoting_style="needed" if quote else "none")
 
     def render(start: int) -> bytes:  # conversion, rounding and rendering of one chunk (GIL mostly released)
@@ -157,7 +157,7 @@ _QUOTED = np.zeros(256, dtype=bool)
 _QUOTED[[ord(c) for c in ',"\n\r']] = True  # the bytes that make CSV quote a cell
 
 
-def needs_quotes(text) -> bool:
+def _needs_quotes(text) -> bool:
     """Whether a pyarrow string array has a cell that CSV must quote (a comma, quote or line
     break): a look at its character bytes, whatever their cells."""
     data = text.buffers()[2]

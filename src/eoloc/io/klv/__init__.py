@@ -2,7 +2,7 @@
 ST 0903 VMTI targets and ST 1607 nested sets, decoded tolerantly (:mod:`.reader`), mapped into
 eoloc tables (:mod:`.telemetry`), and written back (:mod:`.encode`)."""
 
-from importlib import import_module
+from ..._lazy import lazy_attributes
 
 _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventions alone at start-up)
     "EG0104_KEY": "eg0104", "encode_eg0104": "eg0104",
@@ -14,12 +14,7 @@ _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventio
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _WHERE)
 
 
 __all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote", "build_uas_packet",
