@@ -12,12 +12,12 @@ import numpy as np
 
 from .errors import InputError
 from .io.table import Issue, Table
-from .io.telemetry import match_detections, telemetry_pose
 from .result import RANGE_FROM_FILES, Fixes, Status, with_status
 from .rules import AtRange, StopRule, rule_from_options
 from .sensor import Pose, SensorModel
 
 if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only when a budget is given
+    # (and the telemetry tables only by the functions that read them: one observation needs neither)
     from .accuracy.budget import ErrorBudget
     from .accuracy.covariance import FixCovariance
 
@@ -51,6 +51,8 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
     correction is added to every fix inside its trained range (the others are flagged); its
     per-fix columns come back in ``Located.compensation``.
     """
+    from .io.telemetry import match_detections, telemetry_pose
+
     if rule is None:
         rule = RANGE_FROM_FILES if isinstance(range_m, str) and range_m == RANGE_FROM_FILES else \
             rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
@@ -124,6 +126,7 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
         raise InputError("pose interpolation needs time_s in both the telemetry and the detections "
                          "(frame numbers alone give no time to interpolate at)")
+    from .io.telemetry import telemetry_pose
     from .sequence.interp import interpolate_poses
 
     ip = interpolate_poses(tt, telemetry_pose(tel, camera=camera), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
