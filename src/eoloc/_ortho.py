@@ -90,10 +90,14 @@ def project_cells(nodes, row_i0, row_a, step, col_a, dem_z, h_const, use_dem, fx
         # the DEM's lookups (gathers) in a loop of their own
         for j in range(n_nodes - 1):
             c0, c1 = node_span(j, step, n_nodes, cols)
-            for c in range(c0, c1):
-                b = col_a[c]
-                fr_row[c] = (1.0 - b) * line[j, 0] + b * line[j + 1, 0]  # the DEM's fractional row
-                fc_row[c] = (1.0 - b) * line[j, 1] + b * line[j + 1, 1]  # and column
+            # slices indexed from 0: numba wraps negative indices, so an index counted from c0 (not
+            # provably >= 0) made every load a gather and every store a scatter (13.3 -> 9.0 ms a frame)
+            ca, fr_s, fc_s = col_a[c0:c1], fr_row[c0:c1], fc_row[c0:c1]
+            fr_a, fr_b, fc_a, fc_b = line[j, 0], line[j + 1, 0], line[j, 1], line[j + 1, 1]
+            for k in range(c1 - c0):
+                b = ca[k]
+                fr_s[k] = (1.0 - b) * fr_a + b * fr_b  # the DEM's fractional row
+                fc_s[k] = (1.0 - b) * fc_a + b * fc_b  # and column
         if use_dem:
             for c in range(cols):
                 h_row[c], inside = grid_height_at(dem_z, fr_row[c], fc_row[c])
@@ -107,18 +111,19 @@ def project_cells(nodes, row_i0, row_a, step, col_a, dem_z, h_const, use_dem, fx
             pxa, pya, pza, qxa, qya, qza = line[j, 2], line[j, 3], line[j, 4], line[j, 5], line[j, 6], line[j, 7]
             pxb, pyb, pzb, qxb, qyb, qzb = (line[j + 1, 2], line[j + 1, 3], line[j + 1, 4], line[j + 1, 5],
                                             line[j + 1, 6], line[j + 1, 7])
-            for c in range(c0, c1):
-                b = col_a[c]
-                h = h_row[c]
+            ca, hs, xs_s, ys_s, rr_s = col_a[c0:c1], h_row[c0:c1], xs[c0:c1], ys[c0:c1], rr[c0:c1]
+            for k in range(c1 - c0):
+                b = ca[k]
+                h = hs[k]
                 X = (1.0 - b) * (pxa + h * qxa) + b * (pxb + h * qxb)
                 Y = (1.0 - b) * (pya + h * qya) + b * (pyb + h * qyb)
                 Z = (1.0 - b) * (pza + h * qza) + b * (pzb + h * qzb)
                 xn = X / Z
                 yn = Y / Z
                 ok = (Z > 0.0) & (xn * xn + yn * yn <= r2_max)  # False for NaN (no ground)
-                xs[c] = xn if ok else np.nan
-                ys[c] = yn if ok else np.nan
-                rr[c] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
+                xs_s[k] = xn if ok else np.nan
+                ys_s[k] = yn if ok else np.nan
+                rr_s[k] = np.sqrt(X * X + Y * Y + Z * Z) if ok else np.nan
         if dist_kind == 0:
             for c in range(cols):
                 ur[c] = fx * xs[c] + cx
@@ -166,9 +171,12 @@ def box_row(u, v, r, boxes):
         umax = -np.inf
         vmin = np.inf
         vmax = -np.inf
-        for c in range(bc * BLOCK, min(bc * BLOCK + BLOCK + 1, cols)):  # branch-free: NaN never wins
-            uc = u[r, c]
-            vc = v[r, c]
+        c0 = bc * BLOCK
+        ub = u[r, c0:min(c0 + BLOCK + 1, cols)]  # indexed from 0: vector loads (see project_cells)
+        vb = v[r, c0:min(c0 + BLOCK + 1, cols)]
+        for k in range(ub.size):  # branch-free: NaN never wins
+            uc = ub[k]
+            vc = vb[k]
             umin = uc if uc < umin else umin
             umax = uc if uc > umax else umax
             vmin = vc if vc < vmin else vmin
