@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._search import searchsorted
 from ..sensor.camera import Camera
 from ..sensor.model import Pose
 from .table import Column, Issue, Table, TableError, read_table
@@ -333,7 +334,7 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
         wanted = np.isfinite(fd)
         q = np.where(wanted, fd, 0.0).astype(np.int64)
         if keys.size:
-            pos = np.maximum(np.searchsorted(keys, q, side="right") - 1, 0)
+            pos = np.maximum(searchsorted(keys, q, side="right") - 1, 0)
             record = np.where(wanted & (keys[pos] == q), order[pos], -1)
     else:
         tt = tel.columns["time_s"]
@@ -342,7 +343,7 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
         ts = tt[order]
         td = det.columns["time_s"]
         if ts.size:
-            pos = np.clip(np.searchsorted(ts, td), 1, max(ts.size - 1, 1))
+            pos = np.clip(searchsorted(ts, td), 1, max(ts.size - 1, 1))
             left = np.clip(pos - 1, 0, ts.size - 1)
             right = np.clip(pos, 0, ts.size - 1)
             pick = np.where(np.abs(td - ts[left]) <= np.abs(ts[right] - td), left, right)
