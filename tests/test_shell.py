@@ -208,7 +208,9 @@ _text = st.text(alphabet=st.sampled_from(list('ab ,"\n\r;é')), max_size=6)
 
 
 @settings(max_examples=60, deadline=None)
-@given(floats=st.lists(st.floats(min_value=-1e9, max_value=1e9) | st.just(float("nan")), min_size=1, max_size=30),
+@given(floats=st.lists(st.floats(min_value=-1e9, max_value=1e9) | st.sampled_from([float("nan"), float("inf"),
+                                                                                   -float("inf")]),
+                      min_size=1, max_size=30),
        data=st.data())
 def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
     """Records -> write_csv (pyarrow, chunked on two threads) -> Python's csv module: every row
@@ -232,14 +234,80 @@ def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
     with path.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     assert [int(r["id"]) for r in rows] == list(range(n))
+    body = path.read_text(encoding="utf-8")
+    assert all(f"\n{i}," in body for i in range(n))  # numbers are never quoted, even where text is
     for r, x, t, b in zip(rows, floats, texts, flags, strict=True):
         for key, tol in (("lat_deg", 0.5e-9), ("range_m", 0.5e-4)):
             if np.isnan(x):
                 assert r[key] == ""
+            elif np.isinf(x):
+                assert float(r[key]) == x
             else:
                 assert abs(float(r[key]) - x) <= tol + 1e-15 * abs(x)
         assert r["note"] == ("" if t is None else t)
         assert r["ok"] == str(b)
+
+
+@settings(max_examples=40, deadline=None)
+@given(names=st.lists(_text, min_size=1, max_size=5, unique=True), data=st.data())
+def test_coded_text_columns_write_the_same_csv(tmp_path_factory, names, data):
+    """A text column also held as codes into its names (statuses, ids as read) writes the very
+    same CSV as the plain column: quoting of commas, quotes and line breaks included."""
+    from eoloc.io import export
+    from eoloc.io.records import Coded, Records
+
+    codes = np.array(data.draw(st.lists(st.integers(0, len(names) - 1), min_size=1, max_size=25)), dtype=np.int32)
+    table = np.array(names, dtype=object)
+    cols = {"id": np.arange(codes.size), "note": table[codes]}
+    tmp = tmp_path_factory.mktemp("coded")
+    old = export.CSV_CHUNK
+    export.CSV_CHUNK = 4
+    try:
+        plain = export.write_csv(tmp / "plain.csv", Records(cols))
+        coded = export.write_csv(tmp / "coded.csv", Records(cols, {"note": Coded(codes, table)}))
+    finally:
+        export.CSV_CHUNK = old
+    assert coded.read_bytes() == plain.read_bytes()
+
+
+def test_text_columns_as_read_are_coded_consistently(tmp_path):
+    """The reader's text columns come with their codes: names[codes] is the column, after the
+    records without a usable key are dropped too."""
+    from eoloc.io.telemetry import read_detections
+
+    path = tmp_path / "d.csv"
+    path.write_text("time_s,target_id,u_px,v_px\n1, A ,1,2\n2,B,3,4\n,A,5,6\n3,,7,8\n4,A,9,10\n")
+    det = read_detections(path)
+    assert det.columns["target_id"].tolist() == ["A", "B", "", "A"]
+    c = det.coded["target_id"]
+    assert (c.names[c.codes] == det.columns["target_id"]).all() and len(set(c.names.tolist())) == len(c.names)
+
+
+def _digits(number: str) -> str:
+    """The significant digits of a number's text (no sign, point, exponent or outer zeros)."""
+    return number.lower().split("e")[0].lstrip("-").replace(".", "").strip("0")
+
+
+@settings(max_examples=80, deadline=None)
+@given(floats=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=40),
+       ints=st.lists(st.integers(-2**63, 2**63 - 1), min_size=1, max_size=40), data=st.data())
+def test_number_text_is_the_shortest_round_trip(floats, ints, data):
+    """eoloc's number formatter (orjson's Ryu, cut into a pyarrow string array) against Python:
+    every finite float reads back as exactly the same double, with the same significant digits
+    as Python's repr (the shortest that do); every int64 as str(); cells marked missing are null."""
+    import pyarrow as pa
+
+    from eoloc.io.export import number_text
+
+    missing = np.array(data.draw(st.lists(st.booleans(), min_size=len(floats), max_size=len(floats))))
+    cells = number_text(np.array(floats), missing).to_pylist()
+    for cell, x, gone in zip(cells, floats, missing, strict=True):
+        if gone:
+            assert cell is None
+        else:
+            assert float(cell) == x and _digits(cell) == _digits(repr(x))
+    assert number_text(np.array(ints, dtype=np.int64)).to_pylist() == [str(i) for i in ints]
+    assert number_text(np.zeros(0)).to_pylist() == [] and isinstance(number_text(np.zeros(0)), pa.StringArray)
 
 
 def test_records_from_rows_round_trip_and_streamed_geojson(tmp_path):

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import InputError
+from .io.records import Coded
 from .io.table import Issue, Table
 from .result import RANGE_FROM_FILES, Fixes, Status, with_status
 from .rules import AtRange, StopRule, rule_from_options
@@ -31,6 +32,7 @@ class Located:
     issues: list[Issue] = field(default_factory=list)
     covariance: FixCovariance | None = None
     compensation: dict[str, np.ndarray] | None = None
+    coded: dict[str, Coded] = field(default_factory=dict)  # extra's text columns as read, coded
 
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | str | None = None, *,
@@ -68,6 +70,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
                  "target_id": np.full(len(tel), "centre", dtype=object), "u_px": u, "v_px": v}
         file_range = tel.columns["range_m"]
         range_source = (tel.path, tel.line)
+        coded = {}
     else:
         if interpolate:
             record, pose, more = _interpolated(tel, det, max_gap_s, time_offset_s, sensor.camera)
@@ -80,6 +83,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
                  "target_id": det.columns["target_id"], "u_px": u, "v_px": v}
         file_range = det.columns["range_m"]
         range_source = (det.path, det.line)
+        coded = {k: c for k, c in det.coded.items() if k in extra}
     has_pose = record >= 0
     pose_index = None
     if not (interpolate and det is not None):
@@ -103,7 +107,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         per_target = pose if pose_index is None else pose.take(pose_index)
         fixes, comp = compensate(compensation, sensor, per_target, fixes, (u, v), rule=rule)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
-    return Located(fixes, extra, issues, cov, comp)
+    return Located(fixes, extra, issues, cov, comp, coded)
 
 
 def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule, budget: ErrorBudget | None = None,

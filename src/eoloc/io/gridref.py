@@ -87,4 +87,4 @@ def with_grid_columns(records: Records, grids: Iterable[str]) -> Records:
             out[k] = v
         if k == "lon_deg":
             out.update(extra)
-    return Records(out)
+    return Records(out, records.coded)

@@ -10,22 +10,42 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+
+@dataclass(frozen=True)
+class Coded:
+    """A text column drawn from a few names, as codes into them: ``names[codes]`` are its values
+    (statuses, target ids). A writer that knows it renders each name once instead of every cell."""
+
+    codes: np.ndarray
+    names: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.codes)
+
+    def __getitem__(self, index) -> Coded:
+        return Coded(self.codes[index], self.names)
 
 
 @dataclass
 class Records:
     """Columns in output order: name -> 1-D array of one length (float64 with NaN where there is
-    no value, int, bool, or objects: strings and None)."""
+    no value, int, bool, or objects: strings and None). ``coded``: text columns that are also
+    held as :class:`Coded` (the column itself stays the reference)."""
 
     columns: dict[str, np.ndarray]
+    coded: dict[str, Coded] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         sizes = {len(v) for v in self.columns.values()}
         if len(sizes) > 1:
             raise ValueError(f"Records: columns of different lengths {sorted(sizes)}")
+        self.coded = {k: c for k, c in self.coded.items() if k in self.columns}  # dropped columns lose theirs
+        if any(len(c.codes) != len(self.columns[k]) for k, c in self.coded.items()):
+            raise ValueError("Records: a coded column's codes differ in length from the column")
 
     def __len__(self) -> int:
         return len(next(iter(self.columns.values()))) if self.columns else 0
@@ -57,7 +77,8 @@ class Records:
         return cls({k: column_of([row.get(k) for row in rows]) for k in names})
 
     def slice(self, start: int, stop: int) -> Records:
-        return Records({k: v[start:stop] for k, v in self.columns.items()})
+        return Records({k: v[start:stop] for k, v in self.columns.items()},
+                       {k: c[start:stop] for k, c in self.coded.items()})
 
     def rows(self, start: int = 0, stop: int | None = None) -> list[dict]:
         """Rows ``start:stop`` as dicts of plain Python values (None where there is no value)."""

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import TableError
+from .records import Coded
 
 
 @dataclass(frozen=True)
@@ -46,12 +47,15 @@ class Issue:
 
 @dataclass
 class Table:
-    """Columns as arrays (float, NaN where bad; str for text columns), source line numbers, issues."""
+    """Columns as arrays (float, NaN where bad; str for text columns), source line numbers, issues;
+    ``coded``: text columns also as codes into their distinct values (see
+    :class:`eoloc.io.records.Coded`)."""
 
     path: str
     columns: dict[str, np.ndarray]
     line: np.ndarray
     issues: list[Issue] = field(default_factory=list)
+    coded: dict[str, Coded] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.line.size)
@@ -61,7 +65,8 @@ class Table:
 
     def keep(self, mask: np.ndarray) -> Table:
         """The records where ``mask`` holds (issues kept)."""
-        return Table(self.path, {k: v[mask] for k, v in self.columns.items()}, self.line[mask], self.issues)
+        return Table(self.path, {k: v[mask] for k, v in self.columns.items()}, self.line[mask], self.issues,
+                     {k: c[mask] for k, c in self.coded.items()})
 
 
 def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple[str, ...],
@@ -114,10 +119,13 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
         numbers, issues = np.arange(2, 2 + _size(raw), dtype=np.int64), []
     n = numbers.size
     arrays: dict[str, np.ndarray] = {}
+    coded: dict[str, Coded] = {}
     cell_issues: list[tuple[int, int, str]] = []  # (record, column order, message)
     for order, col in enumerate(wanted):
         values = raw[col.name]
         if col.text:
+            if isinstance(values, Coded):
+                coded[col.name], values = values, values.names[values.codes]
             arrays[col.name] = values
             continue
         arrays[col.name] = _check_column(values, col, order, cell_issues)
@@ -135,7 +143,8 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     for rec, msgs in by_record.items():
         issues.extend(Issue(src, int(numbers[rec]), m) for m in msgs)
     issues.sort(key=lambda i: i.line)
-    return Table(src, {k: v[key_ok] for k, v in arrays.items()}, numbers[key_ok], issues)
+    table = Table(src, arrays, numbers, issues, coded)
+    return table if key_ok.all() else table.keep(key_ok)  # the usual case: no copies
 
 
 def _clean_file(data: bytes) -> tuple[list[str], int] | None:
@@ -302,14 +311,15 @@ def _arrow_clean(data: bytes, offset: int, width: int, index: dict[str, int],
     n = _size(raw)  # with empty lines kept as rows and short or long ones caught above, one row per line
     empty = np.ones(n, dtype=bool)  # a blank or comma-only line is a row with every cell empty
     for name, v in raw.items():
-        empty &= (v == "") if name in text else v[1]
+        empty &= (v.names == "")[v.codes] if name in text else v[1]
     return None if empty.any() else raw
 
 
 def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
                    longest: int, invalid_row=None) -> dict[str, np.ndarray]:
     """pyarrow's CSV reader on the clean lines: numeric columns as float64 (an empty cell NaN),
-    falling back to strings for a column with a cell that is not a number."""
+    falling back to strings for a column with a cell that is not a number; text columns as
+    :class:`Coded` (see :func:`text_cells`)."""
     import io
 
     import pyarrow as pa
@@ -339,7 +349,7 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
     for name, c in wanted.items():
         col = table.column(c)
         if name in text:
-            out[name] = pc.utf8_trim_whitespace(col.fill_null("")).to_numpy(zero_copy_only=False).astype(object)
+            out[name] = text_cells(col)
         elif name in as_text:
             try:
                 out[name] = (col.cast(pa.float64()).to_numpy(zero_copy_only=False),
@@ -351,6 +361,21 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
             out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False),  # nulls -> NaN
                          col.is_null().to_numpy(zero_copy_only=False))
     return out
+
+
+def text_cells(col) -> Coded:
+    """A pyarrow string column's stripped strings ("" for no value) as codes into its distinct
+    values: ids repeat, and a million cells of a few dozen ids then cost a hash instead of a
+    million Python strings."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    trimmed = pc.utf8_trim_whitespace(col.fill_null(""))
+    if isinstance(trimmed, pa.ChunkedArray):
+        trimmed = trimmed.combine_chunks()
+    coded = trimmed.dictionary_encode()
+    return Coded(coded.indices.to_numpy(zero_copy_only=False), coded.dictionary.to_numpy(zero_copy_only=False)
+                 .astype(object))
 
 
 def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

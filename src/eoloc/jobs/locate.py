@@ -74,8 +74,8 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule
     if nothing:
         notes.append(nothing)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
-    return LocateJob(fix_records(located.fixes, extra, after), located, extra, inputs.issues + located.issues, notes,
-                     summary, inputs.telemetry)
+    return LocateJob(fix_records(located.fixes, extra, after, coded=located.coded), located, extra,
+                     inputs.issues + located.issues, notes, summary, inputs.telemetry)
 
 
 def none_located(fixes, rule) -> str | None:
