@@ -98,7 +98,7 @@ def json_column(a, keep: np.ndarray | None = None) -> list:
     return out.tolist()
 
 
-CSV_CHUNK = 1 << 17  # rows rendered per pyarrow call (two at a time, one per core)
+CSV_CHUNK = 1 << 15  # rows rendered per pyarrow call (two at a time, one per core)
 
 
 def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:

@@ -63,6 +63,12 @@ class Table:
     def has(self, name: str) -> bool:
         return name in self.columns
 
+    def add_missing(self, names, fill=np.nan, dtype=np.float64) -> None:
+        """The columns among ``names`` that the file did not have, as ``fill`` (made only then)."""
+        for name in names:
+            if name not in self.columns:
+                self.columns[name] = np.full(len(self), fill, dtype=dtype)
+
     def keep(self, mask: np.ndarray) -> Table:
         """The records where ``mask`` holds (issues kept)."""
         return Table(self.path, {k: v[mask] for k, v in self.columns.items()}, self.line[mask], self.issues,
@@ -410,12 +416,29 @@ def _map_columns(header: list[str], columns: list[Column], path: str, what: str)
     return index
 
 
+_BIGGEST = float(np.finfo(np.float64).max)
+
+
+def _all_fine(values: np.ndarray, col: Column) -> bool:
+    """Whether every value is there, finite, in the column's range and (frames) whole."""
+    with np.errstate(invalid="ignore"):
+        if col.lo <= -_BIGGEST and col.hi >= _BIGGEST:
+            fine = bool(np.isfinite(values).all())
+        else:
+            inside = np.greater_equal(values, max(col.lo, -_BIGGEST))  # NaN and infinities fail
+            inside &= values <= min(col.hi, _BIGGEST)
+            fine = bool(inside.all())
+    return fine and (col.name != "frame" or bool((values == np.round(values)).all()))
+
+
 def _check_column(cells: tuple[np.ndarray, np.ndarray], col: Column, order: int,
                   issues: list[tuple[int, int, str]]) -> np.ndarray:
     """A column's values as float64, NaN where a cell is empty, not a number, not finite, out of
     the column's range or (frames) not whole; an issue for each such cell (empty ones only when
     the column is required)."""
     values, empty = cells
+    if values.dtype != object and _all_fine(values, col):  # the usual case: one or two passes, no copy
+        return values
     if values.dtype == object:  # some cells are not numbers: they are kept as strings
         words = np.array([isinstance(v, str) for v in values], dtype=bool)
         for i in np.flatnonzero(words):

@@ -108,10 +108,9 @@ def read_observations(path: str | Path) -> Table:
     sensor_roll_deg), u_px, v_px and the surveyed gcp_lat_deg, gcp_lon_deg, gcp_h_m (ellipsoidal).
     Without a flight column every row counts as one flight."""
     t = read_table(path, OBSERVATION_COLUMNS, what="calibration observations", key=("u_px", "v_px"))
-    t.columns.setdefault("flight", np.full(len(t), Path(path).stem, dtype=object))
-    t.columns.setdefault("sensor_roll_deg", np.zeros(len(t)))
-    for name in ("gimbal1_deg", "gimbal2_deg", "time_s"):
-        t.columns.setdefault(name, np.full(len(t), np.nan))
+    t.add_missing(["flight"], Path(path).stem, object)
+    t.add_missing(["sensor_roll_deg"], 0.0)
+    t.add_missing(["gimbal1_deg", "gimbal2_deg", "time_s"])
     return t
 
 
@@ -119,8 +118,7 @@ def read_gcps(path: str | Path) -> Table:
     """Read GCP observations: time_s or frame, gcp_id, u_px, v_px (where the GCP is in that image)
     and the GCP's surveyed lat_deg, lon_deg, h_m (ellipsoidal)."""
     t = read_table(path, GCP_COLUMNS, what="GCP observations", key=("time_s", "frame"))
-    for name in ("time_s", "frame"):
-        t.columns.setdefault(name, np.full(len(t), np.nan))
+    t.add_missing(["time_s", "frame"])
     return t
 
 
@@ -152,8 +150,7 @@ def read_telemetry(path: str | Path, *, geoid=None) -> Table:
                               "unknown; record not located")
                         for line in t.line[np.isnan(t.columns[zoom[0]])] if int(line) not in named)
         t.issues.sort(key=lambda i: i.line)
-    for name in ("gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "range_m", "time_s", "frame"):
-        t.columns.setdefault(name, np.full(len(t), np.nan))
+    t.add_missing(["gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "range_m", "time_s", "frame"])
     return _without_repeated_times(t)
 
 
@@ -267,8 +264,7 @@ def _without_repeated_times(t: Table) -> Table:
 def read_detections(path: str | Path) -> Table:
     """Read a detections CSV (time_s or frame, target_id, u_px, v_px[, range_m])."""
     t = read_table(path, DETECTION_COLUMNS, what="detections", key=("time_s", "frame"))
-    for name in ("range_m", "time_s", "frame"):
-        t.columns.setdefault(name, np.full(len(t), np.nan))
+    t.add_missing(["range_m", "time_s", "frame"])
     return t
 
 
