@@ -22,7 +22,7 @@ def main(n: int) -> list[str]:
     t_pi = best_time(lambda: inv.transform(x, y, z))
     lines = []
     for backend in eoloc.available_backends():  # "auto" is numba where installed
-        with eoloc.use_backend(backend):
+        with eoloc.use_backend(backend), eoloc.use_threads(1):  # one core, as PROJ
             t_f = best_time(lambda: eoloc.geodetic_to_ecef(lat, lon, h))
             t_i = best_time(lambda: eoloc.ecef_to_geodetic(x, y, z))
         lines.append(row(f"geodetic -> ECEF, {backend}, n={n:,}", f"{n / t_f / 1e6:.1f} M/s",

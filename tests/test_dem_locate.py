@@ -259,6 +259,32 @@ def test_march_split_over_threads_equals_one_thread(front_range):
         assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
 
 
+def test_numpy_kernels_split_over_threads_equal_one_thread():
+    """The numpy backend runs a large batch's kernels in chunks on several threads: the same
+    fixes, bit for bit, as on one thread (M3 and M1 with every pixel its own pose; rays above
+    the horizon and pixels outside the image among them)."""
+    from eoloc import use_threads
+    from eoloc._backend import CHUNK, use_backend
+    from eoloc.rules import AtHeight, AtRange
+
+    rng = np.random.default_rng(6)
+    n = 5 * CHUNK + 77
+    pose = Pose(45.0 + rng.normal(0, 0.1, n), 7.0, rng.uniform(500, 9000, n), rng.uniform(0, 360, n),
+                rng.normal(0, 3, n), rng.normal(0, 3, n), (rng.uniform(-180, 180, n), rng.uniform(-95, 10, n)))
+    pixels = (rng.uniform(-50, 1100, n), rng.uniform(-50, 800, n))
+    with use_backend("numpy"):
+        for rule in (AtHeight(120.0), AtRange(rng.uniform(100, 20000, n))):
+            with use_threads(1):
+                one = rule.locate(SENSOR, pose, pixels)
+            with use_threads(2):
+                many = rule.locate(SENSOR, pose, pixels)
+            seen = set(np.unique(one.status).tolist())
+            assert {Status.OK, Status.OUT_OF_IMAGE} <= seen and (Status.NO_INTERSECTION in seen or
+                                                                 isinstance(rule, AtRange))
+            for name in ("lat_deg", "lon_deg", "h_m", "range_m", "status"):
+                assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
+
+
 def test_in_chunks_covers_every_element_once_and_passes_errors_on():
     from eoloc._backend import MIN_CHUNK, in_chunks, use_threads
 
