@@ -43,6 +43,12 @@ def run() -> None:
     runs as it does where pandas is absent: an import of pandas in this process finds nothing."""
     if "pandas" not in sys.modules:
         sys.meta_path.insert(0, _WithoutPandas())
+    import gc
+
+    # what is loaded so far lives as long as the process: moved out of the collector's way, the
+    # full collections of the command's own imports and of the shutdown do not walk it again
+    # (~50 ms off `eoloc locate` of 10^6 detections, measured in 10 alternated pairs)
+    gc.freeze()
     main(prog_name="eoloc")
 
 
