@@ -307,6 +307,10 @@ def test_number_text_is_the_shortest_round_trip(floats, ints, data):
         else:
             assert float(cell) == x and _digits(cell) == _digits(repr(x))
     assert number_text(np.array(ints, dtype=np.int64)).to_pylist() == [str(i) for i in ints]
+    strided = np.repeat(np.array(floats), 2)[::2]  # not contiguous; and half precision, widened
+    assert number_text(strided).to_pylist() == number_text(np.array(floats)).to_pylist()
+    half = np.clip(np.array(floats), -6e4, 6e4).astype(np.float16)  # finite in half precision
+    assert [float(c) for c in number_text(half).to_pylist()] == half.astype(np.float64).tolist()
     same = np.full(len(floats) + 1, floats[0])  # one value throughout: made once
     assert number_text(same).to_pylist() == [number_text(same[:1]).to_pylist()[0]] * same.size
     assert number_text(np.zeros(0)).to_pylist() == [] and isinstance(number_text(np.zeros(0)), pa.StringArray)

@@ -189,17 +189,20 @@ def number_text(v: np.ndarray, missing: np.ndarray | None = None):
     import orjson
     import pyarrow as pa
 
+    v = np.ascontiguousarray(v, dtype=np.float64 if v.dtype.kind == "f" and v.itemsize < 4 else None)  # orjson's
     if missing is None and len(v) > 1 and v[0] == v[-1] and bool((v == v[0]).all()):
         one = orjson.dumps(v[:1], option=orjson.OPT_SERIALIZE_NUMPY).decode()[1:-1]
         return pa.DictionaryArray.from_arrays(arrow_ints(np.zeros(len(v), dtype=np.int8)), pa.array([one]))
     text = np.frombuffer(orjson.dumps(v, option=orjson.OPT_SERIALIZE_NUMPY), dtype=np.uint8)[1:-1]  # "[a,b,c]"
     comma = text == 44
     data = text[~comma]
-    offsets = np.empty(len(v) + 1, dtype=np.int32)  # cell i starts where i commas have been taken out
+    large = data.size >= 2**31  # 32-bit offsets hold up to 2 GB of text
+    offsets = np.empty(len(v) + 1, dtype=np.int64 if large else np.int32)  # cell i starts after i commas gone
     offsets[0], offsets[-1] = 0, data.size
-    np.subtract(np.flatnonzero(comma), np.arange(len(v) - 1), out=offsets[1:-1])
+    np.subtract(np.flatnonzero(comma), np.arange(len(v) - 1), out=offsets[1:-1], casting="unsafe")
     valid = None if missing is None else pa.py_buffer(np.packbits(~missing, bitorder="little"))
-    return pa.StringArray.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data), valid)
+    kind = pa.LargeStringArray if large else pa.StringArray
+    return kind.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data), valid)
 
 
 _QUOTED = np.zeros(256, dtype=bool)
