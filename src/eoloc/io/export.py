@@ -184,25 +184,31 @@ def arrow_ints(codes: np.ndarray):
 def number_text(v: np.ndarray, missing: np.ndarray | None = None):
     """Finite numbers (float or int) as a pyarrow string array in their shortest round-trip
     form (``missing``: cells left empty); one value throughout (a height surface's h_m) as a
-    dictionary of that one text. orjson's Ryu formatting: 2-3x faster than pyarrow's float
-    cast, and the same digits."""
+    dictionary of that one text. orjson's Ryu formatting (3x faster than pyarrow's float cast,
+    the same digits), cut into cells by pyarrow's split (GIL released)."""
     import orjson
     import pyarrow as pa
+    import pyarrow.compute as pc
 
     v = np.ascontiguousarray(v, dtype=np.float64 if v.dtype.kind == "f" and v.itemsize < 4 else None)  # orjson's
+    if len(v) == 0:
+        return pa.array([], type=pa.string())
     if missing is None and len(v) > 1 and v[0] == v[-1] and bool((v == v[0]).all()):
         one = orjson.dumps(v[:1], option=orjson.OPT_SERIALIZE_NUMPY).decode()[1:-1]
         return pa.DictionaryArray.from_arrays(arrow_ints(np.zeros(len(v), dtype=np.int8)), pa.array([one]))
-    text = np.frombuffer(orjson.dumps(v, option=orjson.OPT_SERIALIZE_NUMPY), dtype=np.uint8)[1:-1]  # "[a,b,c]"
-    comma = text == 44
-    data = text[~comma]
-    large = data.size >= 2**31  # 32-bit offsets hold up to 2 GB of text
-    offsets = np.empty(len(v) + 1, dtype=np.int64 if large else np.int32)  # cell i starts after i commas gone
-    offsets[0], offsets[-1] = 0, data.size
-    np.subtract(np.flatnonzero(comma), np.arange(len(v) - 1), out=offsets[1:-1], casting="unsafe")
-    valid = None if missing is None else pa.py_buffer(np.packbits(~missing, bitorder="little"))
-    kind = pa.LargeStringArray if large else pa.StringArray
-    return kind.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data), valid)
+    raw = orjson.dumps(v, option=orjson.OPT_SERIALIZE_NUMPY)  # b"[a,b,c]": ASCII
+    size = len(raw) - 2
+    large = size >= 2**31  # 32-bit offsets hold up to 2 GB of text
+    whole = pa.Array.from_buffers(pa.large_string() if large else pa.string(), 1,
+                                  [None, pa.py_buffer(np.array([0, size], dtype=np.int64 if large else np.int32)),
+                                   pa.py_buffer(memoryview(raw)[1:-1])])
+    cells = pc.split_pattern(whole, ",").flatten()
+    if missing is None:
+        return cells
+    _, offsets, data = cells.buffers()
+    present = np.concatenate([np.zeros(cells.offset, dtype=bool), ~missing])  # bits count from the buffers' start
+    return type(cells).from_buffers(len(v), offsets, data, pa.py_buffer(np.packbits(present, bitorder="little")),
+                                    offset=cells.offset)
 
 
 _QUOTED = np.zeros(256, dtype=bool)
