@@ -235,6 +235,20 @@ def test_a_spoilt_input_is_named_with_its_problem(files, tmp_path, command, slot
     assert r.exit_code == 2 and words in r.output and bad.name in r.output, (command, kind, r.output)
 
 
+def test_errors_come_in_order_while_the_detections_are_read_ahead(files, tmp_path):
+    """`eoloc locate` reads the detections on a thread while the config loads: a bad config is
+    still reported before bad detections, and bad telemetry before them too."""
+    det, det_words = _spoil("utf16", tmp_path)
+    cfg, cfg_words = _bad_config("bool-width", tmp_path)
+    tel = tmp_path / "no-telemetry.csv"
+    for spoilt, name, words in (({"det": det, "cfg": cfg}, cfg.name, cfg_words),
+                                ({"det": det, "tel": tel}, tel.name, "does not exist"),
+                                ({"det": det}, det.name, det_words)):
+        r = _run(_args("locate", files, tmp_path / "out", **spoilt))
+        assert r.exit_code == 2 and words in r.output and name in r.output, r.output
+        assert all(str(p.name) not in r.output for p in spoilt.values() if p.name != name), r.output
+
+
 # -- outputs and DEMs -------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("command", WRITES_OUT)

@@ -115,6 +115,11 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if interpolate and detections is None:
         fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     rule = stop_rule(range_opt, target_height, dem)
+    if detections is not None:  # read while the configuration loads (~70 ms off 10^6 detections)
+        from ..io.telemetry import read_detections
+        from ..jobs.inputs import Prefetch
+
+        detections = Prefetch(read_detections, detections)
     cfg = load_config(config_path)
     from ..io.export import json_safe
     from ..io.writers import write_layer

@@ -15,7 +15,7 @@ from ..io.table import Issue, Table
 from ..pipeline import Located, locate_tables
 from ..result import Status
 from ..rules import StopRule
-from .inputs import read_inputs
+from .inputs import Prefetch, read_inputs
 
 NONLINEARITY_LIMIT = 0.1  # past it the first-order covariance does not describe the fix
 
@@ -38,11 +38,12 @@ class LocateJob:
         return self.located.fixes.status_counts()
 
 
-def locate_files(cfg, telemetry: str | Path, detections: str | Path | None, rule: StopRule | str, *,
+def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch | None, rule: StopRule | str, *,
                  time_tolerance_s: float = 0.02, budget=None, interpolate: bool = False, max_gap_s: float = 0.5,
                  time_offset_s: float | None = None, compensation=None) -> LocateJob:
     """Locate every detection (or every record's image centre) of the files with the config's
-    sensor; ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
+    sensor (``detections``: a path, or a :class:`Prefetch` of one started before the config was
+    loaded); ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
     inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg,
                          msl_geoid=cfg.telemetry.msl_geoid)
     located = locate_tables(cfg.sensor(), inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
