@@ -31,7 +31,7 @@ def fix_records(fixes: Fixes, extra: Mapping[str, Sequence] | None = None,
     ``labels``); else the names, also coded. ``coded``: extra columns held as codes too (ids
     as read, see :attr:`eoloc.io.table.Table.coded`)."""
     cols = {k: np.asarray(v).ravel() for k, v in (extra or {}).items()}
-    cols.update({k: np.ravel(getattr(fixes, k)).astype(np.float64) for k in FIX_COLUMNS[:-1]})
+    cols.update({k: np.ravel(getattr(fixes, k)).astype(np.float64, copy=False) for k in FIX_COLUMNS[:-1]})
     codes = np.ravel(fixes.status)
     cols["status"] = codes.astype(np.int8) if status_codes else STATUS_NAMES[codes.astype(np.intp)]
     cols.update({k: np.asarray(v).ravel() for k, v in (after or {}).items()})
