@@ -1,12 +1,12 @@
 """The `eoloc` command line, in rasterio's `rio` shape: the group (:mod:`.main`), the options
 declared once (:mod:`.options`), one module per command. Commands render and write what the jobs
-(:mod:`eoloc.jobs`) return. Adding a command: a new module defining a click command, and one line
-in COMMANDS below."""
+(:mod:`eoloc.jobs`) return. Adding a command: a new module defining a click command named as
+the module, and one line in COMMANDS below; a command's module is imported only when it runs or
+is listed."""
 
 from __future__ import annotations
 
 import sys
-from importlib import import_module
 
 from .main import main
 
@@ -31,8 +31,8 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("demo", "demo"),
 )
 
-for _module, _name in COMMANDS:
-    main.add_command(getattr(import_module(f".{_module}", __name__), _name))
+for _module, _name in COMMANDS:  # each imported when it runs (or `eoloc --help` lists it)
+    main.add_lazy_command(_module, f"{__name__}.{_module}", _name)
 
 
 def run() -> None:

@@ -40,6 +40,25 @@ class Main(click.Group):
     used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
     anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
 
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.lazy: dict[str, tuple[str, str]] = {}  # command -> (module, object), imported on first use
+
+    def add_lazy_command(self, name: str, module: str, attr: str) -> None:
+        """Register command ``name`` as ``module.attr``, imported only when it is run or listed."""
+        self.lazy[name] = (module, attr)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*self.commands, *self.lazy})
+
+    def get_command(self, ctx: click.Context, name: str):
+        if name not in self.commands and name in self.lazy:
+            from importlib import import_module
+
+            module, attr = self.lazy[name]
+            self.add_command(getattr(import_module(module), attr), name)
+        return super().get_command(ctx, name)
+
     def main(self, args=None, *rest, **kwargs):
         args = sys.argv[1:] if args is None else list(args)
         return super().main(negative_values_kept(args), *rest, **kwargs)
