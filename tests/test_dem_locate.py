@@ -311,3 +311,27 @@ def test_eoloc_threads_must_be_a_number(monkeypatch):
         _backend.default_threads()
     monkeypatch.setenv("EOLOC_THREADS", "1")
     assert _backend.default_threads() == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 300), m=st.integers(0, 40_000), seed=st.integers(0, 2**32 - 1),
+       stray=st.sampled_from([0, -1, 1]))
+def test_take_all_equals_numpy_indexing(n, m, seed, stray):
+    """The threaded gather of several arrays at one index: numpy's fancy indexing, element for
+    element (negative indices from the end), and IndexError where numpy raises one."""
+    from eoloc import use_threads
+    from eoloc._backend import take_all
+
+    rng = np.random.default_rng(seed)
+    arrays = [rng.normal(size=n), rng.integers(-5, 5, n), rng.random(n) < 0.5]
+    index = rng.integers(-n, n, (m // 100, 100) if m >= 100 else m)
+    if stray and index.size:  # one index just out of range, either side
+        index.flat[rng.integers(index.size)] = n if stray > 0 else -n - 1
+    with use_threads(2):
+        if stray and index.size:
+            with pytest.raises(IndexError):
+                take_all(arrays, index)
+            return
+        got = take_all(arrays, index)
+    for a, g in zip(arrays, got, strict=True):
+        assert g.shape == index.shape and g.dtype == a.dtype and np.array_equal(g, a[index])

@@ -180,6 +180,31 @@ def in_chunks(n: int, work: Callable[[int, int], None]) -> None:
             f.result()
 
 
+def take_all(arrays: list[np.ndarray], index: np.ndarray) -> list[np.ndarray]:
+    """``[a[index] for a in arrays]`` for 1-D arrays of one length and an integer index (negative
+    counts from the end; out of range: IndexError), the index cut into slices taken in turn by
+    the threads: numpy's take releases the GIL, and all the arrays are gathered at one slice
+    while its indices are in cache (13 arrays of 10^5 at 10^6 indices: 11-14 ms, 23-41 ms as
+    13 fancy indexings)."""
+    index = np.asarray(index)
+    flat = index.reshape(-1)
+    n = len(arrays[0]) if arrays else 0
+    if flat.size:
+        lo, hi = int(flat.min()), int(flat.max())
+        if lo < -n or hi >= n:
+            raise IndexError(f"index {lo if lo < -n else hi} is out of bounds for axis 0 with size {n}")
+        if lo < 0:
+            flat = np.where(flat < 0, flat + n, flat)
+    outs = [np.empty(flat.size, dtype=a.dtype) for a in arrays]
+
+    def part(i: int, j: int) -> None:
+        for a, out in zip(arrays, outs, strict=True):
+            np.take(a, flat[i:j], out=out[i:j], mode="clip")  # in range (checked above): no per-element check
+
+    in_chunks(flat.size, part)
+    return [o.reshape(index.shape) for o in outs]
+
+
 CHUNK = 16384  # numpy path: temporaries of this many elements stay in cache (2x faster than whole arrays)
 NUMBA_LOAD_NS = 5e8  # numpy work (ns) a process does under auto before it loads numba (see the module doc)
 _rent = {"spent_ns": 0.0}

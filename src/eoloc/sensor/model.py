@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _kernels
-from .._backend import get_backend, run
+from .._backend import get_backend, run, take_all
 from ..geodesy import WGS84, Ellipsoid, as_matrix
 from ..rotation import small_angle_rotation
 from .camera import Camera
@@ -128,11 +128,15 @@ class CameraFrame:
 
     def take(self, index) -> CameraFrame:
         """The frames at ``index`` (targets that share a pose share its frame, computed once)."""
-        def pick(x):
-            return x if np.ndim(x) == 0 else np.asarray(x)[index]
-
-        return CameraFrame(tuple(pick(r) for r in self.R), pick(self.ox), pick(self.oy), pick(self.oz),
-                           pick(self.invalid))
+        parts = [np.asarray(x) for x in (*self.R, self.ox, self.oy, self.oz, self.invalid)]
+        index = np.asarray(index)
+        arrays = [x for x in parts if x.ndim]
+        if index.dtype.kind in "iu" and all(x.ndim == 1 and len(x) == len(arrays[0]) for x in arrays):  # threads
+            taken = iter(take_all(arrays, index))
+            out = [x if not x.ndim else next(taken) for x in parts]
+        else:
+            out = [x if not x.ndim else x[index] for x in parts]
+        return CameraFrame(tuple(out[:9]), *out[9:])
 
 
 @dataclass(frozen=True)
