@@ -158,7 +158,11 @@ def _csv_array(name: str, v: np.ndarray, numbers_as_text: bool = True):
             return pc.round(pa.array(v, mask=nan), decimals)
         if nan.all():
             return pa.nulls(len(v), pa.string())
-        return number_text(np.round(v, decimals), nan if nan.any() else None)
+        rounded = np.round(v, decimals)
+        whole = np.where(nan, 0.0, rounded)
+        if bool((whole == np.trunc(whole)).all()) and float(np.abs(whole).max()) < 2.0**53:  # frames, heights
+            return number_text(whole.astype(np.int64), nan if nan.any() else None)  # "17", not "17.0"
+        return number_text(rounded, nan if nan.any() else None)
     if v.dtype.kind in "iu":
         return number_text(v) if numbers_as_text else pa.array(v)
     if v.dtype.kind == "b":
