@@ -242,7 +242,7 @@ def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
                 assert r[key] == ""
             elif np.isinf(x):
                 assert float(r[key]) == x
-            elif all(float(y) == round(float(y)) for y in floats if np.isfinite(y)):  # a column of whole numbers
+            elif all(not np.isinf(y) and float(y) == round(float(y)) for y in floats if not np.isnan(y)):  # whole
                 assert r[key] == str(round(x))
             else:
                 assert abs(float(r[key]) - x) <= tol + 1e-15 * abs(x)
@@ -283,6 +283,25 @@ def test_text_columns_as_read_are_coded_consistently(tmp_path):
     assert det.columns["target_id"].tolist() == ["A", "B", "", "A"]
     c = det.coded["target_id"]
     assert (c.names[c.codes] == det.columns["target_id"]).all() and len(set(c.names.tolist())) == len(c.names)
+
+
+def test_whole_number_columns_are_written_alike_in_every_chunk(tmp_path):
+    """A float column of whole numbers is written as integers in every chunk (no value: empty);
+    a column with one fraction, past its first chunk, keeps the float form everywhere."""
+    from eoloc.io import export
+    from eoloc.io.records import Records
+
+    frame = np.array([3.0, np.nan, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0])
+    late = np.array([1.0] * 8 + [1.5])
+    old = export.CSV_CHUNK
+    export.CSV_CHUNK = 4
+    try:
+        path = export.write_csv(tmp_path / "w.csv", Records({"frame": frame, "t_s": late}))
+    finally:
+        export.CSV_CHUNK = old
+    rows = [line.split(",") for line in path.read_text().splitlines()[1:]]
+    assert [r[0] for r in rows] == ["3", "", "4", "5", "6", "7", "8", "9", "10"]
+    assert [r[1] for r in rows] == ["1.0"] * 8 + ["1.5"]
 
 
 def _digits(number: str) -> str:

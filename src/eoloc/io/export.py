@@ -118,17 +118,22 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
     names = recs.names or list(FIX_COLUMNS)
     text = {k: _csv_array(k, v) for k, v in recs.columns.items() if v.dtype == object and k not in recs.coded}
     coded = {k: pa.array(c.names.tolist(), type=pa.string()) for k, c in recs.coded.items()}
-    in_use = [pa.array([x for x, n in zip(c.names.tolist(), np.bincount(c.codes, minlength=len(c.names)).tolist(),
-                                          strict=True) if n], type=pa.string()) for c in recs.coded.values()]
+    in_use = [pa.array(c.names[np.bincount(c.codes, minlength=len(c.names)) > 0].tolist(), type=pa.string())
+              for c in recs.coded.values()]
     # a cell to quote makes pyarrow quote every text cell: numbers then stay numbers
     quote = any(_needs_quotes(a) for a in [*text.values(), *in_use])
     options = pacsv.WriteOptions(include_header=False, quoting_style="needed" if quote else "none")
+    # float columns of whole numbers (frames, times, heights) are written as integers, the whole
+    # column alike (its first chunk decides for most columns: one with a fraction is not whole)
+    whole = {k for k, v in recs.columns.items()
+             if v.dtype.kind == "f" and _whole(k, v[:CSV_CHUNK]) and _whole(k, v)}
 
     def render(start: int) -> pa.Buffer:  # conversion, rounding and rendering of one chunk
         part = recs.slice(start, start + CSV_CHUNK)
         table = pa.table({k: pa.DictionaryArray.from_arrays(arrow_ints(part.coded[k].codes), coded[k]) if k in coded
                           else text[k].slice(start, CSV_CHUNK) if k in text
-                          else _csv_array(k, v, numbers_as_text=not quote) for k, v in part.columns.items()})
+                          else _csv_array(k, v, numbers_as_text=not quote, whole=k in whole)
+                          for k, v in part.columns.items()})
         sink = pa.BufferOutputStream()
         pacsv.write_csv(table, sink, options)
         return sink.getvalue()
@@ -144,24 +149,34 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping]) -> Path:
     return path
 
 
-def _csv_array(name: str, v: np.ndarray, numbers_as_text: bool = True):
+def _decimals(name: str) -> int:
+    return 9 if name.endswith("_deg") else 4
+
+
+def _whole(name: str, v: np.ndarray) -> bool:
+    """Whether a float column, rounded as written, holds only whole numbers (or no value) that
+    int64 writes exactly."""
+    r = np.round(v[~np.isnan(v)], _decimals(name))
+    return bool((np.abs(r) < 2.0**53).all() and (r == np.trunc(r)).all())  # an infinity is not whole
+
+
+def _csv_array(name: str, v: np.ndarray, numbers_as_text: bool = True, whole: bool = False):
     """One column as pyarrow renders it in CSV: numbers rounded (no value: empty), booleans as
     True/False, anything else as text. ``numbers_as_text``: numbers made text by
-    :func:`number_text` (else pyarrow formats them: slower, but unquoted where text is quoted)."""
+    :func:`number_text` (else pyarrow formats them: slower, but unquoted where text is quoted);
+    ``whole``: a float column of whole numbers, written as integers ("17", not "17.0")."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
     if v.dtype.kind == "f":
-        decimals = 9 if name.endswith("_deg") else 4
         nan = np.isnan(v)
         if not numbers_as_text or np.isinf(v).any():  # JSON, so orjson, has no infinity
-            return pc.round(pa.array(v, mask=nan), decimals)
+            return pc.round(pa.array(v, mask=nan), _decimals(name))
         if nan.all():
             return pa.nulls(len(v), pa.string())
-        rounded = np.round(v, decimals)
-        whole = np.where(nan, 0.0, rounded)
-        if bool((whole == np.trunc(whole)).all()) and float(np.abs(whole).max()) < 2.0**53:  # frames, heights
-            return number_text(whole.astype(np.int64), nan if nan.any() else None)  # "17", not "17.0"
+        rounded = np.round(v, _decimals(name))
+        if whole:
+            rounded = np.where(nan, 0.0, rounded).astype(np.int64)
         return number_text(rounded, nan if nan.any() else None)
     if v.dtype.kind in "iu":
         return number_text(v) if numbers_as_text else pa.array(v)
