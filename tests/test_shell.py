@@ -216,7 +216,7 @@ def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
     """Records -> write_csv (pyarrow, chunked on two threads) -> Python's csv module: every row
     there, text cells exact (commas, quotes, line breaks quoted), numbers within the stated
     rounding (9 decimals for *_deg, 4 otherwise), no value as an empty cell, booleans True/False."""
-    from eoloc.io import export
+    from eoloc.io import csvfile
     from eoloc.io.records import Records
 
     n = len(floats)
@@ -225,12 +225,12 @@ def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
     recs = Records({"id": np.arange(n), "lat_deg": np.array(floats), "range_m": np.array(floats),
                     "note": np.array(texts, dtype=object), "ok": np.array(flags)})
     path = tmp_path_factory.mktemp("w") / "r.csv"
-    old = export.CSV_CHUNK
-    export.CSV_CHUNK = 7  # several chunks, rendered in parallel and written in order
+    old = csvfile.CSV_CHUNK
+    csvfile.CSV_CHUNK = 7  # several chunks, rendered in parallel and written in order
     try:
-        export.write_csv(path, recs)
+        csvfile.write_csv(path, recs)
     finally:
-        export.CSV_CHUNK = old
+        csvfile.CSV_CHUNK = old
     with path.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     assert [int(r["id"]) for r in rows] == list(range(n))
@@ -255,20 +255,20 @@ def test_columnar_csv_reads_back_as_written(tmp_path_factory, floats, data):
 def test_coded_text_columns_write_the_same_csv(tmp_path_factory, names, data):
     """A text column also held as codes into its names (statuses, ids as read) writes the very
     same CSV as the plain column: quoting of commas, quotes and line breaks included."""
-    from eoloc.io import export
+    from eoloc.io import csvfile
     from eoloc.io.records import Coded, Records
 
     codes = np.array(data.draw(st.lists(st.integers(0, len(names) - 1), min_size=1, max_size=25)), dtype=np.int32)
     table = np.array(names, dtype=object)
     cols = {"id": np.arange(codes.size), "note": table[codes]}
     tmp = tmp_path_factory.mktemp("coded")
-    old = export.CSV_CHUNK
-    export.CSV_CHUNK = 4
+    old = csvfile.CSV_CHUNK
+    csvfile.CSV_CHUNK = 4
     try:
-        plain = export.write_csv(tmp / "plain.csv", Records(cols))
-        coded = export.write_csv(tmp / "coded.csv", Records(cols, {"note": Coded(codes, table)}))
+        plain = csvfile.write_csv(tmp / "plain.csv", Records(cols))
+        coded = csvfile.write_csv(tmp / "coded.csv", Records(cols, {"note": Coded(codes, table)}))
     finally:
-        export.CSV_CHUNK = old
+        csvfile.CSV_CHUNK = old
     assert coded.read_bytes() == plain.read_bytes()
 
 
@@ -285,20 +285,79 @@ def test_text_columns_as_read_are_coded_consistently(tmp_path):
     assert (c.names[c.codes] == det.columns["target_id"]).all() and len(set(c.names.tolist())) == len(c.names)
 
 
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), n=st.integers(1, 12), width=st.integers(1, 6))
+def test_csv_reads_back_in_any_column_order(tmp_path_factory, data, n, width):
+    """Any order of column kinds (ints, floats with gaps, whole floats, one value throughout, no
+    value at all, text with commas/quotes/line breaks, booleans, coded text), the last column and
+    a lone column included: Python's csv module reads back every row and cell as meant."""
+    from eoloc.io import csvfile
+    from eoloc.io.records import Coded, Records
+
+    kinds = data.draw(st.lists(st.sampled_from(["int", "float", "whole", "same", "none", "text", "bool", "coded"]),
+                               min_size=width, max_size=width))
+    cols, coded, want = {}, {}, {}
+    for i, kind in enumerate(kinds):
+        name = f"c{i}_deg" if i % 2 else f"c{i}"
+        if kind == "int":
+            v = np.array(data.draw(st.lists(st.integers(-2**62, 2**62), min_size=n, max_size=n)), dtype=np.int64)
+            want[name] = [str(x) for x in v.tolist()]
+        elif kind in ("float", "whole", "same", "none"):
+            xs = data.draw(st.lists(st.floats(-1e6, 1e6) | st.just(float("nan")), min_size=n, max_size=n))
+            v = {"float": np.array(xs), "whole": np.round(np.array(xs)), "same": np.full(n, 2.5),
+                 "none": np.full(n, np.nan)}[kind]
+            r = np.round(v, csvfile.decimals(name))
+            whole = csvfile._whole(v, csvfile.decimals(name))
+            want[name] = [None if np.isnan(x) else (float(x), whole) for x in r.tolist()]
+        elif kind == "bool":
+            v = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)))
+            want[name] = [str(x) for x in v.tolist()]
+        else:
+            texts = data.draw(st.lists(_text, min_size=n, max_size=n))
+            v = np.array(texts, dtype=object)
+            if kind == "coded":
+                table, codes = np.unique(np.array(texts, dtype=object).astype(str), return_inverse=True)
+                coded[name] = Coded(codes.astype(np.int32), table.astype(object))
+            want[name] = texts
+        cols[name] = v
+    tmp = tmp_path_factory.mktemp("order")
+    old = csvfile.CSV_CHUNK
+    csvfile.CSV_CHUNK = 5
+    try:
+        path = csvfile.write_csv(tmp / "o.csv", Records(cols, coded))
+    finally:
+        csvfile.CSV_CHUNK = old
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == list(cols) and len(rows) == n + 1
+    for j, row in enumerate(rows[1:]):
+        assert len(row) == len(cols)
+        for cell, name in zip(row, cols, strict=True):
+            expected = want[name][j]
+            if expected is None:
+                assert cell == ""
+            elif isinstance(expected, tuple):
+                value, whole = expected
+                assert float(cell) == value and (("." not in cell and "e" not in cell) if whole else True)
+            else:
+                assert cell == expected
+    assert path.read_bytes().endswith(b"\n")  # a blank line would have failed the row count above
+
+
 def test_whole_number_columns_are_written_alike_in_every_chunk(tmp_path):
     """A float column of whole numbers is written as integers in every chunk (no value: empty);
     a column with one fraction, past its first chunk, keeps the float form everywhere."""
-    from eoloc.io import export
+    from eoloc.io import csvfile
     from eoloc.io.records import Records
 
     frame = np.array([3.0, np.nan, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0])
     late = np.array([1.0] * 8 + [1.5])
-    old = export.CSV_CHUNK
-    export.CSV_CHUNK = 4
+    old = csvfile.CSV_CHUNK
+    csvfile.CSV_CHUNK = 4
     try:
-        path = export.write_csv(tmp_path / "w.csv", Records({"frame": frame, "t_s": late}))
+        path = csvfile.write_csv(tmp_path / "w.csv", Records({"frame": frame, "t_s": late}))
     finally:
-        export.CSV_CHUNK = old
+        csvfile.CSV_CHUNK = old
     rows = [line.split(",") for line in path.read_text().splitlines()[1:]]
     assert [r[0] for r in rows] == ["3", "", "4", "5", "6", "7", "8", "9", "10"]
     assert [r[1] for r in rows] == ["1.0"] * 8 + ["1.5"]
@@ -312,29 +371,36 @@ def _digits(number: str) -> str:
 @settings(max_examples=80, deadline=None)
 @given(floats=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=40),
        ints=st.lists(st.integers(-2**63, 2**63 - 1), min_size=1, max_size=40), data=st.data())
-def test_number_text_is_the_shortest_round_trip(floats, ints, data):
-    """eoloc's number formatter (orjson's Ryu, cut into a pyarrow string array) against Python:
-    every finite float reads back as exactly the same double, with the same significant digits
-    as Python's repr (the shortest that do); every int64 as str(); cells marked missing are null."""
+def test_number_cells_are_the_shortest_round_trip(floats, ints, data):
+    """eoloc's number formatter (orjson's Ryu, its output made a pyarrow string array of cells,
+    each followed by its separator) against Python: every finite float reads back as exactly the
+    same double, with the same significant digits as Python's repr (the shortest that do); every
+    int64 as str(); cells marked missing are null; one value throughout is one scalar."""
     import pyarrow as pa
 
-    from eoloc.io.export import number_text
+    from eoloc.io.csvfile import number_cells
+
+    def texts(cells, sep=","):
+        out = cells.to_pylist()
+        assert all(c is None or c.endswith(sep) for c in out)
+        return [None if c is None else c[:-1] for c in out]
 
     missing = np.array(data.draw(st.lists(st.booleans(), min_size=len(floats), max_size=len(floats))))
-    cells = number_text(np.array(floats), missing).to_pylist()
-    for cell, x, gone in zip(cells, floats, missing, strict=True):
+    for cell, x, gone in zip(texts(number_cells(np.array(floats), ",", missing)), floats, missing, strict=True):
         if gone:
             assert cell is None
         else:
             assert float(cell) == x and _digits(cell) == _digits(repr(x))
-    assert number_text(np.array(ints, dtype=np.int64)).to_pylist() == [str(i) for i in ints]
-    strided = np.repeat(np.array(floats), 2)[::2]  # not contiguous; and half precision, widened
-    assert number_text(strided).to_pylist() == number_text(np.array(floats)).to_pylist()
-    half = np.clip(np.array(floats), -6e4, 6e4).astype(np.float16)  # finite in half precision
-    assert [float(c) for c in number_text(half).to_pylist()] == half.astype(np.float64).tolist()
-    same = np.full(len(floats) + 1, floats[0])  # one value throughout: made once
-    assert number_text(same).to_pylist() == [number_text(same[:1]).to_pylist()[0]] * same.size
-    assert number_text(np.zeros(0)).to_pylist() == [] and isinstance(number_text(np.zeros(0)), pa.StringArray)
+    many = np.array([*ints, ints[0] + 1 if ints[0] < 2**63 - 1 else 0], dtype=np.int64)  # two values at least
+    assert texts(number_cells(many, "\n"), "\n") == [str(i) for i in many.tolist()]
+    two = np.array([*floats, 1.5, 2.5])  # two values at least: an array, not one scalar
+    strided = np.repeat(two, 2)[::2]  # not contiguous; and half precision, widened
+    assert number_cells(strided).to_pylist() == number_cells(two).to_pylist()
+    half = np.clip(two, -6e4, 6e4).astype(np.float16)  # finite in half precision
+    assert [float(c) for c in texts(number_cells(half))] == half.astype(np.float64).tolist()
+    same = number_cells(np.full(len(floats) + 1, floats[0]))  # one value throughout: made once
+    assert isinstance(same, pa.StringScalar) and float(same.as_py()[:-1]) == floats[0]
+    assert number_cells(np.zeros(0)).to_pylist() == [] and isinstance(number_cells(np.zeros(0)), pa.StringArray)
 
 
 def test_records_from_rows_round_trip_and_streamed_geojson(tmp_path):
@@ -355,3 +421,16 @@ def test_records_from_rows_round_trip_and_streamed_geojson(tmp_path):
     assert doc["features"] == fix_features(recs)
     assert doc["features"][0]["geometry"]["coordinates"] == [7.0, 45.0, 600.0]
     assert doc["features"][1]["geometry"] is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(codes=st.lists(st.integers(0, 8), max_size=60))
+def test_status_counts_count_every_status(codes):
+    """Fixes.status_counts against Python's Counter: the statuses that occur, each counted."""
+    from collections import Counter
+
+    from eoloc.result import Fixes, Status
+
+    n = len(codes)
+    fixes = Fixes(np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.array(codes, dtype=np.int8))
+    assert fixes.status_counts() == {Status(c).name: k for c, k in Counter(codes).items()}

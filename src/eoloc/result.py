@@ -80,8 +80,8 @@ class Fixes:
 
     def status_counts(self) -> dict[str, int]:
         """How many targets ended with each status (only those that occur)."""
-        codes, counts = np.unique(np.asarray(self.status).ravel(), return_counts=True)
-        return {Status(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
+        counts = np.bincount(np.asarray(self.status).ravel().astype(np.intp), minlength=len(Status))  # no sort
+        return {Status(int(c)).name: int(counts[c]) for c in np.flatnonzero(counts)}
 
 
 def mask_invalid(fixes_arrays: tuple, invalid: np.ndarray, status: Status = Status.INVALID_INPUT) -> tuple:

@@ -15,14 +15,15 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
-from .export import fix_features, write_csv, write_feature_collection, write_fix_geojson
+from .csvfile import write_csv
+from .export import FIX_COLUMNS, fix_features, write_feature_collection, write_fix_geojson
 from .records import Records
 
 DEFAULT_FORMATS = ("csv", "geojson")
 
 
 def _csv(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
-    return write_csv(path.with_suffix(".csv"), records)
+    return write_csv(path.with_suffix(".csv"), records, columns=FIX_COLUMNS)
 
 
 def _geojson(path: Path, records: Records, features: list[dict] | None, name: str) -> Path:
