@@ -143,7 +143,7 @@ def test_file_mode_json_kml_cot_and_utc_times(tmp_path):
 
 RUN_COMMAND = """
 import atexit, sys
-atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb")
+atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb", "rich.live")
                                                  if sys.modules.get(m) is not None), file=sys.stderr))
 from eoloc.cli import run
 sys.argv = ["eoloc", *sys.argv[1:]]
@@ -154,7 +154,8 @@ run()
 def test_the_command_loads_neither_pandas_nor_numba_for_work_numpy_does_faster(tmp_path):
     """The `eoloc` command on the demo files at a height: the same fixes.csv as the library in this
     process, without importing pandas (pyarrow would, where it is installed; eoloc does not use
-    it) or loading numba (0.7-1.5 s to load for milliseconds of work: numpy runs it)."""
+    it) or loading numba (0.7-1.5 s to load for milliseconds of work: numpy runs it); and, off a
+    terminal, without rich's live display (its spinner would show nothing there)."""
     import subprocess
     import sys
 

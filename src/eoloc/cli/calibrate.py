@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 from rich.table import Table as RichTable
 
-from .common import load_config
+from .common import load_config, working
 from .main import console, err_console, report_issues, warn
 from .options import config_option, out_option
 
@@ -52,7 +52,7 @@ def calibrate(telemetry, gcps, config_path, estimate, pixel_sigma, robust, inter
 
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
     cfg = load_config(config_path)
-    with err_console.status(f"solving for {', '.join(groups)}..."):
+    with working(f"solving for {', '.join(groups)}..."):
         job = calibrate_job(cfg, telemetry, gcps, groups=groups, pixel_sigma_px=pixel_sigma, robust=robust,
                             interpolate=interpolate, max_gap_s=max_gap, time_tolerance_s=time_tolerance)
     report_issues(job.issues)

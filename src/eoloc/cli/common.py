@@ -29,7 +29,7 @@ def open_dem(paths, vertical, geoid, dem_crs):
         return None
     from ..terrain import open_dem as open_
 
-    with err_console.status("reading the DEM..."):
+    with working("reading the DEM..."):
         return open_(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
 
 
@@ -104,6 +104,17 @@ class LineProgress:
         pct = f" ({100 * t['done'] / t['total']:.0f} %)" if t["total"] else ""
         err_console.print(f"{t['description']}: {t['done']:,.0f}{of}{pct}, {now - t['start']:.0f} s",
                           highlight=False)
+
+
+def working(message: str):
+    """A step under way: a spinner with ``message`` on a terminal. Elsewhere (CI logs, pipes)
+    nothing, as rich's spinner writes nothing there either; but its display is then not even
+    imported (~10 ms of start-up)."""
+    if err_console.is_terminal:
+        return err_console.status(message)
+    import contextlib
+
+    return contextlib.nullcontext()
 
 
 def progress():

@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from ..render import print_bands
-from .common import load_config, open_dem, progress
+from .common import load_config, open_dem, progress, working
 from .main import console, err_console, fail, report_issues
 from .options import config_option, dem_options, json_option, out_option, target_height_option
 
@@ -111,7 +111,7 @@ def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, 
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is not None and target_height is not None:
         fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
-    with err_console.status(f"locating {len(t)} observations..."):
+    with working(f"locating {len(t)} observations..."):
         obs = locate_observations(sensor, t.columns, dem=dem, height_m=target_height)
     bad = np.flatnonzero(~obs.fixes.ok)
     if bad.size:

@@ -6,6 +6,7 @@ import json
 
 import click
 
+from .common import load_config, working
 from .main import console, err_console, fail, report_issues, warn
 from .options import evaluation_options, json_option, out_option
 
@@ -83,11 +84,9 @@ def evaluate(fixes, truth_path, match, max_distance, fix_columns, truth_columns,
 
     centre = None
     if config_path is not None:
-        from .common import load_config
-
         cam = load_config(config_path).sensor().camera
         centre = (cam.cx, cam.cy)
-    with err_console.status("evaluating..."):
+    with working("evaluating..."):
         ev = evaluate_job(fixes, truth_path, fix_columns=_columns(fix_columns, "--fix-columns"),
                           truth_columns=_columns(truth_columns, "--truth-columns"), match=match or "auto",
                           max_distance_m=max_distance, fix_id=fix_id, truth_id=truth_id, group=group,

@@ -7,7 +7,7 @@ import textwrap
 import click
 
 from ..io.klv.conventions import CONVENTIONS
-from .common import load_config, open_dem
+from .common import load_config, open_dem, working
 from .main import console, err_console, warn
 from .options import config_option, dem_options, formats_option, grid_option, out_option
 
@@ -87,7 +87,7 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
     from ..jobs.setup import misb_setup
 
     sensor, budget = misb_setup(load_config(config_path) if config_path else None)
-    with err_console.status("decoding and locating..."):
+    with working("decoding and locating..."):
         job = klv_job(path, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every, strict=strict,
                       assume=assume)
     print_klv_job(job, console, err_console)

@@ -8,7 +8,7 @@ import click
 import numpy as np
 
 from ..result import RANGE_FROM_FILES, Status
-from .common import load_config, open_dem, stop_rule
+from .common import load_config, open_dem, stop_rule, working
 from .main import console, err_console, fail, report_issues, warn
 from .options import (
     CONVENTIONS,
@@ -127,7 +127,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     from ..jobs.setup import compensation_model
 
     model = compensation_model(cfg, config_path, compensate_path)
-    with err_console.status("locating..."):
+    with working("locating..."):
         job = locate_files(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance, budget=budget,
                            interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model)
     report_issues(job.issues)

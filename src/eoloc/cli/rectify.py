@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 from rich.table import Table as RichTable
 
-from .common import ground, load_config, open_dem
+from .common import ground, load_config, open_dem, working
 from .main import console, err_console, report_issues
 from .options import CONVENTIONS, config_option, ortho_options, out_option
 
@@ -46,7 +46,7 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
 
     surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path)
-    with err_console.status("rectifying..."):
+    with working("rectifying..."):
         job = rectify_job(cfg, image, telemetry, surface, frame=frame, time_s=time_s, crs=crs, gsd_m=gsd,
                           resampling=resampling, nodata=nodata, occlusion=occlusion, grid_step_px=grid_step)
     report_issues(job.issues)

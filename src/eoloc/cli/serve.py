@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import load_config
+from .common import load_config, working
 from .main import err_console, fail
 from .options import config_option, dem_options
 
@@ -59,7 +59,7 @@ def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body
         tiles.setdefault(name, []).append(path)
     dems = {}
     for name, paths in tiles.items():
-        with err_console.status(f"reading DEM {name}..."):
+        with working(f"reading DEM {name}..."):
             dems[name] = open_dem(paths, vertical=vertical, geoid=geoid, assume_crs=dem_crs)
     if player_dir is not None and not (Path(player_dir) / "player.html").is_file():
         fail(f"--player {player_dir}: no player.html in it (write one with `eoloc video ... --out {player_dir}`)")

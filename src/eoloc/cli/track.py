@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 from rich.table import Table as RichTable
 
-from .common import load_config, open_dem, progress, stop_rule
+from .common import load_config, open_dem, progress, stop_rule, working
 from .main import console, err_console, fail, report_issues, warn
 from .options import (
     CONVENTIONS,
@@ -68,7 +68,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
              "position: give one of them")
     rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path)
-    with err_console.status("locating..."):
+    with working("locating..."):
         job = located_detections(cfg, config_path, telemetry, detections, rule, time_tolerance_s=time_tolerance,
                                  interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset)
     report_issues(job.issues)
