@@ -82,8 +82,7 @@ class _Cells:
         elif v.dtype.kind in "iu":
             self.kind = "numbers"
         elif v.dtype.kind == "f":
-            finite = np.isfinite(v)
-            self.kind = "numbers" if finite.all() or not np.isinf(v).any() else "cast"  # orjson has no infinity
+            self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
             self.whole = self.kind == "numbers" and _whole(v[:CSV_CHUNK], decimals(name)) and _whole(v, decimals(name))
         else:
             self.text = _finish(_text_array(name, v), sep, self.empty, lone)
