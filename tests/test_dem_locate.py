@@ -335,3 +335,21 @@ def test_take_all_equals_numpy_indexing(n, m, seed, stray):
         got = take_all(arrays, index)
     for a, g in zip(arrays, got, strict=True):
         assert g.shape == index.shape and g.dtype == a.dtype and np.array_equal(g, a[index])
+
+
+def test_camera_frame_take_keeps_shared_parts_and_gathers_the_rest():
+    """CameraFrame.take: a frame of one pose (every part a scalar) is every target's frame; parts
+    that are arrays are gathered as numpy indexing would, scalar parts kept as they are."""
+    from eoloc.sensor.model import CameraFrame
+
+    one = CameraFrame(tuple(np.float64(k) for k in range(9)), np.float64(1), np.float64(2), np.float64(3),
+                      np.bool_(False))
+    assert one.take(np.array([0, 0, 0])) is one
+    rng = np.random.default_rng(5)
+    R = tuple(rng.normal(size=50) if k % 2 else np.float64(k) for k in range(9))
+    frame = CameraFrame(R, rng.normal(size=50), rng.normal(size=50), np.float64(7.0), rng.random(50) < 0.3)
+    index = rng.integers(-50, 50, 20_000)
+    got = frame.take(index)
+    for a, g in zip((*frame.R, frame.ox, frame.oy, frame.oz, frame.invalid),
+                    (*got.R, got.ox, got.oy, got.oz, got.invalid), strict=True):
+        assert np.array_equal(g, a if np.ndim(a) == 0 else a[index])

@@ -131,6 +131,8 @@ class CameraFrame:
         parts = [np.asarray(x) for x in (*self.R, self.ox, self.oy, self.oz, self.invalid)]
         index = np.asarray(index)
         arrays = [x for x in parts if x.ndim]
+        if not arrays:  # one frame for every target: nothing to gather
+            return self
         if index.dtype.kind in "iu" and all(x.ndim == 1 and len(x) == len(arrays[0]) for x in arrays):  # threads
             taken = iter(take_all(arrays, index))
             out = [x if not x.ndim else next(taken) for x in parts]
