@@ -142,9 +142,10 @@ def test_file_mode_json_kml_cot_and_utc_times(tmp_path):
 
 
 RUN_COMMAND = """
-import atexit, sys
-atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb", "rich.live")
-                                                 if sys.modules.get(m) is not None), file=sys.stderr))
+import atexit, os, sys
+atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb", "rich.live",
+                                                             "pyarrow.compute") if sys.modules.get(m) is not None),
+                              "pydantic plugins:", os.environ.get("PYDANTIC_DISABLE_PLUGINS"), file=sys.stderr))
 from eoloc.cli import run
 sys.argv = ["eoloc", *sys.argv[1:]]
 run()
@@ -154,18 +155,20 @@ run()
 def test_the_command_loads_neither_pandas_nor_numba_for_work_numpy_does_faster(tmp_path):
     """The `eoloc` command on the demo files at a height: the same fixes.csv as the library in this
     process, without importing pandas (pyarrow would, where it is installed; eoloc does not use
-    it) or loading numba (0.7-1.5 s to load for milliseconds of work: numpy runs it); and, off a
-    terminal, without rich's live display (its spinner would show nothing there)."""
+    it) or loading numba (0.7-1.5 s to load for milliseconds of work: numpy runs it); off a
+    terminal, without rich's live display (its spinner would show nothing there); without
+    pyarrow.compute's 25 ms of function wrappers (eoloc.io.arrowfn calls the functions by name);
+    and with pydantic's scan of every distribution for plugins turned off."""
     import subprocess
     import sys
 
     args = [str(DEMO / "telemetry.csv"), str(DEMO / "detections.csv"), "--config", str(DEMO / "camera.toml"),
             "--target-height", "600", "-f", "csv"]
-    env = {k: v for k, v in __import__("os").environ.items() if k != "EOLOC_BACKEND"}
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("EOLOC_BACKEND", "PYDANTIC_DISABLE_PLUGINS")}
     out = subprocess.run([sys.executable, "-c", RUN_COMMAND, "locate", *args, "--out", str(tmp_path / "cmd")],
                          capture_output=True, text=True, env=env)
     assert out.returncode == 0, out.stderr
-    assert "loaded: []" in out.stderr, out.stderr
+    assert "loaded: [] pydantic plugins: __all__" in out.stderr, out.stderr
     r = CliRunner().invoke(main, ["locate", *args, "--out", str(tmp_path / "lib")])
     assert r.exit_code == 0, r.output
     with open(tmp_path / "cmd" / "fixes.csv") as a, open(tmp_path / "lib" / "fixes.csv") as b:
@@ -435,3 +438,89 @@ def test_status_counts_count_every_status(codes):
     n = len(codes)
     fixes = Fixes(np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.array(codes, dtype=np.int8))
     assert fixes.status_counts() == {Status(c).name: k for c, k in Counter(codes).items()}
+
+
+@settings(max_examples=60, deadline=None)
+@given(texts=st.lists(st.one_of(st.none(), st.text(max_size=6), st.sampled_from(['a,b', '"q"', " x ", "", "\n"])),
+                      min_size=1, max_size=40),
+       numbers=st.lists(st.one_of(st.none(), st.floats(allow_nan=False, allow_infinity=True, width=64)), min_size=1,
+                        max_size=40),
+       seed=st.integers(0, 2**32 - 1))
+def test_compute_functions_called_by_name_equal_pyarrow_compute(texts, numbers, seed):
+    """eoloc.io.arrowfn (pyarrow's compute functions by name, without importing pyarrow.compute)
+    against pyarrow.compute's own wrappers, on the same arrays: text, numbers with nulls and
+    infinities, and every option the CSV reader and writer use."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from eoloc.io import arrowfn
+
+    text, num = pa.array(texts, type=pa.string()), pa.array(numbers, type=pa.float64())
+    idx = pa.array(np.random.default_rng(seed).integers(0, len(texts), 25))
+    pairs = [
+        (arrowfn.fill_null(text, "-"), pc.fill_null(text, "-")),
+        (arrowfn.cast(num, pa.string()), num.cast(pa.string())),
+        (arrowfn.is_null(num), num.is_null()),
+        (arrowfn.dictionary_encode(text), text.dictionary_encode()),
+        (arrowfn.utf8_trim_whitespace(text), pc.utf8_trim_whitespace(text)),
+        (arrowfn.take(text, idx), pc.take(text, idx)),
+        (arrowfn.join_cells(text, text, ";"), pc.binary_join_element_wise(text, text, ";")),
+        (arrowfn.join_cells(text, "<", ""), pc.binary_join_element_wise(text, "<", "")),
+        (arrowfn.join_cells(text, text, "", null_replacement="~"),
+         pc.binary_join_element_wise(text, text, "", null_handling="replace", null_replacement="~")),
+        (arrowfn.matches(text, '[,"\r\n]'), pc.match_substring_regex(text, '[,"\r\n]')),
+        (arrowfn.replace_all(text, '"', '""'), pc.replace_substring(text, '"', '""')),
+        (arrowfn.equal(text, ""), pc.equal(text, "")),
+        (arrowfn.or_(arrowfn.equal(text, ""), arrowfn.is_null(text)), pc.or_(pc.equal(text, ""), text.is_null())),
+        (arrowfn.if_else(text.is_null(), "none", text), pc.if_else(text.is_null(), "none", text)),
+    ]
+    for k, (ours, theirs) in enumerate(pairs):
+        assert ours.equals(theirs), (k, ours, theirs)
+    assert arrowfn.any_true(pc.equal(text, "")) is bool(pc.any(pc.equal(text, "")).as_py())
+    with pytest.raises(pa.ArrowInvalid):
+        arrowfn.cast(pa.array(["1.5", "x"]), pa.float64())
+
+
+def test_columns_a_file_lacks_are_one_value_with_no_memory(tmp_path):
+    """A detections file without range_m and frame: those columns are NaN for every record, as a
+    read-only view of one value (no 8 MB column per million records)."""
+    path = tmp_path / "det.csv"
+    path.write_text("time_s,target_id,u_px,v_px\n" + "".join(f"{k * 0.04:.2f},T{k % 3},{k},{k}\n" for k in range(500)))
+    t = read_detections(path)
+    assert len(t) == 500
+    for name in ("range_m", "frame"):
+        col = t.columns[name]
+        assert col.shape == (500,) and np.isnan(col).all() and col.strides == (0,) and not col.flags.writeable
+    kept = t.keep(np.arange(500) % 2 == 0)  # a selection of them is an ordinary array
+    assert kept.columns["frame"].shape == (250,) and np.isnan(kept.columns["frame"]).all()
+
+
+@settings(max_examples=80, deadline=None)
+@given(values=st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64),
+                                 st.floats(-1e6, 1e6), st.sampled_from([1e306, -1.7e308, 2.0**52, 2.0**53 + 2])),
+                       min_size=1, max_size=60),
+       name=st.sampled_from(["x_m", "lat_deg"]))
+def test_every_finite_number_is_written_as_itself_rounded_however_large(values, name, tmp_path_factory):
+    """A float column of any values (huge ones, infinities, gaps) read back with Python's csv
+    module: each cell is the number to the column's decimals (half a unit of the last decimal,
+    and the double's own spacing), a number of 2^52 or more exactly itself, an infinity "inf",
+    a gap empty; never "null" (numpy's rounding scales 1e306 to infinity first)."""
+    from eoloc.io.csvfile import decimals, write_csv
+    from eoloc.io.records import Records
+
+    path = tmp_path_factory.mktemp("big") / "big.csv"
+    v = np.array(values, dtype=np.float64)
+    write_csv(path, Records({name: v}))
+    with open(path, newline="") as fh:
+        cells = [row[name] for row in csv.DictReader(fh)]
+    assert len(cells) == len(v)
+    step = 10.0 ** -decimals(name)
+    for x, cell in zip(v.tolist(), cells, strict=True):
+        if np.isnan(x):
+            assert cell in ("", '""'), (x, cell)
+        elif np.isinf(x):
+            assert cell == ("inf" if x > 0 else "-inf"), (x, cell)
+        elif abs(x) >= 2.0**52:
+            assert float(cell) == x, (x, cell)
+        else:
+            assert abs(float(cell) - x) <= step / 2 * (1 + 1e-9) + 4 * np.spacing(abs(x)), (x, cell)

@@ -84,6 +84,8 @@ class _Cells:
         elif v.dtype.kind == "f":
             self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
             self.whole = self.kind == "numbers" and _whole(v[:CSV_CHUNK], decimals(name)) and _whole(v, decimals(name))
+            self.big = bool(np.fmax.reduce(v, initial=-np.inf) >= _INTEGRAL or  # (NaN skipped)
+                            np.fmin.reduce(v, initial=np.inf) <= -_INTEGRAL)
         else:
             self.text = _finish(_text_array(name, v), sep, self.empty, lone)
 
@@ -94,10 +96,11 @@ class _Cells:
     def render(self, start: int, stop: int):
         """Rows ``start:stop`` as a pyarrow string array (or one scalar for all of them)."""
         import pyarrow as pa
-        import pyarrow.compute as pc
+
+        from . import arrowfn
 
         if self.kind == "coded":
-            return pc.take(self.names, arrow_ints(self.codes[start:stop]))
+            return arrowfn.take(self.names, arrow_ints(self.codes[start:stop]))
         if self.kind == "text":
             return self.text.slice(start, stop - start)
         v = self.v[start:stop]
@@ -106,20 +109,31 @@ class _Cells:
         missing = np.isnan(v)
         if missing.all():
             return pa.scalar(self.empty)
+        rounded = rounded_to(v, decimals(self.name), self.big)
         if self.kind == "cast":  # pyarrow's text for the numbers, "inf" and "-inf" included
-            return _finish(pc.round(pa.array(v, mask=missing), decimals(self.name)).cast(pa.string()), self.sep,
-                           self.empty, False)
-        rounded = np.round(v, decimals(self.name))
+            return _finish(arrowfn.cast(pa.array(rounded, mask=missing), pa.string()), self.sep, self.empty, False)
         if self.whole:
             rounded = np.where(missing, 0.0, rounded).astype(np.int64)
         cells = number_cells(rounded, self.sep, missing if missing.any() else None)
-        return cells if self.sep == "," else pc.fill_null(cells, self.empty)
+        return cells if self.sep == "," else arrowfn.fill_null(cells, self.empty)
+
+
+_INTEGRAL = 2.0**52  # a double this large or larger is a whole number: rounding leaves it as it is
+
+
+def rounded_to(v: np.ndarray, decimals: int, big: bool = True) -> np.ndarray:
+    """``v`` rounded to ``decimals`` as numpy rounds (half to even); numbers of 2^52 or more are
+    whole already and are kept as they are (numpy scales by 10^decimals first, which turns 1e306
+    into infinity). ``big=False``: the caller knows there are none (one pass less)."""
+    with np.errstate(over="ignore"):  # those numbers' scaled copies: replaced below
+        r = np.round(v, decimals)
+    return np.where(np.abs(v) >= _INTEGRAL, v, r) if big else r
 
 
 def _whole(v: np.ndarray, decimals: int) -> bool:
     """Whether a float column, rounded as written, holds only whole numbers (or no value) that
     int64 writes exactly."""
-    r = np.round(v[~np.isnan(v)], decimals)
+    r = rounded_to(v[~np.isnan(v)], decimals)
     return bool((np.abs(r) < 2.0**53).all() and (r == np.trunc(r)).all())  # an infinity is not whole
 
 
@@ -183,25 +197,26 @@ def _finish(text, sep: str, empty: str, lone: bool):
     """Text cells quoted where they must be (a lone column's empty cells too), then ``sep``
     after each; no value: ``empty``."""
     import pyarrow as pa
-    import pyarrow.compute as pc
 
-    quote = pc.match_substring_regex(text, _QUOTED)
+    from . import arrowfn
+
+    quote = arrowfn.matches(text, _QUOTED)
     if lone:
-        quote = pc.or_(quote, pc.equal(text, ""))
-    if pc.any(quote).as_py():
-        text = pc.if_else(quote, pc.binary_join_element_wise('"', pc.replace_substring(text, '"', '""'), '"', ""),
-                          text)
-    return pc.fill_null(pc.binary_join_element_wise(text, pa.scalar(sep), ""), empty)
+        quote = arrowfn.or_(quote, arrowfn.equal(text, ""))
+    if arrowfn.any_true(quote):
+        text = arrowfn.if_else(quote, arrowfn.join_cells('"', arrowfn.replace_all(text, '"', '""'), '"', ""), text)
+    return arrowfn.fill_null(arrowfn.join_cells(text, pa.scalar(sep), ""), empty)
 
 
 def _join(cells: list, n: int):
     """The bytes of ``n`` rows: each row's cells (with their separators) one after the other."""
     import pyarrow as pa
-    import pyarrow.compute as pc
+
+    from . import arrowfn
 
     if not any(isinstance(c, pa.Array) for c in cells):  # every column one value: the same row n times
         return "".join(c.as_py() for c in cells).encode("utf-8") * n
-    rows = pc.binary_join_element_wise(*cells, "", null_handling="replace", null_replacement=",")
+    rows = arrowfn.join_cells(*cells, "", null_replacement=",")
     _, offsets, data = rows.buffers()
     o = np.frombuffer(offsets, dtype=np.int32)
     return data[o[rows.offset]:o[rows.offset + len(rows)]]

@@ -64,10 +64,12 @@ class Table:
         return name in self.columns
 
     def add_missing(self, names, fill=np.nan, dtype=np.float64) -> None:
-        """The columns among ``names`` that the file did not have, as ``fill`` (made only then)."""
+        """The columns among ``names`` that the file did not have, as ``fill``: a read-only view
+        of the one value (a million detections without range_m or frame: no 8 MB column made
+        and filled for each)."""
         for name in names:
             if name not in self.columns:
-                self.columns[name] = np.full(len(self), fill, dtype=dtype)
+                self.columns[name] = np.broadcast_to(np.array(fill, dtype=dtype), (len(self),))
 
     def keep(self, mask: np.ndarray) -> Table:
         """The records where ``mask`` holds (issues kept)."""
@@ -329,8 +331,9 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
     import io
 
     import pyarrow as pa
-    import pyarrow.compute as pc
     from pyarrow import csv as pacsv
+
+    from . import arrowfn
 
     names = [f"c{j}" for j in range(width)]
     wanted = {name: f"c{j}" for name, j in index.items()}
@@ -358,14 +361,15 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
             out[name] = text_cells(col)
         elif name in as_text:
             try:
-                out[name] = (col.cast(pa.float64()).to_numpy(zero_copy_only=False),
-                             col.is_null().to_numpy(zero_copy_only=False))
+                out[name] = (arrowfn.cast(col, pa.float64()).to_numpy(zero_copy_only=False),
+                             arrowfn.is_null(col).to_numpy(zero_copy_only=False))
             except pa.ArrowInvalid:
-                cells = pc.utf8_trim_whitespace(col.fill_null("")).to_numpy(zero_copy_only=False).astype(object)
+                cells = arrowfn.utf8_trim_whitespace(arrowfn.fill_null(col, "")).to_numpy(zero_copy_only=False) \
+                    .astype(object)
                 out[name] = _numbers(cells)
         else:
             out[name] = (col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False),  # nulls -> NaN
-                         col.is_null().to_numpy(zero_copy_only=False))
+                         arrowfn.is_null(col).to_numpy(zero_copy_only=False))
     return out
 
 
@@ -374,12 +378,13 @@ def text_cells(col) -> Coded:
     values: ids repeat, and a million cells of a few dozen ids then cost a hash instead of a
     million Python strings."""
     import pyarrow as pa
-    import pyarrow.compute as pc
 
-    trimmed = pc.utf8_trim_whitespace(col.fill_null(""))
+    from . import arrowfn
+
+    trimmed = arrowfn.utf8_trim_whitespace(arrowfn.fill_null(col, ""))
     if isinstance(trimmed, pa.ChunkedArray):
         trimmed = trimmed.combine_chunks()
-    coded = trimmed.dictionary_encode()
+    coded = arrowfn.dictionary_encode(trimmed)
     return Coded(coded.indices.to_numpy(zero_copy_only=False), coded.dictionary.to_numpy(zero_copy_only=False)
                  .astype(object))
 
