@@ -337,6 +337,62 @@ def test_take_all_equals_numpy_indexing(n, m, seed, stray):
         assert g.shape == index.shape and g.dtype == a.dtype and np.array_equal(g, a[index])
 
 
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(1, 200), m=st.integers(0, 60_000), seed=st.integers(0, 2**32 - 1),
+       backend=st.sampled_from(["numpy", "numba"]), stray=st.sampled_from([0, 0, -1, 1]))
+def test_a_kernel_gathering_its_inputs_chunk_by_chunk_equals_one_on_gathered_arrays(n, m, seed, backend, stray):
+    """run() with Gathered rotation components (values[index], taken chunk by chunk inside the
+    kernel on numpy, made first on numba) gives, bit for bit, what it gives on the arrays numpy
+    indexing makes; negative indices count from the end; an index out of range raises IndexError
+    as numpy does; a Gathered whose shape is not the batch's broadcasts as its array would."""
+    from eoloc import use_backend, use_threads
+    from eoloc._backend import Gathered, run
+
+    rng = np.random.default_rng(seed)
+    R = [rng.normal(size=n) for _ in range(9)]
+    index = rng.integers(-n, n, (m // 100, 100) if m >= 100 else m)
+    xn, yn = rng.normal(size=index.shape), rng.normal(size=index.shape)
+    if stray and index.size:  # one index just out of range, either side
+        index.flat[rng.integers(index.size)] = n if stray > 0 else -n - 1
+    with use_backend(backend), use_threads(2):
+        if stray and index.size:
+            with pytest.raises(IndexError):
+                run("ray_direction", tuple(Gathered(c, index) for c in R), xn, yn)
+            return
+        got = run("ray_direction", tuple(Gathered(c, index) for c in R), xn, yn)
+        want = run("ray_direction", tuple(c[index] for c in R), xn, yn)
+        for g, w in zip(got, want, strict=True):
+            assert g.shape == index.shape and np.array_equal(g, w, equal_nan=True)
+        if index.ndim == 2:  # one row of pixels against every row of poses: broadcast
+            got = run("ray_direction", tuple(Gathered(c, index[:, :1]) for c in R), xn, yn)
+            want = run("ray_direction", tuple(c[index[:, :1]] for c in R), xn, yn)
+            for g, w in zip(got, want, strict=True):
+                assert np.array_equal(g, w, equal_nan=True)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_rays_of_many_targets_per_pose_equal_those_of_the_poses_taken_per_target(backend):
+    """SensorModel.rays with pose_index (each pose's camera frame computed once, its rotation
+    gathered inside the ray kernel) against the same rays from the poses indexed per target."""
+    from eoloc import Camera, Pose, SensorModel, use_backend
+    from eoloc.sensor import AzElGimbal
+
+    rng = np.random.default_rng(11)
+    n, m = 300, 50_000
+    pose = Pose(45 + rng.normal(0, 0.1, n), 7 + rng.normal(0, 0.1, n), 3000 + rng.normal(0, 50, n),
+                rng.uniform(0, 360, n), rng.normal(0, 3, n), rng.normal(0, 3, n),
+                (rng.uniform(-180, 180, n), rng.uniform(-90, -20, n), np.zeros(n)))
+    sensor = SensorModel(Camera(1024, 768, 1200.0, 1200.0, 512.0, 384.0), AzElGimbal(),
+                         mount_misalignment_deg=(0.1, -0.2, 0.3))
+    index = rng.integers(0, n, m)
+    pixels = (rng.uniform(0, 1023, m), rng.uniform(0, 767, m))
+    with use_backend(backend):
+        got = sensor.rays(pose, pixels, pose_index=index)
+        want = sensor.rays(pose.take(index), pixels)
+    for k in ("ox", "oy", "oz", "dx", "dy", "dz", "invalid", "out_of_image"):
+        assert np.array_equal(np.broadcast_to(getattr(got, k), (m,)), np.broadcast_to(getattr(want, k), (m,))), k
+
+
 def test_camera_frame_take_keeps_shared_parts_and_gathers_the_rest():
     """CameraFrame.take: a frame of one pose (every part a scalar) is every target's frame; parts
     that are arrays are gathered as numpy indexing would, scalar parts kept as they are."""

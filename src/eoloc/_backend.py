@@ -180,6 +180,34 @@ def in_chunks(n: int, work: Callable[[int, int], None]) -> None:
             f.result()
 
 
+class Gathered:
+    """``values[index]`` not made yet: a kernel of :func:`run` on the numpy backend gathers it
+    chunk by chunk, next to the chunk's other inputs, instead of reading a whole gathered copy.
+    Many targets per pose (10^6 targets of 10^5 poses) then read the per-pose values from cache,
+    and the copy (72 MB for a rotation's 9 components) is never written. Anywhere else it is the
+    array it stands for (``np.asarray`` makes it)."""
+
+    __slots__ = ("index", "values")
+
+    def __init__(self, values: np.ndarray, index: np.ndarray) -> None:
+        self.values, self.index = values, index  # values 1-D; index integers (negative from the end)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.index.shape
+
+    @property
+    def ndim(self) -> int:
+        return self.index.ndim
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        out = self.values.take(self.index)
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+
 def take_all(arrays: list[np.ndarray], index: np.ndarray) -> list[np.ndarray]:
     """``[a[index] for a in arrays]`` for 1-D arrays of one length and an integer index (negative
     counts from the end; out of range: IndexError), the index cut into slices taken in turn by
@@ -256,15 +284,14 @@ def run(name: str, *args):
         elif sig.width(param) == 9:
             if len(a) != 9:
                 raise ValueError(f"{name}: rotation {param} needs 9 components, got {len(a)}")
-            flat_args.extend(np.asarray(c, dtype=np.float64) for c in a)
+            flat_args.extend(_array(c) for c in a)
         else:
-            flat_args.append(np.asarray(a, dtype=np.float64))
-    arrays = [a for a in flat_args if isinstance(a, np.ndarray)]
+            flat_args.append(_array(a))
+    arrays = [a for a in flat_args if isinstance(a, (np.ndarray, Gathered))]
     shape = np.broadcast_shapes(*(a.shape for a in arrays))
     n = int(np.prod(shape))
-    flat_in = [a if not isinstance(a, np.ndarray) else float(a) if a.ndim == 0
-               else a.reshape(-1) if a.shape == shape and a.flags.c_contiguous  # no copy, no broadcast
-               else np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1) for a in flat_args]
+    indexes: dict = {}  # each Gathered index checked and flattened once
+    flat_in = [_flat(a, shape, indexes) for a in flat_args]
     outs = []
     for o in sig.outputs:
         outs.extend(np.empty(n, dtype=np.int8 if o == "status" else np.float64) for _ in range(sig.width(o)))
@@ -273,9 +300,57 @@ def run(name: str, *args):
     else:
         from . import _nb
 
-        getattr(_nb, name)(n, *flat_in, *outs)
+        getattr(_nb, name)(n, *_gather_all(flat_in), *outs)
     shaped = iter([o.reshape(shape) for o in outs])
     return tuple(tuple(next(shaped) for _ in range(9)) if sig.width(o) == 9 else next(shaped) for o in sig.outputs)
+
+
+def _array(a):
+    """A kernel input as float64: an array, or a :class:`Gathered` of float64 values."""
+    if isinstance(a, Gathered):
+        return Gathered(np.ascontiguousarray(a.values, dtype=np.float64).reshape(-1), a.index)
+    return np.asarray(a, dtype=np.float64)
+
+
+def _flat(a, shape: tuple[int, ...], indexes: dict):
+    """An input as the backends see it: a scalar, or a flat array of the broadcast ``shape`` (a
+    copy only where it really broadcasts); a :class:`Gathered` of that shape stays one, its index
+    flat, non-negative and in range (checked once per index, in ``indexes``: the chunks take with
+    ``clip``)."""
+    if isinstance(a, Gathered):
+        if a.shape != shape:
+            return _flat(np.asarray(a), shape, indexes)
+        key = (id(a.index), len(a.values))
+        if key not in indexes:
+            index, n = np.asarray(a.index).reshape(-1), len(a.values)
+            if index.size:
+                lo, hi = int(index.min()), int(index.max())
+                if lo < -n or hi >= n:
+                    raise IndexError(f"index {lo if lo < -n else hi} is out of bounds for axis 0 with size {n}")
+                if lo < 0:
+                    index = np.where(index < 0, index + n, index)
+            indexes[key] = index
+        return Gathered(a.values, indexes[key])
+    if not isinstance(a, np.ndarray):
+        return a
+    if a.ndim == 0:
+        return float(a)
+    if a.shape == shape and a.flags.c_contiguous:  # no copy, no broadcast
+        return a.reshape(-1)
+    return np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1)
+
+
+def _gather_all(flat_in: list) -> list:
+    """The inputs with every :class:`Gathered` made (those of one index together, on the threads)."""
+    groups: dict[int, list[int]] = {}
+    for k, x in enumerate(flat_in):
+        if isinstance(x, Gathered):
+            groups.setdefault((id(x.index), len(x.values)), []).append(k)
+    out = list(flat_in)
+    for ks in groups.values():
+        for k, made in zip(ks, take_all([flat_in[k].values for k in ks], flat_in[ks[0]].index), strict=True):
+            out[k] = made
+    return out
 
 
 def _run_numpy(sig, n: int, flat_in: list, outs: list[np.ndarray]) -> None:
@@ -288,7 +363,8 @@ def _run_numpy(sig, n: int, flat_in: list, outs: list[np.ndarray]) -> None:
         with np.errstate(all="ignore"):  # per thread
             for i in range(start, stop, CHUNK):
                 j = min(i + CHUNK, stop)
-                part = [x if not isinstance(x, np.ndarray) else x[i:j] for x in flat_in]
+                part = [x[i:j] if isinstance(x, np.ndarray) else x.values.take(x.index[i:j], mode="clip")
+                        if isinstance(x, Gathered) else x for x in flat_in]
                 args, k = [], 0
                 for param in sig.params:
                     w = sig.width(param) if param not in sig.constants else 1

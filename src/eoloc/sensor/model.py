@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _kernels
-from .._backend import get_backend, run, take_all
+from .._backend import Gathered, get_backend, run, take_all
 from ..geodesy import WGS84, Ellipsoid, as_matrix
 from ..rotation import small_angle_rotation
 from .camera import Camera
@@ -127,15 +127,19 @@ class CameraFrame:
         return as_matrix(self.R)
 
     def take(self, index) -> CameraFrame:
-        """The frames at ``index`` (targets that share a pose share its frame, computed once)."""
+        """The frames at ``index`` (targets that share a pose share its frame, computed once).
+        With an integer index into one-dimensional frames, the rotation is left
+        :class:`~eoloc._backend.Gathered`: the ray kernel gathers it chunk by chunk (it is the
+        array it stands for anywhere else); the origins are gathered on the threads."""
         parts = [np.asarray(x) for x in (*self.R, self.ox, self.oy, self.oz, self.invalid)]
         index = np.asarray(index)
         arrays = [x for x in parts if x.ndim]
         if not arrays:  # one frame for every target: nothing to gather
             return self
-        if index.dtype.kind in "iu" and all(x.ndim == 1 and len(x) == len(arrays[0]) for x in arrays):  # threads
-            taken = iter(take_all(arrays, index))
-            out = [x if not x.ndim else next(taken) for x in parts]
+        if index.dtype.kind in "iu" and all(x.ndim == 1 and len(x) == len(arrays[0]) for x in arrays):
+            taken = iter(take_all([x for x in parts[9:] if x.ndim], index))
+            out = [Gathered(x, index) if x.ndim else x for x in parts[:9]] + \
+                  [next(taken) if x.ndim else x for x in parts[9:]]
         else:
             out = [x if not x.ndim else x[index] for x in parts]
         return CameraFrame(tuple(out[:9]), *out[9:])
