@@ -524,3 +524,21 @@ def test_every_finite_number_is_written_as_itself_rounded_however_large(values, 
             assert float(cell) == x, (x, cell)
         else:
             assert abs(float(cell) - x) <= step / 2 * (1 + 1e-9) + 4 * np.spacing(abs(x)), (x, cell)
+
+
+@settings(max_examples=80, deadline=None)
+@given(chunks=st.lists(st.lists(st.one_of(st.none(), st.sampled_from(["T1", " T1", "T1 ", "\tT2", "T2", " ", "a b"]),
+                                          st.text(max_size=4)), max_size=30),
+                       min_size=1, max_size=4))
+def test_text_cells_are_the_stripped_cells_each_name_once(chunks):
+    """A text column read as codes into its names: names[codes] are the cells stripped of
+    surrounding white space as Python strips them ("" where there is no value), and no name
+    twice (cells that differ only by spaces share one)."""
+    import pyarrow as pa
+
+    from eoloc.io.table import text_cells
+
+    coded = text_cells(pa.chunked_array([pa.array(c, type=pa.string()) for c in chunks], type=pa.string()))
+    want = [("" if x is None else x.strip()) for c in chunks for x in c]
+    assert coded.names[coded.codes].tolist() == want if want else len(coded.codes) == 0
+    assert len(set(coded.names.tolist())) == len(coded.names)

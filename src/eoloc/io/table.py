@@ -376,17 +376,25 @@ def _arrow_columns(clean, width: int, index: dict[str, int], text: set[str],
 def text_cells(col) -> Coded:
     """A pyarrow string column's stripped strings ("" for no value) as codes into its distinct
     values: ids repeat, and a million cells of a few dozen ids then cost a hash instead of a
-    million Python strings."""
+    million Python strings. The cells are coded as they are and the distinct values stripped
+    (" T1" and "T1" then become one name): a million cells are hashed, not also copied stripped."""
     import pyarrow as pa
 
     from . import arrowfn
 
-    trimmed = arrowfn.utf8_trim_whitespace(arrowfn.fill_null(col, ""))
-    if isinstance(trimmed, pa.ChunkedArray):
-        trimmed = trimmed.combine_chunks()
-    coded = arrowfn.dictionary_encode(trimmed)
-    return Coded(coded.indices.to_numpy(zero_copy_only=False), coded.dictionary.to_numpy(zero_copy_only=False)
-                 .astype(object))
+    cells = arrowfn.fill_null(col, "")
+    if isinstance(cells, pa.ChunkedArray):
+        cells = cells.combine_chunks()
+    coded = arrowfn.dictionary_encode(cells)
+    codes = coded.indices.to_numpy(zero_copy_only=False)
+    names = arrowfn.utf8_trim_whitespace(coded.dictionary).to_numpy(zero_copy_only=False).astype(object)
+    distinct, first, where = np.unique(names.astype(str), return_index=True, return_inverse=True)
+    if len(distinct) < len(names):  # names that differed only by spaces: one code each, in first-seen order
+        order = np.argsort(first)
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        return Coded(rank[where.reshape(-1)][codes], names[first[order]])
+    return Coded(codes, names)
 
 
 def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
