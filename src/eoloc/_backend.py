@@ -208,6 +208,20 @@ class Gathered:
         return out if dtype is None else out.astype(dtype, copy=False)
 
 
+def flat_index(index, n: int) -> np.ndarray:
+    """An integer index into ``n`` elements, flat and counted from the start (negative counts from
+    the end); out of range: IndexError, as numpy raises it. Checked once here, the takes that use
+    it then skip the per-element check (``mode="clip"``)."""
+    flat = np.asarray(index).reshape(-1)
+    if flat.size:
+        lo, hi = int(flat.min()), int(flat.max())
+        if lo < -n or hi >= n:
+            raise IndexError(f"index {lo if lo < -n else hi} is out of bounds for axis 0 with size {n}")
+        if lo < 0:
+            flat = np.where(flat < 0, flat + n, flat)
+    return flat
+
+
 def take_all(arrays: list[np.ndarray], index: np.ndarray) -> list[np.ndarray]:
     """``[a[index] for a in arrays]`` for 1-D arrays of one length and an integer index (negative
     counts from the end; out of range: IndexError), the index cut into slices taken in turn by
@@ -215,14 +229,7 @@ def take_all(arrays: list[np.ndarray], index: np.ndarray) -> list[np.ndarray]:
     while its indices are in cache (13 arrays of 10^5 at 10^6 indices: 11-14 ms, 23-41 ms as
     13 fancy indexings)."""
     index = np.asarray(index)
-    flat = index.reshape(-1)
-    n = len(arrays[0]) if arrays else 0
-    if flat.size:
-        lo, hi = int(flat.min()), int(flat.max())
-        if lo < -n or hi >= n:
-            raise IndexError(f"index {lo if lo < -n else hi} is out of bounds for axis 0 with size {n}")
-        if lo < 0:
-            flat = np.where(flat < 0, flat + n, flat)
+    flat = flat_index(index, len(arrays[0]) if arrays else 0)
     outs = [np.empty(flat.size, dtype=a.dtype) for a in arrays]
 
     def part(i: int, j: int) -> None:
@@ -322,14 +329,7 @@ def _flat(a, shape: tuple[int, ...], indexes: dict):
             return _flat(np.asarray(a), shape, indexes)
         key = (id(a.index), len(a.values))
         if key not in indexes:
-            index, n = np.asarray(a.index).reshape(-1), len(a.values)
-            if index.size:
-                lo, hi = int(index.min()), int(index.max())
-                if lo < -n or hi >= n:
-                    raise IndexError(f"index {lo if lo < -n else hi} is out of bounds for axis 0 with size {n}")
-                if lo < 0:
-                    index = np.where(index < 0, index + n, index)
-            indexes[key] = index
+            indexes[key] = flat_index(a.index, len(a.values))
         return Gathered(a.values, indexes[key])
     if not isinstance(a, np.ndarray):
         return a

@@ -12,29 +12,11 @@ replaced here too.
 from __future__ import annotations
 
 try:  # where pyarrow.compute takes them from (pyarrow >= 1.0)
-    from pyarrow._compute import (
-        CastOptions,
-        DictionaryEncodeOptions,
-        JoinOptions,
-        MatchSubstringOptions,
-        NullOptions,
-        ReplaceSubstringOptions,
-        ScalarAggregateOptions,
-        TakeOptions,
-        call_function,
-    )
+    import pyarrow._compute as _fn
 except ImportError:  # pragma: no cover - a pyarrow that moved them: the public module has them all
-    from pyarrow.compute import (
-        CastOptions,
-        DictionaryEncodeOptions,
-        JoinOptions,
-        MatchSubstringOptions,
-        NullOptions,
-        ReplaceSubstringOptions,
-        ScalarAggregateOptions,
-        TakeOptions,
-        call_function,
-    )
+    import pyarrow.compute as _fn
+
+call_function = _fn.call_function
 
 
 def fill_null(values, fill):
@@ -46,16 +28,16 @@ def fill_null(values, fill):
 
 def cast(values, target_type):
     """``values`` as ``target_type`` (safe: an invalid value raises ``pa.ArrowInvalid``)."""
-    return call_function("cast", [values], CastOptions.safe(target_type))
+    return call_function("cast", [values], _fn.CastOptions.safe(target_type))
 
 
 def is_null(values):
-    return call_function("is_null", [values], NullOptions())
+    return call_function("is_null", [values], _fn.NullOptions())
 
 
 def dictionary_encode(values):
     """``values`` as a dictionary array: indices into its distinct values (nulls stay null)."""
-    return call_function("dictionary_encode", [values], DictionaryEncodeOptions())
+    return call_function("dictionary_encode", [values], _fn.DictionaryEncodeOptions())
 
 
 def utf8_trim_whitespace(values):
@@ -64,24 +46,24 @@ def utf8_trim_whitespace(values):
 
 def take(values, indices):
     """``values[indices]`` (indices checked)."""
-    return call_function("take", [values, indices], TakeOptions(boundscheck=True))
+    return call_function("take", [values, indices], _fn.TakeOptions(boundscheck=True))
 
 
 def join_cells(*cells_and_separator, null_replacement: str | None = None):
     """Element-wise concatenation of string arrays (or scalars), the last argument the separator;
     a null cell makes the result null, or is ``null_replacement`` when that is given."""
-    options = JoinOptions() if null_replacement is None else JoinOptions("replace", null_replacement)
+    options = _fn.JoinOptions() if null_replacement is None else _fn.JoinOptions("replace", null_replacement)
     return call_function("binary_join_element_wise", list(cells_and_separator), options)
 
 
 def matches(values, pattern: str):
     """Whether each string matches the regular expression ``pattern`` anywhere."""
-    return call_function("match_substring_regex", [values], MatchSubstringOptions(pattern))
+    return call_function("match_substring_regex", [values], _fn.MatchSubstringOptions(pattern))
 
 
 def replace_all(values, pattern: str, replacement: str):
     """Each string with every ``pattern`` (plain text) replaced by ``replacement``."""
-    return call_function("replace_substring", [values], ReplaceSubstringOptions(pattern, replacement))
+    return call_function("replace_substring", [values], _fn.ReplaceSubstringOptions(pattern, replacement))
 
 
 def equal(a, b):
@@ -98,4 +80,4 @@ def if_else(condition, a, b):
 
 def any_true(values) -> bool:
     """Whether any element is true (nulls skipped)."""
-    return bool(call_function("any", [values], ScalarAggregateOptions()).as_py())
+    return bool(call_function("any", [values], _fn.ScalarAggregateOptions()).as_py())
