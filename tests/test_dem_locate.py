@@ -409,3 +409,8 @@ def test_camera_frame_take_keeps_shared_parts_and_gathers_the_rest():
     for a, g in zip((*frame.R, frame.ox, frame.oy, frame.oz, frame.invalid),
                     (*got.R, got.ox, got.oy, got.oz, got.invalid), strict=True):
         assert np.array_equal(g, a if np.ndim(a) == 0 else a[index])
+    turning = CameraFrame(R, np.float64(1), np.float64(2), np.float64(3), np.bool_(False))  # only the attitude varies
+    got = turning.take(index)
+    assert (got.ox, got.oy, got.oz, got.invalid) == (turning.ox, turning.oy, turning.oz, turning.invalid)
+    for a, g in zip(turning.R, got.R, strict=True):
+        assert np.array_equal(g, a if np.ndim(a) == 0 else a[index])

@@ -204,6 +204,8 @@ class Gathered:
         return len(self.index)
 
     def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        if copy is False:
+            raise ValueError("a Gathered array is made on request: it cannot be had without a copy")
         out = self.values.take(self.index)
         return out if dtype is None else out.astype(dtype, copy=False)
 

@@ -137,7 +137,8 @@ class CameraFrame:
         if not arrays:  # one frame for every target: nothing to gather
             return self
         if index.dtype.kind in "iu" and all(x.ndim == 1 and len(x) == len(arrays[0]) for x in arrays):
-            taken = iter(take_all([x for x in parts[9:] if x.ndim], index))
+            origin = [x for x in parts[9:] if x.ndim]  # (none where only the attitude varies)
+            taken = iter(take_all(origin, index) if origin else ())
             out = [Gathered(x, index) if x.ndim else x for x in parts[:9]] + \
                   [next(taken) if x.ndim else x for x in parts[9:]]
         else:
