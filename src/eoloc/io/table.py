@@ -387,14 +387,11 @@ def text_cells(col) -> Coded:
         cells = cells.combine_chunks()
     coded = arrowfn.dictionary_encode(cells)
     codes = coded.indices.to_numpy(zero_copy_only=False)
-    names = arrowfn.utf8_trim_whitespace(coded.dictionary).to_numpy(zero_copy_only=False).astype(object)
-    distinct, first, where = np.unique(names.astype(str), return_index=True, return_inverse=True)
-    if len(distinct) < len(names):  # names that differed only by spaces: one code each, in first-seen order
-        order = np.argsort(first)
-        rank = np.empty_like(order)
-        rank[order] = np.arange(len(order))
-        return Coded(rank[where.reshape(-1)][codes], names[first[order]])
-    return Coded(codes, names)
+    names = arrowfn.utf8_trim_whitespace(coded.dictionary)
+    if not names.equals(coded.dictionary):  # some had spaces: names equal once stripped share one code
+        merged = arrowfn.dictionary_encode(names)
+        codes, names = merged.indices.to_numpy(zero_copy_only=False)[codes], merged.dictionary
+    return Coded(codes, names.to_numpy(zero_copy_only=False).astype(object))
 
 
 def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
