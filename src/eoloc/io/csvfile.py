@@ -1,14 +1,16 @@
 """The CSV writer: records (columns) to a CSV file with a header, fast enough for a million fixes.
 
-Each column becomes its cells as text, every cell followed by its separator (a comma; a line
-break after the last column), and pyarrow joins the cells of each row (``binary_join_element_wise``,
-GIL released). Numbers get their text from orjson's Ryu code (the shortest text that reads back
-as the same double, 3x faster than pyarrow's float cast) in one call per column and chunk; the
-commas orjson puts between them are the cells' separators already, so a cell is only an offset
-into orjson's output. Chunks of rows are rendered on two threads and written in order.
+How each column writes its cells is decided once for the whole column (:class:`_Cells`). Chunks
+of rows are rendered on two threads and written in order. A chunk's rows come from the compiled
+row renderer :mod:`eoloc.io.csvrows` (built with the package; it writes numbers, codes and
+pre-rendered cells with the GIL released) or, where it was not built, from pyarrow: each column's
+cells as a string array, every cell followed by its separator, joined row by row
+(``binary_join_element_wise``). Both give the same bytes (tested). Numbers are written as orjson
+writes them (Ryu: the shortest text that reads back as the same double); csvrows does that itself
+for a column whose rounded numbers have at most 15 digits and hands the others to orjson.
 
-Compared with rendering every cell on its own and handing pyarrow's CSV writer the columns, this
-takes 25 % less processor time on a million fixes (bench/RESULTS.md, session 41).
+Against orjson + pyarrow's join, csvrows takes the writer of 10^6 fixes from 0.29 to ~0.1 s
+(bench/RESULTS.md, session 43).
 """
 
 from __future__ import annotations
@@ -48,14 +50,33 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping], *, columns
             cells = [_Cells.of(k, recs.columns[k], recs.coded.get(k), last=i == len(names) - 1, lone=len(names) == 1)
                      for i, k in enumerate(names)]
 
+            rows = compiled_rows()
+
             def render(start: int):
                 stop = min(start + CSV_CHUNK, len(recs))
+                if rows is not None:
+                    return rows.render(start, stop - start, tuple(c.spec(start, stop) for c in cells))
                 return _join([c.render(start, stop) for c in cells], stop - start)
 
             with ThreadPoolExecutor(2) as pool:
                 for chunk in pool.map(render, range(0, len(recs), CSV_CHUNK)):
                     fh.write(chunk)
     return path
+
+
+def compiled_rows():
+    """The compiled row renderer (:mod:`eoloc.io.csvrows`), or None where it was not built (an
+    install without a C compiler): the writer then joins pyarrow string arrays, the same bytes."""
+    if not USE_COMPILED:
+        return None
+    try:
+        from . import csvrows
+    except ImportError:
+        return None
+    return csvrows
+
+
+USE_COMPILED = True  # False: always the pyarrow join (the tests compare the two)
 
 
 def decimals(name: str) -> int:
@@ -74,24 +95,51 @@ class _Cells:
         self.empty = ('""' if lone else "") + sep  # a row of one empty cell is not a blank line
         self.kind = "text"
         if coded is not None:
-            self.kind, self.codes = "coded", coded.codes
+            codes = np.ascontiguousarray(coded.codes)
+            self.kind, self.codes = "coded", codes if codes.dtype.kind == "i" else codes.astype(np.int64)
             self.names = _finish(pa.array(coded.names.tolist(), type=pa.string()), sep, self.empty, lone)
         elif v.dtype.kind == "b":
-            self.kind, self.codes = "coded", v.view(np.int8)
+            self.kind, self.codes = "coded", np.ascontiguousarray(v).view(np.int8)
             self.names = pa.array(["False" + sep, "True" + sep])
+        if self.kind == "coded":  # the names' offsets and text, for csvrows
+            _, offsets, data = self.names.buffers()
+            at = self.names.offset
+            self.name_buffers = (np.frombuffer(offsets, dtype=np.int32)[at:at + len(self.names) + 1], data)
         elif v.dtype.kind in "iu":
             self.kind = "numbers"
+            self.ints = v if v.dtype == np.int64 else v.astype(np.int64) if _fits_int64(v) else None
         elif v.dtype.kind == "f":
             self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
             self.whole = self.kind == "numbers" and _whole(v[:CSV_CHUNK], decimals(name)) and _whole(v, decimals(name))
-            self.big = bool(np.fmax.reduce(v, initial=-np.inf) >= _INTEGRAL or  # (NaN skipped)
-                            np.fmin.reduce(v, initial=np.inf) <= -_INTEGRAL)
+            top, bottom = np.fmax.reduce(v, initial=-np.inf), np.fmin.reduce(v, initial=np.inf)  # (NaN skipped)
+            self.big = bool(top >= _INTEGRAL or bottom <= -_INTEGRAL)
+            # csvrows writes a rounded number itself while it has at most 15 digits (see its text)
+            # (float64 only: numpy rounds a float32 column in float32)
+            self.floats = np.ascontiguousarray(v) if v.dtype == np.float64 and self.kind == "numbers" and max(
+                top, -bottom) < 10.0 ** (15 - decimals(name)) else None
         else:
             self.text = _finish(_text_array(name, v), sep, self.empty, lone)
 
     @classmethod
     def of(cls, name: str, v: np.ndarray, coded: Coded | None, *, last: bool, lone: bool) -> _Cells:
         return cls(name, v, coded, "\n" if last else ",", lone)
+
+    def spec(self, start: int, stop: int) -> tuple:
+        """Rows ``start:stop`` as :func:`eoloc.io.csvrows.render` takes them (see csvrows.c)."""
+        sep = self.sep.encode()
+        if self.kind == "coded":
+            return 3, self.codes, *self.name_buffers
+        if self.kind == "numbers" and self.v.dtype.kind == "f" and self.floats is not None:
+            return 1, self.floats, decimals(self.name), self.whole, sep, self.empty.encode()
+        if self.kind == "numbers" and self.v.dtype.kind in "iu" and self.ints is not None:
+            return 2, self.ints, sep
+        import pyarrow as pa
+
+        cells = self.render(start, stop)
+        if not isinstance(cells, pa.Array):
+            return 0, cells.as_py().encode("utf-8")
+        validity, offsets, data = cells.buffers()
+        return 4, offsets, data, validity, cells.offset
 
     def render(self, start: int, stop: int):
         """Rows ``start:stop`` as a pyarrow string array (or one scalar for all of them)."""
@@ -116,6 +164,10 @@ class _Cells:
             rounded = np.where(missing, 0.0, rounded).astype(np.int64)
         cells = number_cells(rounded, self.sep, missing if missing.any() else None)
         return cells if self.sep == "," else arrowfn.fill_null(cells, self.empty)
+
+
+def _fits_int64(v: np.ndarray) -> bool:
+    return v.size == 0 or (int(v.min()) >= -2**63 and int(v.max()) < 2**63)
 
 
 _INTEGRAL = 2.0**52  # a double this large or larger is a whole number: rounding leaves it as it is
