@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections import deque
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -26,7 +27,8 @@ import numpy as np
 
 from .records import Coded, Records
 
-CSV_CHUNK = 1 << 15  # rows rendered per pyarrow call (two at a time, one per core)
+CSV_CHUNK = 1 << 15  # rows rendered per call (two at a time, one per core)
+AHEAD = 4  # chunks rendered ahead of the file: rendering outruns the writes, memory should not
 
 _QUOTED = '[,"\r\n]'  # a cell with one of these is quoted (RFC 4180)
 
@@ -58,9 +60,14 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping], *, columns
                     return rows.render(start, stop - start, tuple(c.spec(start, stop) for c in cells))
                 return _join([c.render(start, stop) for c in cells], stop - start)
 
-            with ThreadPoolExecutor(2) as pool:
-                for chunk in pool.map(render, range(0, len(recs), CSV_CHUNK)):
-                    fh.write(chunk)
+            with ThreadPoolExecutor(2) as pool:  # at most AHEAD chunks rendered and not yet written
+                pending: deque = deque()
+                for start in range(0, len(recs), CSV_CHUNK):
+                    if len(pending) == AHEAD:
+                        fh.write(pending.popleft().result())
+                    pending.append(pool.submit(render, start))
+                while pending:
+                    fh.write(pending.popleft().result())
     return path
 
 

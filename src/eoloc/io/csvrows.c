@@ -61,35 +61,70 @@ static const char DIGIT_PAIRS[201] =
     "40414243444546474849505152535455565758596061626364656667686970717273747576777879"
     "8081828384858687888990919293949596979899";
 
-/* The decimal digits of a (most significant first) into out; returns how many. */
-static int digits_of(uint64_t a, char *out) {
-    char tmp[24];
-    int k = 24;
-    while (a >= 100) {
+static const uint64_t POW10U[20] = {1ULL,
+                                   10ULL,
+                                   100ULL,
+                                   1000ULL,
+                                   10000ULL,
+                                   100000ULL,
+                                   1000000ULL,
+                                   10000000ULL,
+                                   100000000ULL,
+                                   1000000000ULL,
+                                   10000000000ULL,
+                                   100000000000ULL,
+                                   1000000000000ULL,
+                                   10000000000000ULL,
+                                   100000000000000ULL,
+                                   1000000000000000ULL,
+                                   10000000000000000ULL,
+                                   100000000000000000ULL,
+                                   1000000000000000000ULL,
+                                   10000000000000000000ULL};
+
+/* How many decimal digits a has (at least 1). */
+static inline int ndigits(uint64_t a) {
+    int k = 1; /* a loop: the widths of a column's numbers vary little, so it is well predicted */
+    while (k < 20 && a >= POW10U[k]) k++;
+    return k;
+}
+
+/* Exactly len digits of a (leading zeros where it has fewer), ending just before end. */
+static inline void digits_back(char *end, uint64_t a, int len) {
+    while (len >= 2) {
         unsigned r = (unsigned)(a % 100);
         a /= 100;
-        tmp[--k] = DIGIT_PAIRS[2 * r + 1];
-        tmp[--k] = DIGIT_PAIRS[2 * r];
+        end -= 2;
+        memcpy(end, DIGIT_PAIRS + 2 * r, 2);
+        len -= 2;
     }
-    if (a >= 10) {
-        tmp[--k] = DIGIT_PAIRS[2 * a + 1];
-        tmp[--k] = DIGIT_PAIRS[2 * a];
-    } else {
-        tmp[--k] = (char)('0' + a);
-    }
-    memcpy(out, tmp + k, (size_t)(24 - k));
-    return 24 - k;
+    if (len) *--end = (char)('0' + a % 10);
+}
+
+static inline char *put_u64(char *p, uint64_t a) {
+    int k = ndigits(a);
+    digits_back(p + k, a, k);
+    return p + k;
 }
 
 static inline char *put_i64(char *p, int64_t x) {
-    uint64_t a;
     if (x < 0) {
         *p++ = '-';
-        a = (uint64_t)0 - (uint64_t)x;
-    } else {
-        a = (uint64_t)x;
+        return put_u64(p, (uint64_t)0 - (uint64_t)x);
     }
-    return p + digits_of(a, p);
+    return put_u64(p, (uint64_t)x);
+}
+
+/* a / 10^d and its remainder; the usual decimals as constants (a multiplication, not a division). */
+static inline uint64_t split(uint64_t a, int d, uint64_t *frac) {
+    uint64_t q;
+    switch (d) {
+    case 4: q = a / 10000ULL; break;
+    case 9: q = a / 1000000000ULL; break;
+    default: q = a / POW10U[d];
+    }
+    *frac = a - q * POW10U[d];
+    return q;
 }
 
 /* The text of rint(x * scale) / scale as orjson writes it; returns NULL when the rounded
@@ -101,50 +136,41 @@ static inline char *put_rounded(char *p, double x, double scale, int decimals) {
         memcpy(p, "0.0", 3);
         return p + 3;
     }
-    if (m < 0) {
-        *p++ = '-';
-        m = -m;
-    }
+    *p = '-'; /* kept only for a negative number */
+    p += m < 0;
+    m = fabs(m);
     if (m > 1e15) return NULL;
-    uint64_t a = (uint64_t)m;
-    int e = -decimals; /* the value is a * 10^e */
-    while (e < 0 && a % 10 == 0) {
-        a /= 10;
-        e++;
-    }
-    char dig[24];
-    int k = digits_of(a, dig);
-    if (e == 0) { /* a whole number: orjson writes "12.0" */
-        memcpy(p, dig, (size_t)k);
-        p += k;
+    uint64_t frac, whole = split((uint64_t)m, decimals, &frac);
+    if (frac == 0) { /* a whole number: orjson writes "12.0" */
+        p = put_u64(p, whole);
         memcpy(p, ".0", 2);
         return p + 2;
     }
-    int lead = k + e - 1; /* the power of ten of the first digit */
-    if (lead <= -6) {     /* below 1e-5: "2.5e-6" */
-        *p++ = dig[0];
-        if (k > 1) {
-            *p++ = '.';
-            memcpy(p, dig + 1, (size_t)(k - 1));
-            p += k - 1;
+    int fd = decimals; /* the value is whole + frac * 10^-fd, frac without trailing zeros */
+    while (frac % 10 == 0) {
+        frac /= 10;
+        fd--;
+    }
+    if (whole == 0) {
+        int k = ndigits(frac);
+        if (fd - k >= 5) { /* below 1e-5 (the first digit's power of ten -6 or less): "2.5e-6" */
+            char dig[20] = {0};
+            digits_back(dig + k, frac, k);
+            *p++ = dig[0];
+            if (k > 1) {
+                *p++ = '.';
+                memcpy(p, dig + 1, (size_t)(k - 1));
+                p += k - 1;
+            }
+            *p++ = 'e';
+            *p++ = '-';
+            return put_u64(p, (uint64_t)(fd - k + 1));
         }
-        *p++ = 'e';
-        *p++ = '-';
-        return p + digits_of((uint64_t)(-lead), p);
     }
-    if (k + e > 0) { /* digits before the point */
-        int ip = k + e;
-        memcpy(p, dig, (size_t)ip);
-        p += ip;
-        *p++ = '.';
-        memcpy(p, dig + ip, (size_t)(k - ip));
-        return p + (k - ip);
-    }
-    *p++ = '0';
+    p = put_u64(p, whole);
     *p++ = '.';
-    for (int z = 0; z < -(k + e); z++) *p++ = '0';
-    memcpy(p, dig, (size_t)k);
-    return p + k;
+    digits_back(p + fd, frac, fd);
+    return p + fd;
 }
 
 static int get_buffer(PyObject *obj, Col *c, const char *what) {
