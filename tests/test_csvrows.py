@@ -80,8 +80,8 @@ def test_bad_input_is_an_error_not_a_crash():
 
 
 _text = st.text(alphabet=st.sampled_from(list('ab ,"\n\r;é')), max_size=6)
-_KINDS = ["int", "int32", "uint64", "float", "tiny", "huge", "inf", "float32", "whole", "same", "none", "text",
-          "bool", "coded", "coded_u8"]
+_KINDS = ["int", "int32", "uint64", "int_strided", "float", "float_strided", "tiny", "huge", "inf", "float32", "whole",
+          "same", "none", "text", "bool", "coded", "coded_u8"]
 
 
 @settings(max_examples=120, deadline=None)
@@ -95,13 +95,15 @@ def test_compiled_and_pyarrow_paths_write_the_same_bytes(tmp_path_factory, data,
     floats = st.floats(-1e6, 1e6) | st.just(float("nan"))
     for i, kind in enumerate(kinds):
         name = f"c{i}_deg" if i % 2 else f"c{i}"
-        if kind in ("int", "int32", "uint64"):
+        if kind in ("int", "int32", "uint64", "int_strided"):
             lo, hi, dtype = {"int": (-2**63, 2**63 - 1, np.int64), "int32": (-2**31, 2**31 - 1, np.int32),
-                             "uint64": (0, 2**64 - 1, np.uint64)}[kind]
+                             "uint64": (0, 2**64 - 1, np.uint64), "int_strided": (-9, 9, np.int64)}[kind]
             v = np.array(data.draw(st.lists(st.integers(lo, hi), min_size=n, max_size=n)), dtype=dtype)
-        elif kind in ("float", "tiny", "huge", "inf", "float32", "whole", "same", "none"):
+            v = np.repeat(v, 2)[::2] if kind == "int_strided" else v  # a view with a stride
+        elif kind in ("float", "float_strided", "tiny", "huge", "inf", "float32", "whole", "same", "none"):
             xs = np.array(data.draw(st.lists(floats, min_size=n, max_size=n)))
-            v = {"float": xs, "tiny": xs * 1e-11, "huge": xs * 1e12, "inf": np.where(xs > 0, np.inf, xs),
+            v = {"float": xs, "float_strided": np.repeat(xs, 2)[::2], "tiny": xs * 1e-11, "huge": xs * 1e12,
+                 "inf": np.where(xs > 0, np.inf, xs),
                  "float32": xs.astype(np.float32), "whole": np.round(xs), "same": np.full(n, -2.5),
                  "none": np.full(n, np.nan)}[kind]
         elif kind == "bool":

@@ -114,7 +114,7 @@ class _Cells:
             self.name_buffers = (np.frombuffer(offsets, dtype=np.int32)[at:at + len(self.names) + 1], data)
         elif v.dtype.kind in "iu":
             self.kind = "numbers"
-            self.ints = v if v.dtype == np.int64 else v.astype(np.int64) if _fits_int64(v) else None
+            self.ints = np.ascontiguousarray(v, dtype=np.int64) if _fits_int64(v) else None
         elif v.dtype.kind == "f":
             self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
             self.whole = self.kind == "numbers" and _whole(v[:CSV_CHUNK], decimals(name)) and _whole(v, decimals(name))
@@ -145,8 +145,10 @@ class _Cells:
         cells = self.render(start, stop)
         if not isinstance(cells, pa.Array):
             return 0, cells.as_py().encode("utf-8")
+        if cells.type != pa.string():  # csvrows reads int32 offsets
+            raise TypeError(f"CSV column {self.name!r}: cells of type {cells.type}, not string")
         validity, offsets, data = cells.buffers()
-        return 4, offsets, data, validity, cells.offset
+        return 4, offsets, b"" if data is None else data, validity, cells.offset
 
     def render(self, start: int, stop: int):
         """Rows ``start:stop`` as a pyarrow string array (or one scalar for all of them)."""
