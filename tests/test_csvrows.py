@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eoloc.io import csvfile
+from eoloc.io import csvfile, rows
 from eoloc.io.records import Coded, Records
 
 
@@ -19,7 +19,7 @@ def test_the_row_renderer_is_built():
     pure-Python path, so a missing build must fail here, not pass by comparing that path with itself."""
     from eoloc.io import csvrows
 
-    assert csvfile.compiled_rows() is csvrows
+    assert rows.compiled() is csvrows
 
 
 def _orjson_cells(v: np.ndarray, decimals: int) -> list[str]:
@@ -41,11 +41,11 @@ def test_numbers_are_orjsons_text_of_numpys_rounding(data, decimals, magnitude):
     xs = data.draw(st.lists(st.floats(-1.0, 1.0, allow_nan=False), min_size=1, max_size=60))
     v = np.array(xs) * magnitude
     v = np.concatenate([v[np.abs(v) < limit], [0.0, -0.0, 0.5, -2.5, 1e-5, -9.9e-6]])
-    out = csvrows.render(0, len(v), ((1, v, decimals, False, b",", b","),)).decode().split(",")[:-1]
+    out = csvrows.render(0, len(v), ((1, v, decimals, False, b"", b",", b","),)).decode().split(",")[:-1]
     assert out == _orjson_cells(v, decimals)
     gaps = v.copy()
     gaps[::3] = np.nan
-    out = csvrows.render(0, len(v), ((1, gaps, decimals, False, b"\n", b"\n"),)).decode().split("\n")[:-1]
+    out = csvrows.render(0, len(v), ((1, gaps, decimals, False, b"", b"\n", b"\n"),)).decode().split("\n")[:-1]
     want = _orjson_cells(np.nan_to_num(gaps), decimals)
     assert out == ["" if np.isnan(g) else w for g, w in zip(gaps, want, strict=True)]
 
@@ -57,7 +57,7 @@ def test_ints_and_rows_from_an_offset(ints, start):
     from eoloc.io import csvrows
 
     v = np.array([0] * start + ints, dtype=np.int64)
-    out = csvrows.render(start, len(ints), ((2, v, b"\n"),)).decode()
+    out = csvrows.render(start, len(ints), ((2, v, b"", b"\n"),)).decode()
     assert out == "".join(f"{i}\n" for i in ints)
 
 
@@ -70,11 +70,11 @@ def test_bad_input_is_an_error_not_a_crash():
     with pytest.raises(ValueError, match="code past its names"):
         csvrows.render(0, 2, ((3, np.array([0, 2], dtype=np.int32), offsets, names),))
     with pytest.raises(IndexError):
-        csvrows.render(1, 3, ((2, np.arange(3), b","),))
+        csvrows.render(1, 3, ((2, np.arange(3), b"", b","),))
     with pytest.raises(TypeError):
-        csvrows.render(0, 1, ((1, np.arange(1, dtype=np.float32), 4, False, b",", b","),))
+        csvrows.render(0, 1, ((1, np.arange(1, dtype=np.float32), 4, False, b"", b",", b","),))
     with pytest.raises(ValueError, match="15 digits"):
-        csvrows.render(0, 1, ((1, np.array([1e12]), 4, False, b",", b","),))
+        csvrows.render(0, 1, ((1, np.array([1e12]), 4, False, b"", b",", b","),))
     with pytest.raises(ValueError):
         csvrows.render(0, 1, ((7, b"x"),))
 
@@ -122,8 +122,8 @@ def test_compiled_and_pyarrow_paths_write_the_same_bytes(tmp_path_factory, data,
     csvfile.CSV_CHUNK = chunk
     try:
         fast = csvfile.write_csv(tmp / "fast.csv", Records(cols, coded)).read_bytes()
-        csvfile.USE_COMPILED = False
+        rows.USE_COMPILED = False
         slow = csvfile.write_csv(tmp / "slow.csv", Records(cols, coded)).read_bytes()
     finally:
-        csvfile.CSV_CHUNK, csvfile.USE_COMPILED = old, True
+        csvfile.CSV_CHUNK, rows.USE_COMPILED = old, True
     assert fast == slow

@@ -410,7 +410,8 @@ def test_number_cells_are_the_shortest_round_trip(floats, ints, data):
 def test_records_from_rows_round_trip_and_streamed_geojson(tmp_path):
     """Dict rows -> Records -> rows gives the same values back (None for a missing key), and the
     streamed GeoJSON equals the features built in memory."""
-    from eoloc.io.export import fix_features, write_fix_geojson
+    from eoloc.io.export import fix_features
+    from eoloc.io.geojsonfile import write_fix_geojson
     from eoloc.io.records import Records
 
     rows = [{"target_id": "A", "lat_deg": 45.0, "lon_deg": 7.0, "h_m": 600.0, "status": "OK", "frame": 3},

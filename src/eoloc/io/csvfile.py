@@ -18,17 +18,15 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections import deque
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from . import rows
 from .records import Coded, Records
 
-CSV_CHUNK = 1 << 15  # rows rendered per call (two at a time, one per core)
-AHEAD = 4  # chunks rendered ahead of the file: rendering outruns the writes, memory should not
+CSV_CHUNK = rows.CHUNK
 
 _QUOTED = '[,"\r\n]'  # a cell with one of these is quoted (RFC 4180)
 
@@ -52,38 +50,15 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping], *, columns
             cells = [_Cells.of(k, recs.columns[k], recs.coded.get(k), last=i == len(names) - 1, lone=len(names) == 1)
                      for i, k in enumerate(names)]
 
-            rows = compiled_rows()
+            compiled = rows.compiled()
 
-            def render(start: int):
-                stop = min(start + CSV_CHUNK, len(recs))
-                if rows is not None:
-                    return rows.render(start, stop - start, tuple(c.spec(start, stop) for c in cells))
+            def render(start: int, stop: int) -> bytes:
+                if compiled is not None:
+                    return compiled.render(start, stop - start, tuple(c.spec(start, stop) for c in cells))
                 return _join([c.render(start, stop) for c in cells], stop - start)
 
-            with ThreadPoolExecutor(2) as pool:  # at most AHEAD chunks rendered and not yet written
-                pending: deque = deque()
-                for start in range(0, len(recs), CSV_CHUNK):
-                    if len(pending) == AHEAD:
-                        fh.write(pending.popleft().result())
-                    pending.append(pool.submit(render, start))
-                while pending:
-                    fh.write(pending.popleft().result())
+            rows.write_chunks(fh, len(recs), render, CSV_CHUNK)
     return path
-
-
-def compiled_rows():
-    """The compiled row renderer (:mod:`eoloc.io.csvrows`), or None where it was not built (an
-    install without a C compiler): the writer then joins pyarrow string arrays, the same bytes."""
-    if not USE_COMPILED:
-        return None
-    try:
-        from . import csvrows
-    except ImportError:
-        return None
-    return csvrows
-
-
-USE_COMPILED = True  # False: always the pyarrow join (the tests compare the two)
 
 
 def decimals(name: str) -> int:
@@ -117,13 +92,10 @@ class _Cells:
             self.ints = np.ascontiguousarray(v, dtype=np.int64) if _fits_int64(v) else None
         elif v.dtype.kind == "f":
             self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
-            self.whole = self.kind == "numbers" and _whole(v[:CSV_CHUNK], decimals(name)) and _whole(v, decimals(name))
+            self.whole = self.kind == "numbers" and whole_column(v, decimals(name))
             top, bottom = np.fmax.reduce(v, initial=-np.inf), np.fmin.reduce(v, initial=np.inf)  # (NaN skipped)
             self.big = bool(top >= _INTEGRAL or bottom <= -_INTEGRAL)
-            # csvrows writes a rounded number itself while it has at most 15 digits (see its text)
-            # (float64 only: numpy rounds a float32 column in float32)
-            self.floats = np.ascontiguousarray(v) if v.dtype == np.float64 and self.kind == "numbers" and max(
-                top, -bottom) < 10.0 ** (15 - decimals(name)) else None
+            self.floats = compiled_floats(v, decimals(name), top, bottom) if self.kind == "numbers" else None
         else:
             self.text = _finish(_text_array(name, v), sep, self.empty, lone)
 
@@ -137,9 +109,9 @@ class _Cells:
         if self.kind == "coded":
             return 3, self.codes, *self.name_buffers
         if self.kind == "numbers" and self.v.dtype.kind == "f" and self.floats is not None:
-            return 1, self.floats, decimals(self.name), self.whole, sep, self.empty.encode()
+            return 1, self.floats, decimals(self.name), self.whole, b"", sep, self.empty.encode()
         if self.kind == "numbers" and self.v.dtype.kind in "iu" and self.ints is not None:
-            return 2, self.ints, sep
+            return 2, self.ints, b"", sep
         import pyarrow as pa
 
         cells = self.render(start, stop)
@@ -191,9 +163,25 @@ def rounded_to(v: np.ndarray, decimals: int, big: bool = True) -> np.ndarray:
     return np.where(np.abs(v) >= _INTEGRAL, v, r) if big else r
 
 
-def _whole(v: np.ndarray, decimals: int) -> bool:
+def whole_column(v: np.ndarray, decimals: int) -> bool:
     """Whether a float column, rounded as written, holds only whole numbers (or no value) that
-    int64 writes exactly."""
+    int64 writes exactly (its first chunk looked at first: most columns are not)."""
+    return _whole(v[:CSV_CHUNK], decimals) and _whole(v, decimals)
+
+
+def compiled_floats(v: np.ndarray, decimals: int, top: float | None = None, bottom: float | None = None):
+    """The float column as csvrows takes it (contiguous float64), or None where csvrows does not
+    write it: a float32 column (numpy rounds it in float32), or a rounded number with more than
+    15 digits (csvrows.c says why). Infinities: the caller's (csvrows refuses them). ``top``,
+    ``bottom``: the column's largest and smallest number if known."""
+    if v.dtype != np.float64:
+        return None
+    top = np.fmax.reduce(v, initial=-np.inf) if top is None else top  # (NaN skipped)
+    bottom = np.fmin.reduce(v, initial=np.inf) if bottom is None else bottom
+    return np.ascontiguousarray(v) if max(top, -bottom) < 10.0 ** (15 - decimals) else None
+
+
+def _whole(v: np.ndarray, decimals: int) -> bool:
     r = rounded_to(v[~np.isnan(v)], decimals)
     return bool((np.abs(r) < 2.0**53).all() and (r == np.trunc(r)).all())  # an infinity is not whole
 

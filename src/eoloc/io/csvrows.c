@@ -21,8 +21,10 @@
 
    render(start, n, columns) -> bytes; each column a tuple:
      (0, cell)                                      the same cell (bytes, separator included) on every row
-     (1, values, decimals, whole, sep, empty)       float64 numbers; NaN: ``empty``; whole: as integers
-     (2, values, sep)                               int64 numbers
+     (1, values, decimals, whole, prefix, suffix, empty)
+                                                    float64 numbers between prefix and suffix (bytes);
+                                                    NaN: ``empty`` alone; whole: as integers
+     (2, values, prefix, suffix)                    int64 numbers between prefix and suffix
      (3, codes, offsets, data)                      coded text: names[codes[row]] (int32 offsets)
      (4, offsets, data, validity, offset)           text cells of rows offset .. offset+n of a string
                                                     array (null: ",")
@@ -44,7 +46,8 @@ typedef struct {
     int nbuf;
     const char *text;   /* K_CONST: the cell; K_FLOAT: the empty cell */
     Py_ssize_t text_len;
-    char sep;
+    const char *prefix, *suffix;
+    Py_ssize_t prefix_len, suffix_len;
     int decimals, whole;
     double scale;
     Py_ssize_t offset;  /* K_CELLS */
@@ -191,13 +194,24 @@ static void release(Col *cols, Py_ssize_t ncols) {
         for (int b = 0; b < cols[j].nbuf; b++) PyBuffer_Release(&cols[j].buf[b]);
 }
 
-static int one_char(PyObject *obj, char *out) {
-    if (!PyBytes_Check(obj) || PyBytes_GET_SIZE(obj) != 1) {
-        PyErr_SetString(PyExc_TypeError, "csvrows: a separator is one byte");
+static int text_of(PyObject *obj, const char **text, Py_ssize_t *len) {
+    if (!PyBytes_Check(obj)) {
+        PyErr_SetString(PyExc_TypeError, "csvrows: a prefix, suffix or cell text is bytes");
         return -1;
     }
-    *out = PyBytes_AS_STRING(obj)[0];
+    *text = PyBytes_AS_STRING(obj);
+    *len = PyBytes_GET_SIZE(obj);
     return 0;
+}
+
+/* Short texts (separators, JSON keys) byte by byte: cheaper than a call to memcpy. */
+static inline char *put_text(char *p, const char *text, Py_ssize_t len) {
+    if (len > 16) {
+        memcpy(p, text, (size_t)len);
+        return p + len;
+    }
+    for (Py_ssize_t i = 0; i < len; i++) *p++ = text[i];
+    return p;
 }
 
 static int is_format(const Py_buffer *b, const char *allowed, Py_ssize_t itemsize) {
@@ -216,7 +230,7 @@ static Py_ssize_t parse_col(PyObject *spec, Col *c, Py_ssize_t start, Py_ssize_t
     long kind = PyLong_AsLong(PyTuple_GET_ITEM(spec, 0));
     if (kind == -1 && PyErr_Occurred()) return -1;
     c->kind = (int)kind;
-    static const Py_ssize_t sizes[5] = {2, 6, 3, 4, 5};
+    static const Py_ssize_t sizes[5] = {2, 7, 4, 4, 5};
     if (kind < 0 || kind > 4 || size != sizes[kind]) {
         PyErr_Format(PyExc_ValueError, "csvrows: bad column spec of kind %ld", kind);
         return -1;
@@ -246,18 +260,16 @@ static Py_ssize_t parse_col(PyObject *spec, Col *c, Py_ssize_t start, Py_ssize_t
         c->decimals = (int)d;
         c->scale = POW10[d];
         c->whole = PyObject_IsTrue(PyTuple_GET_ITEM(spec, 3));
-        if (c->whole < 0 || one_char(PyTuple_GET_ITEM(spec, 4), &c->sep) < 0) return -1;
-        if (!PyBytes_Check(PyTuple_GET_ITEM(spec, 5))) {
-            PyErr_SetString(PyExc_TypeError, "csvrows: the empty cell is bytes");
+        if (c->whole < 0 || text_of(PyTuple_GET_ITEM(spec, 4), &c->prefix, &c->prefix_len) < 0 ||
+            text_of(PyTuple_GET_ITEM(spec, 5), &c->suffix, &c->suffix_len) < 0 ||
+            text_of(PyTuple_GET_ITEM(spec, 6), &c->text, &c->text_len) < 0)
             return -1;
-        }
-        c->text = PyBytes_AS_STRING(PyTuple_GET_ITEM(spec, 5));
-        c->text_len = PyBytes_GET_SIZE(PyTuple_GET_ITEM(spec, 5));
         if (c->buf[0].len / 8 < start + n) {
             PyErr_SetString(PyExc_IndexError, "csvrows: rows past the end of a float column");
             return -1;
         }
-        return (c->text_len > 32 ? c->text_len : 32) * n;
+        Py_ssize_t cell = 32 + c->prefix_len + c->suffix_len;
+        return (c->text_len > cell ? c->text_len : cell) * n;
     }
     case K_INT: {
         if (get_buffer(PyTuple_GET_ITEM(spec, 1), c, "an int column") < 0) return -1;
@@ -265,12 +277,14 @@ static Py_ssize_t parse_col(PyObject *spec, Col *c, Py_ssize_t start, Py_ssize_t
             PyErr_SetString(PyExc_TypeError, "csvrows: an int column is int64");
             return -1;
         }
-        if (one_char(PyTuple_GET_ITEM(spec, 2), &c->sep) < 0) return -1;
+        if (text_of(PyTuple_GET_ITEM(spec, 2), &c->prefix, &c->prefix_len) < 0 ||
+            text_of(PyTuple_GET_ITEM(spec, 3), &c->suffix, &c->suffix_len) < 0)
+            return -1;
         if (c->buf[0].len / 8 < start + n) {
             PyErr_SetString(PyExc_IndexError, "csvrows: rows past the end of an int column");
             return -1;
         }
-        return 21 * n;
+        return (21 + c->prefix_len + c->suffix_len) * n;
     }
     case K_CODED: {
         if (get_buffer(PyTuple_GET_ITEM(spec, 1), c, "codes") < 0 || get_buffer(PyTuple_GET_ITEM(spec, 2), c, "offsets") < 0 ||
@@ -341,20 +355,19 @@ static char *fill(char *p, const Col *cols, Py_ssize_t ncols, Py_ssize_t start, 
             const Col *c = &cols[j];
             switch (c->kind) {
             case K_CONST:
-                memcpy(p, c->text, (size_t)c->text_len);
-                p += c->text_len;
+                p = put_text(p, c->text, c->text_len);
                 break;
             case K_FLOAT: {
                 double x = ((const double *)c->buf[0].buf)[row];
                 if (isnan(x)) {
-                    memcpy(p, c->text, (size_t)c->text_len);
-                    p += c->text_len;
+                    p = put_text(p, c->text, c->text_len);
                     break;
                 }
                 if (!isfinite(x)) {
                     *bad = "an infinity in a float column";
                     return NULL;
                 }
+                p = put_text(p, c->prefix, c->prefix_len);
                 if (c->whole) {
                     double r = rint(x * c->scale) / c->scale;
                     if (!(fabs(r) < 9.2e18)) {
@@ -369,12 +382,13 @@ static char *fill(char *p, const Col *cols, Py_ssize_t ncols, Py_ssize_t start, 
                         return NULL;
                     }
                 }
-                *p++ = c->sep;
+                p = put_text(p, c->suffix, c->suffix_len);
                 break;
             }
             case K_INT:
+                p = put_text(p, c->prefix, c->prefix_len);
                 p = put_i64(p, ((const int64_t *)c->buf[0].buf)[row]);
-                *p++ = c->sep;
+                p = put_text(p, c->suffix, c->suffix_len);
                 break;
             case K_CODED: {
                 int64_t code = code_at(c, row);
@@ -383,8 +397,7 @@ static char *fill(char *p, const Col *cols, Py_ssize_t ncols, Py_ssize_t start, 
                     return NULL;
                 }
                 const int32_t *off = (const int32_t *)c->buf[1].buf;
-                memcpy(p, (const char *)c->buf[2].buf + off[code], (size_t)(off[code + 1] - off[code]));
-                p += off[code + 1] - off[code];
+                p = put_text(p, (const char *)c->buf[2].buf + off[code], off[code + 1] - off[code]);
                 break;
             }
             default: { /* K_CELLS */
@@ -394,8 +407,7 @@ static char *fill(char *p, const Col *cols, Py_ssize_t ncols, Py_ssize_t start, 
                     break;
                 }
                 const int32_t *off = (const int32_t *)c->buf[0].buf;
-                memcpy(p, (const char *)c->buf[1].buf + off[at], (size_t)(off[at + 1] - off[at]));
-                p += off[at + 1] - off[at];
+                p = put_text(p, (const char *)c->buf[1].buf + off[at], off[at + 1] - off[at]);
             }
             }
         }

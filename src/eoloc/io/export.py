@@ -109,22 +109,6 @@ def _point_feature(row: dict) -> dict:
     return {"type": "Feature", "geometry": geom, "properties": props}
 
 
-def write_fix_geojson(path: str | Path, records: Records, chunk: int = 65536) -> Path:
-    """GeoJSON FeatureCollection of fix records, streamed in chunks (a million fixes never sit
-    in memory as dicts); failed fixes have a null geometry."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", encoding="utf-8") as fh:
-        fh.write('{"type": "FeatureCollection", "features": [')
-        sep = "\n"
-        for part in records.chunks(chunk):
-            for row in part.rows():
-                fh.write(sep + json.dumps(_point_feature(row), allow_nan=False))
-                sep = ",\n"
-        fh.write("\n]}\n")
-    return path
-
-
 def write_feature_collection(path: str | Path, features: list[dict], indent: int | None = None) -> Path:
     """Write GeoJSON features as a FeatureCollection (creating the folder)."""
     path = Path(path)

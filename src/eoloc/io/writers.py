@@ -16,7 +16,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
 from .csvfile import write_csv
-from .export import FIX_COLUMNS, fix_features, write_feature_collection, write_fix_geojson
+from .export import FIX_COLUMNS, fix_features, write_feature_collection
+from .geojsonfile import write_fix_geojson
 from .records import Records
 
 DEFAULT_FORMATS = ("csv", "geojson")
