@@ -1,7 +1,9 @@
 """CSV reading: eoloc's telemetry reader (line accounting + pyarrow + value checks) against
 pyarrow.csv reading the same file with no checks, alternated in one run (goal <= 3x); and
 `eoloc locate` on 10^5 telemetry + 10^6 detections against pandas reading the two files, five
-alternated pairs, median ratio (goal <= 10x, peak memory <= 1.5 GB).
+alternated pairs, median ratio (goal <= 10x, peak memory <= 1.5 GB); and the GeoJSON of 10^6
+fixes (`eoloc locate`'s other default format) against Python's json module writing the same
+features one by one.
 
     python bench/bench_csv.py [--lines 1000000]
 """
@@ -111,6 +113,48 @@ run()
 """
 
 
+def fix_records(n: int, seed: int = 2):
+    """Records shaped like `eoloc locate`'s fixes (ids and statuses coded, as the job makes them)."""
+    from eoloc.io.export import STATUS_NAMES
+    from eoloc.io.records import Coded, Records
+
+    rng = np.random.default_rng(seed)
+    ids = np.array([f"T{k}" for k in range(50)], dtype=object)
+    id_codes = rng.integers(0, 50, n).astype(np.int32)
+    status = np.where(rng.random(n) < 0.97, 0, 3).astype(np.int8)
+    ok = status == 0
+    cols = {"line": np.arange(2, n + 2), "time_s": np.round(rng.uniform(0, 4000, n), 2), "frame": np.full(n, np.nan),
+            "target_id": ids[id_codes], "u_px": rng.uniform(0, 1023, n), "v_px": rng.uniform(0, 767, n),
+            "record_line": rng.integers(2, 100_002, n), "lat_deg": np.where(ok, 45 + rng.normal(0, 0.02, n), np.nan),
+            "lon_deg": np.where(ok, 7 + rng.normal(0, 0.02, n), np.nan), "h_m": np.where(ok, 600.0, np.nan),
+            "range_m": np.where(ok, rng.uniform(2000, 8000, n), np.nan), "status": STATUS_NAMES[status]}
+    return Records(cols, {"target_id": Coded(id_codes, ids), "status": Coded(status, STATUS_NAMES)})
+
+
+def geojson_pair(out: Path, n: int = 1_000_000) -> tuple[float, float]:
+    """(eoloc's GeoJSON writer, Python's json module feature by feature) seconds on n fixes."""
+    import json
+
+    from eoloc.io.export import fix_features
+    from eoloc.io.geojsonfile import write_fix_geojson
+
+    recs = fix_records(n)
+    write_fix_geojson(out / "warm.geojson", fix_records(1000))
+    t0 = time.perf_counter()
+    write_fix_geojson(out / "eoloc.geojson", recs)
+    t_eoloc = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with (out / "json.geojson").open("w") as fh:  # the hand-written way: one dict and one dumps per feature
+        fh.write('{"type": "FeatureCollection", "features": [\n')
+        for start in range(0, n, 65536):
+            feats = fix_features(recs.slice(start, start + 65536))
+            fh.write(",\n".join(json.dumps(f) for f in feats))
+        fh.write("\n]}\n")
+    t_json = time.perf_counter() - t0
+    assert len(json.loads((out / "eoloc.geojson").read_bytes())["features"]) == n
+    return t_eoloc, t_json
+
+
 def main(lines: int = 1_000_000, locate: bool = True) -> list[str]:
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -131,6 +175,11 @@ def main(lines: int = 1_000_000, locate: bool = True) -> list[str]:
                            1 / ratio))
             print(f"locate: {wall:.2f} s = {ratio:.1f}x pandas' read (median of 5 alternated pairs; goal <= 10x), "
                   f"peak {peak:.0f} MB (goal <= 1500)", file=sys.stderr)
+            t_eoloc, t_json = geojson_pair(tmp)
+            out.append(row("GeoJSON of 10^6 fixes (write_fix_geojson)", f"{t_eoloc:.2f} s",
+                           f"json module, feature by feature: {t_json:.1f} s", t_json / t_eoloc))
+            print(f"geojson: eoloc {t_eoloc:.2f} s, json module {t_json:.1f} s, {t_json / t_eoloc:.0f}x faster",
+                  file=sys.stderr)
     return out
 
 
