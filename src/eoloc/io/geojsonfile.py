@@ -36,13 +36,9 @@ def write_fix_geojson(path: str | Path, records: Records, *, chunk: int | None =
         fh.write(b'{"type": "FeatureCollection", "features": [')
         if len(recs):
             columns = _feature_columns(recs)
-            compiled = rows.compiled()
 
             def render(start: int, stop: int) -> bytes:
-                specs = tuple(c.spec(start, stop) for c in columns)
-                if compiled is not None:
-                    return compiled.render(start, stop - start, specs)
-                return rows.render_reference(start, stop - start, specs)
+                return rows.render(start, stop - start, [c.spec(start, stop) for c in columns])
 
             rows.write_chunks(fh, len(recs), render, chunk or rows.CHUNK)
             fh.seek(-1, 2)  # the last feature's comma
