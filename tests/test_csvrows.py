@@ -79,6 +79,21 @@ def test_bad_input_is_an_error_not_a_crash():
         csvrows.render(0, 1, ((7, b"x"),))
 
 
+def test_negative_zero_is_written_as_orjson_writes_it(tmp_path):
+    """-0.0 is "-0.0" in both paths, also in a chunk whose numbers are otherwise all 0.0 (the
+    pyarrow path wrote such a chunk as one value, "0.0" throughout; hypothesis found it)."""
+    v = np.array([0.0, 51.5, 0.0, 0.0, -0.0, 0.0])
+    old = csvfile.CSV_CHUNK
+    csvfile.CSV_CHUNK = 3
+    try:
+        fast = csvfile.write_csv(tmp_path / "fast.csv", Records({"x_m": v})).read_text()
+        rows.USE_COMPILED = False
+        slow = csvfile.write_csv(tmp_path / "slow.csv", Records({"x_m": v})).read_text()
+    finally:
+        csvfile.CSV_CHUNK, rows.USE_COMPILED = old, True
+    assert fast == slow == "x_m\n0.0\n51.5\n0.0\n0.0\n-0.0\n0.0\n"
+
+
 _text = st.text(alphabet=st.sampled_from(list('ab ,"\n\r;é')), max_size=6)
 _KINDS = ["int", "int32", "uint64", "int_strided", "float", "float_strided", "tiny", "huge", "inf", "float32", "whole",
           "same", "none", "text", "bool", "coded", "coded_u8"]

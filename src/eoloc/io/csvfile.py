@@ -89,7 +89,7 @@ class _Cells:
             self.name_buffers = (np.frombuffer(offsets, dtype=np.int32)[at:at + len(self.names) + 1], data)
         elif v.dtype.kind in "iu":
             self.kind = "numbers"
-            self.ints = np.ascontiguousarray(v, dtype=np.int64) if _fits_int64(v) else None
+            self.ints = np.ascontiguousarray(v, dtype=np.int64) if fits_int64(v) else None
         elif v.dtype.kind == "f":
             self.kind = "cast" if np.isinf(v).any() else "numbers"  # orjson has no infinity: pyarrow writes it
             self.whole = self.kind == "numbers" and whole_column(v, decimals(name))
@@ -147,7 +147,8 @@ class _Cells:
         return cells if self.sep == "," else arrowfn.fill_null(cells, self.empty)
 
 
-def _fits_int64(v: np.ndarray) -> bool:
+def fits_int64(v: np.ndarray) -> bool:
+    """Whether an integer column's values all fit int64 (a uint64 column's may not)."""
     return v.size == 0 or (int(v.min()) >= -2**63 and int(v.max()) < 2**63)
 
 
@@ -197,7 +198,8 @@ def number_cells(v: np.ndarray, sep: str = ",", missing: np.ndarray | None = Non
     v = np.ascontiguousarray(v, dtype=np.float64 if v.dtype.kind == "f" and v.itemsize < 4 else None)  # orjson's
     if len(v) == 0:
         return pa.array([], type=pa.string())
-    if missing is None and len(v) > 1 and v[0] == v[-1] and bool((v == v[0]).all()):
+    bits = v.view(f"u{v.itemsize}")  # one value throughout, bit for bit: 0.0 and -0.0 are two
+    if missing is None and len(v) > 1 and bits[0] == bits[-1] and bool((bits == bits[0]).all()):
         return pa.scalar(orjson.dumps(v[:1], option=orjson.OPT_SERIALIZE_NUMPY).decode()[1:-1] + sep)
     raw = bytearray(orjson.dumps(v, option=orjson.OPT_SERIALIZE_NUMPY))  # b"[a,b,c]": ASCII, no comma in a number
     text = np.frombuffer(raw, dtype=np.uint8)

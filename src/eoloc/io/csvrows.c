@@ -1,8 +1,9 @@
-/* eoloc.io.csvrows: CSV rows from columns, with the GIL released.
+/* eoloc.io.csvrows: text rows from columns, with the GIL released.
 
-   The CSV writer (eoloc/io/csvfile.py) decides once per column how its cells are written; this
-   module writes rows start .. start+n of every column, one row after the other, each cell
-   followed by its separator, into one bytes object. What it does by hand, and why:
+   The CSV and GeoJSON writers (eoloc/io/csvfile.py, geojsonfile.py; the specs: rows.py) decide
+   once per column how its cells are written; this module writes rows start .. start+n of every
+   column, one row after the other, each cell with what surrounds it (a CSV separator, a JSON
+   key), into one bytes object. What it does by hand, and why:
 
    - numbers rounded to a column's decimals exactly as numpy rounds them (x * 10^d, rint, the
      same IEEE operations) and written as orjson writes that rounded double (its shortest
@@ -10,8 +11,8 @@
      with the decimal point put back and trailing zeros dropped (no other decimal of 15 digits
      or fewer reads back as the same double), "1.0" style for whole values, the exponent form
      below 1e-5 ("2.5e-6") as orjson does. The writer checks each column's range first and
-     sends any other column through orjson (tests: every cell against orjson and against the
-     pure-Python writer, byte for byte);
+     sends any other column through orjson (tests: every cell against orjson, and against the
+     pure-Python renderers byte for byte);
    - integers, coded text (an index into its pre-rendered names) and pre-rendered cells (a
      pyarrow string array's buffers) copied in.
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from . import rows
-from .csvfile import compiled_floats, decimals, rounded_to, whole_column
+from .csvfile import compiled_floats, decimals, fits_int64, rounded_to, whole_column
 from .records import Coded, Records
 
 _POINT = b'{"type": "Point", "coordinates": ['
@@ -78,7 +78,7 @@ def _property(name: str, v: np.ndarray, coded: Coded | None, key: bytes):
         return _Coded(coded.codes, [key + json.dumps(x).encode() for x in coded.names.tolist()])
     if v.dtype.kind == "b":
         return _Coded(v.view(np.int8), [key + b"false", key + b"true"])
-    if v.dtype.kind in "iu" and (v.size == 0 or (int(v.min()) >= -2**63 and int(v.max()) < 2**63)):
+    if v.dtype.kind in "iu" and fits_int64(v):
         return _Ints(np.ascontiguousarray(v, dtype=np.int64), key)
     if v.dtype.kind == "f":
         v = np.where(np.isinf(v), np.nan, v.astype(np.float64))  # JSON has no infinity: null

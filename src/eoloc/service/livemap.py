@@ -43,6 +43,7 @@ class _Client:
         self.dropped = 0
         self.sent = 0
         self.closed = False
+        self.since = 0  # the messages published before it connected came in its first snapshot
 
     def put(self, data: bytes) -> None:
         if len(self.queue) == self.queue.maxlen:
@@ -82,9 +83,10 @@ class LiveHub:
             self.newest[str(message.get("stream", ""))] = data
             self.last_packet = time.monotonic()
             self.published += 1
+            number = self.published
         loop = self.loop
         if loop is not None and not loop.is_closed():
-            loop.call_soon_threadsafe(self._fan_out, data)
+            loop.call_soon_threadsafe(self._fan_out, data, number)
 
     def stop(self, why: str) -> None:
         """The source has ended: every browser is told at once (and by each status after)."""
@@ -101,9 +103,12 @@ class LiveHub:
                 "sent": sent, "dropped": dropped}
 
     # the server's side (its event loop)
-    def _fan_out(self, data: bytes) -> None:
+    def _fan_out(self, data: bytes, number: int) -> None:
+        """Message ``number`` to every browser that did not have it in its first snapshot (it may
+        have connected between the publishing and this call)."""
         for c in self.clients:
-            c.put(data)
+            if number > c.since:
+                c.put(data)
 
     def status(self) -> dict:
         """The session's state (waiting, live, silent, stopped), its counters and the browsers."""
@@ -140,6 +145,7 @@ class LiveHub:
         with self.lock:
             for data in self.newest.values():
                 client.put(data)
+            client.since = self.published
         client.put(self._for(client, self.status()))
         self.clients.add(client)
         self.connections += 1
