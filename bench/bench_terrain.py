@@ -75,7 +75,7 @@ def main(n: int) -> list[str]:
     lines.append(row(f"M4 ray-DEM, 30 m DEM, obliques 0-80 deg, numba, n={n:,} ({f.ok.mean():.0%} OK), one thread",
                      f"{n / t_nb1 / 1e3:.0f} k rays/s", f"naive half-cell march (numpy) {naive_rate / 1e3:.1f} k/s",
                      n / t_nb1 / naive_rate))
-    lines.append(row(f"M4 ray-DEM, same, numba on {eoloc.threads()} threads (eoloc._backend.in_chunks)",
+    lines.append(row(f"M4 ray-DEM, same, numba on {eoloc.threads()} threads (eoloc.kernels.backend.in_chunks)",
                      f"{n / t_nb / 1e3:.0f} k rays/s", f"one thread {n / t_nb1 / 1e3:.0f} k rays/s", t_nb1 / t_nb))
     lines.append(row(f"M4 ray-DEM, same, numpy lockstep, n={k:,}", f"{k / t_np / 1e3:.0f} k rays/s",
                      f"naive half-cell march (numpy) {naive_rate / 1e3:.1f} k/s", k / t_np / naive_rate))
@@ -87,7 +87,7 @@ def main(n: int) -> list[str]:
     t_frame = best_time(lambda: eoloc.locate_flat(s, pose, 965.0, (u, v)), repeat=5, number=200)
     lines.append(row("one frame, 50 targets, M2 + [Z15] distortion correction", f"{t_frame * 1e3:.3f} ms/frame",
                      "[Z15] Matlab 20 ms (0.4 ms/target)", 20e-3 / t_frame))
-    from eoloc.footprint import footprints
+    from eoloc.ground.footprint import footprints
 
     fp_pose = Pose(39.58, 40.42, 5500.0, 0.0, 0.0, 0.0, (0.0, -8.0))  # the top of the image sees past the DEM
     t_fp = best_time(lambda: footprints(sensor, fp_pose, dem, edge_samples=16), repeat=3)

@@ -18,7 +18,7 @@ import numpy as np
 from eoloc import AzElGimbal, Camera, SensorModel
 from eoloc.accuracy import compensation as C
 from eoloc.accuracy.calflight import InstallationErrors, calibration_flights
-from eoloc.render import print_bands
+from eoloc.cli.render import print_bands
 
 
 def main() -> None:

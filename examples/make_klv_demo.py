@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from eoloc.ground.frame import frame_geometry, misb_sensor
 from eoloc.io.config import load_config
 from eoloc.io.klv import encode_uas_packet, encode_vmti
 from eoloc.io.telemetry import read_detections, read_telemetry, telemetry_pose
-from eoloc.misb import frame_geometry, misb_sensor
 from eoloc.terrain import open_dem
 from eoloc.terrain.geoid import default_geoid
 

@@ -13,7 +13,7 @@ import pytest
 import eoloc
 
 if "numba" in eoloc.available_backends():
-    importlib.import_module("eoloc._nb")
+    importlib.import_module("eoloc.kernels.compiled")
 
 
 @pytest.fixture(params=eoloc.available_backends())

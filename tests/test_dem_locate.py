@@ -212,10 +212,10 @@ def test_backends_agree_on_M4():
        az=st.floats(0.0, 360.0), off_nadir=st.floats(0.0, 89.0), s=st.floats(0.0, 1.0))
 def test_march_knot_interpolation_is_exact_to_a_micrometre(lat, lon, h, az, off_nadir, s):
     """The numba march reads grid coordinates along a ray by cubic Hermite interpolation between
-    exact knots (eoloc._march._knot). Checked against the exact conversion inside one knot
+    exact knots (eoloc.kernels.march._knot). Checked against the exact conversion inside one knot
     interval, at any latitude, height and obliquity: < 1 µm in height and on the ground."""
-    from eoloc import _march
     from eoloc.geodesy import WGS84
+    from eoloc.kernels import march
 
     a, b, e2, ep2 = WGS84.constants
     o = np.array(eoloc.geodetic_to_ecef(lat, lon, h))
@@ -225,10 +225,10 @@ def test_march_knot_interpolation_is_exact_to_a_micrometre(lat, lon, h, az, off_
     d /= np.linalg.norm(d)
     dlat = dlon = 1.0 / 3600.0
     args = (*o, *d)
-    k0 = _march._knot(*args, 0.0, a, b, e2, ep2, lat - 1.0, lon - 1.0, dlat, dlon, 3600.0)
-    length = _march._knot_length(k0[6])
-    k1 = _march._knot(*args, length, a, b, e2, ep2, lat - 1.0, lon - 1.0, dlat, dlon, k0[1])
-    fr, fc, hh = _march._hermite(s * length, 0.0, length, k0, k1)
+    k0 = march._knot(*args, 0.0, a, b, e2, ep2, lat - 1.0, lon - 1.0, dlat, dlon, 3600.0)
+    length = march._knot_length(k0[6])
+    k1 = march._knot(*args, length, a, b, e2, ep2, lat - 1.0, lon - 1.0, dlat, dlon, k0[1])
+    fr, fc, hh = march._hermite(s * length, 0.0, length, k0, k1)
     p = o + s * length * d
     lat_x, lon_x, h_x = eoloc.ecef_to_geodetic(*p)
     lon_i = lon - 1.0 + fc * dlon
@@ -242,7 +242,7 @@ def test_march_split_over_threads_equals_one_thread(front_range):
     """A large batch is marched in chunks on several threads: the same fixes, bit for bit, as on
     one thread, every status included (rays off the grid, above the horizon, on the terrain)."""
     from eoloc import use_threads
-    from eoloc._backend import MIN_CHUNK
+    from eoloc.kernels.backend import MIN_CHUNK
     from eoloc.rules import OnDEM
 
     rng = np.random.default_rng(5)
@@ -264,7 +264,7 @@ def test_numpy_kernels_split_over_threads_equal_one_thread():
     fixes, bit for bit, as on one thread (M3 and M1 with every pixel its own pose; rays above
     the horizon and pixels outside the image among them)."""
     from eoloc import use_threads
-    from eoloc._backend import CHUNK, use_backend
+    from eoloc.kernels.backend import CHUNK, use_backend
     from eoloc.rules import AtHeight, AtRange
 
     rng = np.random.default_rng(6)
@@ -286,7 +286,7 @@ def test_numpy_kernels_split_over_threads_equal_one_thread():
 
 
 def test_in_chunks_covers_every_element_once_and_passes_errors_on():
-    from eoloc._backend import MIN_CHUNK, in_chunks, use_threads
+    from eoloc.kernels.backend import MIN_CHUNK, in_chunks, use_threads
 
     n = 5 * MIN_CHUNK + 7
     seen = np.zeros(n, np.int64)
@@ -304,13 +304,13 @@ def test_in_chunks_covers_every_element_once_and_passes_errors_on():
 
 def test_eoloc_threads_must_be_a_number(monkeypatch):
     import eoloc.errors
-    from eoloc import _backend
+    from eoloc.kernels import backend
 
     monkeypatch.setenv("EOLOC_THREADS", "many")
     with pytest.raises(eoloc.errors.ConfigError, match="EOLOC_THREADS='many': give a whole number"):
-        _backend.default_threads()
+        backend.default_threads()
     monkeypatch.setenv("EOLOC_THREADS", "1")
-    assert _backend.default_threads() == 1
+    assert backend.default_threads() == 1
 
 
 @settings(max_examples=40, deadline=None)
@@ -320,7 +320,7 @@ def test_take_all_equals_numpy_indexing(n, m, seed, stray):
     """The threaded gather of several arrays at one index: numpy's fancy indexing, element for
     element (negative indices from the end), and IndexError where numpy raises one."""
     from eoloc import use_threads
-    from eoloc._backend import take_all
+    from eoloc.kernels.backend import take_all
 
     rng = np.random.default_rng(seed)
     arrays = [rng.normal(size=n), rng.integers(-5, 5, n), rng.random(n) < 0.5]
@@ -346,7 +346,7 @@ def test_a_kernel_gathering_its_inputs_chunk_by_chunk_equals_one_on_gathered_arr
     indexing makes; negative indices count from the end; an index out of range raises IndexError
     as numpy does; a Gathered whose shape is not the batch's broadcasts as its array would."""
     from eoloc import use_backend, use_threads
-    from eoloc._backend import Gathered, run
+    from eoloc.kernels.backend import Gathered, run
 
     rng = np.random.default_rng(seed)
     R = [rng.normal(size=n) for _ in range(9)]

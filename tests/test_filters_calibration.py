@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from eoloc import AzElGimbal, Camera, Fixes, SensorModel, Status, geodesy, locate_ellipsoid
 from eoloc.accuracy import locate_with_covariance
 from eoloc.accuracy.budget import ErrorBudget
-from eoloc.calibration import TelemetryTrack, calibrate
 from eoloc.sequence import TelemetryNoise, rls_static, synthetic_flight
+from eoloc.sequence.calibration import TelemetryTrack, calibrate
 from eoloc.sequence.simulate import gcp_flight
 from eoloc.sequence.track import TrackerConfig, cv_model, joseph_update, track_features, track_fixes
 
@@ -224,7 +224,7 @@ def test_calibration_recovers_the_misalignment_from_20_gcps(seed):
     assert np.all(np.abs(err) < 4 * c.sigma)
     assert c.sensor.mount_misalignment_deg == pytest.approx(tuple(c.values))
     assert c.rms(c.ground_error_before_m) > 10.0
-    from eoloc.calibration import _ground_error
+    from eoloc.sequence.calibration import _ground_error
 
     p_gcp = np.stack(geodesy.geodetic_to_ecef(*g.gcp_llh.T), -1)
     random_level = c.rms(_ground_error(true, g.obs_pose, g.pixels, g.gcp_llh, p_gcp))

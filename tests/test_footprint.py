@@ -10,7 +10,7 @@ import pytest
 
 import eoloc
 from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy
-from eoloc.footprint import border_pixels, footprint_features, footprints
+from eoloc.ground.footprint import border_pixels, footprint_features, footprints
 from eoloc.io.writers import write_layer
 
 SENSOR = SensorModel(Camera.from_hfov(60.0, 640, 480))

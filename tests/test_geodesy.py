@@ -150,7 +150,7 @@ def test_auto_backend_is_numba_once_loaded():
         pytest.skip("numba not installed: auto is numpy, nothing to route")
     import importlib
 
-    importlib.import_module("eoloc._nb")  # loaded: auto has nothing left to rent
+    importlib.import_module("eoloc.kernels.compiled")  # loaded: auto has nothing left to rent
 
     lat, lon, h = _sample(200_000, 4)
     x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
@@ -167,19 +167,19 @@ def test_auto_backend_is_numba_once_loaded():
 
 AUTO_RENTS = """
 import sys, numpy as np, eoloc
-from eoloc import _backend, _kernels
+from eoloc.kernels import backend, core
 rng = np.random.default_rng(3)
 def batch(n):
     lat, lon, h = rng.uniform(-89, 89, n), rng.uniform(-180, 180, n), rng.uniform(-500, 9000, n)
     return eoloc.ecef_to_geodetic(*eoloc.geodetic_to_ecef(lat, lon, h))
 small = [batch(20_000) for _ in range(3)]
-sig = _kernels.SIGNATURES
+sig = core.SIGNATURES
 counted = 3 * 20_000 * (sig["geodetic_to_ecef"].numpy_ns + sig["ecef_to_geodetic"].numpy_ns)
-print("after small", _backend.numba_loaded(), "numba" in sys.modules, _backend._rent["spent_ns"] == counted)
-_backend.NUMBA_LOAD_NS = _backend._rent["spent_ns"] + 1e6   # a budget the next batch passes
+print("after small", backend.numba_loaded(), "numba" in sys.modules, backend._rent["spent_ns"] == counted)
+backend.NUMBA_LOAD_NS = backend._rent["spent_ns"] + 1e6   # a budget the next batch passes
 lat, lon, h = rng.uniform(-89, 89, 200_000), rng.uniform(-180, 180, 200_000), rng.uniform(-500, 9000, 200_000)
 x, y, z = eoloc.geodetic_to_ecef(lat, lon, h)
-print("after big", _backend.numba_loaded())
+print("after big", backend.numba_loaded())
 auto = eoloc.ecef_to_geodetic(x, y, z)
 with eoloc.use_backend("numba"):
     numba = eoloc.ecef_to_geodetic(x, y, z)

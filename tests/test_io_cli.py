@@ -17,7 +17,7 @@ from eoloc.cli import main
 from eoloc.io.config import ConfigError, load_config
 from eoloc.io.table import TableError
 from eoloc.io.telemetry import match_detections, read_detections, read_telemetry
-from eoloc.pipeline import locate_tables
+from eoloc.jobs.tables import locate_tables
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
 S13_ARGS = ["--lat", "42", "--lon", "125", "--aircraft-height", "10000", "--yaw", "10", "--pitch", "5", "--roll", "-2",
@@ -262,7 +262,7 @@ def test_cli_footprint_writes_polygons_that_map_back_to_the_image_border(tmp_pat
     statuses = [f["properties"]["status"] for f in doc["features"]]
     assert statuses.count("INVALID_INPUT") == 1 and statuses.count("OK") == len(tel) - 1
     # the first frame's ring, projected back into its camera, is the image border (4 points a side)
-    from eoloc.footprint import border_pixels
+    from eoloc.ground.footprint import border_pixels
     from eoloc.io.telemetry import telemetry_pose
 
     sensor = load_config(DEMO / "camera.toml").sensor()

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 
 import eoloc
 from eoloc.geodesy import horizontal_distance_m
+from eoloc.ground.frame import frame_geometry, misb_sensor, packet_pose
 from eoloc.io.klv import (
     UAS_KEY,
     decode_klv_bytes,
@@ -27,10 +28,9 @@ from eoloc.io.klv import (
     read_klv,
     vmti_detections,
 )
-from eoloc.misb import frame_geometry, misb_sensor, packet_pose
+from eoloc.jobs.klvframes import check_frames, locate_vmti
 from eoloc.sensor import Camera, Pose, SensorModel
 from eoloc.terrain.geoid import default_geoid
-from eoloc.video import check_frames, locate_vmti
 
 DATA = Path(__file__).parent / "data" / "klv"
 TRUCK = Path(__file__).resolve().parents[2] / "shared" / "data" / "klv" / "esri_fmv_sample" / "Truck.klv"

@@ -23,6 +23,7 @@ from stanag4609.st0903 import VTargetData, decode_vmti_local_set, encode_vmti_lo
 
 from eoloc.cli import main
 from eoloc.geodesy import horizontal_distance_m
+from eoloc.ground.frame import packet_pose
 from eoloc.io.klv import (
     build_uas_packet,
     decode_klv_bytes,
@@ -38,7 +39,6 @@ from eoloc.io.klv.st0601 import FIELDS, Mapped, Special
 from eoloc.io.klv.st0903 import decode_vmti, encode_target, encode_vmti_set, imapb
 from eoloc.jobs.diagnose import diagnose_frames
 from eoloc.jobs.klv import klv_job
-from eoloc.misb import packet_pose
 from eoloc.rules import locate_ellipsoid
 from eoloc.sensor import Camera, Pose, SensorModel
 from eoloc.terrain.geoid import default_geoid

@@ -17,7 +17,7 @@ import pytest
 
 import eoloc
 from eoloc.io.klv.reader import split_klv
-from eoloc.live.cot import CotFeed
+from eoloc.live.cotfeed import CotFeed
 from eoloc.live.senders import TcpSender
 from tak_server import TakClient, free_tcp_port, freetakserver
 

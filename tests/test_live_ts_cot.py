@@ -217,7 +217,7 @@ def test_cot_feed_events_of_one_packet_and_the_silence():
     """The events of one packet parse as CoT with the ST 0805 types and links; the stale time
     follows the stream's rate (median interval, a gap does not move it); silence re-sends the
     aircraft already stale; --cot-interval holds events back per uid."""
-    from eoloc.live.cot import CotFeed
+    from eoloc.live.cotfeed import CotFeed
     from eoloc.live.session import LiveSession
 
     packets = [raw for raw, _ in split_klv(circling_flight_klv(12, seed=5, rate_hz=5.0))]
@@ -250,7 +250,7 @@ def test_cot_carries_the_refined_targets(tmp_path):
     its own marker '<uid>-refined' at the estimate's point, ce = its CEP50 / 1.1774 (the sigma
     of a circular normal error with that CEP50), the model and fix count in the remarks; the
     same estimates as --ndjson writes. A Kalman estimate carries its speed and course."""
-    from eoloc.live.cot import CotFeed
+    from eoloc.live.cotfeed import CotFeed
     from eoloc.live.refine import TargetFilters
     from eoloc.live.session import LiveSession
 

@@ -1,4 +1,4 @@
-"""The compiled orthorectification (eoloc._ortho, issue 22) against the numpy reference path and
+"""The compiled orthorectification (eoloc.kernels.ortho, issue 22) against the numpy reference path and
 against the rays of M4: the same pixel for every cell, the same cells seen except at a
 silhouette, and the mirror-free fold test that limits the z-buffer to where terrain folds over."""
 
@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 import eoloc
-from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, _nb, geodesy, locate_dem, open_dem
-from eoloc import rectify as R
-from eoloc._backend import use_backend
+from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, geodesy, locate_dem, open_dem
 from eoloc.accuracy.calflight import relief
+from eoloc.ground import rectify
+from eoloc.kernels import compiled
+from eoloc.kernels.backend import use_backend
 from eoloc.sensor.distortion import BrownConrady
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
@@ -33,9 +34,9 @@ def _longs_peak() -> DEM:
 
 
 def _both(sensor, pose, surface, grid, occlusion=True):
-    fast = R.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+    fast = rectify.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
     with use_backend("numpy"):
-        ref = R.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+        ref = rectify.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
     return fast, ref
 
 
@@ -46,7 +47,7 @@ def test_every_cell_lands_on_the_reference_pixel(crs, lens):
     SensorModel.ground_to_image per cell): the nodes' bilinear interpolation costs nothing
     measurable. Cells without ground agree too (NaN on both sides)."""
     sensor = SensorModel(CAM.with_distortion(lens), AzElGimbal())
-    grid = R.output_grid(sensor, POSE, _hills(), crs=crs, gsd_m=3.0)
+    grid = rectify.output_grid(sensor, POSE, _hills(), crs=crs, gsd_m=3.0)
     fast, ref = _both(sensor, POSE, _hills(), grid, occlusion=False)
     both = np.isfinite(ref.u_px) & np.isfinite(fast.u_px)
     # the reference projects every cell in front of the camera; the kernel stops past the lens
@@ -97,9 +98,9 @@ def test_hidden_cells_agree_with_the_rays_except_on_a_silhouette(scene):
         dem, pose, gsd = _longs_peak(), Pose(40.255, -105.55, 6000.0, 0.0, 0.0, 0.0, (-90.0, -30.0)), 6.0
         cam = Camera.from_hfov(25.0, 1280, 720)
     sensor = SensorModel(cam, AzElGimbal())
-    grid = R.output_grid(sensor, pose, dem, gsd_m=gsd)
+    grid = rectify.output_grid(sensor, pose, dem, gsd_m=gsd)
     fast, ref = _both(sensor, pose, dem, grid)
-    no_occ = R.frame_pixels(sensor, pose, dem, grid, occlusion=False)
+    no_occ = rectify.frame_pixels(sensor, pose, dem, grid, occlusion=False)
     hidden = no_occ.valid & ~fast.valid
     assert hidden.sum() > 1000  # the scene does hide terrain
     differ = fast.valid != ref.valid
@@ -115,16 +116,16 @@ def test_no_fold_means_no_hiding_and_the_camera_position_is_the_range_origin():
     camera (the lever arm's origin) to the cell's ground point."""
     sensor = SensorModel(CAM, AzElGimbal())
     steep = Pose(35.09, 112.7, 1900.0, 10.0, 1.0, -2.0, (5.0, -85.0))
-    grid = R.output_grid(sensor, steep, _hills(), gsd_m=4.0)
-    on = R.frame_pixels(sensor, steep, _hills(), grid)
-    off = R.frame_pixels(sensor, steep, _hills(), grid, occlusion=False)
+    grid = rectify.output_grid(sensor, steep, _hills(), gsd_m=4.0)
+    on = rectify.frame_pixels(sensor, steep, _hills(), grid)
+    off = rectify.frame_pixels(sensor, steep, _hills(), grid, occlusion=False)
     tiles = np.zeros((19, 25), np.uint8)
-    n_front, n_back = _nb.ortho_fold_tiles(on.u_px, on.v_px, R.FOLD_TILE_PX, 1.0, tiles)
+    n_front, n_back = compiled.ortho_fold_tiles(on.u_px, on.v_px, rectify.FOLD_TILE_PX, 1.0, tiles)
     assert n_front > 10_000 and n_back == 0 and not tiles.any()  # no fold: the z-buffer pass is skipped
     np.testing.assert_array_equal(on.valid, off.valid)
     rows, cols = np.nonzero(on.valid)
     x, y = grid.centres(rows, cols)
-    lon, lat = R.transformer(grid.crs, R.pyproj.CRS.from_epsg(4326)).transform(x, y)
+    lon, lat = rectify.transformer(grid.crs, rectify.pyproj.CRS.from_epsg(4326)).transform(x, y)
     p = np.stack(geodesy.geodetic_to_ecef(lat, lon, _hills().height(lat, lon)), -1)
     cam = np.array(geodesy.geodetic_to_ecef(35.09, 112.7, 1900.0))
     np.testing.assert_allclose(on.range_m[rows, cols], np.linalg.norm(p - cam, axis=-1), atol=1e-3)
@@ -149,14 +150,14 @@ def test_resampling_matches_scipy():
     counts off on this noise, as OpenCV's int16 path is: int16 takes eoloc's sampler)."""
     sensor = SensorModel(CAM, AzElGimbal())
     rng = np.random.default_rng(4)
-    grid = R.output_grid(sensor, POSE, _hills(), gsd_m=3.0)
-    px = R.frame_pixels(sensor, POSE, _hills(), grid)
+    grid = rectify.output_grid(sensor, POSE, _hills(), gsd_m=3.0)
+    px = rectify.frame_pixels(sensor, POSE, _hills(), grid)
     for img in (rng.integers(0, 65535, (1, 300, 400), dtype=np.uint16),
                 rng.integers(0, 255, (3, 300, 400), dtype=np.uint8), rng.random((2, 300, 400)).astype(np.float32),
                 rng.integers(-30000, 30000, (5, 300, 400), dtype=np.int16)):
         for how in ("bilinear", "nearest"):
-            fast = R.resample(img, px, resampling=how, nodata=7)
-            opencv = how == "bilinear" and img.dtype.name in R.REMAP_DTYPES
+            fast = rectify.resample(img, px, resampling=how, nodata=7)
+            opencv = how == "bilinear" and img.dtype.name in rectify.REMAP_DTYPES
             u, v = (px.map_x.astype(float), px.map_y.astype(float)) if opencv else (px.u_px, px.v_px)
             ref = _scipy(img, u, v, px.valid, 1 if how == "bilinear" else 0, 7)
             assert fast.dtype == img.dtype and fast.shape == ref.shape
@@ -176,7 +177,7 @@ def test_orthority_agrees_where_both_see_the_ground():
     import bench_ortho as B
 
     dem, grid, _ = B.scene(2.25)
-    px = R.frame_pixels(B.SENSOR, B.POSE, dem, grid)
+    px = rectify.frame_pixels(B.SENSOR, B.POSE, dem, grid)
     x, y, z = B.cell_world(grid, dem)
     fc, rms = B.orthority_camera(px, x, y, z)
     assert rms < 0.1

@@ -31,7 +31,7 @@ import pytest
 import eoloc
 from browser import chromium
 from eoloc import Camera, Pose, locate_dem, open_dem
-from eoloc.misb import misb_sensor
+from eoloc.ground.frame import misb_sensor
 from served import eoloc_serve
 
 EXAMPLES = Path(__file__).parents[1] / "examples"
@@ -155,7 +155,7 @@ def _grab(d) -> np.ndarray:
 
 
 def test_play_and_seek_keep_the_map_on_the_frame_shown(demo, served):
-    from eoloc.io.video import iter_frames
+    from eoloc.io.videofile import iter_frames
 
     out = demo / "eoloc"
     data, frames = _data(out), _frames_csv(out)
@@ -272,7 +272,7 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
     else within one pixel's own ground extent (measured: worst 0.75) and 99.5 % within 0.4 of it
     (0.32); on flat ground every cell is kept and bilinear is within 5 % of a pixel."""
     from eoloc import AzElGimbal, SensorModel
-    from eoloc import rectify as R
+    from eoloc.ground import rectify
     from eoloc.jobs.player import grid_step_px, offline_grid
     from eoloc.jobs.video import frame_visibility
     from eoloc.rules import surface_rule
@@ -286,8 +286,8 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
     rel, refused, total = [], 0, 0
     for t, ground in ((0.0, dem), (5.0, dem), (9.0, dem), (3.0, 3500.0)):
         pose = V.truth_pose(np.array(t))
-        grid = R.output_grid(sensor, pose, ground, gsd_m=3.0)
-        px = R.frame_pixels(sensor, pose, ground, grid)
+        grid = rectify.output_grid(sensor, pose, ground, gsd_m=3.0)
+        px = rectify.frame_pixels(sensor, pose, ground, grid)
         hidden = frame_visibility(px, V.WIDTH, V.HEIGHT) == 1
         g = offline_grid(sensor, pose, ground, grid_step_px(V.WIDTH, V.HEIGHT), (px.u_px[hidden], px.v_px[hidden]))
         u, v = rng.uniform(-0.5, V.WIDTH - 0.5, 4000), rng.uniform(-0.5, V.HEIGHT - 0.5, 4000)
@@ -324,7 +324,7 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
 def test_the_browser_video_is_remuxed_h264_or_transcoded(tmp_path, demo):
     import av
 
-    from eoloc.io.video import browser_video, frame_times, iter_frames
+    from eoloc.io.videofile import browser_video, frame_times, iter_frames
 
     # H.264 in MPEG-TS: the same stream in MP4 (every frame decodes to the same pixels), the first frame at 0
     ts = demo / "longs_peak_pass.ts"

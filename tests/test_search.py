@@ -1,4 +1,4 @@
-"""eoloc._search.searchsorted against numpy's own searchsorted: the same position for every query,
+"""eoloc.util.search.searchsorted against numpy's own searchsorted: the same position for every query,
 whatever the keys' spacing (steady, bunched, repeated, integers, huge magnitudes) and the queries
 (the keys themselves, between them, outside their range, non-finite)."""
 
@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eoloc import _search
+from eoloc.util import search
 
 
 def _keys(rng: np.random.Generator, kind: str, n: int) -> np.ndarray:
@@ -42,7 +42,7 @@ def test_searchsorted_equals_numpy(seed: int, kind: str, n: int, m: int, side: s
                             np.nextafter(keys[rng.integers(0, n, m - 2 * (m // 3) - 6)], np.inf),
                             [np.nan, np.inf, -np.inf, keys[0], keys[-1], -0.0]])
     rng.shuffle(q)
-    got = _search.searchsorted(keys, q, side=side)
+    got = search.searchsorted(keys, q, side=side)
     want = np.searchsorted(keys, q, side=side)
     assert got.dtype == np.int64
     np.testing.assert_array_equal(got, want)
@@ -51,8 +51,8 @@ def test_searchsorted_equals_numpy(seed: int, kind: str, n: int, m: int, side: s
 def test_few_queries_and_degenerate_keys_take_numpy() -> None:
     keys = np.array([3.0, 3.0, 3.0])
     q = np.linspace(2, 4, 5000)
-    np.testing.assert_array_equal(_search.searchsorted(keys, q), np.searchsorted(keys, q))
-    np.testing.assert_array_equal(_search.searchsorted(np.arange(5.0), [2.0, 2.5]), [2, 3])
+    np.testing.assert_array_equal(search.searchsorted(keys, q), np.searchsorted(keys, q))
+    np.testing.assert_array_equal(search.searchsorted(np.arange(5.0), [2.0, 2.5]), [2, 3])
 
 
 def test_steady_keys_answer_without_numpy_binary_search_per_query(monkeypatch) -> None:
@@ -69,8 +69,8 @@ def test_steady_keys_answer_without_numpy_binary_search_per_query(monkeypatch) -
         sizes.append(np.size(v))
         return real(a, v, *args, **kwargs)
 
-    monkeypatch.setattr(_search.np, "searchsorted", counting)
-    np.testing.assert_array_equal(_search.searchsorted(keys, q), want)
+    monkeypatch.setattr(search.np, "searchsorted", counting)
+    np.testing.assert_array_equal(search.searchsorted(keys, q), want)
     assert sizes == [keys.size + 1]
 
 

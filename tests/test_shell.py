@@ -143,7 +143,7 @@ def test_file_mode_json_kml_cot_and_utc_times(tmp_path):
 
 RUN_COMMAND = """
 import atexit, os, sys
-atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc._nb", "rich.live",
+atexit.register(lambda: print("loaded:", sorted(m for m in ("pandas", "numba", "eoloc.kernels.compiled", "rich.live",
                                                              "pyarrow.compute") if sys.modules.get(m) is not None),
                               "pydantic plugins:", os.environ.get("PYDANTIC_DISABLE_PLUGINS"), file=sys.stderr))
 from eoloc.cli import run

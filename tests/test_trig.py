@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import eoloc
-from eoloc import _kernels as K
+from eoloc.kernels import core as K
 
 HAS_NUMBA = "numba" in eoloc.available_backends()
 
@@ -90,9 +90,9 @@ def test_compiled_twins_equal_the_numpy_evaluation_bit_for_bit():
     """The numba twins are the same arithmetic: not one bit apart from the numpy evaluation."""
     import numba
 
-    from eoloc import _nb
+    from eoloc.kernels import compiled
 
-    sincos, atan2 = _nb._g["sincos"], _nb._g["atan2"]
+    sincos, atan2 = compiled._g["sincos"], compiled._g["atan2"]
 
     @numba.njit
     def run(t, y, x, s, c, a):
@@ -121,13 +121,13 @@ def test_per_element_drivers_compile_to_simd_loops(name, n_out):
     Three things each broke it without a visible error (and are guarded here): a libm call per
     sine, runtime overlap checks between many input and output arrays (the drivers are compiled
     with noalias), and a kernel left as a call in the loop body (kernels are always-inline)."""
-    from eoloc import _nb
+    from eoloc.kernels import compiled
 
     n = 64
     rng = np.random.default_rng(0)
     arr = lambda: rng.uniform(0.1, 0.9, n)  # noqa: E731
     ell = (6378137.0, 6356752.314245179, 0.0066943799901413165, 0.006739496742276434)
-    fresh = _nb._driver(getattr(_nb, name).py_func, cache=False)  # cached code carries no IR
+    fresh = compiled._driver(getattr(compiled, name).py_func, cache=False)  # cached code carries no IR
     if name == "camera_frame":  # az-el turret angles, skew and the pose varying; mount, boresight fixed
         eye = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
         args = [0, arr(), arr(), arr(), *eye, *eye, *eye, arr(), *(arr() for _ in range(6)), 0.1, 0.2, 0.3, ell[0],
@@ -149,7 +149,7 @@ def test_per_element_drivers_compile_to_simd_loops(name, n_out):
     fresh(n, *args, *got)
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert re.search(r"<\d+ x double>", ir), f"{name}: the element loop did not vectorise"
-    getattr(_nb, name)(n, *args, *ref)  # and the cached driver the library runs gives the same numbers
+    getattr(compiled, name)(n, *args, *ref)  # and the cached driver the library runs gives the same numbers
     for a, b in zip(got, ref, strict=True):
         np.testing.assert_array_equal(a, b)
 

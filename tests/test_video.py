@@ -23,13 +23,13 @@ from rasterio.transform import from_origin
 from rio_cogeo.cogeo import cog_validate
 
 from eoloc.cli import main
+from eoloc.ground.frame import misb_sensor
+from eoloc.ground.mosaic import Mosaic, ground_sample_m
+from eoloc.ground.rectify import FramePixels, OutputGrid, frame_pixels, output_grid
 from eoloc.io.klv.encode import encode_uas_packet
 from eoloc.io.klv.mux import add_sync_klv, write_klv_ts
-from eoloc.io.video import iter_frames, probe_video
+from eoloc.io.videofile import iter_frames, probe_video
 from eoloc.jobs.video import FrameSelection, frame_visibility, round_gsd, video_job
-from eoloc.misb import misb_sensor
-from eoloc.mosaic import Mosaic, ground_sample_m
-from eoloc.rectify import FramePixels, OutputGrid, frame_pixels, output_grid
 from eoloc.rules import AtHeight
 from eoloc.sensor import AzElGimbal, Camera, Pose, SensorModel
 from served import eoloc_serve

@@ -13,9 +13,9 @@ Conventions (one per concept, everywhere in the library):
 - Results: :class:`Fixes` with a per-target :class:`Status`; NaN coordinates where not OK.
 """
 
-from ._backend import available_backends, get_backend, set_backend, threads, use_backend, use_threads
-from ._lazy import lazy_attributes
 from .errors import EolocError
+from .kernels.backend import available_backends, get_backend, set_backend, threads, use_backend, use_threads
+from .util.lazy import lazy_attributes
 
 _WHERE = {  # the rest of the API, loaded on first use (so that `eoloc --help` loads no kernels)
     "WGS84": "geodesy", "Ellipsoid": "geodesy", "ecef_to_geodetic": "geodesy", "geodetic_to_ecef": "geodesy",

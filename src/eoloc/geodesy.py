@@ -15,8 +15,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
-from ._backend import run
+from .kernels import core as kernels
+from .kernels.backend import run
 
 __all__ = [
     "WGS84",
@@ -113,7 +113,7 @@ def R_ecef_ned(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.nd
     lon = np.asarray(lon, dtype=np.float64)
     if degrees:
         lat, lon = np.radians(lat), np.radians(lon)
-    return as_matrix(_kernels.r_ecef_ned(lat, lon))
+    return as_matrix(kernels.r_ecef_ned(lat, lon))
 
 
 _NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -180,8 +180,8 @@ def look_angles(lat0_deg: float, lon0_deg: float, h0_m: float, lat_deg: float, l
     horizon) of one point seen from another, both geodetic (degrees, ellipsoidal m): the line of
     sight in the observer's local NED frame. Plain floats, for one point at a time (a live
     packet's look at its frame centre: no array set-up); :func:`geodetic_to_ned` for arrays. The
-    kernels' own formulas (:mod:`eoloc._kernels`), evaluated on the two points."""
-    K = _kernels
+    kernels' own formulas (:mod:`eoloc.kernels.core`), evaluated on the two points."""
+    K = kernels
     lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
     x0, y0, z0 = K.geodetic_to_ecef(lat0, lon0, h0_m, ell.a, ell.e2)
     x, y, z = K.geodetic_to_ecef(math.radians(lat_deg), math.radians(lon_deg), h_m, ell.a, ell.e2)

@@ -19,8 +19,8 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
 from .geodesy import as_matrix
+from .kernels import core as kernels
 
 __all__ = [
     "R_ned_body",
@@ -41,22 +41,22 @@ def _rad(a: ArrayLike, degrees: bool) -> np.ndarray:
 
 def rot_x(angle: ArrayLike, *, degrees: bool = True) -> np.ndarray:
     """Active rotation about x, (..., 3, 3)."""
-    return as_matrix(_kernels.rot_x(_rad(angle, degrees)))
+    return as_matrix(kernels.rot_x(_rad(angle, degrees)))
 
 
 def rot_y(angle: ArrayLike, *, degrees: bool = True) -> np.ndarray:
     """Active rotation about y, (..., 3, 3)."""
-    return as_matrix(_kernels.rot_y(_rad(angle, degrees)))
+    return as_matrix(kernels.rot_y(_rad(angle, degrees)))
 
 
 def rot_z(angle: ArrayLike, *, degrees: bool = True) -> np.ndarray:
     """Active rotation about z, (..., 3, 3)."""
-    return as_matrix(_kernels.rot_z(_rad(angle, degrees)))
+    return as_matrix(kernels.rot_z(_rad(angle, degrees)))
 
 
 def R_ned_body(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike, *, degrees: bool = True) -> np.ndarray:
     """Body (FRD) to NED rotation (..., 3, 3) from yaw, pitch, roll: Rz(yaw) Ry(pitch) Rx(roll)."""
-    return as_matrix(_kernels.r_ned_body(_rad(yaw, degrees), _rad(pitch, degrees), _rad(roll, degrees)))
+    return as_matrix(kernels.r_ned_body(_rad(yaw, degrees), _rad(pitch, degrees), _rad(roll, degrees)))
 
 
 def euler_from_R_ned_body(R: ArrayLike, *, degrees: bool = True, warn_gimbal_lock: bool = True):

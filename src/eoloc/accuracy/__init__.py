@@ -1,7 +1,7 @@
 """Accuracy analysis: error budgets, Monte Carlo through the same kernels, CEP, sensitivities,
 first-order covariance of every fix."""
 
-from .._lazy import lazy_attributes
+from ..util.lazy import lazy_attributes
 
 # names -> their module, imported on first use (PEP 562): `from eoloc.accuracy import ErrorBudget`
 # must not load Monte Carlo, CEP quadrature and scipy (start-up of the command line)

@@ -3,7 +3,7 @@
 A *mapper* is ``mapper(fn, args_list, on_done=None) -> [fn(*args) for args in args_list]`` (in
 order); ``on_done(i)`` is called as item i finishes (progress bars). Monte Carlo chunks and sweep
 points are independent and seeded by their index, and every mapper runs them on the compiled
-kernels (:func:`eoloc._backend.load_compiled`), so every mapper gives identical results.
+kernels (:func:`eoloc.kernels.backend.load_compiled`), so every mapper gives identical results.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
-from .._backend import load_compiled
+from ..kernels.backend import load_compiled
 
 
 class Mapper(Protocol):

@@ -56,7 +56,7 @@ def batch(patterns, out_dir, dem_paths, vertical, geoid, dem_crs, config_path, t
     from ..io.writers import write_layer
     from ..jobs.accuracy import mapper
     from ..jobs.batch import BatchSettings, batch_job, find_tasks, status_records
-    from ..render import batch_table
+    from .render import batch_table
 
     settings = BatchSettings(out_dir, tuple(dem_paths), vertical, geoid, dem_crs, config_path, target_height,
                              footprint_every, tuple(grid), strict)

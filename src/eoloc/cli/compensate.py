@@ -10,10 +10,10 @@ from pathlib import Path
 import click
 import numpy as np
 
-from ..render import print_bands
 from .common import load_config, open_dem, progress, working
 from .main import console, err_console, fail, report_issues
 from .options import config_option, dem_options, json_option, out_option, target_height_option
+from .render import print_bands
 
 COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles (after Peng et al.'s
 error prediction and compensation at large oblique angles).

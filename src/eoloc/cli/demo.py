@@ -1,4 +1,4 @@
-"""`eoloc demo`: the bundled example, run through the jobs (eoloc.demo)."""
+"""`eoloc demo`: the bundled example, run through the jobs (:mod:`.walkthrough`)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,6 @@ from .main import console
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-demo", show_default=True,
               help="Folder for the outputs (CSV, GeoJSON, KML, CoT, the map, GeoTIFF).")
 def demo(out_dir) -> None:
-    from ..demo import run_demo
+    from .walkthrough import run_demo
 
     run_demo(Path(out_dir), console=console, data=resources.files("eoloc") / "data" / "demo")

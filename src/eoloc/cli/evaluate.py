@@ -80,7 +80,7 @@ def evaluate(fixes, truth_path, match, max_distance, fix_columns, truth_columns,
              config_path, n_boot, level, seed, cooks_threshold, plots, as_json, out_dir) -> None:
     from ..io.export import json_safe
     from ..jobs.evaluate import evaluate_job, evaluation_notes, evaluation_tables, report_dict, write_evaluation
-    from ..render import rich_table
+    from .render import rich_table
 
     centre = None
     if config_path is not None:

@@ -81,7 +81,7 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, tiles, write_klv,
         footprint_every, strict, assume) -> None:
     from ..jobs.klv import klv_job, write_klv_products
-    from ..render import print_klv_job
+    from .render import print_klv_job
 
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     from ..jobs.setup import misb_setup

@@ -105,7 +105,7 @@ datagram's arrival to its outputs sent.
 def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_targets,
          cot_interval, refine, realtime, max_packets, duration, silence) -> None:
     from ..jobs.setup import misb_setup
-    from ..live.cot import CotFeed
+    from ..live.cotfeed import CotFeed
     from ..live.senders import cot_sender
     from ..live.session import LiveSession
     from ..live.sources import open_source

@@ -101,7 +101,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if telemetry is None:
         if detections is not None or interpolate or compensate_path:
             fail("--interpolate, --compensate and a DETECTIONS file belong to file mode: give a TELEMETRY file")
-        from .._backend import few_targets
+        from ..kernels.backend import few_targets
 
         with few_targets():
             _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
@@ -146,7 +146,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
                 sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
-    from ..pipeline import locate_by_rule
+    from ..jobs.tables import locate_by_rule
     from ..sensor import Camera, GimbalKind, Pose, SensorModel, gimbal_from_name
 
     if lat is None or lon is None or height is None:

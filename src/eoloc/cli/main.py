@@ -12,8 +12,8 @@ from rich.markup import escape
 
 from .. import __version__
 from ..errors import EolocError
-from ..render import print_issues
 from .options import CONVENTIONS, negative_values_kept
+from .render import print_issues
 
 console = Console()
 err_console = Console(stderr=True)

@@ -39,7 +39,7 @@ def map_command(telemetry, fixes, footprints, tracks, dem_paths, tiles, output, 
     aircraft = None
     if telemetry:
         from ..io.telemetry import read_telemetry
-        from ..video import aircraft_feature
+        from ..jobs.klvframes import aircraft_feature
 
         aircraft = [aircraft_feature(read_telemetry(telemetry))]
     dem = open_dem(dem_paths, "egm96", None, None)

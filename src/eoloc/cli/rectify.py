@@ -55,7 +55,7 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
     tif = write_ortho(ortho, out / "ortho.tif", tags={"EOLOC_SOURCE": Path(image).name,
                                                "EOLOC_TELEMETRY_LINE": job.telemetry_line,
                                                "EOLOC_SURFACE": "DEM" if dem_paths else target_height})
-    from ..footprint import footprint_features
+    from ..ground.footprint import footprint_features
 
     feats = footprint_features([fp], [{"image": Path(image).name}])
     written = [tif, *write_layer(out, "footprint", [f["properties"] for f in feats], ["geojson"], features=feats),

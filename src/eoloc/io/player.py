@@ -3,7 +3,7 @@
 - ``player.html``: the page, self-contained (Leaflet inlined, no network): the video and the map
   side by side; it reads the files below with ``<script>`` and ``<img>``/``<video>`` elements
   only, so it works from a USB stick (``file://``) as well as served by `eoloc serve --player`.
-- ``player/video.mp4``: the video as a browser plays it (:func:`eoloc.io.video.browser_video`).
+- ``player/video.mp4``: the video as a browser plays it (:func:`eoloc.io.videofile.browser_video`).
 - ``player/data.js``: every frame's time, pose and camera, the rectified frames' footprints,
   centres, drapes and grids, the VMTI targets, the mosaic's tiles (:mod:`eoloc.jobs.player`).
 - ``player/drape/NNNNNN.webp``: each rectified frame warped to Web Mercator (EPSG:3857, as

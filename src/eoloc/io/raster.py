@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..rectify import Ortho
+    from ..ground.rectify import Ortho
     from ..terrain.dem import DEM
 
 DEM_NODATA = -32768.0

@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._backend import in_chunks
-from .._search import searchsorted
+from ..kernels.backend import in_chunks
 from ..sensor.camera import Camera
 from ..sensor.model import Pose
+from ..util.search import searchsorted
 from .table import Column, Issue, Table, TableError, read_table
 
 TELEMETRY_COLUMNS = [

@@ -15,7 +15,7 @@ from .inputs import read_inputs
 
 @dataclass
 class CalibrationJob:
-    """The solution (eoloc.calibration.Calibration), the starting sensor and telemetry corrections,
+    """The solution (eoloc.sequence.calibration.Calibration), the starting sensor and telemetry corrections,
     one residual row per GCP observation, the report (calibration.json's content, JSON-safe) and
     the input issues."""
 
@@ -32,9 +32,9 @@ class CalibrationJob:
 def calibrate_job(cfg, telemetry, gcps, *, groups: tuple[str, ...], pixel_sigma_px: float = 1.0,
                   robust: bool = False, interpolate: bool = False, max_gap_s: float = 0.5,
                   time_tolerance_s: float = 0.02) -> CalibrationJob:
-    from ..calibration import GROUPS, TelemetryTrack
-    from ..calibration import calibrate as solve
     from ..io.telemetry import match_detections, read_gcps, telemetry_pose
+    from ..sequence.calibration import GROUPS, TelemetryTrack
+    from ..sequence.calibration import calibrate as solve
 
     bad = [g for g in groups if g not in GROUPS]
     if bad or not groups:

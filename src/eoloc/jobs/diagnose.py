@@ -18,9 +18,9 @@ from itertools import combinations
 import numpy as np
 
 from ..geodesy import horizontal_distance_m
+from ..ground.frame import frame_centre, misb_sensor, packet_pose
 from ..io.klv.conventions import CONVENTIONS, FRAME_CONVENTIONS, apply_to_telemetry, encoder_heights_hae
 from ..io.records import Records
-from ..misb import frame_centre, misb_sensor, packet_pose
 
 THRESHOLD_M = 50.0
 

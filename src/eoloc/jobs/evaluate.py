@@ -305,7 +305,7 @@ def figures(ev: Evaluation, *, title: str = "") -> dict:
 
 @dataclass(frozen=True)
 class TableData:
-    """A table as data: what the CLI prints (eoloc.render.rich_table) and the report writes."""
+    """A table as data: what the CLI prints (eoloc.cli.render.rich_table) and the report writes."""
 
     title: str
     header: list[str]

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..footprint import Footprint, footprint_features, footprints
+from ..ground.footprint import Footprint, footprint_features, footprints
 from ..io.records import plain_value
 from ..io.table import Issue
 from ..io.telemetry import telemetry_pose

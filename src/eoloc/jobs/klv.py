@@ -46,11 +46,17 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     dropped (named); assume: convention names (:data:`eoloc.io.klv.conventions.CONVENTIONS`)
     applied to the stream before anything is computed. map_layers=False leaves out the GeoJSON
     layers only the map and KML draw (aircraft, encoder footprints, fixes): an archive job's saving."""
+    from ..ground.frame import misb_sensor
     from ..io.klv import klv_telemetry, read_klv, vmti_detections
     from ..io.klv.conventions import apply_to_telemetry
-    from ..misb import misb_sensor
-    from ..video import aircraft_features, check_frames, dem_footprint_features, footprint_features, locate_vmti
     from .diagnose import diagnose_frames, diagnose_vmti
+    from .klvframes import (
+        aircraft_features,
+        check_frames,
+        corner_footprint_features,
+        dem_footprint_features,
+        locate_vmti,
+    )
 
     assume = tuple(dict.fromkeys(assume))
     stream = read_klv(path, strict=strict)
@@ -64,11 +70,11 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     from_0 = "vmti-pixels-from-0" in assume
     det = vmti_detections(stream, pixels_from=0 if from_0 else 1)
     prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
-              footprint_features(tel, check.geometry, every=footprint_every))
+              corner_footprint_features(tel, check.geometry, every=footprint_every))
     layers = {"footprints": prints}
     if map_layers:
         layers |= {"aircraft": aircraft_features(tel),
-                   "encoder footprints": footprint_features(tel, None, every=footprint_every)}
+                   "encoder footprints": corner_footprint_features(tel, None, every=footprint_every)}
     records = Records({})
     diagnoses = [diagnose_frames(raw_tel, sensor)]
     v = None

@@ -12,10 +12,10 @@ import numpy as np
 from ..io.export import fix_records, with_utc
 from ..io.records import Records
 from ..io.table import Issue, Table
-from ..pipeline import Located, locate_tables
 from ..result import Status
 from ..rules import StopRule
 from .inputs import Prefetch, read_inputs
+from .tables import Located, locate_tables
 
 NONLINEARITY_LIMIT = 0.1  # past it the first-order covariance does not describe the fix
 

@@ -74,7 +74,7 @@ def offline_grid(sensor: SensorModel, pose: Pose, ground, step_px: int, hidden_p
     the cell's error; over max(CELL_LIMIT_PX ground pixels, 1 m) refuses the cell). ``hidden_px``:
     (u, v) where hidden ground projects into the frame (rectification's hidden cells): cells there
     and around hold a terrain edge and are refused whatever the checks say."""
-    from ..rectify import ground_grid
+    from ..ground.rectify import ground_grid
     from ..rules import surface_rule
 
     g = ground_grid(sensor, pose, ground, step_px=step_px)
@@ -174,7 +174,7 @@ class PlayerData:
         frames = {"t": self.frame_time_s, "lat": pose.lat_deg, "lon": pose.lon_deg, "h": pose.h_m, "yaw": pose.yaw_deg,
                   "pitch": pose.pitch_deg, "roll": pose.roll_deg, **{f"g{k + 1}": a for k, a in enumerate(g)}}
         if self.camera is not None and "hfov_deg" in self.poses.values:  # KLV: each frame's own pinhole
-            from ..misb import misb_frame_sensor
+            from ..ground.frame import misb_frame_sensor
 
             cams = [misb_frame_sensor(self.width, self.height, hf, vf) for hf, vf in
                     zip(self.poses.values["hfov_deg"], self.poses.values["vfov_deg"], strict=True)]

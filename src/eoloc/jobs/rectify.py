@@ -60,8 +60,8 @@ def record_of(tel, telemetry, frame: int | None, time_s: float | None) -> int:
 def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, time_s: float | None = None,
                 crs: str = "utm", gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0,
                 occlusion: bool = True, grid_step_px: float = 32) -> RectifyJob:
-    from .. import rectify as R
-    from ..footprint import footprints
+    from ..ground import rectify
+    from ..ground.footprint import footprints
     from ..io.telemetry import telemetry_pose
 
     inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
@@ -72,14 +72,14 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     pose = telemetry_pose(tel, k, sensor.camera)
     img = read_image(image)
     try:
-        ortho = R.orthorectify(img, sensor, pose, surface, crs=crs, gsd_m=gsd_m, resampling=resampling, nodata=nodata,
-                               occlusion=occlusion)
+        ortho = rectify.orthorectify(img, sensor, pose, surface, crs=crs, gsd_m=gsd_m, resampling=resampling,
+                                     nodata=nodata, occlusion=occlusion)
     except InputError as exc:
         raise InputError(f"{image}: {exc}") from None
-    grid = R.ground_grid(sensor, pose, surface, step_px=grid_step_px)
+    grid = rectify.ground_grid(sensor, pose, surface, step_px=grid_step_px)
     ok = grid.fixes.ok.ravel()
     px = np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]
-    short = R.shortcut_error(ortho, sensor, pose, surface, px).summary()
+    short = rectify.shortcut_error(ortho, sensor, pose, surface, px).summary()
     fp = footprints(sensor, pose, surface)[0]
     return RectifyJob(ortho, fp, grid, short, int(tel.line[k]), int(px.shape[0]), inputs.issues)
 

@@ -61,8 +61,8 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
                level: float = 0.95, seed: int = 0, cooks_threshold: float | None = None, command: str = "",
                progress=None) -> ReportJob:
     from ..accuracy import compensation as C
-    from ..calibration import GROUPS, calibrate
     from ..io.telemetry import read_observations
+    from ..sequence.calibration import GROUPS, calibrate
     from .setup import error_budget
 
     step = progress or (lambda text: None)

@@ -68,7 +68,7 @@ def misb_setup(cfg: Config | None):
     if cfg is None:
         return None, None
     from ..accuracy.budget import ErrorBudget
-    from ..misb import misb_sensor
+    from ..ground.frame import misb_sensor
 
     inst = cfg.installation
     sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)

@@ -22,8 +22,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import InputError, KLVError
-from ..io.video import VideoInfo, iter_frames, probe_video
-from ..misb import misb_frame_sensor
+from ..ground.frame import misb_frame_sensor
+from ..io.videofile import VideoInfo, iter_frames, probe_video
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
 from ..terrain import DEM
@@ -88,8 +88,8 @@ def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | 
     default 0); otherwise tag 2's UNIX times, the first packet at the first frame unless
     ``time_offset_s`` is given (UNIX time of the first frame). Also the stream's VMTI detections
     (None when it has none)."""
+    from ..ground.frame import packet_pose
     from ..io.klv import klv_telemetry, read_klv, vmti_detections
-    from ..misb import packet_pose
 
     stream = read_klv(path, strict=strict)
     if not stream.packets:
@@ -147,7 +147,7 @@ def locate_video_vmti(vmti: VMTISource, surface, first_pts_s: float) -> list[dic
     detection with its time since the first frame, box (px), point and status."""
     from ..io.export import STATUS_NAMES, json_column
     from ..result import Status
-    from ..video import locate_vmti
+    from .klvframes import locate_vmti
 
     d = vmti.detections.columns
     f = locate_vmti(vmti.telemetry, vmti.detections, surface).fixes
@@ -208,11 +208,11 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     ``player`` the player page (its clicks ask `eoloc serve` for the DEM named ``dem_name``;
     ``serve_command`` is what the page tells its user to run for that). The VMTI detections of
     the KLV are located with their own packets' poses. ``progress(done, total)`` after each frame."""
-    from .. import rectify as R
-    from ..footprint import footprint_features, footprints
+    from ..ground import rectify
+    from ..ground.footprint import footprint_features, footprints
+    from ..ground.mosaic import Mosaic, ground_sample_m
     from ..io.raster import write_cog
-    from ..io.video import frame_times
-    from ..mosaic import Mosaic, ground_sample_m
+    from ..io.videofile import frame_times
 
     out = Path(out)
     info = probe_video(video)
@@ -282,10 +282,10 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
             if status == "OK":
                 try:
                     if gsd_m is None and "res" not in pass_grid:  # the pass's cell: the first frame's GSD, rounded
-                        gsd_m = round_gsd(R.native_gsd_m(sensor, pose, ground))
+                        gsd_m = round_gsd(rectify.native_gsd_m(sensor, pose, ground))
                     fp = footprints(sensor, pose, ground)[0]  # the grid's extent, and a layer of its own
-                    grid = R.output_grid(sensor, pose, ground, crs=pass_grid.get("crs", crs),
-                                         gsd_m=gsd_m, res=pass_grid.get("res"), footprint=fp)
+                    grid = rectify.output_grid(sensor, pose, ground, crs=pass_grid.get("crs", crs),
+                                               gsd_m=gsd_m, res=pass_grid.get("res"), footprint=fp)
                     result = _rectify_frame(fr.image, sensor, pose, ground, grid, resampling, nodata, occlusion)
                 except InputError as exc:
                     status, note = "NOT_RECTIFIED", str(exc)
@@ -330,8 +330,8 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                              f"{min(missing)})")
     mres, tileset = None, None
     if mos is not None:
+        from ..ground.mosaic import cell_size_m
         from ..io.tiles import write_xyz_tiles
-        from ..mosaic import cell_size_m
 
         mres = mos.result()
         g = mres.grid
@@ -349,7 +349,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     job = VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors, vmti_rows)
     if page_data is not None:
         from ..io.player import write_player
-        from ..io.video import browser_video
+        from ..io.videofile import browser_video
 
         mp4, job.video_for_browser = browser_video(video, out / "player" / "video.mp4", first_pts_s=t0)
         page_data["vmti"] = vmti_rows
@@ -431,9 +431,9 @@ def _pose_columns(pose: Pose) -> dict[str, float]:
 
 def _rectify_frame(image: np.ndarray, sensor: SensorModel, pose: Pose, ground, grid, resampling: str,
                    nodata: float, occlusion: bool):
-    from .. import rectify as R
+    from ..ground import rectify
 
     img = image[None] if image.ndim == 2 else np.moveaxis(image, -1, 0)
-    px = R.frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
-    data = R.resample(img, px, resampling=resampling, nodata=nodata)
+    px = rectify.frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
+    data = rectify.resample(img, px, resampling=resampling, nodata=nodata)
     return data, px, frame_visibility(px, sensor.camera.width, sensor.camera.height)

@@ -5,13 +5,13 @@ map, KLV out) is written from a :class:`PacketUpdate`.
 Two drivers of the same kernels, chosen once per session by :class:`PacketLocator`:
 
 - **per ray** (the common case: the frame-centre elevation as the surface, no error budget, no
-  lens model): the packet's pose read as plain numbers (:func:`eoloc.io.klv.telemetry.packet_view`)
+  lens model): the packet's pose read as plain numbers (:func:`eoloc.io.klv.tables.packet_view`)
   and each of its rays — frame centre, four corners, every VMTI target — put through the
   single-target kernel (:meth:`eoloc.sensor.model.SensorModel.locate_one`, ~1 µs a ray): a packet
   of 20 targets in a fraction of a millisecond, nothing set up per packet but its numbers;
 - **per packet as a batch** (a DEM, an error budget): `eoloc klv`'s own functions
-  (:func:`eoloc.io.klv.klv_telemetry`, :func:`eoloc.misb.frame_geometry`,
-  :func:`eoloc.video.locate_vmti`) on a one-packet stream.
+  (:func:`eoloc.io.klv.klv_telemetry`, :func:`eoloc.ground.frame.frame_geometry`,
+  :func:`eoloc.jobs.klvframes.locate_vmti`) on a one-packet stream.
 
 Both give the same numbers (tests/test_live_fast.py holds them to each other and to the batch
 path over hostile packets: NaN angles, fields of view out of range, pixels outside the frame,
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._backend import load_compiled
 from ..io.export import STATUS_NAMES, fix_records, utc_times, with_utc
+from ..kernels.backend import load_compiled
 from ..result import Status
 
 
@@ -98,7 +98,7 @@ class PacketLocator:
     from packet to packet, and so does the driver (see the module notes)."""
 
     def __init__(self, *, dem=None, sensor=None, budget=None) -> None:
-        from ..misb import misb_sensor
+        from ..ground.frame import misb_sensor
         from ..sensor.camera import Camera
 
         self.sensor = sensor or misb_sensor()
@@ -118,10 +118,10 @@ class PacketLocator:
             return locate_packet(source, packet, known, late=late, dem=self.dem, sensor=self.sensor,
                                  budget=self.budget)
         from ..geodesy import look_angles
+        from ..ground.frame import CORNERS
         from ..io.klv import vmti_detections
         from ..io.klv.reader import KLVStream
-        from ..io.klv.telemetry import packet_view
-        from ..misb import CORNERS
+        from ..io.klv.tables import packet_view
 
         known = known or packet
         f = known.fields
@@ -147,7 +147,7 @@ class PacketLocator:
             if ends[0][4] == Status.OK:
                 centre = ends[0][:3]
             if all(e[4] == Status.OK for e in ends[1:]):
-                from ..footprint import polygon_geometry
+                from ..ground.footprint import polygon_geometry
 
                 k = np.array([e[:3] for e in ends[1:]])
                 footprint = polygon_geometry(k[:, 1], k[:, 0], k[:, 2])
@@ -225,10 +225,10 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
                   budget=None) -> PacketUpdate:
     """:meth:`PacketLocator.locate` by `eoloc klv`'s own functions on a one-packet stream (the
     batch driver: any surface, with or without an error budget)."""
+    from ..ground.frame import frame_geometry, misb_sensor, packet_pose
     from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.reader import KLVStream
-    from ..misb import frame_geometry, misb_sensor, packet_pose
-    from ..video import locate_vmti
+    from ..jobs.klvframes import locate_vmti
 
     sensor = sensor or misb_sensor()
     known = known or packet
@@ -243,14 +243,14 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     surface = dem if dem is not None else tel.columns["fc_h_m"]
     centre = footprint = look = None
     if platform is not None:
-        from ..footprint import polygon_geometry
         from ..geodesy import geodetic_to_ned
+        from ..ground.footprint import polygon_geometry
 
         geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], surface)
         if bool(geom.centre.ok[0]):
             centre = (float(geom.centre.lat_deg[0]), float(geom.centre.lon_deg[0]), float(geom.centre.h_m[0]))
         if dem is not None:  # the image border traced on the terrain, clipped at its edge (as `eoloc klv`)
-            from ..video import dem_footprint_features
+            from ..jobs.klvframes import dem_footprint_features
 
             footprint = dem_footprint_features(tel, dem, sensor)[0]["geometry"]
         elif bool(np.all(geom.corners.ok[0])):

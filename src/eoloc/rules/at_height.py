@@ -21,7 +21,7 @@ class AtHeight(KernelRule):
     height along a line is convex, so a crossing where the ray descends is the first one. A point
     within 1 µm of the surface on a descending ray is certain. Anything else is decided exactly
     by Newton steps from the camera side, which never overshoot the first crossing
-    (``_kernels.ellipsoid_exact``).
+    (``eoloc.kernels.core.ellipsoid_exact``).
 
     Validity domain (the same on both backends): target heights from -100 km to +10 000 km; the
     camera above the surface (on it, to 1 µm, or below it: BELOW_SURFACE, never a point); only

@@ -7,7 +7,7 @@ own in this package. It states its validity domain in its docstring, runs its ke
 them in ``errors``). Every caller (pipeline, Monte Carlo, covariance, compensation, footprints,
 rectification, KLV, CLI) holds a rule object and calls it, never branching on its kind.
 
-Adding a rule: one file here with a ``StopRule`` subclass and its kernel in ``eoloc._kernels``,
+Adding a rule: one file here with a ``StopRule`` subclass and its kernel in ``eoloc.kernels.core``,
 plus its name in :data:`eoloc.rules.RULES` (README "Architecture").
 """
 
@@ -19,8 +19,8 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._backend import run
 from ..geodesy import WGS84, Ellipsoid
+from ..kernels.backend import run
 from ..result import Fixes, Status, mask_invalid
 from ..sensor.model import Pose, Rays, SensorModel
 

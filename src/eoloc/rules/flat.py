@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
-from .._backend import get_backend, run
 from ..geodesy import WGS84, Ellipsoid
+from ..kernels import core as kernels
+from ..kernels.backend import get_backend, run
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel, split_pixels
 from .base import StopRule, f64, to_fixes
@@ -78,8 +78,8 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     frame = sensor.camera_frame(pose)
     xn0, yn0 = sensor.normalized(main_pixel, pose.focal_scale)
     with np.errstate(all="ignore"):
-        nx, ny, nz, H = _kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
-                                            np.asarray(main_range_m, dtype=np.float64), *ell)
+        nx, ny, nz, H = kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0,
+                                           np.asarray(main_range_m, dtype=np.float64), *ell)
     u, v = split_pixels(pixels, sensor.camera)
     xn, yn = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
     out = run("flat_target", frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *ell)
@@ -93,7 +93,7 @@ def _one_frame(pose: Pose, main_range_m, main_pixel) -> bool:
 
 
 def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixels, main_pixel) -> Fixes:
-    from .. import _nb
+    from ..kernels import compiled
 
     pose9 = np.radians([pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, 0, 0, 0])
     pose9[2] = pose.h_m
@@ -106,8 +106,9 @@ def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixe
     v = np.ascontiguousarray(np.broadcast_to(v, shape)).reshape(-1)
     out = [np.empty(u.size) for _ in range(4)] + [np.empty(u.size, dtype=np.int8)]
     dist = cam.distortion
-    _nb.flat_frame(sensor.kernel_params, 0 if dist is None else dist.kind, _NO_DIST if dist is None else dist.packed,
-                   float(cam.width), float(cam.height), pose9, main, main_range_m, u, v, *out)
+    compiled.flat_frame(sensor.kernel_params, 0 if dist is None else dist.kind,
+                        _NO_DIST if dist is None else dist.packed, float(cam.width), float(cam.height), pose9, main,
+                        main_range_m, u, v, *out)
     return to_fixes([o.reshape(shape) for o in out], False)
 
 

@@ -7,9 +7,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _march, geodesy
-from .._backend import get_backend, in_chunks
+from .. import geodesy
 from ..geodesy import WGS84, Ellipsoid
+from ..kernels import march
+from ..kernels.backend import get_backend, in_chunks
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
@@ -22,7 +23,7 @@ METHODS = ("march", "descent")
 class OnDEM(StopRule):
     """M4: the first crossing of each ray with ``dem`` (ellipsoidal heights, bilinear surface).
 
-    ``method="march"`` (default): the guaranteed-first-hit march of :mod:`eoloc._march` (an
+    ``method="march"`` (default): the guaranteed-first-hit march of :mod:`eoloc.kernels.march` (an
     exact solve in each cell, coarse skipping on numba), the point on the bilinear DEM surface
     to < 1 cm. ``method="descent"``: [Q]'s iteration (ellipsoid at H, read the DEM, lower H by
     ``eps_h`` until the terrain is above), kept for comparison. Its height error is <= eps_h and
@@ -63,7 +64,7 @@ class OnDEM(StopRule):
         f = self._march(moved, ell)
         return replace(f, h_m=f.h_m + s)
 
-    def _march(self, rays: Rays, ell: Ellipsoid) -> Fixes:
+    def march(self, rays: Rays, ell: Ellipsoid) -> Fixes:
         a, b, e2, ep2 = ell.constants
         shape = rays.shape
         flat = [np.ascontiguousarray(np.broadcast_to(x, shape), dtype=np.float64).reshape(-1)
@@ -71,24 +72,24 @@ class OnDEM(StopRule):
         g = self.dem.grid
         hmin, hmax = self.dem.height_range
         if self.method == "descent":
-            out = _march.descent_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, self.eps_h, a, b, e2,
-                                       ep2)
+            out = march.descent_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, self.eps_h, a, b, e2,
+                                      ep2)
         else:
-            fine, coarse, margin = _march.march_params(self.dem)
+            fine, coarse, margin = march.march_params(self.dem)
             if get_backend() == "numba":
-                from .. import _nb
+                from ..kernels import compiled
 
                 n = flat[0].size
                 out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
                 bmax = self.dem.block_max
 
                 def part(i: int, j: int) -> None:  # one contiguous slice of the rays, on a thread of its own
-                    _nb.terrain_march(j - i, *(x[i:j] for x in flat), g.z, bmax, g.lat0, g.lon0, g.dlat, g.dlon,
-                                      hmin, hmax, fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
+                    compiled.terrain_march(j - i, *(x[i:j] for x in flat), g.z, bmax, g.lat0, g.lon0, g.dlat, g.dlon,
+                                           hmin, hmax, fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
 
                 in_chunks(n, part)
             else:
-                out = _march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
+                out = march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
         return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid, rays.out_of_image)
 
     def terrain_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray:

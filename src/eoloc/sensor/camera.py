@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
+from ..kernels import core as kernels
 from .distortion import Distortion
 
 
@@ -133,17 +133,17 @@ class Camera:
         :meth:`pixel_to_normalized` is not the inverse, e.g. past the fold of a barrel lens)."""
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        m = 0.5 + _kernels.IMAGE_MARGIN_PX
+        m = 0.5 + kernels.IMAGE_MARGIN_PX
         if self.distortion is None and u.size and v.size and u.min() >= -m and v.min() >= -m \
                 and u.max() <= self.width - 1.0 + m and v.max() <= self.height - 1.0 + m:
             return np.False_  # all inside (and finite): four reductions instead of a mask
         with np.errstate(all="ignore"):
-            usable = _kernels.pixel_in_image(u, v, float(self.width), float(self.height))
+            usable = kernels.pixel_in_image(u, v, float(self.width), float(self.height))
             if self.distortion is not None:
                 d = self.distortion
                 k = np.asarray(focal_scale, dtype=np.float64)
-                usable = usable & _kernels.undistort_ok(d.kind, d.packed, (u - self.cx) / (self.fx * k),
-                                                        (v - self.cy) / (self.fy * k), np.asarray(xn), np.asarray(yn))
+                usable = usable & kernels.undistort_ok(d.kind, d.packed, (u - self.cx) / (self.fx * k),
+                                                       (v - self.cy) / (self.fy * k), np.asarray(xn), np.asarray(yn))
             return np.isfinite(u + v) & ~usable
 
     def normalized_to_pixel(self, xn: ArrayLike, yn: ArrayLike, *,

@@ -10,7 +10,7 @@
   cubic polynomials (PCHIP). Undistorting is direct (x_r = x / (1 + D)); distorting solves
   eta = zeta (1 + D(w(eta))) by fixed-point iteration.
 
-Both models are evaluated by :mod:`eoloc._kernels` (``undistort`` / ``distort``), so the
+Both models are evaluated by :mod:`eoloc.kernels.core` (``undistort`` / ``distort``), so the
 compiled frame kernels and the array path share one implementation.
 Every stop rule sees undistorted rays: the camera applies ``undistort`` in pixel -> ray and
 ``distort`` in ground -> pixel.
@@ -25,7 +25,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
+from ..kernels import core as kernels
 
 # [Z15] measured table: normalised field w -> distortion ratio D in percent
 Z15_FIELD = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
@@ -43,7 +43,7 @@ class BrownConrady:
     k3: float = 0.0
 
     name = "brown-conrady"
-    kind: ClassVar[int] = _kernels.DIST_BROWN
+    kind: ClassVar[int] = kernels.DIST_BROWN
 
     @property
     def coefficients(self) -> np.ndarray:
@@ -52,17 +52,17 @@ class BrownConrady:
 
     @cached_property
     def packed(self) -> np.ndarray:
-        """Parameters as the compiled kernels take them (eoloc._kernels.undistort)."""
+        """Parameters as the compiled kernels take them (eoloc.kernels.core.undistort)."""
         return self.coefficients
 
     def distort(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Ideal normalised coordinates -> distorted normalised coordinates."""
-        return _kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
+        return kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
 
     def undistort(self, xd: ArrayLike, yd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Distorted normalised coordinates -> ideal ones (Newton, converged to ~1e-15)."""
         with np.errstate(all="ignore"):
-            return _kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
+            return kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class DistortionRatio:
     d_percent: tuple[float, ...] = Z15_D_PERCENT
 
     name = "ratio"
-    kind: ClassVar[int] = _kernels.DIST_RATIO
+    kind: ClassVar[int] = kernels.DIST_RATIO
 
     def __post_init__(self) -> None:
         if not self.r_max > 0:
@@ -95,7 +95,7 @@ class DistortionRatio:
     @cached_property
     def packed(self) -> np.ndarray:
         """(w0, n, breakpoints, PCHIP coefficients per interval): the layout of
-        eoloc._kernels.ppoly_eval. scipy fits the monotone cubic pieces; the kernels evaluate them."""
+        eoloc.kernels.core.ppoly_eval. scipy fits the monotone cubic pieces; the kernels evaluate them."""
         from scipy.interpolate import PchipInterpolator
 
         fit = PchipInterpolator(np.asarray(self.field), np.asarray(self.d_percent) / 100.0)
@@ -103,13 +103,13 @@ class DistortionRatio:
 
     def ratio(self, r_distorted: ArrayLike) -> np.ndarray:
         """D at distorted normalised image height(s) r = eta / f."""
-        return _kernels.distortion_ratio(_f64(r_distorted), self.packed)
+        return kernels.distortion_ratio(_f64(r_distorted), self.packed)
 
     def undistort(self, xd: ArrayLike, yd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        return _kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
+        return kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
 
     def distort(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        return _kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
+        return kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
 
 
 def _f64(x: ArrayLike) -> np.ndarray:

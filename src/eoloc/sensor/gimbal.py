@@ -12,7 +12,7 @@
 - :class:`FixedMount` — any R_body_cam given as a matrix or a quaternion (w, x, y, z), plus an
   optional sensor roll about the boresight (the first gimbal angle).
 
-The kernels live in :mod:`eoloc._kernels` (``r_body_cam``); these classes name the angles and
+The kernels live in :mod:`eoloc.kernels.core` (``r_body_cam``); these classes name the angles and
 carry the constant part.
 """
 
@@ -24,7 +24,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import GimbalKind
+from ..kernels.core import GimbalKind
 
 _IDENTITY9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 

@@ -17,9 +17,9 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
-from .._backend import Gathered, get_backend, run, take_all
 from ..geodesy import WGS84, Ellipsoid, as_matrix
+from ..kernels import core as kernels
+from ..kernels.backend import Gathered, get_backend, run, take_all
 from ..rotation import small_angle_rotation
 from .camera import Camera
 from .gimbal import AzElGimbal, Gimbal, GimbalKind
@@ -129,7 +129,7 @@ class CameraFrame:
     def take(self, index) -> CameraFrame:
         """The frames at ``index`` (targets that share a pose share its frame, computed once).
         With an integer index into one-dimensional frames, the rotation is left
-        :class:`~eoloc._backend.Gathered`: the ray kernel gathers it chunk by chunk (it is the
+        :class:`~eoloc.kernels.backend.Gathered`: the ray kernel gathers it chunk by chunk (it is the
         array it stands for anywhere else); the origins are gathered on the threads."""
         parts = [np.asarray(x) for x in (*self.R, self.ox, self.oy, self.oz, self.invalid)]
         index = np.asarray(index)
@@ -182,13 +182,13 @@ class SensorModel:
 
     @cached_property
     def kernel_params(self) -> np.ndarray:
-        """Parameter vector of the single-target kernel (layout in eoloc._kernels)."""
+        """Parameter vector of the single-target kernel (layout in eoloc.kernels.core)."""
         c = self.camera
         p = np.concatenate([
             [c.fx, c.fy, c.cx, c.cy, float(self.gimbal.kind)],
             self._R_mount9, self.gimbal.R_fixed9, self._R_bore9, self.lever_arm_m, self.ellipsoid.constants,
         ]).astype(np.float64)
-        assert p.size == _kernels.N_PARAMS
+        assert p.size == kernels.N_PARAMS
         return p
 
     # -- chain ----------------------------------------------------------------------------------
@@ -196,8 +196,8 @@ class SensorModel:
     def R_body_cam(self, gimbal_deg: tuple) -> np.ndarray:
         """R_body_cam (..., 3, 3) for gimbal angles (degrees), misalignments included."""
         g1, g2, g3 = self.gimbal.angles(tuple(gimbal_deg))
-        return as_matrix(_kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
-                                              self.gimbal.R_fixed9, self._R_bore9, 0.0))
+        return as_matrix(kernels.r_body_cam(self.gimbal.kind, g1, g2, g3, self._R_mount9,
+                                             self.gimbal.R_fixed9, self._R_bore9, 0.0))
 
     def camera_frame(self, pose: Pose, *, mount_misalignment_deg: ArrayLike | None = None,
                      boresight_misalignment_deg: ArrayLike | None = None,
@@ -271,9 +271,9 @@ class SensorModel:
         sensor roll. Same kernels as the array path; compare the status with ``Status.OK``.
         """
         if range_m is not None and height_m is None:
-            stop_kind, stop_value = _kernels.STOP_RANGE, range_m
+            stop_kind, stop_value = kernels.STOP_RANGE, range_m
         elif height_m is not None and range_m is None:
-            stop_kind, stop_value = _kernels.STOP_ELLIPSOID, height_m
+            stop_kind, stop_value = kernels.STOP_ELLIPSOID, height_m
         else:
             raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
         if self.gimbal.kind == GimbalKind.FIXED:
@@ -290,15 +290,15 @@ class SensorModel:
     @staticmethod
     def _one_fn():
         if get_backend() == "numba":
-            from .. import _nb
+            from ..kernels import compiled
 
-            return _nb.locate_one
+            return compiled.locate_one
         return _locate_one_numpy
 
 
 def _locate_one_numpy(*args):
     with np.errstate(all="ignore"):
-        lat, lon, h, t, st = _kernels.locate_one(*args)
+        lat, lon, h, t, st = kernels.locate_one(*args)
     return float(lat), float(lon), float(h), float(t), int(st)
 
 

@@ -29,9 +29,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from starlette.requests import Request  # at module level: FastAPI resolves the routes' annotations here
 
-from .._backend import load_compiled
 from ..errors import EolocError
 from ..io.config import CameraConfig
+from ..kernels.backend import load_compiled
 
 MAX_BODY_BYTES = 8 * 1024 * 1024
 MAX_PIXELS = 100_000  # per request, over all observations
@@ -135,7 +135,7 @@ def locate_observation(obs: ObservationIn, state: ServiceState, where: str) -> d
 def solve_observation(obs: ObservationIn, state: ServiceState, where: str, pixels=None):
     """(fixes, u, v, uncertainty columns or None) of one observation; ``pixels``: (u, v) arrays that
     replace the observation's own (the Arrow route's columns)."""
-    from ..pipeline import locate_by_rule
+    from ..jobs.tables import locate_by_rule
     from ..rules import rule_from_options
     from ..sensor import Camera, Pose, SensorModel, gimbal_from_name
 

@@ -94,7 +94,7 @@ class DEM:
     def block_max(self) -> np.ndarray:
         """Highest post of each 8 x 8-cell block (+inf where a block holds a void), built once:
         lets the M4 march skip stretches where the ray is above all terrain."""
-        from .._march import block_max
+        from ..kernels.march import block_max
 
         return block_max(self.grid.z)
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import _kernels
+from ..kernels import core as kernels
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,7 +47,7 @@ class LatLonGrid:
         lat = np.asarray(lat, dtype=np.float64)
         lon = np.asarray(lon, dtype=np.float64)
         with np.errstate(invalid="ignore"):
-            h, inside = _kernels.grid_height(self.z, self.lat0, self.lon0, self.dlat, self.dlon, lat, lon)
+            h, inside = kernels.grid_height(self.z, self.lat0, self.lon0, self.dlat, self.dlon, lat, lon)
         return np.asarray(h), np.asarray(inside)
 
     def post_coordinates(self) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,8 @@
 """MISB KLV in and out: ST 0601 / EG 0104 packets (raw KLV or MPEG-TS, one stream per KLV PID),
 ST 0903 VMTI targets and ST 1607 nested sets, decoded tolerantly (:mod:`.reader`), mapped into
-eoloc tables (:mod:`.telemetry`), and written back (:mod:`.encode`)."""
+eoloc tables (:mod:`.tables`), and written back (:mod:`.encode`)."""
 
-from ..._lazy import lazy_attributes
+from ...util.lazy import lazy_attributes
 
 _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventions alone at start-up)
     "EG0104_KEY": "eg0104", "encode_eg0104": "eg0104",
@@ -10,7 +10,7 @@ _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventio
     "frame_uas_packet": "encode", "uas_items": "encode", "with_target_location": "encode",
     "UAS_KEY": "reader", "KLVIssue": "reader", "KLVPacket": "reader", "KLVStream": "reader",
     "StreamNote": "reader", "decode_klv_bytes": "reader", "read_klv": "reader",
-    "TAGS": "telemetry", "klv_telemetry": "telemetry", "vmti_detections": "telemetry",
+    "TAGS": "tables", "klv_telemetry": "tables", "vmti_detections": "tables",
 }
 
 

@@ -15,7 +15,7 @@ What is ours and what is not:
   first packet it was seen in. ``strict=True`` has stanag4609 enforce the standard instead: a
   packet it refuses is dropped and named.
 - **Streams**: each KLV PID of a transport stream is its own stream (``"PID 497"``); a raw KLV
-  file is one stream (``""``). :mod:`.telemetry` keeps report-on-change state per stream.
+  file is one stream (``""``). :mod:`.tables` keeps report-on-change state per stream.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ def circling_flight_klv(n_packets: int, *, seed: int = 0, lat_deg: float = 40.0,
                         n_targets: int = 5, hfov_deg: float = 20.0, start_unix_s: float = START_UNIX_S) -> bytes:
     """``n_packets`` ST 0601 packets (raw KLV) of a circling flight centred ``seed``-dependently
     near (lat_deg, lon_deg); the ground is the geoid (MSL 0)."""
-    from ...misb import frame_geometry, misb_sensor
+    from ...ground.frame import frame_geometry, misb_sensor
     from ...sensor import Pose
     from ...terrain.geoid import default_geoid
 

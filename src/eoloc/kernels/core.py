@@ -7,7 +7,7 @@ arithmetic, numpy ufuncs and :func:`pick` / :func:`_finite`.  Angles are radians
 Two backends run these *same* functions:
 
 - numpy: called directly on arrays (the reference path, always available);
-- numba: :mod:`eoloc._nb` compiles each function for scalars (``pick`` becomes a branch, sine,
+- numba: :mod:`eoloc.kernels.compiled` compiles each function for scalars (``pick`` becomes a branch, sine,
   cosine and atan2 become the polynomials below) inside element loops that LLVM vectorises, and
   the single-target fast path calls them directly.
 
@@ -51,7 +51,7 @@ GIMBAL_FIXED = int(GimbalKind.FIXED)
 
 def compiled(inline: bool = False):
     """Mark a kernel for the numba backend, which compiles every marked function of a module for
-    scalars (:mod:`eoloc._nb`); ``inline``: always inlined by LLVM (a call left in a driver's loop
+    scalars (:mod:`eoloc.kernels.compiled`); ``inline``: always inlined by LLVM (a call left in a driver's loop
     stops it from vectorising). The function itself is returned unchanged for numpy."""
 
     def mark(fn):
@@ -856,7 +856,7 @@ def cell_first_root(h0, dh, ar0, dar, ac0, dac, z00, z01, z10, z11, s_lo, s_hi):
 
 @dataclass(frozen=True)
 class Signature:
-    """How the backends drive a kernel over many elements (:func:`eoloc._backend.run`): its
+    """How the backends drive a kernel over many elements (:func:`eoloc.kernels.backend.run`): its
     parameters in order (read off the function), which are the same for every element
     (``constants``; ``ints`` among them are integers) and its outputs. A name starting with
     ``R_`` is a rotation: 9 numbers, given as one argument (a 9-tuple or an array with 9 in its

@@ -8,7 +8,7 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    computed (the interpolation error is (step * cell)^2 / 8R: 5 µm at 16 cells of 1 m); the
    DEM's bilinear height there (or the constant surface); the camera
    frame point c0 + h n; its pinhole projection, the lens distortion (the same
-   ``_kernels.distort`` as every other ground -> pixel path) and its range; whether it lies in
+   ``core.distort`` as every other ground -> pixel path) and its range; whether it lies in
    the image, with the sampling maps for OpenCV's remap (final wherever nothing hides it). Per
    row, by node interval, so that the node values are constants of loops LLVM vectorises.
 2. ``fold_tiles``: terrain hides terrain only where the mesh of the cells (two triangles per
@@ -25,10 +25,10 @@ Ground -> image, one output cell at a time (README "Orthorectification"):
    nearest surface passes, and a cell is hidden only when nearer terrain covers all four: at a
    silhouette the sub-cell doubt goes to "seen".
 5. ``sample_bands``: nearest or exact bilinear sampling (uint8/uint16 bilinear goes
-   through OpenCV's remap, eoloc.rectify.resample).
+   through OpenCV's remap, eoloc.ground.rectify.resample).
 
-Each is plain scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins; the
-numpy reference is :func:`eoloc.rectify.orthorectify_reference`, which reaches the same cells by
+Each is plain scalar code that numba compiles (eoloc.kernels.compiled) with the kernels' compiled twins; the
+numpy reference is :func:`eoloc.ground.rectify.orthorectify_reference`, which reaches the same cells by
 scipy's map_coordinates and decides hiding by each cell's own ray (M4) instead of a z-buffer.
 """
 
@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import compiled, distort, grid_height_at
+from .core import compiled, distort, grid_height_at
 
 N_NODE = 8  # per node: the DEM's fractional row and column there, camera-frame ellipsoid point (x, y, z), up (x, y, z)
 BLOCK = 16  # cells per side of the blocks the z-buffer pass takes or skips whole

@@ -30,11 +30,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
-from . import geodesy
-from .errors import InputError
-from .rules import locate_ellipsoid
-from .sensor.model import Pose, SensorModel
-from .sequence.interp import interpolate_poses
+from .. import geodesy
+from ..errors import InputError
+from ..rules import locate_ellipsoid
+from ..sensor.model import Pose, SensorModel
+from .interp import interpolate_poses
 
 GROUPS = {"mount": ("mount_x_deg", "mount_y_deg", "mount_z_deg"),
           "boresight": ("boresight_x_deg", "boresight_y_deg", "boresight_z_deg"),

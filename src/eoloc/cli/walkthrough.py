@@ -10,16 +10,16 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
 
-from .accuracy.covariance import covariance_columns
-from .geodesy import horizontal_distance_m
-from .io.config import load_config
-from .io.export import fix_records
-from .io.telemetry import read_detections, read_telemetry
-from .io.writers import write_layer
-from .jobs.setup import error_budget
-from .pipeline import RANGE_FROM_FILES, locate_tables
-from .rules import AtHeight, OnDEM, locate_range
-from .sensor import AzElGimbal, Camera, Pose, SensorModel
+from ..accuracy.covariance import covariance_columns
+from ..geodesy import horizontal_distance_m
+from ..io.config import load_config
+from ..io.export import fix_records
+from ..io.telemetry import read_detections, read_telemetry
+from ..io.writers import write_layer
+from ..jobs.setup import error_budget
+from ..jobs.tables import RANGE_FROM_FILES, locate_tables
+from ..rules import AtHeight, OnDEM, locate_range
+from ..sensor import AzElGimbal, Camera, Pose, SensorModel
 
 S13_EXPECTED = (42.02058646, 125.03195512, 419.58)
 
@@ -118,9 +118,9 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
     """[P]: synthetic calibration flights with installation errors; the model learnt on 6 flights
     corrects 3 others; CEP by oblique band before and after, and [P] Fig. 1 as a PNG. Returns the
     training flights (the accuracy report's observations)."""
-    from .accuracy import compensation as C
-    from .accuracy.calflight import calibration_flights
-    from .accuracy.plots import plot_compensation
+    from ..accuracy import compensation as C
+    from ..accuracy.calflight import calibration_flights
+    from ..accuracy.plots import plot_compensation
     from .render import print_bands
 
     console.rule("Large oblique angles: learned error compensation ([P]; eoloc compensate)")
@@ -147,10 +147,10 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
 def run_report_demo(out_dir: Path, *, console: Console, config_path: Path, flights) -> None:
     """`eoloc report` on the calibration flights: their observations and station DEM written as a
     user would have them, then the accuracy report (HTML + CSV) made from those files."""
-    from .io.raster import write_dem
-    from .io.records import Records
-    from .jobs.report import report_job, write_report
-    from .terrain import open_dem
+    from ..io.raster import write_dem
+    from ..io.records import Records
+    from ..jobs.report import report_job, write_report
+    from ..terrain import open_dem
 
     console.rule("Flight-test accuracy report (eoloc report)")
     (obs,) = write_layer(out_dir, "observations", Records(dict(flights.columns)), ["csv"])
@@ -171,10 +171,10 @@ def run_report_demo(out_dir: Path, *, console: Console, config_path: Path, fligh
 def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """M5: a synthetic checkerboard frame seen obliquely over the Longs Peak DEM, orthorectified
     to UTM on the DEM, with [P]'s bounds shortcut measured against the rigorous ray."""
-    from . import rectify as R
-    from .io.raster import write_ortho
-    from .rules import locate_dem
-    from .terrain import open_dem
+    from ..ground import rectify
+    from ..io.raster import write_ortho
+    from ..rules import locate_dem
+    from ..terrain import open_dem
 
     console.rule("Image georeferencing (M5; eoloc rectify)")
     dem = open_dem(data / "longs_peak_srtmgl3.tif")
@@ -183,11 +183,11 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     u, v = np.meshgrid(np.arange(640.0), np.arange(480.0))
     f = locate_dem(sensor, pose, dem, (u, v))
     frame = np.where(f.ok, 60 + 140 * ((np.floor(f.lat_deg / 0.001) + np.floor(f.lon_deg / 0.001)) % 2), 0)
-    ortho = R.orthorectify(frame.astype(np.uint8), sensor, pose, dem, crs="utm")
+    ortho = rectify.orthorectify(frame.astype(np.uint8), sensor, pose, dem, crs="utm")
     path = write_ortho(ortho, out_dir / "ortho.tif")
-    grid = R.ground_grid(sensor, pose, dem, step_px=40)
+    grid = rectify.ground_grid(sensor, pose, dem, step_px=40)
     ok = grid.fixes.ok.ravel()
-    short = R.shortcut_error(ortho, sensor, pose, dem, np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]).summary()
+    short = rectify.shortcut_error(ortho, sensor, pose, dem, np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]).summary()
     console.print(f"A 640 x 480 frame of a 0.001° checkerboard on the terrain, seen 45° below the horizon from "
                   f"6000 m: {ortho.shape[1]} x {ortho.shape[0]} cells of {ortho.res[0]:.2f} m in {ortho.crs.name}, "
                   f"{100 * ortho.valid.mean():.0f} % seen (terrain-hidden cells blanked). [P]'s bounds shortcut "
@@ -198,8 +198,8 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
 
 def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
     """RLS per static target over all frames (M6) and range-free triangulation (M8), against truth."""
-    from .io.telemetry import match_detections, telemetry_pose
-    from .sequence import rls_static, triangulate
+    from ..io.telemetry import match_detections, telemetry_pose
+    from ..sequence import rls_static, triangulate
 
     t1 = next(iter(truth.values()))
     m3 = locate_tables(sensor, tel, det, AtHeight(t1[2]), budget=budget)
@@ -232,9 +232,9 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
 def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """M4 over real terrain (SRTM, Longs Peak): every detection on the DEM, against the truth and
     against what the ellipsoid at one height would give; footprints on the DEM."""
-    from .footprint import footprint_features, footprints
-    from .io.telemetry import telemetry_pose
-    from .terrain import open_dem
+    from ..ground.footprint import footprint_features, footprints
+    from ..io.telemetry import telemetry_pose
+    from ..terrain import open_dem
 
     dem = open_dem(data / "longs_peak_srtmgl3.tif")  # SRTM heights are EGM96: converted with the bundled geoid
     sensor = load_config(data / "camera.toml").sensor()
@@ -284,10 +284,10 @@ def run_klv_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     """The mountain flight as a MISB ST 0601 stream with ST 0903 targets (flight.klv, one packet
     corrupted on purpose): decoded, checked against the encoder's frame centres, targets located on
     the DEM and compared with the survey, and written as CSV, GeoJSON, KML, CoT and an HTML map."""
-    from .accuracy.budget import ErrorBudget
-    from .jobs.klv import klv_job, write_klv_products
+    from ..accuracy.budget import ErrorBudget
+    from ..jobs.klv import klv_job, write_klv_products
+    from ..terrain import open_dem
     from .render import print_klv_job
-    from .terrain import open_dem
 
     console.rule("KLV in: MISB ST 0601 + ST 0903 VMTI -> fixes, footprints, map (eoloc klv)")
     dem = open_dem(data / "longs_peak_srtmgl3.tif")
@@ -316,8 +316,8 @@ def run_batch_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     task, into one GeoParquet dataset per layer (eoloc batch), run twice to show the resume."""
     import shutil
 
-    from .io.klv.synthetic import write_circling_flights
-    from .jobs.batch import BatchSettings, batch_job
+    from ..io.klv.synthetic import write_circling_flights
+    from ..jobs.batch import BatchSettings, batch_job
     from .render import batch_table
 
     console.rule("An archive: every recording a task -> GeoParquet datasets (eoloc batch)")
@@ -344,10 +344,10 @@ def run_live_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     import threading
     import time
 
-    from .io.klv.mux import write_klv_ts
-    from .io.klv.reader import split_klv
-    from .io.mapview import write_map
-    from .live.sources import DatagramSink, file_datagrams
+    from ..io.klv.mux import write_klv_ts
+    from ..io.klv.reader import split_klv
+    from ..io.mapview import write_map
+    from ..live.sources import DatagramSink, file_datagrams
 
     console.rule("Live: MPEG-TS over UDP -> eoloc live -> Cursor-on-Target (TAK), a live map, KLV out, NDJSON")
     out_dir.mkdir(parents=True, exist_ok=True)

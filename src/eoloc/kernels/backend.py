@@ -1,8 +1,8 @@
 """Backend selection and the one dispatcher every public function goes through.
 
 ``numba`` (compiled, vectorised loops) or ``numpy`` (chunked array code, the reference path); both
-run the same kernels from :mod:`eoloc._kernels`. They differ only in the last bits of sine, cosine
-and atan2 (numba evaluates them by the fdlibm polynomials of ``_kernels``, numpy by its own
+run the same kernels from :mod:`eoloc.kernels.core`. They differ only in the last bits of sine, cosine
+and atan2 (numba evaluates them by the fdlibm polynomials of :mod:`.core`, numpy by its own
 ufuncs), so results agree to 1e-8 m, times the geometry's own amplification of a last-bit change
 (1/sin of the grazing angle for a ray meeting a surface; tested). ``auto``, the default, is numba
 where it is installed. Choose with ``EOLOC_BACKEND`` or :func:`use_backend`.
@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from . import _kernels
+from . import core as kernels
 
 BACKENDS = ("numba", "numpy")
 _state = {"name": "auto", "resolved": ""}
@@ -53,7 +53,7 @@ def get_backend() -> str:
 def _resolve() -> str:
     name = _state["name"]
     if name not in (*BACKENDS, "auto"):  # only from the environment: set_backend checks its argument
-        from .errors import ConfigError
+        from ..errors import ConfigError
 
         raise ConfigError(f"EOLOC_BACKEND={name!r} is not a backend: set it to one of {(*BACKENDS, 'auto')} "
                           "or unset it")
@@ -110,7 +110,7 @@ def default_threads() -> int:
         try:
             return max(1, int(text))
         except ValueError:
-            from .errors import ConfigError
+            from ..errors import ConfigError
 
             raise ConfigError(f"EOLOC_THREADS={text!r}: give a whole number of threads (1: no threads) or "
                               "unset it") from None
@@ -249,7 +249,7 @@ _rent = {"spent_ns": 0.0}
 
 def numba_loaded() -> bool:
     """Whether this process has loaded eoloc's compiled kernels (numba)."""
-    return "eoloc._nb" in sys.modules
+    return "eoloc.kernels.compiled" in sys.modules
 
 
 def load_compiled() -> None:
@@ -258,7 +258,7 @@ def load_compiled() -> None:
     kernels in this process and on any Dask worker; and for long-running processes (the service,
     live sessions), so that the load is not paid in a request's or a packet's time."""
     if _state["name"] == "auto" and get_backend() == "numba":
-        from . import _nb  # noqa: F401
+        from . import compiled  # noqa: F401
 
 
 def _rents(sig, n: int) -> bool:
@@ -273,7 +273,7 @@ def _rents(sig, n: int) -> bool:
 
 
 def run(name: str, *args):
-    """Run kernel ``name`` (declared in ``eoloc._kernels.SIGNATURES``) on inputs that broadcast;
+    """Run kernel ``name`` (declared in ``eoloc.kernels.core.SIGNATURES``) on inputs that broadcast;
     returns its outputs as arrays of the broadcast shape (a rotation as a 9-tuple of them).
 
     A rotation argument is a 9-tuple or an array with 9 in its first axis; constants (the
@@ -281,7 +281,7 @@ def run(name: str, *args):
     scalar, an array is broadcast to the full shape and flattened (a copy only where it really
     broadcasts).
     """
-    sig = _kernels.SIGNATURES[name]
+    sig = kernels.SIGNATURES[name]
     if len(args) != len(sig.params):
         raise TypeError(f"{name} takes {len(sig.params)} arguments ({', '.join(sig.params)}), got {len(args)}")
     flat_args: list = []
@@ -307,9 +307,9 @@ def run(name: str, *args):
     if get_backend() == "numpy" or _rents(sig, n):
         _run_numpy(sig, n, flat_in, outs)
     else:
-        from . import _nb
+        from . import compiled
 
-        getattr(_nb, name)(n, *_gather_all(flat_in), *outs)
+        getattr(compiled, name)(n, *_gather_all(flat_in), *outs)
     shaped = iter([o.reshape(shape) for o in outs])
     return tuple(tuple(next(shaped) for _ in range(9)) if sig.width(o) == 9 else next(shaped) for o in sig.outputs)
 
@@ -359,7 +359,7 @@ def _run_numpy(sig, n: int, flat_in: list, outs: list[np.ndarray]) -> None:
     """The kernel itself on chunks of the flat inputs, rotations regrouped as 9-tuples; a large
     batch split over :func:`threads` threads (the kernels are element-wise: the same results
     however it is split; 1.3-1.6x on two cores, measured on ray_direction at 10^6)."""
-    fn = getattr(_kernels, sig.name)
+    fn = getattr(kernels, sig.name)
 
     def work(start: int, stop: int) -> None:
         with np.errstate(all="ignore"):  # per thread

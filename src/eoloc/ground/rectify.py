@@ -26,13 +26,13 @@ import numpy as np
 import pyproj
 from numpy.typing import ArrayLike
 
-from . import geodesy
-from .errors import InputError
+from .. import geodesy
+from ..errors import InputError
+from ..result import Fixes, Status
+from ..rules import locate_dem, surface_rule
+from ..sensor.model import Pose, SensorModel
+from ..terrain.dem import DEM
 from .footprint import Footprint, footprints
-from .result import Fixes, Status
-from .rules import locate_dem, surface_rule
-from .sensor.model import Pose, SensorModel
-from .terrain.dem import DEM
 
 RESAMPLING = {"nearest": 0, "bilinear": 1, "cubic": 3}
 _WGS84 = pyproj.CRS.from_epsg(4326)
@@ -245,17 +245,17 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     """Project every cell of ``grid`` (its ground point on ``surface``) into the frame seen from
     ``pose`` and decide which cells the camera sees: inside the image, and (``occlusion``, on a
     DEM) not hidden by nearer terrain (a z-buffer of the terrain mesh). Compiled (numba) passes,
-    eoloc._ortho; with the numpy backend, the reference path (M4 rays for the hiding)."""
-    from . import _kernels
-    from ._backend import get_backend
+    eoloc.kernels.ortho; with the numpy backend, the reference path (M4 rays for the hiding)."""
+    from ..kernels import core as kernels
+    from ..kernels.backend import get_backend
 
     if get_backend() == "numpy":
         return _frame_pixels_reference(sensor, pose, surface, grid, occlusion=occlusion)
-    from . import _nb, _ortho
+    from ..kernels import compiled, ortho
 
     cam = sensor.camera
     rows, cols = grid.shape
-    nr, nc = _ortho.node_count(rows, NODE_STEP), _ortho.node_count(cols, NODE_STEP)
+    nr, nc = ortho.node_count(rows, NODE_STEP), ortho.node_count(cols, NODE_STEP)
     node_x, _ = grid.centres(0, np.arange(nc) * NODE_STEP)
     _, node_y = grid.centres(np.arange(nr) * NODE_STEP, 0)
     gx, gy = np.meshgrid(node_x, node_y)
@@ -266,7 +266,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     p0 = np.stack(geodesy.geodetic_to_ecef(lat, lon, 0.0), -1)
     la, lo = np.radians(lat), np.radians(lon)
     up = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
-    nodes = np.empty((nr, nc, _ortho.N_NODE))
+    nodes = np.empty((nr, nc, ortho.N_NODE))
     if isinstance(surface, DEM):  # the DEM's fractional row and column (linear in lat, lon: interpolated as they are)
         g = surface.grid
         nodes[..., 0], nodes[..., 1] = (lat - g.lat0) / g.dlat, (lon - g.lon0) / g.dlon
@@ -276,36 +276,35 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
         dem = (np.zeros((2, 2)), float(surface), False)
     nodes[..., 2:5] = (p0 - o) @ R  # R^T (p - o), row vectors
     nodes[..., 5:8] = up @ R
-    row_i0, row_a = _ortho.node_index(rows, NODE_STEP)
-    _, col_a = _ortho.node_index(cols, NODE_STEP)
+    row_i0, row_a = ortho.node_index(rows, NODE_STEP)
+    _, col_a = ortho.node_index(cols, NODE_STEP)
     fs = float(np.ravel(pose.focal_scale)[0])
     dist = cam.distortion
-    kind, dp = (dist.kind, np.asarray(dist.packed, float)) if dist is not None else (_kernels.DIST_NONE, np.zeros(1))
+    kind, dp = (dist.kind, np.asarray(dist.packed, float)) if dist is not None else (kernels.DIST_NONE, np.zeros(1))
     r2_max = _ideal_radius2(cam, fs) * 1.02**2
     u, v, rng = (np.empty((rows, cols)) for _ in range(3))
     valid = np.empty((rows, cols), np.uint8)
     map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
     use_zbuf = occlusion and isinstance(surface, DEM)
     zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf, np.float32)  # ranges to mm: ample
-    # the image tiles the mesh's back faces touch: only there can terrain hide terrain (eoloc._ortho.fold_tiles)
+    # the image tiles the mesh's back faces touch: only there can terrain hide terrain (eoloc.kernels.ortho.fold_tiles)
     tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)) if use_zbuf else (1, 1), np.uint8)
-    boxes = _ortho.block_boxes(rows, cols) if use_zbuf else np.zeros((1, 1, 4))  # the z-buffer blocks' image boxes
+    boxes = ortho.block_boxes(rows, cols) if use_zbuf else np.zeros((1, 1, 4))  # the z-buffer blocks' image boxes
     if bool(np.any(frame.invalid)):
         u[:], v[:], rng[:], valid[:], map_x[:], map_y[:] = np.nan, np.nan, np.nan, 0, -16.0, -16.0
         n_front = n_back = 0
     else:
-        n_front, n_back = _nb.ortho_project_cells(nodes, row_i0, row_a, NODE_STEP, col_a, *dem, cam.fx * fs,
-                                                  cam.fy * fs, cam.cx, cam.cy, int(kind), dp, r2_max, cam.width,
-                                                  cam.height, u, v, rng, valid, map_x, map_y, use_zbuf, FOLD_TILE_PX,
-                                                  tiles, boxes)
+        n_front, n_back = compiled.ortho_project_cells(
+            nodes, row_i0, row_a, NODE_STEP, col_a, *dem, cam.fx * fs, cam.fy * fs, cam.cx, cam.cy, int(kind), dp,
+            r2_max, cam.width, cam.height, u, v, rng, valid, map_x, map_y, use_zbuf, FOLD_TILE_PX, tiles, boxes)
     if use_zbuf:
         if n_back > n_front:  # a mirrored view: clockwise triangles face the camera
             tiles[:] = 0
-            n_back, n_front = _nb.ortho_fold_tiles(u, v, FOLD_TILE_PX, -1.0, tiles)
+            n_back, n_front = compiled.ortho_fold_tiles(u, v, FOLD_TILE_PX, -1.0, tiles)
         if n_back:  # terrain can hide terrain only where the mesh folds over: the z-buffer there
-            _nb.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, boxes, zbuf)
-            _nb.ortho_hide_folded(u, v, rng, zbuf, FOLD_TILE_PX, tiles, boxes, cam.width, cam.height, valid, map_x,
-                                  map_y)
+            compiled.ortho_rasterize_depth(u, v, rng, FOLD_TILE_PX, tiles, boxes, zbuf)
+            compiled.ortho_hide_folded(u, v, rng, zbuf, FOLD_TILE_PX, tiles, boxes, cam.width, cam.height, valid, map_x,
+                                       map_y)
     return FramePixels(u, v, rng, valid.view(bool), map_x, map_y)
 
 
@@ -364,7 +363,7 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
     other integer types go through eoloc's compiled sampler (exact weights), cubic through scipy."""
     if resampling not in RESAMPLING:
         raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
-    from ._backend import get_backend
+    from ..kernels.backend import get_backend
 
     rows, cols = px.valid.shape
     is_int = np.issubdtype(image.dtype, np.integer)
@@ -386,10 +385,10 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
         return out
     out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
     if resampling != "cubic" and get_backend() != "numpy":
-        from . import _nb
+        from ..kernels import compiled
 
-        _nb.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8),
-                               resampling == "bilinear", is_int, fill, out)
+        compiled.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8),
+                                    resampling == "bilinear", is_int, fill, out)
         return out
     from scipy.ndimage import map_coordinates
 

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .result import Fixes, Status, with_status
-from .rules import AtHeight, AtRange, OnDEM
-from .sensor.camera import Camera
-from .sensor.gimbal import AzElGimbal
-from .sensor.model import Pose, Rays, SensorModel
-from .terrain import DEM
+from ..result import Fixes, Status, with_status
+from ..rules import AtHeight, AtRange, OnDEM
+from ..sensor.camera import Camera
+from ..sensor.gimbal import AzElGimbal
+from ..sensor.model import Pose, Rays, SensorModel
+from ..terrain import DEM
 
 # ST 0601 corner order in units of the half-FOV tangents (x right, y down in the image)
 CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])

@@ -11,7 +11,7 @@ The algorithm, per ray (see README "M4"):
    above the highest post of every 8 x 8 block its bounding box touches.
 3. Fine steps (about 2 cells): grid coordinates at both ends, linear in between
    (< 0.1 mm off); a grid walk visits every cell the step crosses, and in each cell the
-   ray-minus-bilinear-surface quadratic is solved exactly (``_kernels.cell_first_root``), so the
+   ray-minus-bilinear-surface quadratic is solved exactly (``core.cell_first_root``), so the
    first crossing is found however thin the peak or ridge.
 4. Polish: one Newton step on the exact surface (geodetic height of the ray point minus the
    bilinear DEM height there).
@@ -20,7 +20,7 @@ Statuses: a cell outside the grid on the way: OUT_OF_COVERAGE; a cell with a voi
 way: DEM_VOID (nothing is known of the ground there, so no later hit can be called the first);
 camera on or below the terrain: BELOW_SURFACE; no crossing in the band: NO_INTERSECTION.
 
-``march_ray`` is scalar code that numba compiles (eoloc._nb) with the kernels' compiled twins;
+``march_ray`` is scalar code that numba compiles (eoloc.kernels.compiled) with the kernels' compiled twins;
 ``march_numpy`` runs the same cell solver over all rays at once, stepping every ray in lockstep
 (no coarse skipping: slower, and the reference the numba path is tested against).
 """
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import (
+from .core import (
     BELOW_SURFACE,
     DEM_VOID,
     INVALID_INPUT,

@@ -1,7 +1,7 @@
 """A mosaic of a pass: orthorectified frames pasted into one grid, the finest ground sample wins.
 
 Every frame of a pass is rectified onto a grid of the same CRS and cell size whose cell edges sit
-on multiples of the cell size (:func:`eoloc.rectify.output_grid`), so each frame's grid is a window
+on multiples of the cell size (:func:`eoloc.ground.rectify.output_grid`), so each frame's grid is a window
 of one endless global grid at whole-cell offsets and pasting is copying, with no resampling. The
 mosaic keeps, per cell, the frame that saw it with the smallest ground sample distance (the
 frame's pixel footprint on the ground there, :func:`ground_sample_m`), and records that frame's
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
-from .errors import InputError
+from ..errors import InputError
 from .rectify import FramePixels, OutputGrid
 
 NO_FRAME = -1

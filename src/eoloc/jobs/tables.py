@@ -10,17 +10,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InputError
-from .io.records import Coded
-from .io.table import Issue, Table
-from .result import RANGE_FROM_FILES, Fixes, Status, with_status
-from .rules import AtRange, StopRule, rule_from_options
-from .sensor import Pose, SensorModel
+from ..errors import InputError
+from ..io.records import Coded
+from ..io.table import Issue, Table
+from ..result import RANGE_FROM_FILES, Fixes, Status, with_status
+from ..rules import AtRange, StopRule, rule_from_options
+from ..sensor import Pose, SensorModel
 
 if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only when a budget is given
     # (and the telemetry tables only by the functions that read them: one observation needs neither)
-    from .accuracy.budget import ErrorBudget
-    from .accuracy.covariance import FixCovariance
+    from ..accuracy.budget import ErrorBudget
+    from ..accuracy.covariance import FixCovariance
 
 
 @dataclass
@@ -53,7 +53,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
     correction is added to every fix inside its trained range (the others are flagged); its
     per-fix columns come back in ``Located.compensation``.
     """
-    from .io.telemetry import match_detections, telemetry_pose
+    from ..io.telemetry import match_detections, telemetry_pose
 
     if rule is None:
         rule = RANGE_FROM_FILES if isinstance(range_m, str) and range_m == RANGE_FROM_FILES else \
@@ -102,7 +102,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
     fixes = with_status(fixes, ~has_pose, Status.NO_TELEMETRY)
     comp = None
     if compensation is not None:
-        from .accuracy.compensation import compensate
+        from ..accuracy.compensation import compensate
 
         per_target = pose if pose_index is None else pose.take(pose_index)
         fixes, comp = compensate(compensation, sensor, per_target, fixes, (u, v), rule=rule)
@@ -115,7 +115,7 @@ def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule, budg
     """Fixes by stop ``rule`` and, with an error ``budget``, their first-order covariance (else
     None); ``pose_index``: each pixel's element of ``pose`` (see :meth:`SensorModel.rays`)."""
     if budget is not None:
-        from .accuracy.covariance import locate_with_covariance
+        from ..accuracy.covariance import locate_with_covariance
 
         return locate_with_covariance(sensor, pose if pose_index is None else pose.take(pose_index), budget,
                                       pixels, rule)
@@ -130,8 +130,8 @@ def _interpolated(tel: Table, det: Table, max_gap_s: float, time_offset_s: float
     if not (np.isfinite(tt).any() and np.isfinite(td).any()):
         raise InputError("pose interpolation needs time_s in both the telemetry and the detections "
                          "(frame numbers alone give no time to interpolate at)")
-    from .io.telemetry import telemetry_pose
-    from .sequence.interp import interpolate_poses
+    from ..io.telemetry import telemetry_pose
+    from ..sequence.interp import interpolate_poses
 
     ip = interpolate_poses(tt, telemetry_pose(tel, camera=camera), td, time_offset_s=time_offset_s, max_gap_s=max_gap_s)
     q = td + time_offset_s

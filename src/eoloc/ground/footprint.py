@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
-from .result import Fixes, Status
-from .rules import surface_rule
-from .sensor.model import Pose, SensorModel
-from .terrain.dem import DEM
+from ..errors import InputError
+from ..result import Fixes, Status
+from ..rules import surface_rule
+from ..sensor.model import Pose, SensorModel
+from ..terrain.dem import DEM
 
 _BISECTIONS = 26  # 2^-26 of a segment: below 1e-4 px on images up to 6000 px
 

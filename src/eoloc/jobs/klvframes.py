@@ -11,18 +11,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .footprint import polygon_geometry
-from .geodesy import horizontal_distance_m
-from .io.table import Table
-from .misb import FrameGeometry, frame_geometry, misb_sensor, packet_pose
-from .pipeline import locate_by_rule
-from .result import Fixes, Status
-from .rules import surface_rule
-from .sensor.camera import Camera
-from .sensor.model import SensorModel
+from ..geodesy import horizontal_distance_m
+from ..ground.footprint import polygon_geometry
+from ..ground.frame import FrameGeometry, frame_geometry, misb_sensor, packet_pose
+from ..io.table import Table
+from ..result import Fixes, Status
+from ..rules import surface_rule
+from ..sensor.camera import Camera
+from ..sensor.model import SensorModel
+from .tables import locate_by_rule
 
 if TYPE_CHECKING:
-    from .accuracy.budget import ErrorBudget
+    from ..accuracy.budget import ErrorBudget
 
 
 @dataclass(frozen=True)
@@ -70,9 +70,9 @@ def check_frames(tel: Table, surface=None, *, sensor: SensorModel | None = None)
     return FrameCheck(geom, centre, corners, rng)
 
 
-def footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int = 1) -> list[dict]:
-    """Frame footprints as GeoJSON polygons: eoloc's (``geom``) or, with geom None, the encoder's
-    corner tags. Frames with a missing corner get a null geometry."""
+def corner_footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int = 1) -> list[dict]:
+    """Frame footprints by their four corners as GeoJSON polygons: eoloc's (``geom``) or, with geom
+    None, the encoder's corner tags. Frames with a missing corner get a null geometry."""
     c = tel.columns
     feats = []
     for i in range(0, len(tel), max(every, 1)):
@@ -92,8 +92,8 @@ def footprint_features(tel: Table, geom: FrameGeometry | None = None, every: int
 def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, every: int = 1,
                            edge_samples: int = 8) -> list[dict]:
     """Frame footprints on a DEM (image border traced and clipped at the DEM's edge or the horizon,
-    :func:`eoloc.footprint.footprints`), one batched call per distinct field of view."""
-    from .footprint import footprints
+    :func:`eoloc.ground.footprint.footprints`), one batched call per distinct field of view."""
+    from ..ground.footprint import footprints
 
     base = sensor or misb_sensor()
     c = tel.columns
@@ -197,7 +197,7 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
                                                  (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m))
         status[idx] = st
         if cov is not None:
-            from .accuracy.covariance import covariance_columns  # scipy (1.2 s): only when a budget asks for it
+            from ..accuracy.covariance import covariance_columns  # scipy (1.2 s): only when a budget asks for it
 
             for k, v in covariance_columns(cov, ok).items():
                 unc.setdefault(k, np.full(n, np.nan))[idx] = v
