@@ -42,6 +42,16 @@ def _free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+def _until_listening(proc: subprocess.Popen) -> str:
+    """What `eoloc live` printed up to its "listening on" line: its socket is bound from then on."""
+    head = []
+    while not head or "listening on" not in head[-1]:
+        line = proc.stdout.readline()
+        assert line or proc.poll() is None, "".join(head)
+        head.append(line)
+    return "".join(head)
+
+
 def _batch_fixes() -> dict[tuple[float, str], tuple[float, float, float]]:
     """`eoloc klv`'s located targets by (packet time, target id)."""
     job = klv_job(FLIGHT, dem=open_dem(DEM))
@@ -64,7 +74,7 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     sends[10], sends[11] = sends[11], sends[10]  # reordered
     sends.insert(20, b"\x00hello, not KLV")
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    time.sleep(2.0)  # the receiver binds (it imports eoloc first)
+    head = _until_listening(proc)  # the receiver has bound its socket (it imports eoloc and reads the DEM first)
     for d in sends:
         tx.sendto(d, ("127.0.0.1", port))
         time.sleep(0.01)
@@ -74,6 +84,7 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
+    log = head + log
     assert proc.returncode == 0, log
     assert "Traceback" not in log
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped (SIGINT)")):].splitlines()[0])

@@ -64,7 +64,7 @@ class OnDEM(StopRule):
         f = self._march(moved, ell)
         return replace(f, h_m=f.h_m + s)
 
-    def march(self, rays: Rays, ell: Ellipsoid) -> Fixes:
+    def _march(self, rays: Rays, ell: Ellipsoid) -> Fixes:
         a, b, e2, ep2 = ell.constants
         shape = rays.shape
         flat = [np.ascontiguousarray(np.broadcast_to(x, shape), dtype=np.float64).reshape(-1)
