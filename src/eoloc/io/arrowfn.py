@@ -66,12 +66,22 @@ def replace_all(values, pattern: str, replacement: str):
     return call_function("replace_substring", [values], _fn.ReplaceSubstringOptions(pattern, replacement))
 
 
+def replace_regex(values, pattern: str, replacement: str):
+    """Each string with every match of the regular expression ``pattern`` replaced by
+    ``replacement`` (RE2 syntax; ``\\1`` is the first group)."""
+    return call_function("replace_substring_regex", [values], _fn.ReplaceSubstringOptions(pattern, replacement))
+
+
 def equal(a, b):
     return call_function("equal", [a, b])
 
 
 def or_(a, b):
     return call_function("or", [a, b])
+
+
+def and_not(a, b):
+    return call_function("and_not", [a, b])
 
 
 def if_else(condition, a, b):

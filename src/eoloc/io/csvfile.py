@@ -29,6 +29,12 @@ from .records import Coded, Records
 CSV_CHUNK = rows.CHUNK
 
 _QUOTED = '[,"\r\n]'  # a cell with one of these is quoted (RFC 4180)
+# a spreadsheet takes a cell that starts with one of these for a formula (CSV injection, OWASP): a
+# text cell that does and is not a plain number is written after an apostrophe, which spreadsheets
+# show as text and eoloc's reader takes off again (:func:`eoloc.io.table.unguarded`); a cell that
+# already starts with apostrophes before such a character gets one more, so every cell reads back
+FORMULA = "^'*[=+\\-@\t\r]"
+PLAIN_NUMBER = "^[+-]?([0-9]+[.]?[0-9]*|[.][0-9]+)([eE][+-]?[0-9]+)?$"
 
 
 def write_csv(path: str | Path, records: Records | Sequence[Mapping], *, columns: Sequence[str] = ()) -> Path:
@@ -140,7 +146,8 @@ class _Cells:
             return pa.scalar(self.empty)
         rounded = rounded_to(v, decimals(self.name), self.big)
         if self.kind == "cast":  # pyarrow's text for the numbers, "inf" and "-inf" included
-            return _finish(arrowfn.cast(pa.array(rounded, mask=missing), pa.string()), self.sep, self.empty, False)
+            return _finish(arrowfn.cast(pa.array(rounded, mask=missing), pa.string()), self.sep, self.empty, False,
+                           numbers=True)
         if self.whole:
             rounded = np.where(missing, 0.0, rounded).astype(np.int64)
         cells = number_cells(rounded, self.sep, missing if missing.any() else None)
@@ -244,13 +251,18 @@ def _fmt(key: str, v) -> str:
     return str(v)
 
 
-def _finish(text, sep: str, empty: str, lone: bool):
-    """Text cells quoted where they must be (a lone column's empty cells too), then ``sep``
-    after each; no value: ``empty``."""
+def _finish(text, sep: str, empty: str, lone: bool, *, numbers: bool = False):
+    """Text cells guarded against formulas (:data:`FORMULA`; not ``numbers``' text, such as
+    "-inf"), quoted where they must be (a lone column's empty cells too), then ``sep`` after each;
+    no value: ``empty``."""
     import pyarrow as pa
 
     from . import arrowfn
 
+    formula = None if numbers else arrowfn.matches(text, FORMULA)
+    if formula is not None and arrowfn.any_true(formula):
+        formula = arrowfn.and_not(formula, arrowfn.matches(text, PLAIN_NUMBER))
+        text = arrowfn.if_else(formula, arrowfn.join_cells("'", text, ""), text)
     quote = arrowfn.matches(text, _QUOTED)
     if lone:
         quote = arrowfn.or_(quote, arrowfn.equal(text, ""))

@@ -119,6 +119,20 @@ def write_geoparquet(path: str | Path, records: Records, features: list[dict] | 
     return path
 
 
+def _without_nul(table):
+    """The table with NUL characters in its text replaced by U+FFFD: GDAL hands text to SQLite as C
+    strings, which would end at the NUL and silently lose the rest of the value."""
+    import pyarrow as pa
+
+    from . import arrowfn
+
+    for k, name in enumerate(table.column_names):
+        col = table.column(k)
+        if pa.types.is_string(col.type) and arrowfn.any_true(arrowfn.matches(col, "\x00")):
+            table = table.set_column(k, name, arrowfn.replace_all(col, "\x00", "\ufffd"))
+    return table
+
+
 def write_gpkg(path: str | Path, records: Records, features: list[dict] | None = None, *, layer: str) -> Path:
     """One layer as a GeoPackage (GDAL through pyogrio); the file is replaced."""
     import pyogrio
@@ -128,6 +142,7 @@ def write_gpkg(path: str | Path, records: Records, features: list[dict] | None =
     table, meta = geo_table(records, features)
     if path.exists():
         path.unlink()
+    table = _without_nul(table)
     kinds = {t.removesuffix(" Z") for t in meta["geometry_types"]}
     gtype = "Unknown" if len(kinds) != 1 else next(iter(kinds)) + (" Z" if any(" Z" in t for t in meta[
         "geometry_types"]) else "")

@@ -7,11 +7,17 @@ images are data URIs, targets are vector circles (no marker images), and there a
 unless ``tiles=`` asks for them. Every layer is a GeoJSON feature list, the same that goes to
 .geojson and KML. SVG paths carry CSS classes (``eoloc-target``, ``eoloc-cep``,
 ``eoloc-footprint``, ``eoloc-aircraft``, ``eoloc-track``) so a browser test can count them.
+
+Data reaches the page only through serialisers: every tooltip (target ids, frames, track ids come
+from the user's files) is a JSON string (Jinja's ``tojson``, which also escapes ``<``, ``>``, ``&``
+and ``'`` for a script) set as a DOM node's ``textContent``, never parsed as HTML or pasted into
+JavaScript source; the title goes through :func:`html.escape`.
 """
 
 from __future__ import annotations
 
 import base64
+import html
 import io
 from importlib import resources
 from pathlib import Path
@@ -23,6 +29,27 @@ from ..errors import InputError
 
 _COLOURS = {"aircraft": "#1f77b4", "footprints": "#ff9900", "encoder footprints": "#888888", "targets": "#d62728",
             "tracks": "#9467bd", "truth": "#2ca02c"}
+
+
+def _text_tooltip():
+    """folium's Tooltip, with its text as text: folium pastes a tooltip's text into a JavaScript
+    template literal that Leaflet then parses as HTML (``${…}`` runs, ``<img onerror>`` runs on
+    hover, a backtick breaks the page). This one hands Leaflet a node whose ``textContent`` is the
+    text, written as a JSON string."""
+    import folium
+    from folium.template import Template
+
+    class TextTooltip(folium.Tooltip):
+        _template = Template("""
+            {% macro script(this, kwargs) %}
+            {{ this._parent.get_name() }}.bindTooltip(
+                (function (text) { var node = document.createElement("div"); node.textContent = text; return node; })(
+                    {{ this.text|tojson }}),
+                {{ this.options|tojavascript }});
+            {% endmacro %}
+            """)
+
+    return TextTooltip
 
 
 def _inline_leaflet():
@@ -43,8 +70,6 @@ def offline_page(template: str, scripts: dict[str, str], fields: dict[str, str])
     eoloc/data) with Leaflet's CSS and JS inlined at /*LEAFLET_CSS*/ and /*LEAFLET_JS*/, each other
     /*MARK*/ of ``scripts`` replaced by the data file it names, and each {{NAME}} of ``fields`` by
     its value, HTML-escaped. The live map and the video player are made this way."""
-    import html
-
     base = resources.files("eoloc") / "data"
     page = (base / template).read_text(encoding="utf-8")
     parts = {"/*LEAFLET_CSS*/": "leaflet/leaflet.css", "/*LEAFLET_JS*/": "leaflet/leaflet.js", **scripts}
@@ -101,6 +126,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
     import folium
 
     OfflineMap, js, css = _inline_leaflet()
+    tip = _text_tooltip()
     points = [c for layer in (aircraft, footprints, targets, tracks, truth, encoder_footprints) for f in layer or ()
               if f.get("geometry") for c in _coords(f["geometry"])]
     if not points:
@@ -112,7 +138,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
     m.get_root().header.add_child(folium.Element(f"<style>{css}</style>\n<script>{js}</script>"))
     m.get_root().html.add_child(folium.Element(
         f'<div id="eoloc-title" style="position:fixed;top:8px;left:50px;z-index:1000;background:white;'
-        f'padding:4px 8px;font:14px sans-serif;border-radius:4px">{_escape(title)}</div>'))
+        f'padding:4px 8px;font:14px sans-serif;border-radius:4px">{html.escape(title)}</div>'))
     if dem is not None:
         url, bounds = _hillshade_png(dem)
         folium.raster_layers.ImageOverlay(url, bounds=bounds, name="terrain (hillshade)", opacity=0.9).add_to(m)
@@ -125,7 +151,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
         for f in aircraft:
             if f.get("geometry"):
                 folium.PolyLine(_latlon(f["geometry"]["coordinates"]), color=_COLOURS["aircraft"], weight=3,
-                                class_name="eoloc-aircraft", tooltip="aircraft").add_to(g)
+                                class_name="eoloc-aircraft", tooltip=tip("aircraft")).add_to(g)
     for name, layer, cls in (("footprints", footprints, "eoloc-footprint"),
                              ("encoder footprints", encoder_footprints, "eoloc-encoder-footprint")):
         if layer:
@@ -136,7 +162,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
                     props = f.get("properties") or {}
                     folium.Polygon(_latlon(geom["coordinates"][0]), color=_COLOURS[name], weight=1, fill=True,
                                    fill_opacity=0.08, class_name=cls,
-                                   tooltip=f"{name}: frame {props.get('frame', '')}").add_to(g)
+                                   tooltip=tip(f"{name}: frame {props.get('frame', '')}")).add_to(g)
     if tracks:
         g = group("tracks")
         for f in tracks:
@@ -144,7 +170,7 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
             if geom and geom["type"] == "LineString":
                 folium.PolyLine(_latlon(geom["coordinates"]), color=_COLOURS["tracks"], weight=3,
                                 class_name="eoloc-track",
-                                tooltip=f"track {(f.get('properties') or {}).get('track_id', '')}").add_to(g)
+                                tooltip=tip(f"track {(f.get('properties') or {}).get('track_id', '')}")).add_to(g)
     for name, layer, cls in (("targets", targets, "eoloc-target"), ("truth", truth, "eoloc-truth")):
         if not layer:
             continue
@@ -158,11 +184,11 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
             cep = props.get("cep50_m")
             if isinstance(cep, (int, float)) and np.isfinite(cep) and cep > 0:
                 folium.Circle([lat_t, lon_t], radius=float(cep), color=_COLOURS[name], weight=1, fill=True,
-                              fill_opacity=0.1, class_name="eoloc-cep", tooltip=f"CEP50 {cep:.1f} m").add_to(g)
-            label = " ".join(f"{k}={_short(v)}" for k, v in props.items() if k in
+                              fill_opacity=0.1, class_name="eoloc-cep", tooltip=tip(f"CEP50 {cep:.1f} m")).add_to(g)
+            label = " ".join(f"{k}={_short(v)}" for k, v in props.items() if v is not None and k in
                              ("target_id", "frame", "time_s", "h_m", "status", "cep50_m", "ce90_m", "le90_m"))
             folium.CircleMarker([lat_t, lon_t], radius=4, color=_COLOURS[name], weight=2, fill=True, fill_opacity=0.9,
-                                class_name=cls, tooltip=label or name).add_to(g)
+                                class_name=cls, tooltip=tip(label or name)).add_to(g)
     folium.LayerControl(collapsed=False).add_to(m)
     m.fit_bounds([[float(lat.min()), float(lon.min())], [float(lat.max()), float(lon.max())]])
     path = Path(path)
@@ -185,6 +211,3 @@ def _coords(geom: dict):
 def _short(v) -> str:
     return f"{v:.1f}" if isinstance(v, float) else str(v)
 
-
-def _escape(s: str) -> str:
-    return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -104,6 +105,9 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
                          "file, saved as UTF-8")
     if data[:3] == b"\xef\xbb\xbf":
         data = b" " * 3 + data[3:]  # same byte offsets; the header's names are stripped anyway
+    if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
+        # line ends of old Macs (CR alone), or mixed: each lone CR is a line end (same byte offsets)
+        data = _LONE_CR.sub(b"\n", data)
     src = str(path)
     fast = _clean_file(data)
     lines = None if fast is not None else _Lines(data, src)
@@ -155,6 +159,18 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
     return table if key_ok.all() else table.keep(key_ok)  # the usual case: no copies
 
 
+_LONE_CR = re.compile(rb"\r(?!\n)")
+
+
+def _fields(line: str, *, strict: bool = False) -> list[str]:
+    """The fields of one CSV record (Python's csv module), however long a field is: the module's
+    own limit (128 KiB a field, process-wide) is raised to the record's length first. ``strict``:
+    text after a closing quote is an error (csv.Error), not part of the field."""
+    if len(line) > csv.field_size_limit():
+        csv.field_size_limit(len(line))
+    return next(csv.reader([line], strict=strict), [])
+
+
 def _clean_file(data: bytes) -> tuple[list[str], int] | None:
     """The header and the offset of the first data line when the file can be read in one go:
     ASCII or UTF-8, the header on line 1, no comment, no quote; else None (the lines are then
@@ -168,7 +184,7 @@ def _clean_file(data: bytes) -> tuple[list[str], int] | None:
             data.decode("utf-8")
         except UnicodeDecodeError:
             return None
-    header = [x.strip().lower() for x in next(csv.reader([first.decode("utf-8")]))]
+    header = [x.strip().lower() for x in _fields(first.decode("utf-8"))]
     return header, (nl + 1 if nl >= 0 else len(data))
 
 
@@ -223,7 +239,10 @@ class _Lines:
             self.numbers = np.zeros(0, dtype=np.int64)
             return
         h = int(content[0])
-        self.header = [x.strip().lower() for x in next(csv.reader([self.line(h).decode("utf-8")]))]
+        try:
+            self.header = [x.strip().lower() for x in _fields(self.line(h).decode("utf-8"))]
+        except csv.Error as exc:
+            raise TableError(f"{path}:{h + 1}: the header line is not a CSV record ({exc})") from None
         self.data_lines = content[1:]
         self.quoted = b'"' in data[self.ends[h]:]  # quotes in the header alone do not need the slow path
 
@@ -269,11 +288,19 @@ class _Lines:
             record = self.line(i).decode("utf-8")
             span = 1
             # a record continues past the line end only inside a quote, and only when the joined
-            # record then has the header's field count (else: an unterminated quote on this line)
+            # record is then strictly CSV with the header's field count (else: an unterminated
+            # quote on this line, and the lines after it are records of their own)
             while record.count('"') % 2 and k + span < len(lines) and lines[k + span] == i + span and span < 64:
                 record += "\n" + self.line(i + span).decode("utf-8")
                 span += 1
-            fields = next(csv.reader([record]), [])
+            try:
+                fields = _fields(record, strict=span > 1)
+            except csv.Error as exc:
+                if span == 1:  # one line the csv module refuses
+                    self.issues.append(Issue(self.path, i + 1, f"not a CSV record ({exc}); line skipped"))
+                    k += 1
+                    continue
+                fields = []  # the joined lines are not one record
             if record.count('"') % 2 or (span > 1 and len(fields) != width):
                 self.issues.append(Issue(self.path, i + 1, "an unterminated quote (a field opened with \" and never "
                                                            "closed); line skipped"))
@@ -293,6 +320,10 @@ class _Lines:
         out = {}
         for name, j in index.items():
             cells = np.array([r[j].strip() for r in rows], dtype=object)
+            if name in text and cells.size:
+                import pyarrow as pa
+
+                cells = np.array(unguarded(pa.array(cells.tolist(), type=pa.string())).to_pylist(), dtype=object)
             out[name] = cells if name in text else _numbers(cells)
         return out
 
@@ -387,11 +418,25 @@ def text_cells(col) -> Coded:
         cells = cells.combine_chunks()
     coded = arrowfn.dictionary_encode(cells)
     codes = coded.indices.to_numpy(zero_copy_only=False)
-    names = arrowfn.utf8_trim_whitespace(coded.dictionary)
+    names = unguarded(arrowfn.utf8_trim_whitespace(coded.dictionary))
     if not names.equals(coded.dictionary):  # some had spaces: names equal once stripped share one code
         merged = arrowfn.dictionary_encode(names)
         codes, names = merged.indices.to_numpy(zero_copy_only=False)[codes], merged.dictionary
     return Coded(codes, names.to_numpy(zero_copy_only=False).astype(object))
+
+
+GUARDED = "^'('*[=+\\-@\t\r])"  # a cell eoloc's CSV writer guarded against formulas (eoloc.io.csvfile.FORMULA)
+
+
+def unguarded(names):
+    """Text cells (a pyarrow string array) with the apostrophe a CSV writer puts before a cell that
+    a spreadsheet would take for a formula (``'=1+2``, OWASP's CSV injection advice, which eoloc's
+    writer follows) taken off again: ids read back as they were written."""
+    from . import arrowfn
+
+    if not arrowfn.any_true(arrowfn.matches(names, GUARDED)):
+        return names
+    return arrowfn.replace_regex(names, GUARDED, "\\1")
 
 
 def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ picks with one repeated option (``--format csv --format kml``).
 A layer is point records (:class:`Records`, or dict rows; one per target, ``lat_deg``/``lon_deg``/
 ``h_m``/``status``; failed fixes kept, with no geometry) or GeoJSON features (footprints, tracks)
 with their records.
-Formats: CSV (every row), GeoJSON (RFC 7946, rings counter-clockwise), KML (simplekml, heights
+Formats: CSV (every row), GeoJSON (RFC 7946, rings counter-clockwise), KML (ElementTree, heights
 converted to MSL), CoT (TAK data package of one event per located point; point layers only),
 GeoParquet and GeoPackage (:mod:`eoloc.io.geotable`: WKB geometry, EPSG:4979).
 Grid references (MGRS, UTM) are added as columns on request (:mod:`eoloc.io.gridref`).

@@ -22,7 +22,15 @@
   let fitted = false;
   let lastMessage = 0;
 
-  const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
+  // a tooltip is a node of text lines (textContent): what a stream sends is never parsed as HTML
+  const tip = (...lines) => {
+    const node = document.createElement("div");
+    lines.filter((l) => l !== null).forEach((l, i) => {
+      if (i) node.appendChild(document.createElement("br"));
+      node.appendChild(document.createTextNode(String(l)));
+    });
+    return node;
+  };
   const num = (v, d) => (typeof v === "number" && isFinite(v)) ? v.toFixed(d) : "–";
 
   function circle(layer, store, id, ll, radius, opts) {
@@ -61,7 +69,7 @@
         const ll = [g.coordinates[1], g.coordinates[0]];
         S.aircraft[key] = ll;
         marker(groups.aircraft, drawn.aircraft, key, ll, {radius: 7, color: COLOURS.aircraft, className: "eoloc-aircraft"},
-               `${esc(p.name || key)}<br>h ${num(p.h_m, 0)} m, heading ${num(p.heading_deg, 1)}°<br>${esc(p.time_utc || "")}`);
+               tip(p.name || key, `h ${num(p.h_m, 0)} m, heading ${num(p.heading_deg, 1)}°`, p.time_utc || ""));
         trail(groups.aircraft, drawn.trail, key, ll, {color: COLOURS.aircraft, className: "eoloc-aircraft-trail"});
         bounds.push(ll);
       } else if (p.what === "footprint" && g.type === "Polygon") {
@@ -74,23 +82,23 @@
         const ll = [g.coordinates[1], g.coordinates[0]];
         S.centres[key] = ll;
         marker(groups["frame centres"], drawn.centre, key, ll, {radius: 4, color: COLOURS.centre, className: "eoloc-centre"},
-               `frame centre<br>h ${num(g.coordinates[2], 0)} m`);
+               tip("frame centre", `h ${num(g.coordinates[2], 0)} m`));
       } else if (p.what === "target") {
         const id = `${key}/${p.target_id}`, ll = [g.coordinates[1], g.coordinates[0]];
         const t = S.targets[id] = S.targets[id] || {n: 0};
         Object.assign(t, {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], cep50_m: p.cep50_m, n: t.n + 1, packet: m.index});
         marker(groups.targets, drawn.target, id, ll, {radius: 5, color: COLOURS.target, className: "eoloc-target"},
-               `target ${esc(p.target_id)}<br>h ${num(g.coordinates[2], 1)} m` +
-               (p.cep50_m != null ? `<br>CEP50 ${num(p.cep50_m, 1)} m, CE90 ${num(p.ce90_m, 1)} m` : ""));
+               tip(`target ${p.target_id}`, `h ${num(g.coordinates[2], 1)} m`,
+                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m, CE90 ${num(p.ce90_m, 1)} m` : null));
         circle(groups.targets, drawn.cep, id, ll, p.cep50_m, {color: COLOURS.target, className: "eoloc-cep"});
         trail(groups.tracks, drawn.track, id, ll, {color: COLOURS.track, className: "eoloc-track"});
       } else if (p.what === "estimate") {
         const id = `${key}/${p.target_id}`, ll = [g.coordinates[1], g.coordinates[0]];
         S.estimates[id] = {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], cep50_m: p.cep50_m, n: p.n_fixes, model: p.model};
         marker(groups.estimates, drawn.estimate, id, ll, {radius: 6, color: COLOURS.estimate, className: "eoloc-estimate"},
-               `target ${esc(p.target_id)}: ${esc(p.model || "estimate")} of ${esc(p.n_fixes)} fixes` +
-               (p.cep50_m != null ? `<br>CEP50 ${num(p.cep50_m, 1)} m` : "") +
-               (p.speed_mps != null ? `<br>speed ${num(p.speed_mps, 1)} m/s` : ""));
+               tip(`target ${p.target_id}: ${p.model || "estimate"} of ${p.n_fixes} fixes`,
+                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m` : null,
+                   p.speed_mps != null ? `speed ${num(p.speed_mps, 1)} m/s` : null));
         circle(groups.estimates, drawn.estimateCep, id, ll, p.cep50_m, {color: COLOURS.estimate, className: "eoloc-cep"});
       }
     }

@@ -14,6 +14,8 @@
   const clickInfo = document.getElementById("click-info");
   const rectifiedIdx = Object.keys(D.rectified).map(Number).sort((a, b) => a - b);
   const period = N > 1 ? (F.t[N - 1] - F.t[0]) / (N - 1) : 0.04;
+  // a tooltip's text as text (textContent): ids from the metadata are never parsed as HTML
+  const textNode = (text) => { const node = document.createElement("div"); node.textContent = text; return node; };
 
   // -- the map ------------------------------------------------------------------------------------
   const map = L.map("map", { zoomSnap: 0, attributionControl: false });
@@ -136,7 +138,7 @@
       if (v.lat_deg === null) continue;
       L.circleMarker([v.lat_deg, v.lon_deg], { radius: 6, color: "#ff2d2d", fillOpacity: 0.6,
                                                className: "eoloc-vmti" })
-        .bindTooltip(`target ${v.target_id}: ${v.lat_deg.toFixed(6)}, ${v.lon_deg.toFixed(6)}, ${v.h_m.toFixed(1)} m`)
+        .bindTooltip(textNode(`target ${v.target_id}: ${v.lat_deg.toFixed(6)}, ${v.lon_deg.toFixed(6)}, ${v.h_m.toFixed(1)} m`))
         .addTo(vmtiLayer);
     }
     drawBoxes();

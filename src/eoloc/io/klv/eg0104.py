@@ -19,7 +19,7 @@ from datetime import timedelta
 from functools import partial
 from typing import Any
 
-from .localset import EPOCH, FieldError, Note, SetError, ber_length, decode_table, encode_length
+from .localset import EPOCH, FieldError, Note, SetError, ber_length, decode_table, encode_length, misb_time
 
 EG0104_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 _PREFIX = bytes.fromhex("060E2B34")
@@ -64,9 +64,7 @@ def _value(kind: str, raw: bytes) -> Any:
             raise FieldError(f"4 bytes expected, {len(raw)} sent")
         return struct.unpack(">f", raw)[0]
     if kind == "time":
-        if len(raw) != 8:
-            raise FieldError(f"8 bytes expected, {len(raw)} sent")
-        return EPOCH + timedelta(microseconds=int.from_bytes(raw, "big"))
+        return misb_time(raw)
     return raw.decode("ascii", errors="replace").rstrip("\x00")
 
 

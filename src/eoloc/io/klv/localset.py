@@ -14,10 +14,11 @@ it refuses the whole set on any of the above (README: "Real KLV").
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)  # MISB time stamps: microseconds since (ST 0603)
+MAX_TIME_US = (datetime.max.replace(tzinfo=UTC) - EPOCH) // timedelta(microseconds=1)  # 9999-12-31 23:59:59.999999
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,6 +40,19 @@ class FieldError(ValueError):
 
 class SetError(Exception):
     """The bytes cannot be read as a local set at all (raised only by :func:`ber_length`)."""
+
+
+def misb_time(raw: bytes) -> datetime:
+    """A MISB precision time stamp (ST 0603: an 8-byte count of microseconds since 1970-01-01 UTC)
+    as a UTC datetime. Every item time stamp (ST 0601 tag 2, ST 0903 tag 2, EG 0104's) is read
+    here. A value it cannot be (a wrong length, or past the year 9999, such as all bits set) is a
+    :class:`FieldError`: the item is left out with a note and the rest of the packet kept."""
+    if len(raw) != 8:
+        raise FieldError(f"8 bytes expected, {len(raw)} sent")
+    us = int.from_bytes(raw, "big")
+    if us > MAX_TIME_US:
+        raise FieldError(f"time stamp {us} µs (0x{raw.hex().upper()}) is past the year 9999: not a time")
+    return EPOCH + timedelta(microseconds=us)
 
 
 def ber_length(data: bytes, pos: int, end: int) -> tuple[int, int, bool]:

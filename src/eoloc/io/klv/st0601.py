@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta
 from fractions import Fraction
 from typing import Any
 
-from .localset import EPOCH, FieldError, Note, decode_table, parse_items
+from .localset import FieldError, Note, decode_table, misb_time, parse_items
 from .st0903 import decode_vmti
 
 MULTIPLE = frozenset({100, 101})  # ST 1607 segment and amend sets may repeat
@@ -80,11 +79,6 @@ def _uint(lo: int | None = None, hi: int | None = None):
     return decode
 
 
-def _timestamp(raw: bytes) -> datetime:
-    if len(raw) != 8:
-        raise FieldError(f"8 bytes expected, {len(raw)} sent")
-    return EPOCH + timedelta(microseconds=int.from_bytes(raw, "big"))
-
 
 def _text(raw: bytes) -> str:
     try:
@@ -104,7 +98,7 @@ _FULL_ANGLE = Mapped(4, F(-90), F(90), True, Special.OUT_OF_RANGE)
 
 #: tag -> (name, mapping or decoder): the ST 0601.19 items eoloc reads
 FIELDS: dict[int, tuple[str, Any]] = {
-    2: ("Precision Time Stamp", _timestamp),
+    2: ("Precision Time Stamp", misb_time),
     3: ("Mission ID", _text), 4: ("Platform Tail Number", _text),
     5: ("Platform Heading Angle", Mapped(2, F(0), F(360))),
     6: ("Platform Pitch Angle", Mapped(2, F(-20), F(20), True, Special.OUT_OF_RANGE)),

@@ -12,11 +12,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta
 from typing import Any
 
 from .localset import (
-    EPOCH,
     FieldError,
     Note,
     SetError,
@@ -26,6 +24,7 @@ from .localset import (
     encode_items,
     encode_length,
     encode_oid,
+    misb_time,
     parse_items,
 )
 
@@ -66,11 +65,6 @@ def _text(raw: bytes) -> str:
     return raw.decode("utf-8", errors="replace").rstrip("\x00")
 
 
-def _time(raw: bytes) -> datetime:
-    if len(raw) != 8:
-        raise FieldError(f"8 bytes expected, {len(raw)} sent")
-    return EPOCH + timedelta(microseconds=int.from_bytes(raw, "big"))
-
 
 @dataclass(frozen=True)
 class Location:
@@ -94,7 +88,7 @@ def _location(raw: bytes) -> Location:
 
 #: ST 0903.6 VMTI local set items: tag -> (name, decoder); 101 (targets) is read separately
 VMTI_FIELDS: dict[int, tuple[str, Any]] = {
-    2: ("precisionTimeStamp", _time), 3: ("vmtiSystemName", _text), 4: ("vmtiLsVersionNum", _uint),
+    2: ("precisionTimeStamp", misb_time), 3: ("vmtiSystemName", _text), 4: ("vmtiLsVersionNum", _uint),
     5: ("totalNumTargetsDetected", _uint), 6: ("numTargetsReported", _uint), 7: ("frameNumber", _uint),
     8: ("frameWidth", _uint), 9: ("frameHeight", _uint), 10: ("vmtiSourceSensor", _text),
     11: ("vmtiHorizontalFov", _FOV), 12: ("vmtiVerticalFov", _FOV),
