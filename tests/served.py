@@ -11,6 +11,14 @@ from pathlib import Path
 
 import httpx
 
+PROCESSES: dict[str, subprocess.Popen] = {}  # base URL -> the server's process, while it runs
+
+
+def rss_mb(url: str) -> float:
+    """The resident memory of the server at ``url`` (MB, from /proc)."""
+    status = Path(f"/proc/{PROCESSES[url].pid}/status").read_text()
+    return int(next(x for x in status.splitlines() if x.startswith("VmRSS:")).split()[1]) / 1024
+
 
 def free_port() -> int:
     with socket.socket() as s:
@@ -38,7 +46,9 @@ def eoloc_serve(*args: str):
             proc.kill()
         if proc.poll() is not None:
             raise RuntimeError(f"eoloc serve {' '.join(args)} did not start:\n{proc.stdout.read().decode()}")
+        PROCESSES[url] = proc
         yield url
     finally:
+        PROCESSES.pop(url, None)
         proc.terminate()
         proc.wait(10)

@@ -4,6 +4,7 @@ directly; bad requests against the field they name."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import httpx
@@ -194,7 +195,8 @@ def test_arrow_uncertainty_columns_are_the_json_rows_uncertainty():
     u, v = np.array([0.0, 512.0, 1023.0, 5000.0]), np.array([0.0, 384.0, 767.0, 5.0])
     o, uu, vv = read_arrow_request(_arrow_body(obs, u, v))
     t = pa.ipc.open_stream(arrow_fixes(*solve_observation(o, state, "eoloc", pixels=(uu, vv)))).read_all()
-    rows = locate_observation(ObservationIn.model_validate({**obs, "pixels": np.c_[u, v].tolist()}), state, "")
+    request = json.dumps({**obs, "pixels": np.c_[u, v].tolist()})  # as the JSON route reads it: strictly
+    rows = locate_observation(ObservationIn.model_validate_json(request), state, "")
     names = list(rows["fixes"][0]["uncertainty"])
     assert len(names) >= 4 and t.column_names[7:] == names
     for name in names:

@@ -364,3 +364,213 @@ def test_46_6_fuzzed_csv_files_keep_every_good_line(tmp_path):
         assert got == want, (seed, [(a, b) for a, b in zip(got, want, strict=False) if a != b][:2], len(got), len(want))
         assert len(t.issues) == f.bad, (seed, [str(i) for i in t.issues])
         assert np.all(np.isfinite(t.columns["u_px"]))
+
+
+# -- items 4 and 7: the HTTP server's memory, time-outs and types -------------------------------------
+
+S13_POSE = {"lat_deg": 42.0, "lon_deg": 125.0, "h_m": 10_000.0, "yaw_deg": 10.0, "pitch_deg": 5.0, "roll_deg": -2.0,
+            "gimbal_deg": [45.0, -75.0]}
+TIMEOUT_S = 1.0  # the test server's --request-timeout and --send-timeout
+
+
+@pytest.fixture(scope="module")
+def server():
+    """`eoloc serve` with the mountain camera and short time-outs."""
+    from served import eoloc_serve
+
+    with eoloc_serve("--config", str(MOUNTAIN / "camera.toml"), "--request-timeout", str(TIMEOUT_S),
+                     "--send-timeout", str(TIMEOUT_S)) as url:
+        yield url
+
+
+def _arrow_stream(n: int, *, compression: str | None = None, observation: dict | None = None) -> bytes:
+    import numpy as np
+    import pyarrow as pa
+
+    obs = observation or {"pose": S13_POSE, "stop": {"target_height_m": 100.0}}
+    table = pa.table({"u_px": np.zeros(n), "v_px": np.zeros(n)}).replace_schema_metadata({"eoloc": json.dumps(obs)})
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, table.schema, options=pa.ipc.IpcWriteOptions(compression=compression)) as w:
+        w.write_table(table)
+    return sink.getvalue().to_pybytes()
+
+
+def test_46_4_a_compressed_arrow_bomb_is_refused_before_it_is_decompressed(server):
+    """A few KB of zstd declaring 10^8 rows (1.6 GB once decompressed): 413, and the server's memory
+    does not move (before: 1.5 GB per request, kept)."""
+    import httpx
+
+    from served import rss_mb
+
+    bomb = _arrow_stream(10**8, compression="zstd")
+    assert len(bomb) < 100_000
+    before = rss_mb(server)
+    for _ in range(3):
+        r = httpx.post(server + "/v1/locate/arrow", content=bomb,
+                       headers={"content-type": "application/vnd.apache.arrow.stream"}, timeout=60)
+        assert r.status_code == 413 and "declares 100000000 rows" in r.text, r.text
+    assert rss_mb(server) - before < 50
+    r = httpx.post(server + "/v1/locate/arrow", content=_arrow_stream(1000, compression="lz4"),
+                   headers={"content-type": "application/vnd.apache.arrow.stream"})
+    assert r.status_code == 200  # compressed streams of a sane size are still read
+
+
+def test_46_4_a_chunked_body_over_the_limit_is_413_without_a_traceback():
+    import httpx
+
+    from served import eoloc_serve
+
+    def chunks():
+        for _ in range(9):
+            yield b"x" * 2**20
+
+    with eoloc_serve("--max-body-mb", "8") as url:
+        r = httpx.post(url + "/v1/locate", content=chunks(), headers={"content-type": "application/json"})
+        assert r.status_code == 413 and "over this server's limit" in r.text, r.text
+        assert httpx.get(url + "/v1/health").status_code == 200
+
+
+def _cut_after(sock: socket.socket, trickle: bytes, limit_s: float = 60.0) -> tuple[float, bytes]:
+    """Send ``trickle`` a byte at a time until the server cuts the connection: (seconds it took,
+    what the server answered)."""
+    t0 = time.monotonic()
+    sock.settimeout(0.2)
+    answer = b""
+    for k in range(10**6):
+        try:
+            sock.sendall(trickle[k % len(trickle):k % len(trickle) + 1])
+            answer += sock.recv(4096)
+            if answer == b"" or answer.endswith(b"\n"):
+                break
+        except TimeoutError:
+            continue
+        except OSError:  # reset or broken pipe: cut
+            break
+        finally:
+            assert time.monotonic() - t0 < limit_s, "never cut"
+    try:
+        while chunk := sock.recv(4096):
+            answer += chunk
+    except OSError:
+        pass
+    return time.monotonic() - t0, answer
+
+
+def test_46_4_slow_headers_and_slow_bodies_are_cut_after_the_request_timeout(server):
+    host, port = server.removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port))) as s:
+        s.sendall(b"POST /v1/locate HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+        took, answer = _cut_after(s, b"X-Slow: 1\r\n")
+    assert took >= TIMEOUT_S and answer.startswith(b"HTTP/1.1 408"), answer
+    with socket.create_connection((host, int(port))) as s:
+        s.sendall(b"POST /v1/locate HTTP/1.1\r\nHost: 127.0.0.1\r\ncontent-type: application/json\r\n"
+                  b"content-length: 100000\r\n\r\n{")
+        took, _ = _cut_after(s, b" ")
+    assert took >= TIMEOUT_S
+
+
+def _tcp_state(sock: socket.socket) -> int:
+    """The kernel's TCP state of a socket (tcp_info's first byte: 1 established, 7 closed, 8 close-wait)."""
+    return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 8)[0]
+
+
+def _unread_round(server: str, body: bytes, size: int, clients: int) -> None:
+    """``clients`` connections ask for the answer to ``body`` (``size`` bytes) and read none of it:
+    waits until the server has cut every one, and checks none got the whole answer."""
+    host, port = server.removeprefix("http://").split(":")
+    socks = []
+    for _ in range(clients):
+        s = socket.socket()
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # (before connecting: a small window)
+        s.connect((host, int(port)))
+        s.sendall(b"POST /v1/locate HTTP/1.1\r\nHost: 127.0.0.1\r\ncontent-type: application/json\r\n"
+                  + f"content-length: {len(body)}\r\n\r\n".encode() + body)
+        socks.append(s)
+    t0 = time.monotonic()
+    while any(_tcp_state(s) == 1 for s in socks):  # wait, reading nothing, until the server has cut them all
+        assert time.monotonic() - t0 < 180, [_tcp_state(s) for s in socks]
+        time.sleep(0.1)
+    assert time.monotonic() - t0 >= TIMEOUT_S
+    for s in socks:  # what had reached each client before the cut: not the whole answer
+        got = 0
+        s.settimeout(5)
+        try:
+            while chunk := s.recv(1 << 16):
+                got += len(chunk)
+        except OSError:
+            pass
+        s.close()
+        assert got < size
+
+
+def test_46_4_clients_that_never_read_their_answers_are_cut_and_their_memory_freed(server):
+    """Rounds of ten clients that ask for ~15 MB of JSON each and read none of it: each is cut
+    after the send time-out, the server goes on answering, and its memory does not grow from round
+    to round (before: every unread answer held for as long as its client stayed connected)."""
+    import httpx
+
+    from served import rss_mb
+
+    body = json.dumps({"pose": {**S13_POSE, "gimbal_deg": [45.0, -30.0]}, "stop": {"target_height_m": 100.0},
+                       "pixels": [[float(k % 1280), float(k // 1280)] for k in range(100_000)]}).encode()
+    size = len(httpx.post(server + "/v1/locate", content=body, headers={"content-type": "application/json"}).content)
+    assert size > 10_000_000
+    base = rss_mb(server)
+    rounds = []
+    for _ in range(3):
+        _unread_round(server, body, size, 10)
+        assert httpx.get(server + "/v1/health").status_code == 200
+        rounds.append(rss_mb(server))
+    print(f"RSS (MB): {base:.0f} before, {' / '.join(f'{r:.0f}' for r in rounds)} after each round of 10")
+    assert rounds[0] - base < 200  # a few answers' worth, not ten (150 MB)
+    assert max(rounds[1:]) - rounds[0] < 50  # bounded: the same memory serves the next rounds
+
+
+@pytest.mark.parametrize("change, field, words", [
+    (lambda o: o["pose"].update(lat_deg=True), "pose.lat_deg", "valid number"),
+    (lambda o: o["pose"].update(lat_deg="42"), "pose.lat_deg", "valid number"),
+    (lambda o: o["pose"].update(lat_deg=" 42 "), "pose.lat_deg", "valid number"),
+    (lambda o: o["pose"].update(h_m="1e4"), "pose.h_m", "valid number"),
+    (lambda o: o.update(pixels=[["1", "2"]]), "pixels.0.0", "valid number"),
+    (lambda o: o["stop"].update(target_height_m=False), "stop.target_height_m", "valid number"),
+    (lambda o: o.update(camera={"width": 1024, "height": 768, "focal_mm": 1e-300, "pixel_um": 1e300}),
+     "camera.focal_mm", "greater than or equal to 0.1"),
+], ids=["bool", "string", "padded string", "exponent string", "string pixels", "bool height", "absurd camera"])
+def test_46_7_the_api_takes_only_the_types_it_asks_for(server, change, field, words):
+    """A value of the wrong type is refused by name, as the config loader refuses it (before: `true`
+    located at latitude 1.02 deg, strings were numbers, an absurd camera gave HTTP 500)."""
+    import copy
+
+    import httpx
+
+    obs = copy.deepcopy({"pose": S13_POSE, "stop": {"target_height_m": 100.0}, "pixels": [[512.0, 384.0]]})
+    change(obs)
+    r = httpx.post(server + "/v1/locate", json=obs)
+    assert r.status_code == 422, r.text
+    problems = r.json()["problems"]
+    assert any(p["field"] == field and words in p["message"] for p in problems), problems
+
+
+def test_46_7_no_cross_site_post_and_no_foreign_host(server):
+    """A form or fetch from another site can only send text/plain without a preflight: refused 415 on
+    both routes; a Host header naming another site (DNS rebinding): 400."""
+    import httpx
+
+    obs = json.dumps({"pose": S13_POSE, "stop": {"target_height_m": 100.0}})
+    r = httpx.post(server + "/v1/locate", content=obs, headers={"content-type": "text/plain"})
+    assert r.status_code == 415
+    r = httpx.post(server + "/v1/locate/arrow", content=_arrow_stream(3), headers={"content-type": "text/plain"})
+    assert r.status_code == 415
+    r = httpx.get(server + "/v1/health", headers={"host": "attacker.example"})
+    assert r.status_code == 400
+    assert httpx.get(server + "/v1/health", headers={"host": "localhost"}).status_code == 200
+
+
+def test_46_7_a_config_with_an_absurd_pixel_pitch_is_refused(tmp_path):
+    from eoloc.errors import ConfigError
+    from eoloc.io.config import load_config
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 50.0\npixel_um = 1e-300\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match="pixel_um"):
+        load_config(bad)

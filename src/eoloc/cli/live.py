@@ -12,7 +12,7 @@ import click
 
 from .common import open_dem
 from .main import err_console, fail, warn
-from .options import config_option, dem_options
+from .options import allow_host_option, config_option, dem_options
 
 LIVE_HELP = """Locate the VMTI targets of a live MISB ST 0601 stream, packet by packet, as it arrives,
 and send them on as NDJSON and Cursor-on-Target (TAK).
@@ -102,8 +102,9 @@ datagram's arrival to its outputs sent.
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
+@allow_host_option
 def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_targets,
-         cot_interval, refine, realtime, max_packets, duration, silence) -> None:
+         cot_interval, refine, realtime, max_packets, duration, silence, allow_hosts) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cotfeed import CotFeed
     from ..live.senders import cot_sender
@@ -135,7 +136,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
     hub = server = None
     if map_at is not None:
-        hub, server = start_map(map_host, map_port, session, source, silence, dem, config)
+        hub, server = start_map(map_host, map_port, session, source, silence, dem, config, allow_hosts)
     stopping = {"why": None}
     started = time.monotonic()
 
@@ -221,15 +222,16 @@ def parse_host_port(text: str) -> tuple[str, int]:
     return host.strip("[]") or "127.0.0.1", int(port)
 
 
-def start_map(host: str, port: int, session, source: str, silence_s: float, dem, config):
+def start_map(host: str, port: int, session, source: str, silence_s: float, dem, config, allow_hosts=()):
     """The live map's hub and its server (eoloc serve's app with the map's routes), started."""
     from ..service.api import ServiceState, create_app
+    from ..service.http import allowed_hosts
     from ..service.livemap import LiveHub, MapServer
 
     hub = LiveHub(silence_s=silence_s, title=f"eoloc live: {source}",
                   counters=lambda: session.counters.counts() | {"streams": dict(session.streams)})
     state = ServiceState(config, {"dem": dem} if dem is not None else {})
-    server = MapServer(create_app(state, hub=hub), host, port)
+    server = MapServer(create_app(state, hub=hub, hosts=allowed_hosts(host, tuple(allow_hosts))), host, port)
     try:
         server.start()
     except OSError as exc:

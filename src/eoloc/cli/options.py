@@ -141,6 +141,14 @@ def ortho_options(crs_note: str = "", gsd_default: str = "the native GSD at the 
     ])
 
 
+def allow_host_option(fn):
+    """--allow-host: a host name (as browsers send it in the Host header) a server also answers to."""
+    return click.option("--allow-host", "allow_hosts", multiple=True, metavar="NAME",
+                        help="Also answer requests for this host name (the server's own names and loopback's "
+                             "always; '*': any, which lets a page on another site reach it by DNS "
+                             "rebinding). Repeatable.")(fn)
+
+
 def config_option(required: bool = True, help_text: str = "Camera/gimbal/installation TOML (see the README)."):
     return click.option("--config", "config_path", required=required, type=click.Path(dir_okay=False),
                         metavar="CONFIG.toml", help=help_text)

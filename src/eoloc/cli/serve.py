@@ -6,9 +6,10 @@ from pathlib import Path
 
 import click
 
+from ..service.http import REQUEST_TIMEOUT_S, SEND_TIMEOUT_S
 from .common import load_config, working
 from .main import err_console, fail
-from .options import config_option, dem_options
+from .options import allow_host_option, config_option, dem_options
 
 SERVE_HELP = """Serve eoloc's HTTP JSON API (OpenAPI docs at http://HOST:PORT/docs).
 
@@ -28,6 +29,10 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
     metadata 'eoloc' holds the observation's JSON without pixels -> an Arrow IPC stream of the
     fixes (null coordinates where a fix failed): big batches with no JSON to parse.
   GET /v1/health   alive, uptime, requests served, the config and DEM names.
+  Limits: bodies over --max-body-mb: 413; Arrow streams declaring more than 10^5 rows or 64 MB
+  once decompressed: 413 (checked before decoding); a request that has not arrived whole after
+  --request-timeout: 408 and cut; an answer left unread for --send-timeout: cut; Host headers
+  other than this server's names (loopback, --host, --allow-host): 400.
   --dem NAME=PATH (repeatable) makes the DEM usable as {"dem": NAME}; --dem PATH names it by its
   file name without the extension; the same NAME repeated joins tiles into one DEM.
   --player DIR     serves `eoloc video`'s output folder DIR at /video/ (/ leads to its
@@ -45,10 +50,17 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
               help="Largest request body accepted, MB.")
 @click.option("--player", "player_dir", type=click.Path(file_okay=False, exists=True), default=None,
               help="`eoloc video`'s output folder to serve at /video/ (its player.html).")
-def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body_mb, player_dir) -> None:
+@allow_host_option
+@click.option("--request-timeout", "request_timeout_s", type=click.FloatRange(0.1), default=REQUEST_TIMEOUT_S,
+              show_default=True, help="Seconds a request (headers and body) may take to arrive whole; then 408.")
+@click.option("--send-timeout", "send_timeout_s", type=click.FloatRange(0.1), default=SEND_TIMEOUT_S,
+              show_default=True, help="Seconds a client may leave its answer unread before it is cut.")
+def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body_mb, player_dir, allow_hosts,
+          request_timeout_s, send_timeout_s) -> None:
     import uvicorn
 
     from ..service.api import ServiceState, create_app
+    from ..service.http import allowed_hosts, server_config
     from ..terrain import open_dem
 
     tiles: dict[str, list[str]] = {}
@@ -64,8 +76,10 @@ def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body
     if player_dir is not None and not (Path(player_dir) / "player.html").is_file():
         fail(f"--player {player_dir}: no player.html in it (write one with `eoloc video ... --out {player_dir}`)")
     state = ServiceState(load_config(config_path) if config_path else None, dems)
-    app = create_app(state, max_body_bytes=int(max_body_mb * 1024 * 1024), player_dir=player_dir)
+    app = create_app(state, max_body_bytes=int(max_body_mb * 1024 * 1024), player_dir=player_dir,
+                     hosts=allowed_hosts(host, allow_hosts))
     err_console.print(f"eoloc serve: http://{host}:{port}/docs (Ctrl-C stops)")
     if player_dir is not None:
         err_console.print(f"the player: http://{host}:{port}/video/player.html")
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    uvicorn.Server(server_config(app, host, port, request_timeout_s=request_timeout_s, send_timeout_s=send_timeout_s,
+                                 log_level="info")).run()

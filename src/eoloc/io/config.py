@@ -83,15 +83,17 @@ class DistortionConfig(_Strict):
 
 
 class CameraConfig(_Strict):
-    width: int = Field(gt=0, description="image width, pixels")
-    height: int = Field(gt=0, description="image height, pixels")
-    focal_mm: float | None = Field(None, gt=0)
-    pixel_um: float | None = Field(None, gt=0)
-    hfov_deg: float | None = Field(None, gt=0, lt=180)
-    fx: float | None = Field(None, gt=0)
-    fy: float | None = Field(None, gt=0)
-    cx: float | None = None
-    cy: float | None = None
+    # the ranges of real cameras, wide: a value outside is a unit mistake (m for mm, mm for µm), and a
+    # focal length of 1e-300 would put every pixel at the image centre
+    width: int = Field(gt=0, le=200_000, description="image width, pixels")
+    height: int = Field(gt=0, le=200_000, description="image height, pixels")
+    focal_mm: float | None = Field(None, ge=0.1, le=20_000, description="focal length, mm (0.1 to 20 000)")
+    pixel_um: float | None = Field(None, ge=0.05, le=1_000, description="pixel pitch, µm (0.05 to 1000)")
+    hfov_deg: float | None = Field(None, ge=1e-3, lt=180)
+    fx: float | None = Field(None, ge=1e-3, le=1e8, description="focal length in pixels (0.001 to 1e8)")
+    fy: float | None = Field(None, ge=1e-3, le=1e8)
+    cx: float | None = Field(None, ge=-2e6, le=2e6, description="principal point, pixels")
+    cy: float | None = Field(None, ge=-2e6, le=2e6)
     distortion: DistortionConfig | None = None
 
     @model_validator(mode="after")

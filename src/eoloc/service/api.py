@@ -22,6 +22,9 @@ write: what a batch of 10^5 targets needs to be served at the library's speed.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import threading
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
@@ -36,12 +39,15 @@ from ..kernels.backend import load_compiled
 MAX_BODY_BYTES = 8 * 1024 * 1024
 MAX_PIXELS = 100_000  # per request, over all observations
 MAX_OBSERVATIONS = 10_000
+MAX_DECODED_BYTES = 64 * 1024 * 1024  # an Arrow request's buffers, decompressed (10^5 pixels: 1.6 MB)
 
 Deg = Annotated[float, Field(allow_inf_nan=False)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    # strict, as the config files are: `"lat_deg": true`, `"42"` or `"1e4"` is not a number, and
+    # nothing is coerced (requests are validated as JSON, where arrays are tuples and 42 is a float)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class PoseIn(_Strict):
@@ -107,11 +113,19 @@ class BatchOut(BaseModel):
 
 
 class RequestError(EolocError):
-    """A request the API cannot serve, with the field it is about."""
+    """A request the API cannot serve, with the field it is about (HTTP ``status``)."""
+
+    status = 422
 
     def __init__(self, field_name: str, message: str) -> None:
         super().__init__(message)
         self.field = field_name
+
+
+class TooLargeError(RequestError):
+    """A request that declares more than the server takes (rows, decompressed bytes): 413."""
+
+    status = 413
 
 
 @dataclass
@@ -222,6 +236,18 @@ def read_arrow_request(body: bytes) -> tuple[ObservationIn, np.ndarray, np.ndarr
     import pyarrow as pa
     from pydantic import ValidationError
 
+    from .arrowcheck import MalformedMessageError, declared
+
+    try:  # what the stream declares, before pyarrow allocates or decompresses any of it
+        size = declared(body)
+    except (ValueError, MalformedMessageError, OSError) as exc:
+        raise RequestError("(body)", f"not an Arrow IPC stream ({ARROW_STREAM}): {exc}") from None
+    if size.rows > MAX_PIXELS:
+        raise TooLargeError("u_px", f"the stream declares {size.rows} rows; at most {MAX_PIXELS} pixels a request: "
+                                    "split the batch")
+    if size.bytes > MAX_DECODED_BYTES:
+        raise TooLargeError("(body)", f"the stream's buffers hold {size.bytes} bytes once decompressed; at most "
+                                      f"{MAX_DECODED_BYTES}")
     try:
         table = pa.ipc.open_stream(body).read_all()
     except (pa.ArrowInvalid, pa.ArrowTypeError, OSError) as exc:
@@ -231,7 +257,8 @@ def read_arrow_request(body: bytes) -> tuple[ObservationIn, np.ndarray, np.ndarr
         raise RequestError("(schema metadata)", "the stream's schema metadata has no 'eoloc' key: put the "
                                                 "observation's JSON (pose, stop, camera, ...; no pixels) there")
     try:
-        obs = ObservationIn.model_validate(orjson.loads(meta))
+        orjson.loads(meta)
+        obs = ObservationIn.model_validate_json(meta)
     except orjson.JSONDecodeError as exc:
         raise RequestError("(schema metadata).eoloc", f"not JSON: {exc}") from None
     except ValidationError as exc:
@@ -276,13 +303,68 @@ def arrow_fixes(f, u: np.ndarray, v: np.ndarray, unc: dict | None) -> bytes:
     return sink.getvalue().to_pybytes()
 
 
+JSON_TYPES = ("application/json",)
+
+
+def media_type(request) -> str:
+    """The request's media type, lower case, without parameters ("" when none is given)."""
+    return request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+
+
+def read_json_request(body: bytes) -> ObservationIn | BatchIn:
+    """One observation or a batch, validated strictly from the JSON text (no type coerced); a
+    RequestError naming the first field that is wrong."""
+    import orjson
+    from pydantic import ValidationError
+
+    try:
+        doc = orjson.loads(body)
+    except orjson.JSONDecodeError as exc:
+        raise RequestError("(body)", f"not JSON: {exc}") from None
+    model = BatchIn if isinstance(doc, dict) and "observations" in doc else ObservationIn
+    try:
+        return model.model_validate_json(body)
+    except ValidationError as exc:
+        raise ValidationProblemsError(exc.errors()) from None
+
+
+class ValidationProblemsError(EolocError):
+    """Every problem pydantic found in a request, each with its field."""
+
+    def __init__(self, errors: list[dict]) -> None:
+        super().__init__("invalid request")
+        self.problems = [{"field": ".".join(str(x) for x in e["loc"]) or "(body)", "message": e["msg"]}
+                         for e in errors]
+
+
+COMPUTING = threading.BoundedSemaphore(max(2, os.cpu_count() or 2))  # requests worked out at once
+BIG_BODY_BYTES = 256 * 1024  # a request this big leaves megabytes of garbage behind it
+
+
+@contextlib.contextmanager
+def computing(body_bytes: int):
+    """A request being worked out: at most one per core at a time (the work holds the GIL for much
+    of it; more at once would only hold more memory), and after a big one its garbage given back
+    to the system (:func:`eoloc.service.http.give_back_memory`)."""
+    with COMPUTING:
+        try:
+            yield
+        finally:
+            if body_bytes >= BIG_BODY_BYTES:
+                from .http import give_back_memory
+
+                give_back_memory()
+
+
 def _pixel_count(obs: list[ObservationIn]) -> int:
     return sum(1 if o.pixels is None else len(o.pixels) for o in obs)
 
 
 def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_BODY_BYTES, hub=None,
-               player_dir: str | None = None):
-    """The ASGI application (FastAPI), wrapped in the request-size limit. With ``hub`` (a
+               player_dir: str | None = None, hosts: list[str] | None = None):
+    """The ASGI application (FastAPI), wrapped in the request-size limit and, with ``hosts``, the
+    check that a request's Host header is one of them (:func:`eoloc.service.http.allowed_hosts`;
+    400 otherwise). With ``hub`` (a
     :class:`eoloc.service.livemap.LiveHub`, as `eoloc live --map` gives) it also serves the live
     map: the page at ``/live`` (``/`` leads there) and its WebSocket. With ``player_dir`` (an
     `eoloc video` output folder) it serves that folder at ``/video/`` (``/`` leads to its
@@ -295,6 +377,7 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
     from fastapi import FastAPI
     from fastapi.exceptions import RequestValidationError
     from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
+    from starlette.requests import ClientDisconnect
 
     from .. import __version__
 
@@ -324,8 +407,12 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
 
     @app.exception_handler(RequestError)
     async def _problem(request: Request, exc: RequestError):
-        return JSONResponse(status_code=422, content={"error": "invalid request",
+        return JSONResponse(status_code=exc.status, content={"error": "invalid request",
                                                       "problems": [{"field": exc.field, "message": str(exc)}]})
+
+    @app.exception_handler(ClientDisconnect)
+    async def _gone(request: Request, exc: ClientDisconnect):  # nobody to answer: no traceback in the log
+        return Response(status_code=499)
 
     @app.exception_handler(EolocError)
     async def _eoloc(request: Request, exc: EolocError):
@@ -338,9 +425,29 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
         return {"status": "ok", "eoloc": __version__, "uptime_s": round(time.time() - state.started, 3),
                 "requests": state.served, "config": state.config is not None, "dems": sorted(state.dems)}
 
-    @app.post("/v1/locate", response_model=LocateOut | BatchOut)
-    def locate(body: ObservationIn | BatchIn):
+    @app.exception_handler(ValidationProblemsError)
+    async def _problems(request: Request, exc: ValidationProblemsError):
+        return JSONResponse(status_code=422, content={"error": "invalid request", "problems": exc.problems})
+
+    body_schema = {"anyOf": [{"$ref": "#/components/schemas/ObservationIn"}, {"$ref": "#/components/schemas/BatchIn"}]}
+
+    @app.post("/v1/locate", response_model=LocateOut | BatchOut, openapi_extra={
+        "requestBody": {"required": True, "content": {"application/json": {"schema": body_schema}}}})
+    async def locate(request: Request):
         """Locate one observation (its pixels, or the image centre) or a batch of them."""
+        from starlette.concurrency import run_in_threadpool
+
+        if media_type(request) not in JSON_TYPES:
+            return _unsupported(request, "application/json")
+        body = await request.body()
+        return await run_in_threadpool(locate_json, body)  # parsed there too: the event loop stays free
+
+    def locate_json(raw: bytes) -> Response:
+        with computing(len(raw)):
+            return _locate_json(raw)
+
+    def _locate_json(raw: bytes) -> Response:
+        body = read_json_request(raw)
         observations = body.observations if isinstance(body, BatchIn) else [body]
         n = _pixel_count(observations)
         if n > MAX_PIXELS:
@@ -363,12 +470,33 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
         """Locate one observation's pixels given as Arrow columns; the fixes come back as Arrow."""
         from starlette.concurrency import run_in_threadpool
 
+        if media_type(request) != ARROW_STREAM:  # (a cross-site form post cannot send this type)
+            return _unsupported(request, ARROW_STREAM)
+
         def serve(body: bytes) -> bytes:  # in the thread pool, as the JSON route: the event loop stays free
-            obs, u, v = read_arrow_request(body)
-            state.served += 1
-            return arrow_fixes(*solve_observation(obs, state, "eoloc", pixels=(u, v)))
+            with computing(len(body)):
+                obs, u, v = read_arrow_request(body)
+                state.served += 1
+                return arrow_fixes(*solve_observation(obs, state, "eoloc", pixels=(u, v)))
 
         return Response(await run_in_threadpool(serve, await request.body()), media_type=ARROW_STREAM)
+
+    def _unsupported(request: Request, wanted: str) -> JSONResponse:
+        got = request.headers.get("content-type") or "none"
+        return JSONResponse(status_code=415, content={"error": f"content-type {got!r}: send {wanted}"})
+
+    def openapi() -> dict:  # the request models, which the routes validate themselves, in the schema
+        from fastapi.openapi.utils import get_openapi
+        from pydantic import TypeAdapter
+
+        if app.openapi_schema is None:
+            spec = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
+            models = TypeAdapter(ObservationIn | BatchIn).json_schema(ref_template="#/components/schemas/{model}")
+            spec.setdefault("components", {}).setdefault("schemas", {}).update(models.get("$defs", {}))
+            app.openapi_schema = spec
+        return app.openapi_schema
+
+    app.openapi = openapi
 
     if player_dir is not None:
         from fastapi.staticfiles import StaticFiles
@@ -402,12 +530,18 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
 
         app.router.routes.append(WebSocketRoute(WS_PATH, hub.serve))
 
-    return SizeLimit(app, max_body_bytes)
+    limited = SizeLimit(app, max_body_bytes)
+    if hosts is None:
+        return limited
+    from starlette.middleware.trustedhost import TrustedHostMiddleware
+
+    return TrustedHostMiddleware(limited, allowed_hosts=hosts, www_redirect=False)
 
 
 class SizeLimit:
     """ASGI wrapper: a request body longer than ``limit`` bytes (by its Content-Length, or as it
-    streams in) is answered 413 with a JSON message; nothing past the limit is read."""
+    streams in, chunked) is answered 413 with a JSON message; nothing past the limit is read, the
+    application then sees the client gone, and whatever it answers after is dropped."""
 
     def __init__(self, app, limit: int) -> None:
         self.app, self.limit = app, limit
@@ -421,30 +555,33 @@ class SizeLimit:
             await self._too_large(send, int(length))
             return
         seen = 0
+        refused = False
 
         async def limited():
-            nonlocal seen
+            nonlocal seen, refused
+            if refused:
+                return {"type": "http.disconnect"}
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > self.limit:
-                    raise _BodyTooLargeError
+                    refused = True
+                    await self._too_large(send, seen)
+                    return {"type": "http.disconnect"}
             return message
 
-        try:
-            await self.app(scope, limited, send)
-        except _BodyTooLargeError:
-            await self._too_large(send, seen)
+        async def answer(message) -> None:
+            if not refused:
+                await send(message)
+
+        await self.app(scope, limited, answer)
 
     async def _too_large(self, send, n: int) -> None:
         import json
 
-        body = json.dumps({"error": f"request body of {n} bytes is over this server's limit of {self.limit} bytes: "
-                                    "split the batch"}).encode()
+        body = json.dumps({"error": f"request body of {n} bytes (or more) is over this server's limit of {self.limit} "
+                                    "bytes: split the batch"}).encode()
         await send({"type": "http.response.start", "status": 413,
-                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
         await send({"type": "http.response.body", "body": body})
-
-
-class _BodyTooLargeError(Exception):
-    pass

@@ -189,8 +189,9 @@ class MapServer:
     def __init__(self, app, host: str, port: int) -> None:
         import uvicorn
 
-        self.server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning",
-                                                    ws="auto", lifespan="on"))
+        from .http import server_config
+
+        self.server = uvicorn.Server(server_config(app, host, port, log_level="warning", ws="auto", lifespan="on"))
         self.thread = threading.Thread(target=self.server.run, name="eoloc-map", daemon=True)
         self.host = host
         self.url = ""
