@@ -574,3 +574,90 @@ def test_46_7_a_config_with_an_absurd_pixel_pitch_is_refused(tmp_path):
     bad.write_text("[camera]\nwidth = 1024\nheight = 768\nfocal_mm = 50.0\npixel_um = 1e-300\n", encoding="utf-8")
     with pytest.raises(ConfigError, match="pixel_um"):
         load_config(bad)
+
+
+# -- item 8: two telemetry records for one frame -----------------------------------------------------
+
+
+def test_46_8_a_frame_given_two_different_poses_is_not_located(tmp_path):
+    """Frame-keyed telemetry with frame 5 twice, with different headings: the detections of frame 5
+    get no point and a warning naming both lines (before: paired with the second, OK, silently); a
+    record repeated exactly is one record, as with times."""
+    import csv
+
+    rows = [r for r in csv.reader((MOUNTAIN / "telemetry.csv").open(encoding="utf-8")) if r and not r[0].startswith("#")]
+    header, body = rows[0], rows[1:21]
+    tel = tmp_path / "telemetry.csv"
+    det = tmp_path / "detections.csv"
+    other = [*body[5][:4], str((float(body[5][4]) + 30.0) % 360.0), *body[5][5:]]  # frame 5 again, 30 deg off
+    with tel.open("w", encoding="utf-8", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["frame", *header[1:]])
+        for k, r in enumerate(body):
+            w.writerow([k, *r[1:]])
+            if k == 5:
+                w.writerow([5, *other[1:]])
+            if k == 7:
+                w.writerow([7, *r[1:]])  # an exact copy
+    with det.open("w", encoding="utf-8", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["frame", "target_id", "u_px", "v_px"])
+        for k in range(20):
+            w.writerow([k, "T", 640.0, 360.0])
+    r = CliRunner().invoke(main, ["locate", str(tel), str(det), "--config", str(MOUNTAIN / "camera.toml"),
+                                  "--dem", str(DEM), "--out", str(tmp_path / "o"), "--json"])
+    assert r.exit_code == 0, r.output
+    fixes = list(csv.DictReader((tmp_path / "o" / "fixes.csv").open(encoding="utf-8")))
+    by_frame = {int(float(f["frame"])): f for f in fixes}
+    assert by_frame[5]["status"] != "OK" and by_frame[5]["lat_deg"] == ""
+    assert by_frame[7]["status"] == "OK" and sum(f["status"] == "OK" for f in fixes) == 19
+    assert "gives frame 5 twice with different values (lines 7 and 8)" in " ".join(r.output.split())
+
+
+# -- item 9: `eoloc batch` kept the partitions of files gone -------------------------------------------
+
+
+def test_46_9_batch_after_a_rename_and_a_delete_holds_each_input_once(tmp_path):
+    """A file renamed and another deleted between two runs into one --out: the dataset then holds
+    exactly what a fresh run over the same inputs holds (before: the old partitions stayed, 405 rows
+    instead of 237); --keep-missing keeps them on purpose."""
+    import shutil
+
+    import pyarrow.dataset as ds
+
+    from eoloc.io.klv.synthetic import write_circling_flights
+
+    inputs = tmp_path / "in"
+    write_circling_flights(inputs, 3, 30, seed=3)
+    shutil.copy(FLIGHT, inputs / "mountain.klv")
+    out = tmp_path / "out"
+
+    def run(*args, into=out):
+        r = CliRunner().invoke(main, ["batch", str(inputs), "--out", str(into), "--dem", str(DEM), *args])
+        assert r.exit_code == 0 and "Traceback" not in r.output, r.output
+        return r.output
+
+    def rows(where: Path) -> int:
+        return ds.dataset(where / "fixes", format="parquet", partitioning="hive").count_rows()
+
+    run()
+    first = rows(out)
+    flights = sorted(inputs.glob("flight_*.klv"))
+    flights[0].rename(inputs / "renamed.klv")
+    flights[1].unlink()
+    said = run()
+    assert "removed the partitions of 2 file(s) no longer among the inputs" in " ".join(said.split())
+    fresh = tmp_path / "fresh"
+    run(into=fresh)
+    assert rows(out) == rows(fresh) < first
+    assert sorted(p.name for p in (out / "fixes").iterdir()) == sorted(p.name for p in (fresh / "fixes").iterdir())
+    # kept on request: a run over one file leaves the others' partitions
+    only = tmp_path / "only"
+    only.mkdir()
+    shutil.copy(inputs / "mountain.klv", only / "mountain.klv")
+    before = rows(out)
+    r = CliRunner().invoke(main, ["batch", str(only), "--out", str(out), "--dem", str(DEM), "--keep-missing"])
+    assert r.exit_code == 0 and "removed" not in r.output, r.output
+    alone = tmp_path / "alone"
+    CliRunner().invoke(main, ["batch", str(only), "--out", str(alone), "--dem", str(DEM)])
+    assert rows(out) == before + rows(alone)  # the others kept beside the new file's

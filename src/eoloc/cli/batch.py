@@ -50,9 +50,12 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
               help="KLV: one footprint every N packets.")
 @click.option("--strict", is_flag=True, help="KLV: drop packets that break MISB ST 0601 as written.")
 @click.option("--redo", is_flag=True, help="Do every file again, even those already done.")
+@click.option("--keep-missing", is_flag=True, help="Keep the partitions of files that were in an earlier run into "
+                                                    "--out but are not among the inputs now (default: removed, so "
+                                                    "that the dataset holds each input file once).")
 @dask_option
 def batch(patterns, out_dir, dem_paths, vertical, geoid, dem_crs, config_path, target_height, grid,
-          footprint_every, strict, redo, dask_address) -> None:
+          footprint_every, strict, redo, keep_missing, dask_address) -> None:
     from ..io.writers import write_layer
     from ..jobs.accuracy import mapper
     from ..jobs.batch import BatchSettings, batch_job, find_tasks, status_records
@@ -71,7 +74,8 @@ def batch(patterns, out_dir, dem_paths, vertical, geoid, dem_crs, config_path, t
         load_config(config_path)
     with mapper(dask_address) as m, progress() as bar:
         task = bar.add_task(f"{len(tasks)} files", total=len(tasks))
-        job = batch_job(tasks, settings, mapper=m, redo=redo, on_done=lambda: bar.advance(task, 1))
+        job = batch_job(tasks, settings, mapper=m, redo=redo, keep_missing=keep_missing,
+                        on_done=lambda: bar.advance(task, 1))
     console.print(batch_table(job))
     for note in job.notes:
         warn(note, "note")

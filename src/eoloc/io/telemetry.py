@@ -323,11 +323,13 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
 
         raise TableError(f"{det.path} gives {gives('detections')} and {tel.path} {gives('telemetry')}: nothing to "
                          "pair them by; add the same column (frame, or time_s) to both files")
-    if use_frames:  # the last record of a frame number, as a dict of them would keep
+    ambiguous: dict[int, str] = {}  # frame -> why its telemetry cannot be told
+    if use_frames:  # a frame's one record (or its exact copies: the last of them)
         ft, fd = tel.columns["frame"], det.columns["frame"]
         good = np.flatnonzero(np.isfinite(ft))
         order = good[np.argsort(ft[good].astype(np.int64), kind="stable")]
         keys = ft[order].astype(np.int64)
+        ambiguous = _frames_with_two_poses(tel, order, keys)
         wanted = np.isfinite(fd)
         q = np.where(wanted, fd, 0.0).astype(np.int64)
         if keys.size:
@@ -336,6 +338,8 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
                 record[i:j] = np.where(wanted[i:j] & (keys[pos] == q[i:j]), order[pos], -1)
 
             in_chunks(n, by_frame)
+            if ambiguous:  # no pose for a frame given two: which one is right cannot be told
+                record[np.isin(q, np.fromiter(ambiguous, np.int64)) & wanted] = -1
     else:
         tt = tel.columns["time_s"]
         good = np.flatnonzero(np.isfinite(tt))
@@ -356,5 +360,29 @@ def match_detections(tel: Table, det: Table, *, time_tolerance_s: float = 0.02) 
     for j in np.flatnonzero(record < 0):
         key = f"frame {det.columns['frame'][j]:g}" if use_frames else f"time {det.columns['time_s'][j]:g} s"
         hint = "" if use_frames else f" within {time_tolerance_s:g} s (widen --time-tolerance?)"
-        issues.append(Issue(det.path, int(det.line[j]), f"no telemetry record for {key}{hint}"))
+        frame = det.columns["frame"][j]
+        why = ambiguous.get(int(frame)) if use_frames and np.isfinite(frame) else None
+        issues.append(Issue(det.path, int(det.line[j]), f"{key}: {why}; not located" if why else
+                            f"no telemetry record for {key}{hint}"))
     return Matched(record, issues)
+
+
+def _frames_with_two_poses(tel: Table, order: np.ndarray, keys: np.ndarray) -> dict[int, str]:
+    """The frame numbers that more than one telemetry record gives, with different values (a pose
+    or anything else), each with why: ``order`` sorts the records by frame, ``keys`` their frames.
+    Exact copies of a record are not a conflict."""
+    same = np.flatnonzero(keys[1:] == keys[:-1])
+    if same.size == 0:
+        return {}
+    names = [k for k, v in tel.columns.items() if v.dtype.kind == "f" and k != "frame"]
+    out: dict[int, str] = {}
+    for k in same:
+        a, b = order[k], order[k + 1]
+        frame = int(keys[k])
+        if frame in out:
+            continue
+        if not all(np.array_equal(tel.columns[c][a], tel.columns[c][b], equal_nan=True) for c in names):
+            first = order[np.searchsorted(keys, frame)]
+            out[frame] = (f"{tel.path} gives frame {frame} twice with different values (lines {int(tel.line[first])} "
+                          f"and {int(tel.line[b])})")
+    return out

@@ -13,9 +13,10 @@ summary. Layers: ``fixes`` (located targets), ``packets`` (the aircraft, per pac
 Resumable: after its partitions are in place a task writes ``OUT/_manifest/<key>.json`` (the file's
 size and modification time, the settings' fingerprint, its figures). A later run skips a file
 whose manifest matches, redoes one that changed (its old partitions are removed first), and
-retries the ones that failed. One bad file never stops the batch: input errors end as
-``failed`` with eoloc's message; anything else (a bug) as ``bug`` with its traceback in
-``OUT/_logs/<key>.txt``.
+retries the ones that failed; the partitions of files no longer among the inputs (renamed, moved,
+deleted) are removed, so that the dataset holds each input once (``keep_missing`` keeps them).
+One bad file never stops the batch: input errors end as ``failed`` with eoloc's message; anything
+else (a bug) as ``bug`` with its traceback in ``OUT/_logs/<key>.txt``.
 """
 
 from __future__ import annotations
@@ -325,11 +326,39 @@ def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileR
 
 # -- the batch -----------------------------------------------------------------------------------
 
+def stale_keys(out_dir: Path, keys: set[str]) -> dict[str, str]:
+    """The partitions' keys in ``out_dir`` (in any layer, or in a manifest) that are not ``keys``,
+    each with the file it was made from (as its manifest says; the key where there is none)."""
+    found = {p.stem for p in (out_dir / MANIFEST).glob("*.json")}
+    for layer in LAYERS:
+        found |= {p.name.removeprefix("file=") for p in (out_dir / layer).glob("file=*") if p.is_dir()}
+    stale = {}
+    for key in sorted(found - keys):
+        try:
+            stale[key] = json.loads(manifest_path(out_dir, key).read_text(encoding="utf-8"))["path"]
+        except (OSError, ValueError, KeyError):
+            stale[key] = key
+    return stale
+
+
+def prune(out_dir: Path, keys: set[str]) -> list[str]:
+    """Remove the partitions, manifests and logs of every key in ``out_dir`` but ``keys`` (files no
+    longer among the inputs: renamed, moved, deleted): the files they came from."""
+    gone = stale_keys(out_dir, keys)
+    for key in gone:
+        remove_partitions(out_dir, key)
+        manifest_path(out_dir, key).unlink(missing_ok=True)
+        (out_dir / LOGS / f"{key}.txt").unlink(missing_ok=True)
+    return list(gone.values())
+
+
 def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings, *, mapper=None, redo: bool = False,
-              on_done: Callable[[], None] | None = None) -> BatchJob:
+              keep_missing: bool = False, on_done: Callable[[], None] | None = None) -> BatchJob:
     """Every task of ``patterns`` (or the given tasks) through ``mapper`` (:mod:`eoloc.accuracy.runners`:
-    here by default, or a Dask cluster); ``redo`` ignores the manifests. ``on_done()`` after each
-    file, skipped ones included (progress)."""
+    here by default, or a Dask cluster); ``redo`` ignores the manifests. The dataset then holds the
+    files of this run and no others: the partitions of files no longer among the inputs (renamed,
+    moved, deleted) are removed, unless ``keep_missing``. ``on_done()`` after each file, skipped
+    ones included (progress)."""
     from ..accuracy.runners import local_map
 
     patterns = list(patterns)
@@ -352,6 +381,11 @@ def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings,
         results[r.key] = r
     ordered = [results[t.key] for t in tasks]
     notes = []
+    if not keep_missing:
+        gone = prune(out_dir, {t.key for t in tasks})
+        if gone:
+            notes.append(f"removed the partitions of {len(gone)} file(s) no longer among the inputs ("
+                         + ", ".join(gone[:5]) + (", ..." if len(gone) > 5 else "") + "; --keep-missing keeps them)")
     if any(r.status == "skipped" for r in ordered):
         notes.append(f"{sum(r.status == 'skipped' for r in ordered)} file(s) already done with these settings were "
                      "skipped (--redo to do them again)")
