@@ -48,6 +48,11 @@ from .core import (
     stop_at_ellipsoid,
 )
 
+ON_SURFACE_M = 1.0e-6  # a camera this close to the terrain (or under it) is on it: BELOW_SURFACE
+# a void cell or the grid's edge stops a ray only where the ray is more than this below the highest
+# post (no ground is known to be higher): above that, nothing there could be hit; the margin covers
+# the < 1 µm of the knots' interpolation, so that both backends call a grazing ray alike
+EDGE_MARGIN_M = 1.0e-5
 BLOCK = 8  # cells per side of a coarse block
 _KNOT_M = 4000.0  # longest distance between exact geodetic knots along a ray (m)
 _R_EARTH = 6_371_000.0
@@ -108,8 +113,8 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
     """Grid walk from a to b (fractional row/col, linear): (status, s) of the first crossing.
 
     status -1: none in this step; OK: crossing at s in [0, 1]; OUT_OF_COVERAGE / DEM_VOID. A cell
-    off the grid or with a void corner stops the walk only where the ray is at or below ``hmax``
-    (the DEM's highest post), as in the numpy march, whose band ends there.
+    off the grid or with a void corner stops the walk only where the ray is lower than ``hmax``
+    (the DEM's highest post) by EDGE_MARGIN_M, as in the numpy march.
     """
     nr = z.shape[0]
     nc = z.shape[1]
@@ -129,7 +134,7 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
         s_hi = min(next_r, next_c, 1.0)
         low = min(h_a + dh * s_lo, h_a + dh * s_hi)  # the ray's lowest point in this cell
         if r < 0 or r > nr - 2 or c < 0 or c > nc - 2:
-            if low <= hmax:
+            if low <= hmax - EDGE_MARGIN_M:
                 return OUT_OF_COVERAGE, s_lo
         else:
             z00 = z[r, c]
@@ -137,7 +142,7 @@ def _walk_cells(z, fr_a, fc_a, h_a, fr_b, fc_b, h_b, hmax):
             z10 = z[r + 1, c]
             z11 = z[r + 1, c + 1]
             if not (z00 == z00 and z01 == z01 and z10 == z10 and z11 == z11):  # a void corner
-                if low <= hmax:
+                if low <= hmax - EDGE_MARGIN_M:
                     return DEM_VOID, s_lo
             elif low <= max(max(z00, z01), max(z10, z11)):  # else the ray is above every corner here
                 s = cell_first_root(h_a, dh, fr_a - r, dfr, fc_a - c, dfc, z00, z01, z10, z11, s_lo, s_hi)
@@ -263,7 +268,7 @@ def march_ray(ox, oy, oz, dx, dy, dz, z, bmax, lat0, lon0, dlat, dlon, hmin, hma
         return np.nan, np.nan, np.nan, np.nan, NO_INTERSECTION
     if inside:
         gap = _surface_gap(ox, oy, oz, dx, dy, dz, 0.0, z, a, b, e2, ep2, lat0, lon0, dlat, dlon)
-        if gap <= 0.0:
+        if gap <= ON_SURFACE_M:
             return np.nan, np.nan, np.nan, np.nan, BELOW_SURFACE
     if not t_end == t_end:
         t_end = t_start + 2.0e6  # never leaves the band (grazing from inside): bounded by coverage
@@ -334,7 +339,7 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
         valid = ray_valid(ox, oy, oz, dx, dy, dz)
         t0, t_end, h_cam = _band(ox, oy, oz, dx, dy, dz, hmin, hmax, a, b, e2, ep2)
         gap0 = _surface_gap(ox, oy, oz, dx, dy, dz, 0.0, z, a, b, e2, ep2, lat0, lon0, dlat, dlon)
-        under = (h_cam <= hmax) & (gap0 <= 0.0)
+        under = (h_cam <= hmax + ON_SURFACE_M) & (gap0 <= ON_SURFACE_M)
         st[under] = BELOW_SURFACE
         st[~valid] = INVALID_INPUT
         active = valid & ~under & np.isfinite(t0)
@@ -353,6 +358,9 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
             # where the step leaves the grid (or 0 if it starts off it): the first obstacle
             g_in, g_out = _box_interval(fa, ca, fb, cb, 0.0, nr - 1.0, 0.0, nc - 1.0)
             off = np.where((g_in > 0.0) | (g_in > g_out), 0.0, np.where(g_out < 1.0, g_out, np.inf))
+            deep = hmax - EDGE_MARGIN_M  # an edge or a void stops only a ray lower than this there
+            dh = hb - ha
+            off = np.where(np.minimum(ha + dh * np.where(np.isfinite(off), off, 1.0), hb) <= deep, off, np.inf)
             blocked = np.where(np.isfinite(off), OUT_OF_COVERAGE, blocked).astype(np.int8)
             blocked_s = off
             # the grid cells the step touches (clamped to the grid, so a step near a pole, whose
@@ -372,7 +380,8 @@ def march_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, f
                     void = np.isnan(z00 + z01 + z10 + z11)
                     s = cell_first_root(ha, hb - ha, fa - r, fb - fa, ca - c, cb - ca, z00, z01, z10, z11, s_in, s_out)
                     best = np.fmin(best, np.where(use & ~void, s, np.nan))
-                    first = use & void & (s_in < blocked_s)
+                    low = np.minimum(ha + dh * np.clip(s_in, 0.0, 1.0), ha + dh * np.clip(s_out, 0.0, 1.0))
+                    first = use & void & (s_in < blocked_s) & (low <= deep)
                     blocked = np.where(first, DEM_VOID, blocked)
                     blocked_s = np.where(first, s_in, blocked_s)
             hit = np.isfinite(best) & ~(blocked_s <= best)  # a void or the edge at the same place wins

@@ -11,6 +11,7 @@ Carlo: everything (n_samples, ...).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -278,11 +279,18 @@ class SensorModel:
             raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
         if self.gimbal.kind == GimbalKind.FIXED:
             g1_deg, g3_deg = 0.0, g1_deg
-        if self.camera.distortion is not None and (u is not None or v is not None):
-            # the compiled single-target kernel is distortion-free: undistort the pixel first
-            xn, yn = self.camera.pixel_to_normalized(self.camera.cx if u is None else u,
-                                                     self.camera.cy if v is None else v)
-            u, v = float(xn * self.camera.fx + self.camera.cx), float(yn * self.camera.fy + self.camera.cy)
+        if u is not None or v is not None:  # a pixel the image does not have is OUT_OF_IMAGE, as in eoloc.locate
+            cam = self.camera
+            u, v = float(cam.cx if u is None else u), float(cam.cy if v is None else v)
+            if cam.distortion is not None:
+                # the compiled single-target kernel is distortion-free: undistort the pixel first
+                xn, yn = cam.pixel_to_normalized(u, v)
+                if bool(cam.outside(u, v, xn, yn)):
+                    return _NOWHERE
+                u, v = float(xn * cam.fx + cam.cx), float(yn * cam.fy + cam.cy)
+            elif math.isfinite(u + v) and not (-_EDGE <= u <= cam.width - 1.0 + _EDGE
+                                               and -_EDGE <= v <= cam.height - 1.0 + _EDGE):
+                return _NOWHERE  # (kernels.pixel_in_image, on two floats without numpy's overhead)
         fn = self._one_fn()
         return fn(self.kernel_params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
                   self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
@@ -294,6 +302,10 @@ class SensorModel:
 
             return compiled.locate_one
         return _locate_one_numpy
+
+
+_NOWHERE = (math.nan, math.nan, math.nan, math.nan, kernels.OUT_OF_IMAGE)
+_EDGE = 0.5 + kernels.IMAGE_MARGIN_PX  # how far past the centres of the edge pixels a pixel is still in the image
 
 
 def _locate_one_numpy(*args):
