@@ -754,3 +754,104 @@ def test_46_10_rays_grazing_the_highest_post_over_a_void_are_called_alike_by_bot
     for backend in eoloc.available_backends():
         with eoloc.use_backend(backend):
             assert eoloc.locate_dem(sensor, low, dem).status == Status.DEM_VOID, backend
+
+
+# -- item 3: live's memory and its stderr under a flood --------------------------------------------------
+
+
+def _flood(rng, good: list[bytes], n: int):
+    """``n`` hostile datagrams, cycling through: random bytes, a good packet with a flipped byte (bad
+    checksum), a good packet whose time stamp is all ones (valid checksum), random "transport
+    packets" (188-byte cells that start with 0x47)."""
+    for k in range(n):
+        kind = k % 4
+        if kind == 0:
+            yield "garbage", rng.bytes(int(rng.integers(1, 1400)))
+        elif kind == 1:
+            raw = bytearray(good[k % len(good)])
+            raw[int(rng.integers(20, len(raw) - 4))] ^= 0xFF
+            yield "checksum", bytes(raw)
+        elif kind == 2:
+            yield "time", _with_items(good[k % len(good)], lambda items: [(t, ALL_ONES if t == 2 else v)
+                                                                          for t, v in items])
+        else:
+            cells = rng.bytes(188 * 7)
+            yield "transport", b"".join(b"\x47" + cells[i * 188 + 1:(i + 1) * 188] for i in range(7))
+
+
+def test_46_3_a_flood_of_bad_datagrams_keeps_memory_bounded_and_every_good_packet():
+    """12 000 hostile datagrams through a live session, the flight's good packets among them: every
+    good packet located, the faults counted by kind, memory flat after warm-up (before: ~170 bytes
+    kept per bad datagram, forever), and the fault lines rate-limited: the first of each kind, then
+    a count per kind and period (before: one stderr line per datagram)."""
+    import tracemalloc
+
+    import numpy as np
+
+    from eoloc.live.session import LiveSession
+    from eoloc.terrain import open_dem
+
+    clock = [0.0]
+    session = LiveSession("udp://flood", dem=open_dem(DEM))
+    session.faults.clock = lambda: clock[0]
+    good = [p for p in _packets() if decode_klv_bytes(p).packets]
+    rng = np.random.default_rng(3)
+    bad = list(_flood(rng, good, 12_000))
+    lines, located, sent_good = [], 0, 0
+    for k, (_, datagram) in enumerate(bad):
+        if k % 50 == 0 and sent_good < len(good):  # the good packets among the first part of the flood
+            located += sum(1 for u in session.feed(good[sent_good]) if u.platform is not None)
+            sent_good += 1
+        session.feed(datagram)
+        clock[0] += 1e-4  # 10 000 datagrams a second
+        lines += session.faults.due()
+        if k == 2_000:  # the good packets are in: from here on what stays allocated is what the flood keeps
+            tracemalloc.start()
+    grown = tracemalloc.get_traced_memory()[0]
+    tracemalloc.stop()
+    lines += session.faults.flush()
+    assert sent_good == len(good) == 39 and located == 39
+    counts = session.faults.counts()
+    assert counts["not KLV"] == 3_000 and counts["checksum"] == 3_000, counts
+    # the all-ones time stamps: the 39 distinct packets kept with a note each, their copies dropped as duplicates
+    assert counts["tag 2 field"] == 39 and session.counters.duplicates == 3_000 - 39, counts
+    assert session.counters.packets == 39 + 39
+    assert grown < 64 * 1024, grown  # bytes, over the 10 000 datagrams after the good packets
+    # 1.2 s of flood: the first line of each kind, then at most one per kind every 5 s
+    assert len(lines) <= 2 * len(counts), (len(lines), lines[:5])
+
+
+# -- the mutated-KLV suite: valid checksums, hostile items -------------------------------------------------
+
+
+def test_46_mutated_klv_never_raises_in_any_path_and_keeps_every_packet(tmp_path):
+    """1 000 packets of the mountain flight with random item mutations and valid checksums
+    (tests/hostile/klvfuzz.py; `bench/hostile.py klv` runs 10^5): `read_klv`, the tables, `eoloc klv`
+    and `eoloc batch` take them all without an exception, a live session the first 300; every packet
+    is kept (its bad items left out with a note), and the good packets are located as before."""
+    from eoloc.io.klv import read_klv
+    from eoloc.live.session import LiveSession
+    from eoloc.terrain import open_dem
+    from hostile.klvfuzz import mutated_packets
+
+    good = [p for p in _packets() if decode_klv_bytes(p).packets]
+    bad = mutated_packets(good, 1_000, seed=46)
+    path = tmp_path / "mutated.klv"
+    path.write_bytes(b"".join(good + bad))
+    stream = read_klv(path)
+    assert len(stream.packets) == len(good) + len(bad)  # every packet kept, item by item
+    tel = klv_telemetry(stream)
+    vmti_detections(stream)
+    assert len(tel) >= len(good)
+    session = LiveSession("udp://mutated", dem=open_dem(DEM))
+    located = sum(1 for raw in good for u in session.feed(raw) if u.platform is not None)
+    assert located == len(good)
+    for raw in bad[:300]:  # (each is located, footprint on the DEM and all: 300 say what 1 000 would)
+        session.feed(raw)
+    assert session.counters.packets + session.counters.duplicates == len(good) + 300
+    r = CliRunner().invoke(main, ["klv", str(path), "--dem", str(DEM), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 0 and "Traceback" not in r.output and "internal error" not in r.output, r.output[-2000:]
+    (tmp_path / "in").mkdir()
+    path.rename(tmp_path / "in" / "mutated.klv")
+    r = CliRunner().invoke(main, ["batch", str(tmp_path / "in"), "--out", str(tmp_path / "b"), "--dem", str(DEM)])
+    assert ",done," in (tmp_path / "b" / "batch_status.csv").read_text(encoding="utf-8"), r.output[-2000:]

@@ -163,7 +163,6 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
                                             stdin=sys.stdin.buffer)
     err_console.print(f"eoloc live: {where} (Ctrl-C stops)")
     out = None if ndjson is None else sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
-    seen_issues = 0
     try:
         for datagram, arrived, *stream in feed:
             updates = session.feed(datagram, *stream)
@@ -180,9 +179,8 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
                     for u, fs in zip(updates, features, strict=True):
                         hub.publish(u, fs)
             session.done(arrived)
-            for issue in session.issues[seen_issues:]:
-                warn(issue, "packet")
-            seen_issues = len(session.issues)
+            for line in session.faults.due():  # the first of each kind, then a count every few seconds
+                warn(line, "fault")
             if stop():
                 break
         if hub is not None:
@@ -202,7 +200,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
             server.close()
         if rewriter is not None:
             rewriter.close()
-    summary = session.counters.summary() | source_state.summary() | {
+    for line in session.faults.flush():
+        warn(line, "fault")
+    summary = session.counters.summary() | source_state.summary() | {"faults": session.faults.counts(),
         "streams": session.streams, "cot_events": feed_cot.events_out,
         "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
     if hub is not None:

@@ -14,7 +14,9 @@ Faults are counted, never fatal: a datagram that is neither (``not_klv``), a pac
 its checksum or framing, or a transport packet the demultiplexer refuses (``corrupt``), the same
 packet twice (``duplicates``: dropped), a packet older than the last of its stream (``late``:
 located all the same, its values not carried), an encoder restart (its time back by more than
-``restart_s``: ``restarts``).
+``restart_s``: ``restarts``). Each fault's message goes to :attr:`LiveSession.faults`
+(:class:`eoloc.live.faults.FaultLog`: counted by kind, reported at a bounded rate, in bounded
+memory), never to a list that grows with the stream.
 """
 
 from __future__ import annotations
@@ -25,10 +27,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .faults import FaultLog
 from .update import PacketLocator, PacketUpdate
 
 RESTART_S = 2.0  # a time stamp this far behind the newest one: the encoder restarted its clock
 TS_PACKET = 188
+MAX_PES_BYTES = 4 * 1024 * 1024  # a KLV PES is kilobytes; a stream that never ends one costs at most this
 
 
 @dataclass
@@ -82,13 +86,15 @@ class LiveSession:
         self.recent_size = recent
         self.restart_s = restart_s
         self.newest_s: dict[str, float] = {}
-        self.issues: list[str] = []
+        self.faults = FaultLog()  # counted by kind, reported at a bounded rate (memory bounded too)
         self.next_index = 0
         self.demux = None
         self.streams: dict[str, int] = {}  # stream -> good packets
         self.refine = refine  # a live.refine.TargetFilters: the targets refined across packets, or None
         self.klv_out = klv_out  # a live.klvout.KlvOut: the stream re-sent with the target locations, or None
         self._items: list = []  # with klv_out: the datagram's transport packets to pass on and PES to rebuild
+        self._wanted: set[int] = {0}  # the PIDs demultiplexed (the PAT's until it names more)
+        self._pmt_pids: set[int] = set()
 
     def feed(self, datagram: bytes, stream: str = "") -> list[PacketUpdate]:
         """``stream``: the name of the KLV stream a raw (not MPEG-TS) datagram belongs to, where the
@@ -115,28 +121,33 @@ class LiveSession:
 
     def _demux(self, datagram: bytes) -> list[tuple[bytes, str]]:
         """KLV payloads (stream name) completed by the transport packets of one datagram."""
-        from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind, TransportDemuxer
+        from stanag4609.transport.demux import PATEvent, PESStreamEvent, PMTEvent, StreamKind, TransportDemuxer
         from stanag4609.transport.metadata import parse_metadata_au_cells
 
         from ..io.klv.reader import one_line
 
         if self.demux is None:
-            self.demux = TransportDemuxer(recover_transport=True)
+            self.demux = TransportDemuxer(recover_transport=True, max_pes_length=MAX_PES_BYTES)
         out = []
         items = self._items = []
         metadata_pids = self._metadata_pids() if self.klv_out is not None else set()
         for k in range(0, len(datagram), TS_PACKET):
             tp = datagram[k:k + TS_PACKET]
-            if self.klv_out is not None and ((tp[1] & 0x1F) << 8 | tp[2]) not in metadata_pids:
+            pid = (tp[1] & 0x1F) << 8 | tp[2]
+            if self.klv_out is not None and pid not in metadata_pids:
                 items.append(tp)  # passed on untouched (video, audio, tables, clock)
+            if pid not in self._wanted:  # video, audio, what no table names: not demultiplexed at all
+                continue
             try:
                 events = self.demux.feed(tp)
             except Exception as exc:  # the demultiplexer's verdict on a damaged transport packet
                 self.counters.corrupt += 1
-                self.issues.append(f"{self.source}: datagram {self.counters.datagrams}: transport packet "
-                                   f"{k // TS_PACKET}: {one_line(exc)}")
+                self.faults.add("transport", f"{self.source}: datagram {self.counters.datagrams}: transport packet "
+                                             f"{k // TS_PACKET}: {one_line(exc)}")
                 continue
             for ev in events:
+                if isinstance(ev, PATEvent | PMTEvent):
+                    self._tables(ev)
                 if isinstance(ev, PMTEvent) and self.klv_out is not None:
                     metadata_pids = self._metadata_pids()
                 if not isinstance(ev, PESStreamEvent):
@@ -153,10 +164,25 @@ class LiveSession:
                         payload = b"".join(cell.data for cell in parse_metadata_au_cells(payload))
                     except Exception as exc:
                         self.counters.corrupt += 1
-                        self.issues.append(f"{self.source}: PID {ev.pid}: metadata access unit: {one_line(exc)}")
+                        self.faults.add("metadata access unit",
+                                        f"{self.source}: PID {ev.pid}: metadata access unit: {one_line(exc)}")
                         continue
                 out.append((payload, f"PID {ev.pid}"))
         return out
+
+    def _tables(self, event) -> None:
+        """The PIDs to demultiplex, from a program table: the PAT's, each PMT's, and the metadata
+        streams (KLV) the PMTs name. A flood of transport packets on other PIDs (garbage, video)
+        then costs a lookup each, not a parse; the sets are bounded by the PID space."""
+        from stanag4609.transport.demux import PATEvent
+
+        from .klvout import METADATA_STREAM_TYPES
+
+        if isinstance(event, PATEvent):
+            self._pmt_pids = {p.program_map_pid for p in event.programs}
+        metadata = {s.elementary_pid for pmt in self.demux.programs.values() for s in pmt.streams
+                    if s.stream_type in METADATA_STREAM_TYPES}
+        self._wanted = {0, *self._pmt_pids, *metadata}
 
     def _metadata_pids(self) -> set[int]:
         """The PIDs the program tables give as metadata (their packets are held for KLV out)."""
@@ -169,14 +195,23 @@ class LiveSession:
         from ..io.klv.reader import decode_klv_bytes
 
         c = self.counters
+        if payload in self.recent:  # a packet seen a moment ago, sent again whole: not decoded again
+            c.duplicates += 1
+            return []
         decoded = decode_klv_bytes(payload, self.source, first_index=self.next_index, stream=stream_name,
                                    container="mpegts" if stream_name else "klv")
         if not decoded.packets and decoded.n_bad == 0 and not stream_name:  # no packet key at all
             c.not_klv += 1
+            self.faults.add("not KLV", f"{self.source}: datagram {c.datagrams}: not KLV ({len(payload)} bytes, no "
+                                       "ST 0601 or EG 0104 key)")
             return []
         c.corrupt += decoded.n_bad
-        where = f"{self.source}{f' [{stream_name}]' if stream_name else ''}: datagram {c.datagrams}"
-        self.issues += [f"{where}: {i.kind}: {i.message}" for i in decoded.issues]
+        if decoded.issues or decoded.notes:
+            where = f"{self.source}{f' [{stream_name}]' if stream_name else ''}: datagram {c.datagrams}"
+            for i in decoded.issues:
+                self.faults.add(i.kind, f"{where}: {i.kind}: {i.message}")
+            for n in decoded.notes:  # item-level departures (a field that cannot be decoded, ...)
+                self.faults.add(f"tag {n.tag} {n.kind}", f"{where}: tag {n.tag}: {n.kind}: {n.message}", n.count)
         self.next_index += len(decoded.packets) + decoded.n_bad
         updates = []
         for pkt in decoded.packets:

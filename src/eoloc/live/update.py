@@ -142,7 +142,7 @@ class PacketLocator:
             tx = ty = math.nan
             if 0 < hfov < 180 and 0 < vfov < 180:
                 tx, ty = math.tan(math.radians(hfov) / 2.0), math.tan(math.radians(vfov) / 2.0)
-            ends = [self._ray(self.view, pose, usable, surface_h, x, y)
+            ends = [self._ray(self.view, pose, usable, surface_h, x, y, in_image=False)
                     for x, y in ((0.0, 0.0), *((cx * tx, cy * ty) for cx, cy in CORNERS))]
             if ends[0][4] == Status.OK:
                 centre = ends[0][:3]
@@ -163,12 +163,13 @@ class PacketLocator:
                             None, utc_times([t], "unix")[0])
 
     @staticmethod
-    def _ray(sensor, pose: tuple, usable: bool, height_m: float, u: float, v: float) -> tuple:
+    def _ray(sensor, pose: tuple, usable: bool, height_m: float, u: float, v: float, in_image: bool = True) -> tuple:
         """(lat, lon, h, range, status) of one ray: the pose's pixel (u, v) stopped at ``height_m``;
-        INVALID_INPUT where the pose, the height or the pixel is not a number (as the batch path)."""
+        INVALID_INPUT where the pose, the height or the pixel is not a number (as the batch path);
+        ``in_image=False`` for the view sensor, whose pixels are normalised coordinates."""
         if not (usable and math.isfinite(u) and math.isfinite(v)):
             return math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT
-        return sensor.locate_one(*pose[:8], u, v, g3_deg=pose[8], height_m=height_m)
+        return sensor.locate_one(*pose[:8], u, v, g3_deg=pose[8], height_m=height_m, in_image=in_image)
 
     def _frame_sensor(self, hfov: float, vfov: float, width: int, height: int):
         """The sensor of a VMTI frame: a pinhole over its size with the given fields of view."""

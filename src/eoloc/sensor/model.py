@@ -265,11 +265,13 @@ class SensorModel:
     def locate_one(self, lat_deg: float, lon_deg: float, h_m: float, yaw_deg: float, pitch_deg: float,
                    roll_deg: float, g1_deg: float, g2_deg: float = 0.0, u: float | None = None,
                    v: float | None = None, *, g3_deg: float = 0.0, range_m: float | None = None,
-                   height_m: float | None = None) -> tuple[float, float, float, float, int]:
+                   height_m: float | None = None, in_image: bool = True) -> tuple[float, float, float, float, int]:
         """One pose, one pixel -> (lat_deg, lon_deg, h_m, range_m, status code) in about a microsecond.
 
         Give ``range_m`` (M1) or ``height_m`` (M3, ellipsoidal). For a fixed mount g1_deg is the
-        sensor roll. Same kernels as the array path; compare the status with ``Status.OK``.
+        sensor roll. Same kernels as the array path; compare the status with ``Status.OK``. A pixel
+        past the image is OUT_OF_IMAGE, as in :func:`eoloc.locate`; ``in_image=False`` skips that
+        check, for a placeholder camera whose "pixels" are normalised image coordinates.
         """
         if range_m is not None and height_m is None:
             stop_kind, stop_value = kernels.STOP_RANGE, range_m
@@ -279,18 +281,18 @@ class SensorModel:
             raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
         if self.gimbal.kind == GimbalKind.FIXED:
             g1_deg, g3_deg = 0.0, g1_deg
-        if u is not None or v is not None:  # a pixel the image does not have is OUT_OF_IMAGE, as in eoloc.locate
+        if u is not None or v is not None:
             cam = self.camera
             u, v = float(cam.cx if u is None else u), float(cam.cy if v is None else v)
             if cam.distortion is not None:
                 # the compiled single-target kernel is distortion-free: undistort the pixel first
                 xn, yn = cam.pixel_to_normalized(u, v)
-                if bool(cam.outside(u, v, xn, yn)):
+                if in_image and bool(cam.outside(u, v, xn, yn)):
                     return _NOWHERE
                 u, v = float(xn * cam.fx + cam.cx), float(yn * cam.fy + cam.cy)
-            elif math.isfinite(u + v) and not (-_EDGE <= u <= cam.width - 1.0 + _EDGE
-                                               and -_EDGE <= v <= cam.height - 1.0 + _EDGE):
-                return _NOWHERE  # (kernels.pixel_in_image, on two floats without numpy's overhead)
+            elif in_image and math.isfinite(u + v) and not (-_EDGE <= u <= cam.width - 1.0 + _EDGE
+                                                            and -_EDGE <= v <= cam.height - 1.0 + _EDGE):
+                return _NOWHERE  # a pixel the image does not have (kernels.pixel_in_image, without numpy)
         fn = self._one_fn()
         return fn(self.kernel_params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
                   self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
