@@ -20,6 +20,14 @@ def rss_mb(url: str) -> float:
     return int(next(x for x in status.splitlines() if x.startswith("VmRSS:")).split()[1]) / 1024
 
 
+def stop_and_log(url: str) -> str:
+    """Stop the server at ``url`` and return everything it printed."""
+    proc = PROCESSES[url]
+    proc.terminate()
+    out, _ = proc.communicate(timeout=30)
+    return out.decode(errors="replace")
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
