@@ -916,3 +916,36 @@ def test_46_hostile_http_bodies_get_4xx_never_5xx_and_no_traceback():
     # (a mutation can leave a request that is still good: a pixel list of [[1, 2]], a changed float)
     assert set(statuses) <= {200, 400, 413, 415, 422} and statuses.count(422) > 150, sorted(set(statuses))
     assert "Traceback" not in log and "Exception in ASGI" not in log, log[-3000:]
+
+
+def test_46_3_one_damaged_transport_packet_costs_its_own_packet_only(tmp_path):
+    """The flight as MPEG-TS with one cell of the KLV PID damaged (its PES length, or its error flag):
+    the file reader and a live session keep every other KLV packet (before: stanag4609's PES
+    assembler stayed confused and the rest of the stream was lost; a file was refused whole)."""
+    from eoloc.io.klv import read_klv
+    from eoloc.io.klv.mux import write_klv_ts
+    from eoloc.live.session import LiveSession
+
+    good = [p for p in _packets() if decode_klv_bytes(p).packets]
+    ts = tmp_path / "flight.ts"
+    write_klv_ts(ts, [[(raw, k / 2.0) for k, raw in enumerate(good)]])
+    from stanag4609.transport.mpegts import parse_transport_packet
+
+    cells = bytearray(ts.read_bytes())
+    parsed = [parse_transport_packet(bytes(cells[k:k + 188]), offset=k) for k in range(0, len(cells), 188)]
+    klv_pid = max({p.pid for p in parsed}, key=lambda pid: sum(q.pid == pid for q in parsed))  # the busiest PID
+    heads = [p for p in parsed if p.pid == klv_pid and p.payload_unit_start]
+    assert len(heads) == len(good)  # one PES per KLV packet
+    pes = heads[5].offset + 188 - len(heads[5].payload)  # PES 5's header: its packet length (bytes 4-5) now 5,
+    cells[pes + 4:pes + 6] = b"\x00\x05"  # which its transport packets overrun
+    cells[heads[20].offset + 1] |= 0x80  # PES 20's first transport packet: the error flag set
+    damaged = tmp_path / "damaged.ts"
+    damaged.write_bytes(bytes(cells))
+    stream = read_klv(damaged)
+    assert len(stream.packets) == len(good) - 2, len(stream.packets)
+    assert sum("MPEG-TS" in i.message for i in stream.issues) >= 2
+    session = LiveSession("udp://ts")
+    located = 0
+    for j in range(0, len(cells), 7 * 188):
+        located += sum(1 for u in session.feed(bytes(cells[j:j + 7 * 188])) if u.platform is not None)
+    assert located == len(good) - 2

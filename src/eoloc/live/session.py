@@ -32,7 +32,6 @@ from .update import PacketLocator, PacketUpdate
 
 RESTART_S = 2.0  # a time stamp this far behind the newest one: the encoder restarted its clock
 TS_PACKET = 188
-MAX_PES_BYTES = 4 * 1024 * 1024  # a KLV PES is kilobytes; a stream that never ends one costs at most this
 
 
 @dataclass
@@ -93,8 +92,6 @@ class LiveSession:
         self.refine = refine  # a live.refine.TargetFilters: the targets refined across packets, or None
         self.klv_out = klv_out  # a live.klvout.KlvOut: the stream re-sent with the target locations, or None
         self._items: list = []  # with klv_out: the datagram's transport packets to pass on and PES to rebuild
-        self._wanted: set[int] = {0}  # the PIDs demultiplexed (the PAT's until it names more)
-        self._pmt_pids: set[int] = set()
 
     def feed(self, datagram: bytes, stream: str = "") -> list[PacketUpdate]:
         """``stream``: the name of the KLV stream a raw (not MPEG-TS) datagram belongs to, where the
@@ -121,39 +118,33 @@ class LiveSession:
 
     def _demux(self, datagram: bytes) -> list[tuple[bytes, str]]:
         """KLV payloads (stream name) completed by the transport packets of one datagram."""
-        from stanag4609.transport.demux import PATEvent, PESStreamEvent, PMTEvent, StreamKind, TransportDemuxer
+        from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind
         from stanag4609.transport.metadata import parse_metadata_au_cells
 
+        from ..io.klv.demux import KLVDemux
         from ..io.klv.reader import one_line
 
         if self.demux is None:
-            self.demux = TransportDemuxer(recover_transport=True, max_pes_length=MAX_PES_BYTES)
+            self.demux = KLVDemux()
         out = []
         items = self._items = []
         metadata_pids = self._metadata_pids() if self.klv_out is not None else set()
         for k in range(0, len(datagram), TS_PACKET):
-            tp = datagram[k:k + TS_PACKET]
-            pid = (tp[1] & 0x1F) << 8 | tp[2]
-            if self.klv_out is not None and pid not in metadata_pids:
-                items.append(tp)  # passed on untouched (video, audio, tables, clock)
-            if pid not in self._wanted:  # video, audio, what no table names: not demultiplexed at all
-                continue
-            try:
-                events = self.demux.feed(tp)
-            except Exception as exc:  # the demultiplexer's verdict on a damaged transport packet
+            cell = datagram[k:k + TS_PACKET]
+            if self.klv_out is not None and ((cell[1] & 0x1F) << 8 | cell[2]) not in metadata_pids:
+                items.append(cell)  # passed on untouched (video, audio, tables, clock)
+            events, damage = self.demux.feed_cells(cell, k)
+            for d in damage:
                 self.counters.corrupt += 1
-                self.faults.add("transport", f"{self.source}: datagram {self.counters.datagrams}: transport packet "
-                                             f"{k // TS_PACKET}: {one_line(exc)}")
-                continue
+                self.faults.add("transport", f"{self.source}: datagram {self.counters.datagrams}: transport "
+                                             f"packet {k // TS_PACKET}: {d.message}")
             for ev in events:
-                if isinstance(ev, PATEvent | PMTEvent):
-                    self._tables(ev)
                 if isinstance(ev, PMTEvent) and self.klv_out is not None:
                     metadata_pids = self._metadata_pids()
                 if not isinstance(ev, PESStreamEvent):
                     continue
                 if ev.kind is not StreamKind.KLV:
-                    if ev.pid in metadata_pids:  # held back as metadata, but not KLV: on as it came
+                    if self.klv_out is not None:  # held back as metadata, but not KLV: on as it came
                         items += [bytes(p) for p in ev.pes.transport_packets]
                     continue
                 if self.klv_out is not None:
@@ -170,26 +161,9 @@ class LiveSession:
                 out.append((payload, f"PID {ev.pid}"))
         return out
 
-    def _tables(self, event) -> None:
-        """The PIDs to demultiplex, from a program table: the PAT's, each PMT's, and the metadata
-        streams (KLV) the PMTs name. A flood of transport packets on other PIDs (garbage, video)
-        then costs a lookup each, not a parse; the sets are bounded by the PID space."""
-        from stanag4609.transport.demux import PATEvent
-
-        from .klvout import METADATA_STREAM_TYPES
-
-        if isinstance(event, PATEvent):
-            self._pmt_pids = {p.program_map_pid for p in event.programs}
-        metadata = {s.elementary_pid for pmt in self.demux.programs.values() for s in pmt.streams
-                    if s.stream_type in METADATA_STREAM_TYPES}
-        self._wanted = {0, *self._pmt_pids, *metadata}
-
     def _metadata_pids(self) -> set[int]:
         """The PIDs the program tables give as metadata (their packets are held for KLV out)."""
-        from .klvout import METADATA_STREAM_TYPES
-
-        return {s.elementary_pid for pmt in self.demux.programs.values() for s in pmt.streams
-                if s.stream_type in METADATA_STREAM_TYPES}
+        return set(self.demux.streams)
 
     def _packets(self, payload: bytes, stream_name: str) -> list[PacketUpdate]:
         from ..io.klv.reader import decode_klv_bytes

@@ -320,12 +320,15 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
 
     Asynchronous carriage (stream_type 0x06, 'KLVA') and synchronous carriage (0x15, metadata
     access units) both end up as one byte stream per PID, framed like a raw KLV file. Transport
-    errors (lost sync, bad continuity) are recovered by the demultiplexer and reported.
+    errors (lost sync, a damaged packet, a PES packet that does not add up) cost the packets they
+    touch, and are reported with their byte offsets in the file (:class:`.demux.KLVDemux`).
     """
-    from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
+    from stanag4609.transport.demux import PESStreamEvent, StreamKind
     from stanag4609.transport.metadata import parse_metadata_au_cells
 
-    demux = TransportDemuxer(recover_transport=True)
+    from .demux import KLVDemux
+
+    demux = KLVDemux()
     issues: list[KLVIssue] = []
     per_pid: dict[int, tuple[bytearray, list]] = {}
     torn = len(data) % TS_PACKET
@@ -333,10 +336,8 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
         issues.append(KLVIssue(path, None, len(data) - torn, "skipped bytes",
                                f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)"))
         data = data[:len(data) - torn]
-    try:
-        events = demux.feed(data) + demux.finish()
-    except Exception as exc:
-        raise KLVError(f"{path}: the MPEG-TS transport cannot be read: {one_line(exc)}") from None
+    events, damage = demux.feed_stream(data)
+    issues += [KLVIssue(path, None, d.offset, "malformed", f"MPEG-TS: {d.message}") for d in damage]
     for ev in events:
         if not isinstance(ev, PESStreamEvent) or ev.kind is not StreamKind.KLV:
             continue
