@@ -6,12 +6,14 @@ import contextlib
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import httpx
 
 PROCESSES: dict[str, subprocess.Popen] = {}  # base URL -> the server's process, while it runs
+LOGS: dict = {}  # base URL -> the file its output goes to
 
 
 def rss_mb(url: str) -> float:
@@ -24,8 +26,8 @@ def stop_and_log(url: str) -> str:
     """Stop the server at ``url`` and return everything it printed."""
     proc = PROCESSES[url]
     proc.terminate()
-    out, _ = proc.communicate(timeout=30)
-    return out.decode(errors="replace")
+    proc.wait(30)
+    return _read(LOGS[url])
 
 
 def free_port() -> int:
@@ -36,11 +38,15 @@ def free_port() -> int:
 
 @contextlib.contextmanager
 def eoloc_serve(*args: str):
-    """Run `eoloc serve ARGS --port P` until the block ends; yields its base URL once /v1/health answers."""
+    """Run `eoloc serve ARGS --port P` until the block ends; yields its base URL once /v1/health
+    answers. Its output goes to a file (a pipe nobody reads would fill with the access log and stop
+    the server after some 800 requests)."""
     port = free_port()
+    log = tempfile.TemporaryFile()
     proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "serve", *args, "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                            stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
+    LOGS[url] = log
     try:
         for _ in range(300):
             try:
@@ -53,10 +59,17 @@ def eoloc_serve(*args: str):
         else:
             proc.kill()
         if proc.poll() is not None:
-            raise RuntimeError(f"eoloc serve {' '.join(args)} did not start:\n{proc.stdout.read().decode()}")
+            raise RuntimeError(f"eoloc serve {' '.join(args)} did not start:\n{_read(log)}")
         PROCESSES[url] = proc
         yield url
     finally:
         PROCESSES.pop(url, None)
+        LOGS.pop(url, None)
         proc.terminate()
-        proc.wait(10)
+        proc.wait(30)
+        log.close()
+
+
+def _read(log) -> str:
+    log.seek(0)
+    return log.read().decode(errors="replace")

@@ -21,6 +21,7 @@ from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.klv import klv_job
 from eoloc.live.session import LiveSession
 from eoloc.terrain import open_dem
+from livecmd import free_udp_port, until_listening
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 FLIGHT = MOUNTAIN / "flight.klv"
@@ -36,22 +37,6 @@ def _targets(updates) -> list[dict]:
     return [f for u in updates for f in u.features() if f["properties"]["what"] == "target"]
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _until_listening(proc: subprocess.Popen) -> str:
-    """What `eoloc live` printed up to its "listening on" line: its socket is bound from then on."""
-    head = []
-    while not head or "listening on" not in head[-1]:
-        line = proc.stdout.readline()
-        assert line or proc.poll() is None, "".join(head)
-        head.append(line)
-    return "".join(head)
-
-
 def _batch_fixes() -> dict[tuple[float, str], tuple[float, float, float]]:
     """`eoloc klv`'s located targets by (packet time, target id)."""
     job = klv_job(FLIGHT, dem=open_dem(DEM))
@@ -62,7 +47,7 @@ def _batch_fixes() -> dict[tuple[float, str], tuple[float, float, float]]:
 
 
 def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
-    port = _free_udp_port()
+    port = free_udp_port()
     out = tmp_path / "fixes.ndjson"
     proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "live", f"udp://127.0.0.1:{port}",
                              "--dem", str(DEM), "--ndjson", str(out), "--silence", "0.5"],
@@ -74,7 +59,7 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     sends[10], sends[11] = sends[11], sends[10]  # reordered
     sends.insert(20, b"\x00hello, not KLV")
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    head = _until_listening(proc)  # the receiver has bound its socket (it imports eoloc and reads the DEM first)
+    head = until_listening(proc)  # the receiver has bound its socket (it imports eoloc and reads the DEM first)
     for d in sends:
         tx.sendto(d, ("127.0.0.1", port))
         time.sleep(0.01)

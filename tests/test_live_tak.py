@@ -16,9 +16,10 @@ from pathlib import Path
 import pytest
 
 import eoloc
-from eoloc.io.klv.reader import split_klv
+from eoloc.io.klv.reader import decode_klv_bytes, split_klv
 from eoloc.live.cotfeed import CotFeed
 from eoloc.live.senders import TcpSender
+from livecmd import wait_for_packets
 from tak_server import TakClient, free_tcp_port, freetakserver
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
@@ -45,12 +46,20 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
             tx.sendto(raw, ("127.0.0.1", port_in))
             time.sleep(0.05)
         ours = lambda evs: [e for e in evs if e.get("uid", "").startswith("eoloc-")]  # noqa: E731
-        client.wait_until_quiet(lambda evs: len(ours(evs)), quiet_s=3.0, timeout_s=90)
+        # the last packet located and its events written (NDJSON is flushed per packet), then stopped:
+        # the summary says how many events went out, and the client waits for exactly those
+        wait_for_packets(out, len(decode_klv_bytes(FLIGHT.read_bytes()).packets), proc)
+        head = []  # and then the stream's silence reported (--silence 1): the stale aircraft sent
+        while not head or "nothing received for" not in head[-1]:
+            head.append(proc.stdout.readline())
+            assert head[-1] or proc.poll() is None, "".join(head)
         proc.send_signal(signal.SIGINT)
         log, _ = proc.communicate(timeout=30)
+        log = "".join(head) + log
+        summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+        client.wait_for(lambda evs: len(ours(evs)) >= summary["cot_events"], 120)  # the server relays at its pace
         client.close()
     assert proc.returncode == 0 and "Traceback" not in log, log
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
     sent = summary["cot"][0]
     assert sent["sent"] == summary["cot_events"] and sent["lost"] == sent["dropped"] == 0 and sent["connects"] == 1
     relayed = ours(client.events)
@@ -74,7 +83,7 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
     assert not any(by_uid.values())
     platform = [e for e in relayed if e.get("type") == "a-f-A-M-F-Q" and e.get("stale") != e.get("time")]
     assert len(platform) == summary["packets"] and platform[0].find("detail/sensor").get("fov")
-    # and when the stream went quiet (--silence 1; the test waits 3 s of quiet), the aircraft again, already stale
+    # and when the stream went quiet (--silence 1; the test waits for it), the aircraft again, already stale
     def remarks(e):  # FreeTAKServer relays <remarks> as an attribute of <detail>
         r = e.find("detail/remarks")
         return r.text if r is not None else e.find("detail").get("remarks", "")

@@ -45,3 +45,9 @@ class InputError(EolocError):
     """The inputs are readable but cannot give what was asked (too few usable observations, a time
     outside the telemetry, a frame that sees no ground, a scenario no target of which can be
     located): the message says what is missing and how to supply it."""
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one line, with its type: for a message that quotes what a library said."""
+    text = str(exc).strip().replace("\n", " ")
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

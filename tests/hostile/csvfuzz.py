@@ -1,6 +1,6 @@
 """Fuzzed detection CSV files whose good records are known in advance: the oracle of the CSV
 reader's "every good line kept" (issue 46 item 6), independent of eoloc (the files are written
-here, byte by byte, from the records). Shared by the test suite and ``bench/hostile.py``.
+here, byte by byte, from the records). Shared by the test suite and ``bench/bench_hostile.py``.
 
 Each file has the header ``time_s,target_id,u_px,v_px`` and good records (time, id, u, v), with
 oddities drawn from a seeded generator: line ends (LF, CRLF, CR alone, mixed), a UTF-8 BOM, no

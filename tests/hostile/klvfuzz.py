@@ -1,5 +1,5 @@
 """Mutated MISB ST 0601 packets with valid checksums: what a buggy or hostile encoder can send and
-a receiver must survive (issue 46). Shared by the test suite and ``bench/hostile.py``.
+a receiver must survive (issue 46). Shared by the test suite and ``bench/bench_hostile.py``.
 
 Each packet is a real one (the bundled mountain flight) whose items are changed at random and
 framed again with a correct checksum, so that the mutation reaches the item decoders instead of

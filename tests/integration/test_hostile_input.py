@@ -2,7 +2,7 @@
 eoloc from outside has a regression test named after it (``test_46_<item>_...``), which failed on
 the code before its fix; the seeded suites beside them (mutated KLV, fuzzed CSV, hostile HTTP
 bodies, injection strings through every writer) run at a size that fits ``make test``, and
-``bench/hostile.py`` runs them big."""
+``bench/bench_hostile.py`` runs them big."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from eoloc.cli import main
 from eoloc.io.klv import build_uas_packet, decode_klv_bytes, klv_telemetry, uas_items, vmti_detections
 from eoloc.io.klv.localset import encode_items, parse_items
 from eoloc.io.klv.reader import split_klv
+from livecmd import free_udp_port, until_listening, wait_for_packets
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 FLIGHT = MOUNTAIN / "flight.klv"
@@ -95,48 +96,18 @@ def test_46_1_eoloc_batch_marks_the_file_done(tmp_path):
     assert ",done," in status, status
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _until_listening(proc: subprocess.Popen) -> str:
-    head = []
-    while not head or "listening on" not in head[-1]:
-        line = proc.stdout.readline()
-        assert line or proc.poll() is None, "".join(head)
-        head.append(line)
-    return "".join(head)
-
-
-def _wait_for_packets(ndjson: Path, n: int, proc: subprocess.Popen, timeout_s: float = 120.0) -> int:
-    """How many packets `eoloc live` has written to ``ndjson`` (it flushes per packet), waited for
-    until there are ``n`` or the process ends (or, a safety net, ``timeout_s`` passes)."""
-    deadline = time.monotonic() + timeout_s
-    seen = 0
-    while time.monotonic() < deadline and proc.poll() is None:
-        if ndjson.exists():
-            rows = [json.loads(x) for x in ndjson.read_text(encoding="utf-8").splitlines() if x.endswith("}")]
-            seen = len({r["properties"]["packet"] for r in rows if r["properties"]["what"] == "aircraft"})
-            if seen >= n:
-                break
-        time.sleep(0.05)
-    return seen
-
-
 def test_46_1_eoloc_live_goes_on_after_the_packet(tmp_path):
     """The packets after the bad one are located: live's summary counts every packet."""
     data, n = _bad_time_flight()
-    port = _free_udp_port()
+    port = free_udp_port()
     out = tmp_path / "fixes.ndjson"
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port}", "--dem", str(DEM), "--ndjson", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    head = _until_listening(proc)
+    head = until_listening(proc)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
         for raw, _ in split_klv(data):
             tx.sendto(raw, ("127.0.0.1", port))
-    seen = _wait_for_packets(out, n - 1, proc)  # every packet but the corrupted one, located and written
+    seen = wait_for_packets(out, n - 1, proc)  # every packet but the corrupted one, located and written
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
     log = head + log
@@ -826,7 +797,7 @@ def test_46_3_a_flood_of_bad_datagrams_keeps_memory_bounded_and_every_good_packe
 
 def test_46_mutated_klv_never_raises_in_any_path_and_keeps_every_packet(tmp_path):
     """1 000 packets of the mountain flight with random item mutations and valid checksums
-    (tests/hostile/klvfuzz.py; `bench/hostile.py klv` runs 10^5): `read_klv`, the tables, `eoloc klv`
+    (tests/hostile/klvfuzz.py; `bench/bench_hostile.py klv` runs 10^5): `read_klv`, the tables, `eoloc klv`
     and `eoloc batch` take them all without an exception, a live session the first 300; every packet
     is kept (its bad items left out with a note), and the good packets are located as before."""
     from eoloc.io.klv import read_klv

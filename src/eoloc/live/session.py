@@ -121,8 +121,8 @@ class LiveSession:
         from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind
         from stanag4609.transport.metadata import parse_metadata_au_cells
 
+        from ..errors import one_line
         from ..io.klv.demux import KLVDemux
-        from ..io.klv.reader import one_line
 
         if self.demux is None:
             self.demux = KLVDemux()

@@ -54,7 +54,7 @@ class KLVDemux:
         """Whole transport packets, each read on its own (a bad one costs itself only)."""
         from stanag4609.transport.mpegts import parse_transport_packet
 
-        from .reader import one_line
+        from ...errors import one_line
 
         events: list = []
         damage: list[Damage] = []
@@ -91,7 +91,7 @@ class KLVDemux:
         """Complete the PES packets still open (a stream that ends)."""
         from stanag4609.transport.demux import PESStreamEvent
 
-        from .reader import one_line
+        from ...errors import one_line
 
         for pid, assembler in self.assemblers.items():
             try:
@@ -103,7 +103,7 @@ class KLVDemux:
     def _packet(self, packet, events: list, damage: list[Damage]) -> None:
         from stanag4609.transport.demux import PATEvent, PESStreamEvent, PMTEvent
 
-        from .reader import one_line
+        from ...errors import one_line
 
         pid = packet.pid
         if pid == 0 or pid in self.pmt_pids:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import KLVError
+from ...errors import KLVError, one_line
 from .eg0104 import EG0104_KEY, decode_eg0104
 from .localset import Note, SetError, ber_length, parse_items
 from .st0601 import decode_values
@@ -302,11 +302,6 @@ def packet_end(data: bytes, k: int) -> tuple[int | None, int, str]:
         return None, 0, (f"the packet declares {length} bytes of value but only {len(data) - start} remain "
                          "(cut short, or a corrupt length)")
     return start + length, start, ""
-
-
-def one_line(exc: BaseException) -> str:
-    text = str(exc).strip().replace("\n", " ")
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def looks_like_ts(data: bytes) -> bool:

@@ -1,0 +1,42 @@
+"""`eoloc live` as a user starts it, in its own process: a free UDP port to give it, its output up
+to the line that says its socket is bound, and the packets it has written: each waited for, not
+slept for."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def until_listening(proc: subprocess.Popen) -> str:
+    """What `eoloc live` printed up to its "listening on" line: its socket is bound from then on."""
+    head = []
+    while not head or "listening on" not in head[-1]:
+        line = proc.stdout.readline()
+        assert line or proc.poll() is None, "".join(head)
+        head.append(line)
+    return "".join(head)
+
+
+def wait_for_packets(ndjson: Path, n: int, proc: subprocess.Popen, timeout_s: float = 120.0) -> int:
+    """How many packets `eoloc live` has written to ``ndjson`` (it flushes per packet), waited for
+    until there are ``n`` or the process ends (or, a safety net, ``timeout_s`` passes)."""
+    deadline = time.monotonic() + timeout_s
+    seen = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        if ndjson.exists():
+            rows = [json.loads(x) for x in ndjson.read_text(encoding="utf-8").splitlines() if x.endswith("}")]
+            seen = len({r["properties"]["packet"] for r in rows if r["properties"]["what"] == "aircraft"})
+            if seen >= n:
+                break
+        time.sleep(0.05)
+    return seen
