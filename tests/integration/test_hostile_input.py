@@ -920,3 +920,62 @@ def test_46_3_one_damaged_transport_packet_costs_its_own_packet_only(tmp_path):
     for j in range(0, len(cells), 7 * 188):
         located += sum(1 for u in session.feed(bytes(cells[j:j + 7 * 188])) if u.platform is not None)
     assert located == len(good) - 2
+
+
+@pytest.mark.browser
+def test_46_5_the_live_map_shows_hostile_names_as_text(tmp_path):
+    """Platform designations, stream names, target ids and filter models that are markup or script,
+    published to the live map (`eoloc live --map`'s server and page) and shown in headless Chromium:
+    no script runs, on load or when every tooltip opens, and each tooltip reads the text sent."""
+    from browser import chromium
+    from eoloc.service.api import create_app
+    from eoloc.service.livemap import LiveHub, MapServer
+
+    hub = LiveHub()
+    server = MapServer(create_app(hub=hub), "127.0.0.1", 0)
+    url = server.start()
+
+    class Update:  # a PacketUpdate's shape
+        stream, late, time_utc = "s", False, "2026-07-14T16:00:00Z"
+
+        def __init__(self, i):
+            self.index, self.key = i, f"stream {INJECTIONS[i % len(INJECTIONS)]}"
+
+    def features(i):
+        name = INJECTIONS[i % len(INJECTIONS)]
+        lat, lon = 40.25 + 0.001 * i, -105.6
+        return [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat, 6000.0]},
+                 "properties": {"what": "aircraft", "name": name, "h_m": 6000.0, "heading_deg": 10.0,
+                                "time_utc": name}},
+                {"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat - 0.05, 3900.0]},
+                 "properties": {"what": "target", "target_id": name, "cep50_m": 5.0, "ce90_m": 9.0}},
+                {"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat - 0.06, 3900.0]},
+                 "properties": {"what": "estimate", "target_id": name, "model": name, "n_fixes": name,
+                                "cep50_m": 3.0}}]
+
+    d = chromium()
+    try:
+        d.get(url)
+        deadline = time.monotonic() + 30
+        while not d.execute_script("return window.eoloc && window.eoloc.connects === 1"):
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        for i in range(len(INJECTIONS)):
+            hub.publish(Update(i), features(i))
+        while d.execute_script("return window.eoloc.packets") < len(INJECTIONS):
+            assert time.monotonic() < deadline + 30
+            time.sleep(0.05)
+        tips = d.execute_script("""
+            for (const el of document.querySelectorAll('path.eoloc-aircraft, path.eoloc-target, path.eoloc-estimate')) {
+                el.dispatchEvent(new MouseEvent('mouseover', {bubbles: true}));
+            }
+            return [...document.querySelectorAll('.leaflet-tooltip')].map(t => t.textContent);""")
+        pwned = d.execute_script("return window.__eoloc_pwned || null")
+        errors = [e for e in d.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    finally:
+        d.quit()
+        server.close()
+    assert pwned is None and errors == [], (pwned, errors)
+    text = "\n".join(tips)
+    for name in INJECTIONS:  # each name shown as the text it is (a target's id, a platform's name)
+        assert f"target {name}" in text, name

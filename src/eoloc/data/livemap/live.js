@@ -103,7 +103,9 @@
       }
     }
     if (!fitted && bounds.length) {
-      map.fitBounds(L.latLngBounds(bounds).pad(0.3));
+      const box = L.latLngBounds(bounds);  // one point (an aircraft with no footprint yet): no box to fit
+      if (box.getNorth() > box.getSouth() || box.getEast() > box.getWest()) { map.fitBounds(box.pad(0.3)); }
+      else { map.setView(box.getCenter(), 13); }
       fitted = true;
     }
   }
