@@ -344,15 +344,15 @@ BIG_BODY_BYTES = 256 * 1024  # a request this big leaves megabytes of garbage be
 def computing(body_bytes: int):
     """A request being worked out: at most one per core at a time (the work holds the GIL for much
     of it; more at once would only hold more memory), and after a big one its garbage given back
-    to the system (:func:`eoloc.service.http.give_back_memory`)."""
+    to the system (:func:`eoloc.service.http.give_back_memory_soon`, off the request's time)."""
     with COMPUTING:
         try:
             yield
         finally:
             if body_bytes >= BIG_BODY_BYTES:
-                from .http import give_back_memory
+                from .http import give_back_memory_soon
 
-                give_back_memory()
+                give_back_memory_soon()
 
 
 def _pixel_count(obs: list[ObservationIn]) -> int:

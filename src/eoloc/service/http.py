@@ -62,6 +62,27 @@ def give_back_memory() -> None:
 
 
 _trim = None
+_trimmer: dict = {}
+
+
+def give_back_memory_soon(delay_s: float = 0.5) -> None:
+    """:func:`give_back_memory` on a thread of its own, once, ``delay_s`` after the first call of a
+    burst: what asks for it (a big answer just computed, a connection just cut) is not held up by
+    it (it can take milliseconds on a big heap), and a burst of big requests trims once."""
+    import threading
+
+    with _trimmer.setdefault("lock", threading.Lock()):
+        if _trimmer.get("due"):
+            return
+        _trimmer["due"] = True
+
+    def trim() -> None:
+        _trimmer["due"] = False
+        give_back_memory()
+
+    timer = threading.Timer(delay_s, trim)
+    timer.daemon = True
+    timer.start()
 
 
 def protocol(request_timeout_s: float = REQUEST_TIMEOUT_S, send_timeout_s: float = SEND_TIMEOUT_S):
@@ -127,7 +148,7 @@ def protocol(request_timeout_s: float = REQUEST_TIMEOUT_S, send_timeout_s: float
             if sock is not None:  # a reset, not a close: the kernel drops what it still holds for the client too
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
             self.transport.abort()  # the buffered answer is dropped with the connection
-            self.loop.call_soon(give_back_memory)
+            give_back_memory_soon()
 
         def connection_lost(self, exc) -> None:
             self._cancel("read_timer")
