@@ -986,3 +986,36 @@ def test_46_5_the_live_map_shows_hostile_names_as_text(tmp_path):
     text = "\n".join(tips)
     for name in INJECTIONS:  # each name shown as the text it is (a target's id, a platform's name)
         assert f"target {name}" in text, name
+
+
+@pytest.mark.browser
+def test_46_5_the_accuracy_report_shows_hostile_flight_names_as_text(tmp_path):
+    """`eoloc report` on observations whose flight names and GCP ids are markup and script, from a
+    file whose own name is one: loaded in headless Chromium, no script runs and the names are text."""
+    import csv
+
+    from browser import page_state
+
+    demo = MOUNTAIN.parent
+    r = CliRunner().invoke(main, ["compensate", "simulate", "--config", str(demo / "camera.toml"), "--flights", "2",
+                                  "--test-flights", "0", "--looks", "30", "--out", str(tmp_path / "cal")])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((tmp_path / "cal" / "train.csv").open(encoding="utf-8")))
+    names = {f: INJECTIONS[k] for k, f in enumerate(sorted({r["flight"] for r in rows}))}
+    for row in rows:
+        row["flight"], row["gcp_id"] = names[row["flight"]], INJECTIONS[3]
+    hostile = tmp_path / "<img src=x onerror=window.__eoloc_pwned=1>.csv"
+    with hostile.open("w", encoding="utf-8", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    r = CliRunner().invoke(main, ["report", str(hostile), "--config", str(demo / "camera.toml"), "--dem",
+                                  str(tmp_path / "cal" / "dem.tif"), "--vertical", "ellipsoid", "--out",
+                                  str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    state, errors = page_state(tmp_path / "out" / "report.html",
+                               "return {pwned: window.__eoloc_pwned || null, text: document.body.innerText,"
+                               " h1: document.querySelector('h1').textContent};")
+    assert state["pwned"] is None and errors == [], (state["pwned"], errors)
+    assert state["h1"] == f"eoloc accuracy report: {hostile.name}"
+    assert all(n in state["text"] for n in names.values()), state["text"][:2000]
