@@ -143,7 +143,7 @@ def test_ts_over_udp_to_cot_multicast_equals_the_batch_path(tmp_path):
         pt = ev.find("point")
         assert abs(float(pt.get("lat")) - r["lat_deg"][i]) < 1e-8 and abs(float(pt.get("lon")) - r["lon_deg"][i]) < 1e-8
         assert abs(float(pt.get("hae")) - r["h_m"][i]) < 0.006
-        ce = math.sqrt((r["sigma_e_m"][i] ** 2 + r["sigma_n_m"][i] ** 2) / 2)
+        ce = r["ce90_m"][i] / math.sqrt(-2 * math.log(0.1))  # the batch CE90 by io.cot convention
         assert abs(float(pt.get("ce")) - ce) < 0.006 and abs(float(pt.get("le")) - r["sigma_u_m"][i]) < 0.006
         assert ev.find("detail/link").get("relation") == "p-p"
         # stale: 10 packet intervals of a 1 Hz stream, from the time of sending
@@ -246,44 +246,53 @@ def test_cot_feed_events_of_one_packet_and_the_silence():
 
 
 def test_cot_carries_the_refined_targets(tmp_path):
-    """--cot-targets both: every fix as before, and each target's refined estimate (RLS here) as
-    its own marker '<uid>-refined' at the estimate's point, ce = its CEP50 / 1.1774 (the sigma
-    of a circular normal error with that CEP50), the model and fix count in the remarks; the
-    same estimates as --ndjson writes. A Kalman estimate carries its speed and course."""
+    """--cot-targets both on the mountain flight over its DEM: every fix as before, and each
+    target's refined estimate (RLS here) as its own marker '<uid>-refined' at the estimate's point,
+    ce = its CE90 / 2.1460 (the sigma of a circular normal error with that CE90) and le = LE90 /
+    1.6449, the model and fix count in the remarks; the same estimates as --ndjson writes. A
+    target whose fixes do not agree with one point (the summits 3 and 4, seen at grazing angles)
+    gets no refined marker once it is INCONSISTENT. A Kalman estimate carries its speed and course."""
     from eoloc.live.cotfeed import CotFeed
     from eoloc.live.refine import TargetFilters
     from eoloc.live.session import LiveSession
 
-    klv = tmp_path / "circling.klv"
-    klv.write_bytes(circling_flight_klv(30, seed=4, rate_hz=2.0))
     cot_port = _free_port()
     out = tmp_path / "live.ndjson"
     with CotReceiver(f"udp://127.0.0.1:{cot_port}") as rx:
-        r = subprocess.run([EOLOC, "live", str(klv), "--config", str(CONFIG), "--cot", f"udp://127.0.0.1:{cot_port}",
-                            "--cot-targets", "both", "--ndjson", str(out)], capture_output=True, text=True,
-                           timeout=120)
+        r = subprocess.run([EOLOC, "live", str(FLIGHT), "--dem", str(DEM), "--config", str(CONFIG), "--cot",
+                            f"udp://127.0.0.1:{cot_port}", "--cot-targets", "both", "--ndjson", str(out)],
+                           capture_output=True, text=True, timeout=120)
         time.sleep(0.3)
     assert r.returncode == 0, r.stderr
     rows = [json.loads(x) for x in out.read_text().splitlines()]
     estimates = [f for f in rows if f["properties"]["what"] == "estimate"]
+    shown = [f for f in estimates if f["geometry"] is not None]
     fixes = [f for f in rows if f["properties"]["what"] == "target" and f["properties"]["status"] == "OK"]
     refined = [e for e in rx.events if e.get("uid").endswith("-refined")]
     plain = [e for e in rx.events if e.get("type") == "a-u-G" and not e.get("uid").endswith("-refined")]
-    assert len(refined) == len(estimates) == 150 and len(plain) == len(fixes) == 150 and rx.bad == []
-    for ev, f in zip(refined, estimates, strict=True):
+    assert len(plain) == len(fixes) == 103 and rx.bad == []
+    assert len(refined) == len(shown) < len(estimates) == 103
+    assert all(f["properties"]["status"] == "INCONSISTENT" for f in estimates if f["geometry"] is None)
+    for ev, f in zip(refined, shown, strict=True):
         p, (lon, lat, h) = f["properties"], f["geometry"]["coordinates"]
-        assert ev.get("uid") == f"eoloc-stream-{p['target_id']}-refined"
+        assert ev.get("uid").endswith(f"-{p['target_id']}-refined")
         pt = ev.find("point")
         assert abs(float(pt.get("lat")) - lat) < 1e-8 and abs(float(pt.get("lon")) - lon) < 1e-8
         assert abs(float(pt.get("hae")) - h) < 0.006
-        assert p["cep50_m"] > 0 and abs(float(pt.get("ce")) - p["cep50_m"] / 1.17741) < 0.006
-        assert float(pt.get("le")) == 9999999.0
+        if p["n_fixes"] > 1:
+            assert p["cep50_m"] > 0 and abs(float(pt.get("ce")) - p["ce90_m"] / 2.14597) < 0.006
+            assert abs(float(pt.get("le")) - p["le90_m"] / 1.64485) < 0.006
         assert f"static (RLS) over {p['n_fixes']} fixes" in ev.find("detail/remarks").text
-    # the estimate converges: the last one of each target has all its fixes behind it
-    last = {e.get("uid"): e for e in refined}
-    assert len(last) == 5 and all("over 30 fixes" in e.find("detail/remarks").text for e in last.values())
-    assert set(last) == {e.get("uid") + "-refined" for e in plain}
+    # the lake (1) converges: its last marker has all 39 fixes behind it; 3 and 4 stop being sent
+    last = {e.get("uid").split("-")[-2]: e for e in refined}
+    assert "over 39 fixes" in last["1"].find("detail/remarks").text
+    for tid in ("3", "4"):
+        final = [f for f in estimates if f["properties"]["target_id"] == tid][-1]
+        assert final["properties"]["status"] == "INCONSISTENT" and final["geometry"] is None
+        assert f"over {final['properties']['n_fixes']} fixes" not in last[tid].find("detail/remarks").text
 
+    klv = tmp_path / "circling.klv"
+    klv.write_bytes(circling_flight_klv(30, seed=4, rate_hz=2.0))
     # moving (Kalman): the same uid as the fixes (estimates only), speed and course in <track>
     session = LiveSession("test", refine=TargetFilters("moving"), budget=misb_setup(
         eoloc.io.config.load_config(CONFIG))[1])

@@ -22,6 +22,7 @@ class Status(IntEnum):
     BELOW_SURFACE = 6  # the camera is on or below the surface the rule stops at (a height, a plane)
     OUT_OF_IMAGE = 7  # the pixel lies outside the image, or where the lens model cannot be inverted
     DEGENERATE = 8  # multi-view: the rays do not determine a point (near-parallel, or it is behind a camera)
+    INCONSISTENT = 9  # a target's fixes over many frames do not agree with one point (no estimate is given)
 
     @property
     def explanation(self) -> str:
@@ -38,6 +39,8 @@ _EXPLAIN = {
     Status.BELOW_SURFACE: "the camera is on or below the target surface (check the target height)",
     Status.OUT_OF_IMAGE: "the pixel is outside the image (or where the lens model cannot be inverted)",
     Status.DEGENERATE: "the rays do not determine a point (near-parallel, or it lies behind a camera)",
+    Status.INCONSISTENT: ("the target's fixes do not agree with one point (it moved, they jump between a summit and "
+                          "the slope behind it, or their uncertainty is too small): no estimate"),
 }
 
 

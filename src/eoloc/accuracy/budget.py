@@ -1,4 +1,25 @@
-"""Error budgets as data: each input with its law (normal sigma or uniform +-max) in its own unit."""
+"""Error budgets as data: each input with its law (normal sigma or uniform +-max) in its own unit,
+and how it behaves in time over a pass.
+
+Time matters as soon as fixes are combined (a static target's estimate over many frames, a track):
+an error that is the same in every frame does not average down, one that is new in every frame
+does. Each source is one of
+
+- ``"bias"``: fixed over a pass (installation and calibration: mounting, boresight, focal length,
+  principal point, the gimbal's zero, a time offset, the terrain model's error at one place);
+- ``"noise"``: new in every frame (pixel measurement, isolator vibration, laser range noise);
+- ``"markov"``: first-order Gauss–Markov, correlated in time with ``tau_s`` (correlation
+  exp(-|dt| / tau_s)): the errors of an aided navigation solution (GNSS/INS position and
+  attitude), which wander over minutes.
+
+The defaults below (:data:`DEFAULT_KIND`) are what a source usually is when the budget does not
+say; they lean to the side that does not average away. Sources: P. D. Groves, *Principles of GNSS,
+Inertial, and Multisensor Integrated Navigation Systems* (2nd ed., Artech House, 2013), where
+navigation errors are modelled as first-order Gauss–Markov processes with correlation times of
+minutes; J. Sun et al. 2013 and Qiao et al. (SPEC's [Z15], [Q]) for the split between fixed
+installation errors and per-frame measurement noise. Say what your system does in the config,
+e.g. ``yaw_deg = {normal = 0.03, kind = "markov", tau_s = 120}``.
+"""
 
 from __future__ import annotations
 
@@ -40,14 +61,32 @@ SOURCES: dict[str, tuple[str, str]] = {
 }
 
 
+KINDS = ("bias", "noise", "markov")
+NAV_TAU_S = 300.0  # correlation time of GNSS/INS position and attitude errors (Groves 2013: minutes)
+
+# what each source is when the budget does not say (see the module notes)
+DEFAULT_KIND: dict[str, tuple[str, float]] = {
+    **{k: ("markov", NAV_TAU_S) for k in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg")},
+    **{k: ("noise", 0.0) for k in ("vibration_yaw_deg", "vibration_pitch_deg", "vibration_roll_deg", "range_m",
+                                  "u_px", "v_px")},
+    **{k: ("bias", math.inf) for k in ("gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "gimbal_skew_deg",
+                                      "boresight_x_deg", "boresight_y_deg", "mount_x_deg", "mount_y_deg",
+                                      "mount_z_deg", "focal_px", "cx_px", "cy_px", "terrain_m", "time_s")},
+}
+
+
 @dataclass(frozen=True)
 class ErrorSource:
     """One input's error: ``law`` "normal" (``value`` = sigma) or "uniform" (``value`` = max, so
-    the draw is in [-max, +max]), in the source's unit (SOURCES)."""
+    the draw is in [-max, +max]), in the source's unit (SOURCES); ``kind`` how it behaves in time
+    ("bias", "noise", "markov"; None: the source's default, :data:`DEFAULT_KIND`) and ``tau_s`` the
+    Gauss–Markov correlation time (s; "markov" only, None: the default)."""
 
     name: str
     law: Literal["normal", "uniform"]
     value: float
+    kind: Literal["bias", "noise", "markov"] | None = None
+    tau_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.name not in SOURCES:
@@ -56,6 +95,22 @@ class ErrorSource:
             raise ValueError(f"error source {self.name}: law must be 'normal' or 'uniform', got {self.law!r}")
         if not (math.isfinite(self.value) and self.value >= 0):
             raise ValueError(f"error source {self.name}: value must be a finite number >= 0, got {self.value!r}")
+        kind, tau = DEFAULT_KIND[self.name]
+        if self.kind is None:
+            object.__setattr__(self, "kind", kind)
+        elif self.kind not in KINDS:
+            raise ValueError(f"error source {self.name}: kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
+        if self.kind == "markov":
+            t = (tau if kind == "markov" else NAV_TAU_S) if self.tau_s is None else self.tau_s
+            if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
+                raise ValueError(f"error source {self.name}: tau_s (the Gauss–Markov correlation time) must be a "
+                                 f"number of seconds > 0, got {self.tau_s!r}")
+            object.__setattr__(self, "tau_s", float(t))
+        else:
+            own = 0.0 if self.kind == "noise" else math.inf  # what the kind means: no memory, or for ever
+            if self.tau_s is not None and self.tau_s != own:
+                raise ValueError(f"error source {self.name}: tau_s applies to kind = 'markov' only, not {self.kind!r}")
+            object.__setattr__(self, "tau_s", own)
 
     @property
     def unit(self) -> str:
@@ -81,7 +136,8 @@ class ErrorSource:
         return out
 
     def describe(self) -> str:
-        return f"{'σ' if self.law == 'normal' else '±'}{self.value:g} {self.unit}"
+        when = f"Gauss–Markov τ {self.tau_s:g} s" if self.kind == "markov" else self.kind
+        return f"{'σ' if self.law == 'normal' else '±'}{self.value:g} {self.unit} ({when})"
 
 
 @dataclass(frozen=True)
@@ -108,14 +164,33 @@ class ErrorBudget:
     def draw(self, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
         return {s.name: s.draw(rng, n) for s in self.sources}
 
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        return tuple(s.kind for s in self.sources)
+
+    @property
+    def tau_s(self) -> np.ndarray:
+        """(S,) each source's correlation time: 0 noise, inf bias, tau_s Gauss–Markov."""
+        return np.array([s.tau_s for s in self.sources], dtype=np.float64)
+
+    def of_kind(self, *kinds: str) -> ErrorBudget:
+        """The budget with the sources of these kinds only."""
+        return ErrorBudget(tuple(s for s in self.sources if s.kind in kinds))
+
     @classmethod
-    def from_mapping(cls, raw: Mapping[str, Mapping[str, float]]) -> ErrorBudget:
-        """From {"yaw_deg": {"normal": 0.02}, "gimbal1_deg": {"uniform": 0.0015}, ...}."""
+    def from_mapping(cls, raw: Mapping[str, Mapping[str, float | str]]) -> ErrorBudget:
+        """From {"yaw_deg": {"normal": 0.02, "kind": "markov", "tau_s": 120},
+        "gimbal1_deg": {"uniform": 0.0015}, ...} (kind and tau_s optional)."""
         out = []
-        for name, law in raw.items():
-            if not isinstance(law, Mapping) or len(law) != 1:
+        for name, spec in raw.items():
+            law = {k: v for k, v in spec.items() if k not in ("kind", "tau_s")} if isinstance(spec, Mapping) else spec
+            if not isinstance(spec, Mapping) or len(law) != 1:
                 raise ValueError(f"error source {name}: give exactly one law, e.g. {{normal = 0.02}} or "
-                                 f"{{uniform = 0.0015}}, got {law!r}")
+                                 f"{{uniform = 0.0015}} (and optionally kind = \"bias\"|\"noise\"|\"markov\", "
+                                 f"tau_s = seconds), got {spec!r}")
             (kind, value), = law.items()
-            out.append(ErrorSource(name, kind, float(value)))
+            if isinstance(value, str) or isinstance(spec.get("tau_s"), str):
+                raise ValueError(f"error source {name}: the law's value and tau_s are numbers, got {spec!r}")
+            tau = spec.get("tau_s")
+            out.append(ErrorSource(name, kind, float(value), spec.get("kind"), None if tau is None else float(tau)))
         return cls(tuple(out))

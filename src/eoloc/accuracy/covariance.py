@@ -19,7 +19,7 @@ be trusted and Monte Carlo is the tool (``linear(tol)`` gives the mask).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -31,7 +31,7 @@ from ..sensor.model import Pose, SensorModel, split_pixels
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
 from .cep import cep_zero_mean, error_ellipses
-from .montecarlo import chain_fixes, metres_per_degree
+from .montecarlo import chain_fixes, metres_per_degree, usable_rule
 
 DEFAULT_REL_STEP = 1e-2
 _K90_1D = 1.6448536269514722  # two-sided 90 % quantile of a standard normal
@@ -44,7 +44,9 @@ class FixCovariance:
     cov_enu (*T, 3, 3) m^2 in the local east/north/up frame at each fix; jacobian_enu (*T, 3, S)
     m per source unit; sources / sigma_in (S,) the budget's source names and standard deviations;
     nonlinearity (*T,) (see the module doc; inf where a +-1 sigma ray fails); lat_deg / h_m (*T,)
-    the fixes' latitude and height (for the metric-to-degree conversion).
+    the fixes' latitude and height (for the metric-to-degree conversion); kinds / tau_s (S,) how
+    each source behaves in time (:mod:`eoloc.accuracy.budget`: "bias", "noise", "markov" and its
+    correlation time), which decides what averages down when fixes are combined.
     """
 
     cov_enu: np.ndarray
@@ -54,6 +56,30 @@ class FixCovariance:
     nonlinearity: np.ndarray
     lat_deg: np.ndarray
     h_m: np.ndarray
+    kinds: tuple[str, ...] = ()
+    tau_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def take(self, index) -> FixCovariance:
+        """The covariance of the fixes at ``index`` of the flattened batch."""
+        def pick(x: np.ndarray, tail: int) -> np.ndarray:
+            return np.reshape(x, (-1, *np.shape(x)[len(np.shape(x)) - tail:]) if tail else -1)[index]
+
+        return FixCovariance(pick(self.cov_enu, 2), pick(self.jacobian_enu, 2), self.sources, self.sigma_in,
+                             pick(np.broadcast_to(self.nonlinearity, self.shape), 0),
+                             pick(np.broadcast_to(self.lat_deg, self.shape), 0),
+                             pick(np.broadcast_to(self.h_m, self.shape), 0), self.kinds, self.tau_s)
+
+    @property
+    def scaled_jacobian(self) -> np.ndarray:
+        """(*T, 3, S) J diag(sigma): each source's 1-sigma effect on the fix (m, ENU)."""
+        return self.jacobian_enu * self.sigma_in
+
+    def part(self, *kinds: str) -> np.ndarray:
+        """(*T, 3, 3) the covariance of the sources of these kinds only (e.g. "bias": what no
+        averaging removes; "noise", "markov": the random part)."""
+        keep = np.array([k in kinds for k in self.kinds], dtype=bool)
+        a = self.scaled_jacobian[..., keep]
+        return a @ np.swapaxes(a, -1, -2)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -126,7 +152,7 @@ def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget,
     broadcast to the targets' shape; velocity_ned_mps (m/s) is used by a ``time_s`` source. The
     fixes are those of :func:`eoloc.locate` with the same rule.
     """
-    rule = rule if rule is not None else rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
+    rule = usable_rule(rule if rule is not None else rule_from_options(range_m=range_m, height_m=height_m, dem=dem))
     if not rel_step > 0:
         raise ValueError(f"rel_step must be > 0, got {rel_step!r}")
     u, v = split_pixels(pixels, sensor.camera)
@@ -173,7 +199,8 @@ def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget,
         nl = np.full(shape, np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         jac = a / sig
-    return fixes, FixCovariance(cov, jac, names, sig, np.asarray(nl, dtype=np.float64), fixes.lat_deg, fixes.h_m)
+    return fixes, FixCovariance(cov, jac, names, sig, np.asarray(nl, dtype=np.float64), fixes.lat_deg, fixes.h_m,
+                                tuple(s.kind for s in srcs), np.array([s.tau_s for s in srcs], dtype=np.float64))
 
 
 def covariance_columns(cov: FixCovariance, ok: ArrayLike | None = None) -> dict[str, np.ndarray]:

@@ -48,9 +48,7 @@ class Scenario:
     description: str = ""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.rule, StopRule):
-            raise TypeError(f"scenario {self.name}: rule must be a stop rule (AtRange, AtHeight, OnDEM), "
-                            f"got {self.rule!r}")
+        usable_rule(self.rule)
         px = np.array([self.sensor.camera.centre_px]) if self.pixels is None else np.asarray(self.pixels, float)
         object.__setattr__(self, "pixels", px.reshape(-1, 2))
 
@@ -60,6 +58,18 @@ class Scenario:
 
     def with_budget(self, budget: ErrorBudget) -> Scenario:
         return replace(self, budget=budget)
+
+
+def usable_rule(rule) -> StopRule:
+    """``rule`` if the error analysis takes it (every single-ray stop rule: AtRange, AtHeight,
+    OnDEM, FlatGround), else an :class:`~eoloc.errors.InputError` that says why and what to use."""
+    if isinstance(rule, StopRule):
+        return rule
+    if getattr(rule, "name", None) == "multiview":
+        raise InputError("MultiView intersects several rays of one target, so there is no single fix to perturb: "
+                         "its uncertainty comes from its own geometry (MultiView(...).intersect(rays).cov_enu, "
+                         "`eoloc triangulate`), from each ray's angular sigma")
+    raise InputError(f"the error analysis needs a stop rule (AtRange, AtHeight, OnDEM, FlatGround), got {rule!r}")
 
 
 def perturbed_fixes(scn: Scenario, d: dict[str, np.ndarray], n: int) -> Fixes:
@@ -118,7 +128,13 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
     # is OUT_OF_IMAGE in every row, never a point with an uncertainty
     xn0, yn0 = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
     outside = sensor.camera.outside(u, v, xn0, yn0, focal_scale=pose.focal_scale)
-    f = rule.stop(sensor.rays_from(frame, xn, yn, outside), sensor.ellipsoid, errors=z)
+    def normalize(uu, vv):
+        return sensor.camera.pixel_to_normalized(uu + z("u_px"), vv + z("v_px"), focal_error_px=z("focal_px"),
+                                                 principal_point_error_px=(z("cx_px"), z("cy_px")),
+                                                 focal_scale=pose.focal_scale)
+
+    f = usable_rule(rule).stop_in_frame(sensor, frame, xn, yn, outside, sensor.ellipsoid, errors=z,
+                                        normalize=normalize)
     shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies
     return Fixes(*(np.broadcast_to(x, shape) for x in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
 

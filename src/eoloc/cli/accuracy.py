@@ -43,15 +43,29 @@ SCENARIOS = ("s13", "q-ellipsoid", "q-dem")
 @out_option("accuracy.csv, sensitivity.csv and the plots")
 def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samples, plots, dask_address,
              out_dir) -> None:
-    from ..io.writers import write_layer
     from ..jobs.accuracy import accuracy_job, mapper, scenario_from
 
     scn, n, seed = scenario_from(config_path, scenario, samples, seed)
     total = n + (len(scn.budget) * sensitivity_samples if sensitivity else 0)
     with mapper(dask_address) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)
-        job = accuracy_job(scn, n, seed, sensitivity_samples=sensitivity_samples if sensitivity else 0,
-                           keep_samples=plots, mapper=m, progress=lambda k: bar.advance(task, k))
+        job = accuracy_job(scn, n, seed, keep_samples=plots, mapper=m, progress=lambda k: bar.advance(task, k))
+    _report(job, scn, n, seed, out_dir, plots)
+    if sensitivity:  # after the result is written: an optional step never loses what came before it
+        from ..accuracy import sensitivity as run_sensitivity
+
+        with mapper(dask_address) as m, progress() as bar:
+            task = bar.add_task("sensitivity", total=len(scn.budget) * sensitivity_samples)
+            job.sensitivity = run_sensitivity(scn, sensitivity_samples, seed=seed, mapper=m,
+                                              progress=lambda k: bar.advance(task, k))
+        _report_sensitivity(job, sensitivity_samples, out_dir)
+
+
+def _report(job, scn, n: int, seed: int, out_dir, plots: bool) -> None:
+    from pathlib import Path
+
+    from ..io.writers import write_layer
+
     console.print(f"[bold]{scn.name}[/]: {n:,} samples, seed {seed}, stop rule {scn.rule.describe()}; budget: "
                   + ", ".join(f"{s.name} {s.describe()}" for s in scn.budget))
     table = RichTable(title="scatter per target, about the error-free fix")
@@ -66,22 +80,27 @@ def accuracy(config_path, scenario, samples, seed, sensitivity, sensitivity_samp
     for key, label in labels.items():
         table.add_row(label, *(f"{r[key]:.4g}" if isinstance(r[key], float) else str(r[key]) for r in job.rows))
     console.print(table)
-    from pathlib import Path
-
     out = Path(out_dir)
     written = write_layer(out, "accuracy", job.rows, ["csv"])
-    if job.sensitivity:
-        t2 = RichTable(title=f"sensitivity, each source alone (target 0, {sensitivity_samples:,} samples each)")
-        for c in ("source", "law", "μ lat (deg/unit)", "μ lon (deg/unit)", "μ h (m/unit)", "σ horizontal (m)"):
-            t2.add_column(c, justify="right")
-        for r in job.sensitivity:
-            t2.add_row(r.source, r.law, f"{r.mu_lat:.4g}", f"{r.mu_lon:.4g}", f"{r.mu_h:.4g}",
-                       f"{r.sigma_horizontal_m:.3g}")
-        console.print(t2)
-        written += write_layer(out, "sensitivity", [vars(r) for r in job.sensitivity], ["csv"])
     if plots:
         from ..accuracy.plots import plot_scatter
 
         for k in range(min(scn.n_targets, 8)):
             written.append(plot_scatter(job.result, out / f"scatter_target{k}.png", target=k))
+    err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+
+
+def _report_sensitivity(job, sensitivity_samples: int, out_dir) -> None:
+    from pathlib import Path
+
+    from ..io.writers import write_layer
+
+    t2 = RichTable(title=f"sensitivity, each source alone (target 0, {sensitivity_samples:,} samples each)")
+    for c in ("source", "law", "μ lat (deg/unit)", "μ lon (deg/unit)", "μ h (m/unit)", "σ horizontal (m)"):
+        t2.add_column(c, justify="right")
+    for r in job.sensitivity:
+        t2.add_row(r.source, r.law, f"{r.mu_lat:.4g}", f"{r.mu_lon:.4g}", f"{r.mu_h:.4g}",
+                   f"{r.sigma_horizontal_m:.3g}")
+    console.print(t2)
+    written = write_layer(Path(out_dir), "sensitivity", [vars(r) for r in job.sensitivity], ["csv"])
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))

@@ -28,11 +28,15 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
   assigns each frame's fixes to tracks by gated global nearest neighbour. Writes tracks.geojson
   (LineStrings with coordTimes), track_fixes.csv (filtered position, speed, heading and their
   sigma per detection; empty where not known yet) and prints a table per track.
+  With a budget, each fix is weighed by its random part and the estimate's uncertainty keeps what
+  does not average: a source with kind = "bias" counts once, "noise" averages down, "markov"
+  (Gauss–Markov, tau_s) by its correlation over the frames' times (see README "Uncertainty").
   --static: recursive least squares per target_id (--forgetting 1 = all frames alike); writes
-  static_targets.csv / .geojson with the estimate, its sigma and CEP50 (the bias share that
-  frames cannot average away estimated from the scatter), and the frame where it converged.
-  A target whose fixes scatter more than 3x their sigma is flagged (it moves) and its sigma is
-  the fixes' own scatter.
+  static_targets.csv / .geojson with the estimate, its sigma, CEP50, CE90, LE90 and the frame
+  where it converged. A target whose fixes do not agree with one point (a chi-square test: it
+  moves, or its fixes jump between a summit and the slope behind it) gets status INCONSISTENT
+  and no point. Without a budget (--meas-sigma) a target whose fixes scatter more than 3x that
+  sigma is flagged and its sigma is the fixes' own scatter.
 """
 
 
@@ -75,8 +79,8 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
     if static:
         rows = static_targets(job, forgetting=forgetting, meas_sigma_m=meas_sigma, window=window)
         console.print(_static_table(rows))
-        console.print("scatter: the frames' scatter against their declared sigma (1 = independent errors that "
-                      "average away; near 0 = a common bias that no number of frames removes)")
+        console.print("scatter: the frames' scatter about the estimate against their declared uncertainty (about 1, "
+                      "or less where part of the error is common to the frames; far more: the fixes do not agree)")
         for r in rows:
             if r.get("warning"):
                 warn(f"target {r['target_id']}: {r['warning']}")
@@ -109,6 +113,10 @@ def _static_table(rows) -> RichTable:
     for c in ("target", "fixes", "lat, lon (°)", "h (m)", "CEP50 (m)", "scatter", "converged"):
         table.add_column(c, justify="right")
     for r in rows:
+        if r["status"] == "INCONSISTENT":
+            table.add_row(r["target_id"], f"{r['used']}/{r['frames']}", "INCONSISTENT", "", "",
+                          f"{r['scatter_ratio']:.3g}", "no estimate")
+            continue
         if r["status"] != "OK":
             table.add_row(r["target_id"], f"0/{r['frames']}", "", "", "", "", "no fix")
             continue

@@ -198,7 +198,7 @@ class AccuracyConfig(_Strict):
     velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     samples: int = Field(100_000, ge=2)
     seed: int = 0
-    budget: dict[str, dict[str, float]]
+    budget: dict[str, dict[str, float | str]]
 
     @model_validator(mode="after")
     def _stop_value(self) -> AccuracyConfig:

@@ -9,6 +9,13 @@ clock's origin, else the time of writing. CoT's ``<point>`` takes lat/lon in WGS
 linear 1-sigma errors in metres (the CoT base schema); 9999999 means unknown, which is what a fix
 without a covariance gets, never an invented number. CE90/LE90 and CEP50 go in the remarks.
 
+The convention, for a receiver to draw the right circle: ``ce`` is the sigma of the circular
+normal error that has the fix's own CE90 (ce = CE90 / 2.1460, the CE90 computed exactly from the
+error ellipse), so the circle of radius 2.1460 ce holds the target with probability 0.9 whatever
+the ellipse's shape, and one of radius ce holds it with 0.39 for a round ellipse; ``le`` is the
+sigma of the vertical error (LE90 / 1.6449). Both are checked by coverage (tests/integration/
+test_coverage.py) as a receiver parses them.
+
 Events are written as text by :func:`event_xml`: one template whose every value goes through the
 standard library's XML escaping (:func:`xml.sax.saxutils.quoteattr` and ``escape``) after
 :func:`eoloc.io.xmltext.xml_text` (the characters XML cannot hold at all become U+FFFD), so a
@@ -42,12 +49,22 @@ def _num(row: dict, key: str) -> float:
     return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else math.nan
 
 
+CE90_PER_SIGMA = math.sqrt(-2.0 * math.log(0.1))  # CE90 of a circular normal error, in sigmas (2.1460)
+LE90_PER_SIGMA = 1.6448536269514722  # two-sided 90 % of a normal, in sigmas
+
+
 def ce_le(row: dict) -> tuple[float, float]:
-    """CoT's 1-sigma circular (ce) and vertical (le) errors of a fix row from its sigma_e/n/u_m
-    columns; :data:`UNKNOWN` for what the row does not know."""
+    """CoT's 1-sigma circular (ce) and vertical (le) errors (see the module notes) of a fix row or
+    an estimate's properties from their ce90_m / le90_m (else sigma_e/n/u_m) columns;
+    :data:`UNKNOWN` for what the row does not know."""
+    ce90, le90 = _num(row, "ce90_m"), _num(row, "le90_m")
     se, sn, su = _num(row, "sigma_e_m"), _num(row, "sigma_n_m"), _num(row, "sigma_u_m")
-    ce = math.sqrt((se * se + sn * sn) / 2.0) if math.isfinite(se + sn) else UNKNOWN
-    return ce, (su if math.isfinite(su) else UNKNOWN)
+    if math.isfinite(ce90):
+        ce = ce90 / CE90_PER_SIGMA
+    else:
+        ce = math.sqrt((se * se + sn * sn) / 2.0) if math.isfinite(se + sn) else UNKNOWN
+    le = le90 / LE90_PER_SIGMA if math.isfinite(le90) else (su if math.isfinite(su) else UNKNOWN)
+    return ce, le
 
 
 _PLAIN = re.compile("[^&<>\"'\x00-\x1f\ufffe\uffff\ud800-\udfff]*\\Z")  # an attribute value as it is

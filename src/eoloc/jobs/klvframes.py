@@ -142,12 +142,16 @@ def aircraft_feature(tel: Table, rows: np.ndarray | None = None, stream: str | N
 @dataclass(frozen=True)
 class VMTIFixes:
     """Located VMTI detections: fixes (N,), per-target columns, covariance columns (or {}), and
-    the covariance itself (N, 3, 3) ENU m^2 when a budget gave one (NaN for the fixes without)."""
+    the covariance itself (N, 3, 3) ENU m^2 when a budget gave one (NaN for the fixes without),
+    with its structure: ``effects`` (N, 3, S) each budget source's 1-sigma effect on each fix (m,
+    ENU) and ``tau_s`` (S,) their correlation times (:class:`eoloc.accuracy.FixCovariance`)."""
 
     fixes: Fixes
     extra: dict[str, np.ndarray]
     uncertainty: dict[str, np.ndarray]
     cov_enu: np.ndarray | None = None
+    effects: np.ndarray | None = None
+    tau_s: np.ndarray | None = None
 
 
 def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
@@ -173,7 +177,7 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     lat, lon, hh, rng = (np.full(n, np.nan) for _ in range(4))
     status = np.full(n, int(Status.NO_TELEMETRY), dtype=np.int8)
     unc: dict[str, np.ndarray] = {}
-    cov_enu = None
+    cov_enu = effects = tau = None
     pose_all = packet_pose(tel).take(row) if n else None
     groups = {}
     usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
@@ -203,10 +207,13 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
                 unc.setdefault(k, np.full(n, np.nan))[idx] = v
             if cov_enu is None:
                 cov_enu = np.full((n, 3, 3), np.nan)
+                tau = cov.tau_s
+                effects = np.full((n, 3, tau.size), np.nan)
             cov_enu[idx] = np.where(ok[:, None, None], np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
+            effects[idx] = np.where(ok[:, None, None], np.reshape(cov.scaled_jacobian, (-1, 3, tau.size)), np.nan)
     extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
              "u_px": d["u_px"], "v_px": d["v_px"]}
-    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc, cov_enu)
+    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc, cov_enu, effects, tau)
 
 
 def _frame_properties(tel: Table, i: int) -> dict:

@@ -50,9 +50,9 @@ def track_job(job: LocateJob, *, associate: bool, accel_psd: float, meas_sigma_m
 
     located = job.located
     t = np.asarray(located.extra["time_s"], dtype=np.float64)
-    cov = None if located.covariance is None else located.covariance.cov_enu
     ids = np.asarray(located.extra["target_id"]).astype(str)
-    ts = track_fixes(t, located.fixes, cov, None if associate else ids, associate=associate,
+    ts = track_fixes(t, located.fixes, None, None if associate else ids, covariance=located.covariance,
+                     associate=associate,
                      config=TrackerConfig(accel_psd=accel_psd, meas_sigma_m=meas_sigma_m, max_coast_s=max_coast_s),
                      progress=progress)
     left = int(np.sum((ts.assigned == "") & np.ravel(located.fixes.ok)))
@@ -81,14 +81,20 @@ def _track_records(ts, job: LocateJob) -> Records:
 
 def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, window: int) -> list[dict]:
     """Recursive least squares per target id over its frames: one row per target, with its sigma,
-    CEP50, scatter ratio and convergence; a target whose fixes scatter more than SCATTER_LIMIT
-    times their sigma gets a warning and the fixes' own scatter as its uncertainty."""
+    CEP50, CE90, LE90, scatter ratio and convergence. With an error budget the uncertainty is the
+    budget's over those frames (biases kept whole, noise averaged down, Gauss–Markov errors by
+    their correlation in time) and a target whose fixes do not agree with one point gets status
+    INCONSISTENT and no point; without one (an assumed ``meas_sigma_m``) a target whose fixes
+    scatter more than SCATTER_LIMIT times that sigma gets a warning and the fixes' own scatter as
+    its uncertainty."""
+    from ..accuracy.cep import cep_zero_mean, error_ellipses
+    from ..result import Status
     from ..sequence.rls import SCATTER_LIMIT, rls_static, scatter_inflation
 
     located = job.located
     fixes: Fixes = located.fixes
     t = np.asarray(located.extra["time_s"], dtype=np.float64)
-    cov = None if located.covariance is None else located.covariance.cov_enu
+    covariance = located.covariance
     ids = np.asarray(located.extra["target_id"]).astype(str)
     rows = []
     for tid in sorted(set(ids.tolist())):
@@ -98,28 +104,38 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
         if not f.ok.any():
             rows.append({"target_id": tid, "frames": int(sel.size), "used": 0, "status": "NO_FIX"})
             continue
-        est = rls_static(f, None if cov is None else cov.reshape(-1, 3, 3)[sel], sigma_m=meas_sigma_m,
-                         forgetting=forgetting, window=window)
+        est = rls_static(f, sigma_m=meas_sigma_m, covariance=None if covariance is None else covariance.take(sel),
+                         time_s=t[sel], forgetting=forgetting, window=window)
         ok_f = np.flatnonzero(f.ok)
         single = np.hypot(est.sigma_m[ok_f[0], 0], est.sigma_m[ok_f[0], 1])  # the first fix's own sigma
         conv = int(est.converged_frame)
-        s = np.sqrt(np.diagonal(est.cov_enu))
-        # frames that spread far more than their sigma allows: the target moved (or the sigma is
-        # optimistic), so the "static" model is rejected and averaging does not shrink the error.
-        # The uncertainty becomes the fixes' own scatter (one frame's sigma times sqrt(ratio)), said.
         ratio = float(est.scatter_ratio)
-        inflate = float(scatter_inflation(ratio, single, float(np.mean(s[:2]))))
-        s = s * inflate
-        warning = "" if inflate == 1.0 else (
-            f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their sigma allows (> {SCATTER_LIMIT:g}): "
-            f"the target moves, or the sigma is optimistic; its uncertainty is the fixes' own scatter, "
-            f"{inflate:.1f}x the static estimate's (for a moving target use eoloc track without --static)")
-        rows.append({"target_id": tid, "frames": int(sel.size), "used": int(est.n_used),
-                     "lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m),
+        row = {"target_id": tid, "frames": int(sel.size), "used": int(est.n_used), "scatter_ratio": ratio}
+        if est.status == Status.INCONSISTENT:
+            rows.append({**row, "status": "INCONSISTENT", "warning": (
+                f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their uncertainty allows: "
+                f"{Status.INCONSISTENT.explanation} (a moving target: eoloc track without --static)")})
+            continue
+        cov = est.cov_enu
+        inflate = 1.0
+        warning = ""
+        if covariance is None:
+            # an assumed sigma: frames that spread far more than it allows (the target moved, or the
+            # sigma is optimistic) make the fixes' own scatter the uncertainty, said
+            inflate = float(scatter_inflation(ratio, single, float(np.mean(np.sqrt(np.diagonal(cov)[:2])))))
+            if inflate > 1.0:
+                warning = (f"the {int(est.n_used)} fixes scatter {ratio:.1f}x more than their sigma allows "
+                           f"(> {SCATTER_LIMIT:g}): the target moves, or the sigma is optimistic; its uncertainty is "
+                           f"the fixes' own scatter, {inflate:.1f}x the static estimate's (for a moving target use "
+                           "eoloc track without --static)")
+        s = np.sqrt(np.diagonal(cov)) * inflate
+        e = error_ellipses(cov[:2, :2] * inflate**2)
+        rows.append({**row, "lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m),
                      "sigma_e_m": float(s[0]), "sigma_n_m": float(s[1]), "sigma_u_m": float(s[2]),
-                     "cep50_m": float(est.cep50_m) * inflate, "first_fix_sigma_h_m": float(single),
-                     "scatter_ratio": ratio, "converged_at_s": float(t[sel][conv]) if conv >= 0 else None,
-                     "status": "OK", "warning": warning})
+                     "cep50_m": float(cep_zero_mean(e[0], e[1], 0.5)), "ce90_m": float(cep_zero_mean(e[0], e[1], 0.9)),
+                     "le90_m": 1.6448536269514722 * float(s[2]), "first_fix_sigma_h_m": float(single),
+                     "converged_at_s": float(t[sel][conv]) if conv >= 0 else None, "status": "OK",
+                     "warning": warning})
     return rows
 
 

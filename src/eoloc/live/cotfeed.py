@@ -18,10 +18,12 @@ Per packet, each event one standalone XML document:
   remarks;
 - with ``targets="estimates"`` each target's **refined estimate** instead (:mod:`eoloc.live.refine`:
   RLS for a static target, the Kalman track for a moving one) under the same uid, so the marker
-  converges as fixes accumulate: ``ce`` its CEP50 / 1.1774 (the 1-sigma of a circular normal
-  error with that CEP), ``le`` unknown (the filters refine the horizontal position), the model
-  and fix count in the remarks, a moving target's speed and course in ``<track>``;
-  ``targets="both"``: the fixes, and the estimates as ``<platform>-<target id>-refined``.
+  converges as fixes accumulate: ``ce``/``le`` from its calibrated covariance by the same
+  convention as a fix (:mod:`eoloc.io.cot`; ``le`` unknown for a track, which refines the
+  horizontal position only), the model and fix count in the remarks, a moving target's speed and
+  course in ``<track>``; a target whose fixes do not agree with one point (INCONSISTENT) gets no
+  marker — a point there would be a plausible wrong one; ``targets="both"``: the fixes, and the
+  estimates as ``<platform>-<target id>-refined``.
 
 ``time``/``start`` are when the event is sent and ``stale`` that plus ``stale_packets`` packet
 intervals of its stream (the median of the last 15 by the ST 0601 time stamps, between ``min_stale_s`` and
@@ -38,7 +40,7 @@ import statistics
 from collections import deque
 from datetime import UTC, datetime, timedelta
 
-from ..io.cot import UNKNOWN, ce_le, element_xml, event_xml, fix_remarks, iso_utc
+from ..io.cot import ce_le, element_xml, event_xml, fix_remarks, iso_utc
 from .update import PacketUpdate
 
 PLATFORM_TYPE = "a-f-A-M-F-Q"  # friendly / air / military / fixed wing / UAV
@@ -46,7 +48,6 @@ TARGET_TYPE = "a-u-G"  # unknown affiliation, ground
 SPI_TYPE = "b-m-p-s-p-i"  # sensor point of interest (MISB ST 0805)
 SHAPE_TYPE = "u-d-f"  # a drawn shape (TAK's freehand polygon)
 TARGET_CHOICES = ("fixes", "estimates", "both")  # what a target's events carry
-CEP50_PER_SIGMA = math.sqrt(2.0 * math.log(2.0))  # CEP50 of a circular normal error, in sigmas (1.1774)
 
 
 class CotFeed:
@@ -141,6 +142,8 @@ class CotFeed:
         if self.targets != "fixes":
             suffix = "-refined" if self.targets == "both" else ""
             for est in u.estimates:
+                if est["geometry"] is None:  # INCONSISTENT: no point to show
+                    continue
                 uid = f"{base}-{est['properties']['target_id']}{suffix}"
                 if self._due(uid, now_s):
                     out.append(self._estimate(est, uid, name, link, now, stale, when))
@@ -161,8 +164,9 @@ class CotFeed:
         if p.get("speed_mps") is not None:
             detail += element_xml("track", course=_fmt(p.get("heading_deg")), speed=_fmt(p["speed_mps"]))
         detail += element_xml("remarks", f"{'; '.join(remarks)}; {when}")
+        ce, le = ce_le(p)
         return event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale, lat=lat, lon=lon, hae=h,
-                         ce=cep / CEP50_PER_SIGMA if cep is not None else UNKNOWN, le=UNKNOWN, detail=detail)
+                         ce=ce, le=le, detail=detail)
 
     def _platform(self, u: PacketUpdate, uid: str, name: str, now: datetime | str, stale: datetime | str,
                   remarks: str) -> bytes:

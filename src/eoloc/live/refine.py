@@ -5,16 +5,20 @@ as `eoloc track --static`) and the constant-velocity Kalman filter
 takes all the targets of a packet in one vectorised update (each target in the ENU frame of its
 own first fix, as the batch); the Kalman step runs only when a model needs it.
 
-Each target's estimate says which model it is. ``model="static"`` (the default): RLS. Its
-uncertainty keeps the share of the error that does not average out (the RLS module's correlated
-fraction) and is widened when the fixes scatter more than their sigma allows
-(:func:`eoloc.sequence.rls.scatter_inflation`, with the batch's warning). ``"moving"``: the
-Kalman track. ``"auto"``: the Kalman track once it is confirmed and its speed is significant
-(over 3 sigma and over ``MOVING_MPS``), else RLS. A bias that drifts with the geometry (attitude
-errors as the aircraft turns) makes the fixes of a fixed target walk too, and "auto" then calls
-it moving: that is why static is the default. Without an error budget the fixes are weighted
-alike (as if each had ``UNWEIGHTED_SIGMA_M``, which also sets the speed's sigma for the moving
-test) and no uncertainty is claimed (null CEP), as for the fixes themselves.
+Each target's estimate says which model it is. ``model="static"`` (the default): RLS. With an
+error budget its uncertainty is that of the budget's sources over the packets so far — biases
+kept whole, noise averaged down, Gauss–Markov errors by their correlation in time
+(:class:`eoloc.sequence.rls.RLSState`) — and a target whose fixes do not agree with one point
+(the chi-square test of :meth:`~eoloc.sequence.rls.RLSState.consistent`: it moves, or its fixes
+jump between a summit and the slope behind it) gets status INCONSISTENT and no point.
+``"moving"``: the Kalman track, each fix weighed by its noise and the budget's biases and
+Gauss–Markov errors carried as consider parameters (:mod:`eoloc.sequence.track`). ``"auto"``: the
+Kalman track once it is confirmed and its speed is significant (over 3 sigma and over
+``MOVING_MPS``), else RLS. A bias that drifts with the geometry (attitude errors as the aircraft
+turns) makes the fixes of a fixed target walk too, and "auto" then calls it moving: that is why
+static is the default. Without an error budget the fixes are weighted alike (as if each had
+``UNWEIGHTED_SIGMA_M``, which also sets the speed's sigma for the moving test) and no uncertainty
+is claimed (null CEP), as for the fixes themselves.
 
 A packet late within its stream is not filtered (the filters only go forward in time); a stream
 whose time goes back (an encoder restart) starts its filters again.
@@ -28,7 +32,8 @@ import numpy as np
 
 from .. import geodesy
 from ..accuracy.cep import cep_zero_mean, error_ellipses
-from ..sequence.rls import SCATTER_LIMIT, RLSState, scatter_inflation, weights
+from ..result import Status
+from ..sequence.rls import SCATTER_LIMIT, RLSState, random_part, scatter_inflation, weights
 from .update import PacketUpdate
 
 MODELS = ("static", "moving", "auto")
@@ -82,6 +87,7 @@ class TargetFilters:
         R = u.cov_enu[idx] if known else np.broadcast_to(UNWEIGHTED_SIGMA_M**2 * np.eye(3), (idx.size, 3, 3))
         good = np.all(np.isfinite(R), axis=(-1, -2))  # a fix whose covariance is unknown does not enter
         idx, R = idx[good], R[good]
+        effects = None if u.effects is None else u.effects[idx]
         if idx.size == 0:
             return u.estimates
         lat, lon, h = (np.array([rows[i][k] for i in idx], dtype=np.float64) for k in ("lat_deg", "lon_deg", "h_m"))
@@ -101,15 +107,23 @@ class TargetFilters:
         n_slots = len(st.slot)
         z = np.zeros((n_slots, 3))
         z[k] = geodesy.to_frame(p, st.origin_ecef[k], st.R_ecef_enu[k])  # ENU at each target's first fix
-        RK = np.broadcast_to(np.eye(3), (n_slots, 3, 3)).copy()
-        RK[k] = R
         use = np.zeros(n_slots, dtype=bool)
         use[k] = True
-        st.rls.update(z, RK, weights(RK, use), use)
+        RK = np.broadcast_to(np.eye(3), (n_slots, 3, 3)).copy()
+        R_kalman = R
+        if effects is None:
+            RK[k] = R
+            st.rls.update(z, RK, weights(RK, use), use)
+        else:  # the error structure: each fix's covariance and source effects in its target's frame
+            turn = np.swapaxes(st.R_ecef_enu[k], -1, -2) @ geodesy.R_ecef_enu(lat, lon)
+            a = np.zeros((n_slots, 3, u.tau_s.size))
+            a[k] = turn @ np.nan_to_num(effects)
+            RK[k] = turn @ R @ np.swapaxes(turn, -1, -2)
+            st.rls.update(z, RK, weights(random_part(a, u.tau_s, RK), use), use, a=a, tau_s=u.tau_s, time_s=u.time_s)
         moving = np.zeros(idx.size, dtype=bool)
         kalman = None
         if st.tracker is not None:
-            kalman = self._track(st, u.time_s, p, R, ids, known)
+            kalman = self._track(st, u, p, R_kalman, ids, lat, lon, effects)
             moving = kalman["moving"] if self.model == "auto" else np.ones(idx.size, dtype=bool)
         u.estimates += self._static(u, st, k[~moving], ids[~moving], known)
         if kalman is not None and moving.any():
@@ -122,32 +136,53 @@ class TargetFilters:
         rls = st.rls
         cov = rls.covariance()[k]
         ratio = rls.scatter_ratio()[k]
+        agree = rls.consistent()[k] if known else np.ones(k.size, dtype=bool)
         e = geodesy.from_frame(rls.x[k], st.origin_ecef[k], st.R_ecef_enu[k])
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
-        sig = error_ellipses(cov[:, :2, :2])
-        cep = cep_zero_mean(sig[:, 0], sig[:, 1], 0.5)
-        mean_sigma = np.mean(np.sqrt(np.diagonal(cov[:, :2, :2], axis1=-2, axis2=-1)), axis=-1)
-        inflate = scatter_inflation(ratio, st.first_sigma_h[k], mean_sigma)
-        cep = np.where(np.isfinite(cep * inflate), cep * inflate, np.nan)
-        columns = zip(ids.tolist(), lon.tolist(), lat.tolist(), h.tolist(), rls.n[k].tolist(), ratio.tolist(),
-                      cep.tolist(), inflate.tolist(), strict=True)
+        spread = uncertainty_props(cov)
+        inflate = np.ones(k.size)
+        if not rls.structured:  # a covariance without its structure: the scatter widens the CEP
+            mean_sigma = np.mean(np.sqrt(np.diagonal(cov[:, :2, :2], axis1=-2, axis2=-1)), axis=-1)
+            inflate = scatter_inflation(ratio, st.first_sigma_h[k], mean_sigma)
         out = []
-        for tid, lo, la, hh, n, r, c, wide in columns:
-            props = {"model": "static (RLS)", "n_fixes": n, "scatter_ratio": r if math.isfinite(r) else None,
-                     "cep50_m": c if known and math.isfinite(c) else None}
-            if wide > 1.0:
+        for j, tid in enumerate(ids.tolist()):
+            r = float(ratio[j])
+            props = {"model": "static (RLS)", "status": "OK" if agree[j] else Status.INCONSISTENT.name,
+                     "n_fixes": int(rls.n[k[j]]), "scatter_ratio": r if math.isfinite(r) else None}
+            if not agree[j]:
+                props["reason"] = (f"the fixes scatter {r:.1f}x more than their uncertainty allows: "
+                                   + Status.INCONSISTENT.explanation)
+                out.append(_estimate(u, tid, None, None, None, props))
+                continue
+            if known:
+                props |= {key: _finite(v[j] * (inflate[j] if key.startswith("c") else 1.0))
+                          for key, v in spread.items()}
+            else:
+                props["cep50_m"] = None
+            if inflate[j] > 1.0:
                 props["warning"] = (f"the fixes scatter {r:.1f}x more than their sigma allows "
                                     f"(> {SCATTER_LIMIT:g}): the target moves, or the sigma is optimistic; the "
                                     "uncertainty is their scatter")
-            out.append(_estimate(u, tid, lo, la, hh, props))
+            out.append(_estimate(u, tid, float(lon[j]), float(lat[j]), float(h[j]), props))
         return out
 
-    def _track(self, st: _Stream, t: float, p: np.ndarray, R: np.ndarray, ids: np.ndarray, known: bool) -> dict:
-        """One Kalman frame for the packet's targets, in the stream's ENU frame (its first fix)."""
+    def _track(self, st: _Stream, u: PacketUpdate, p: np.ndarray, R: np.ndarray, ids: np.ndarray, lat: np.ndarray,
+               lon: np.ndarray, effects: np.ndarray | None) -> dict:
+        """One Kalman frame for the packet's targets, in the stream's ENU frame (its first fix);
+        with the error structure, each fix weighed by its noise and its other sources considered
+        (:func:`eoloc.sequence.track.consider_update`)."""
         if st.track_origin is None:
             st.track_origin = tuple(float(v) for v in geodesy.ecef_to_geodetic(*p[0]))
         z = geodesy.ecef_to_enu(p, *st.track_origin)
-        st.tracker.frame(t, np.arange(len(ids)), z, R[:, :2, :2], ids)
+        A = tau = None
+        Rh = R[:, :2, :2]
+        if effects is not None:
+            turn = geodesy.R_ecef_enu(*st.track_origin[:2]).T @ geodesy.R_ecef_enu(lat, lon)
+            a = (turn @ np.nan_to_num(effects))[:, :2]
+            noise = u.tau_s == 0
+            Rh = a[..., noise] @ np.swapaxes(a[..., noise], -1, -2)
+            A, tau = a[..., ~noise], u.tau_s[~noise]
+        st.tracker.frame(u.time_s, np.arange(len(ids)), z, Rh, ids, A=A, tau_s=tau)
         lives = [st.tracker.live[tid] for tid in ids]
         x = np.array([lv.x for lv in lives])
         P = np.array([lv.P for lv in lives])
@@ -163,15 +198,16 @@ class TargetFilters:
         x, P, speed, speed_sigma = (kal[k][moving] for k in ("x", "P", "speed", "speed_sigma"))
         e = geodesy.enu_to_ecef(np.c_[x[:, 0], x[:, 1], kal["z"][moving, 2]], *st.track_origin)
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
-        sig = error_ellipses(P[:, :2, :2])
-        cep = cep_zero_mean(sig[:, 0], sig[:, 1], 0.5)
+        C = np.zeros((len(x), 3, 3))
+        C[:, :2, :2] = P[:, :2, :2]
+        spread = uncertainty_props(C, vertical=False)
         heading = np.degrees(np.arctan2(x[:, 2], x[:, 3])) % 360.0
         hits = np.asarray(kal["hits"])[moving]
         out = []
         for j, tid in enumerate(ids[moving]):
-            props = {"model": "moving (Kalman)", "n_fixes": int(hits[j]), "speed_mps": float(speed[j]),
+            props = {"model": "moving (Kalman)", "status": "OK", "n_fixes": int(hits[j]), "speed_mps": float(speed[j]),
                      "heading_deg": float(heading[j]), "speed_sigma_mps": _finite(speed_sigma[j]) if known else None,
-                     "cep50_m": _finite(cep[j]) if known else None}
+                     **{key: _finite(v[j]) if known else None for key, v in spread.items()}}
             out.append(_estimate(u, tid, float(lon[j]), float(lat[j]), float(h[j]), props))
         return out
 
@@ -181,7 +217,21 @@ def _finite(v) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def _estimate(u: PacketUpdate, tid: str, lon: float, lat: float, h: float, props: dict) -> dict:
-    return {"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat, h]},
+def uncertainty_props(cov: np.ndarray, vertical: bool = True) -> dict[str, np.ndarray]:
+    """CEP50, CE90 (exact radii of the horizontal normal) and LE90 (m) of estimates of covariance
+    ``cov`` (K, 3, 3) ENU m^2."""
+    e = error_ellipses(cov[:, :2, :2])
+    out = {"cep50_m": cep_zero_mean(e[:, 0], e[:, 1], 0.5), "ce90_m": cep_zero_mean(e[:, 0], e[:, 1], 0.9)}
+    if vertical:
+        out["le90_m"] = LE90_PER_SIGMA * np.sqrt(cov[:, 2, 2])
+    return out
+
+
+LE90_PER_SIGMA = 1.6448536269514722  # two-sided 90 % of a normal, in sigmas
+
+
+def _estimate(u: PacketUpdate, tid: str, lon: float | None, lat: float | None, h: float | None, props: dict) -> dict:
+    geometry = None if lon is None else {"type": "Point", "coordinates": [lon, lat, h]}
+    return {"type": "Feature", "geometry": geometry,
             "properties": {"what": "estimate", "stream": u.stream, "packet": u.index, "time_utc": u.time_utc,
                            "target_id": tid, **props}}

@@ -45,6 +45,8 @@ class PacketUpdate:
     footprint: dict | None  # GeoJSON Polygon: the four frame corners, or on a DEM the traced border
     fixes: list[dict] = field(default_factory=list)  # one row per VMTI target (export.fix_records layout)
     cov_enu: np.ndarray | None = None  # (len(fixes), 3, 3) ENU m^2, with an error budget
+    effects: np.ndarray | None = None  # (len(fixes), 3, S) each budget source's 1-sigma effect (m, ENU)
+    tau_s: np.ndarray | None = None  # (S,) the sources' correlation times (0 noise, inf bias)
 
     time_utc: str | None = None  # the time stamp as ISO 8601 UTC
     estimates: list[dict] = field(default_factory=list)  # refined targets (GeoJSON), see live.refine
@@ -160,7 +162,7 @@ class PacketLocator:
         fixes = self._targets(det, c, pose, usable, surface_h) if len(det) else []
         t = c["time_s"]
         return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
-                            None, utc_times([t], "unix")[0])
+                            time_utc=utc_times([t], "unix")[0])
 
     @staticmethod
     def _ray(sensor, pose: tuple, usable: bool, height_m: float, u: float, v: float, in_image: bool = True) -> tuple:
@@ -266,14 +268,14 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
                      "elevation_deg": math.degrees(math.atan2(-d, math.hypot(n, e))),
                      "range_m": float(geom.centre.range_m[0])}
     fixes: list[dict] = []
-    cov_enu = None
+    cov_enu = effects = tau = None
     det = vmti_detections(KLVStream(source, "klv", [packet]))
     if len(det):
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
         extra = with_utc({"stream": det.columns["stream"], **v.extra}, "unix")
         fixes = fix_records(v.fixes, extra, v.uncertainty).rows()
-        cov_enu = v.cov_enu
+        cov_enu, effects, tau = v.cov_enu, v.effects, v.tau_s
     t = float(c["time_s"])
     iso = utc_times([t], "unix")[0]
     return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
-                        cov_enu, iso)
+                        cov_enu, effects, tau, iso)

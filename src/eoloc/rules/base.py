@@ -42,6 +42,16 @@ class StopRule:
         """Where each ray ends, with the rule's own error sources perturbed by ``errors``."""
         raise NotImplementedError
 
+    def stop_in_frame(self, sensor: SensorModel, frame, xn, yn, outside, ell: Ellipsoid = WGS84,
+                      errors: Errors = no_errors, normalize: Callable | None = None) -> Fixes:
+        """Where the rays of normalised image points (xn, yn) of camera ``frame`` end, with the
+        rule's own error sources perturbed by ``errors``: the form the error analysis calls
+        (Monte Carlo, first-order covariance, sensitivity), so that every rule takes part in it.
+        ``normalize(u, v)``: pixels to normalised points with the same camera errors (for a rule
+        that needs a pixel of its own, e.g. FlatGround's main target). Default: the rays, then
+        :meth:`stop`."""
+        return self.stop(sensor.rays_from(frame, xn, yn, outside), ell, errors=errors)
+
     def locate(self, sensor: SensorModel, pose: Pose, pixels: ArrayLike | None = None,
                pose_index: ArrayLike | None = None) -> Fixes:
         """Pixels (default: the principal point) of ``pose`` to the ground by this rule

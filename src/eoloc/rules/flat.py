@@ -54,6 +54,26 @@ class FlatGround(StopRule):
         pose = pose if pose_index is None else pose.take(pose_index)
         return locate_flat(sensor, pose, self.main_range_m, pixels, main_pixel=self.main_pixel)
 
+    error_sources = ("range_m",)
+
+    def stop_in_frame(self, sensor: SensorModel, frame, xn, yn, outside, ell: Ellipsoid = WGS84, errors=None,
+                      normalize=None) -> Fixes:
+        """The error analysis' form (see :meth:`StopRule.stop_in_frame`): the plane through the main
+        target seen in the same perturbed ``frame`` at the main range plus its ``range_m`` error,
+        the main pixel normalised with the same camera errors."""
+        cam = sensor.camera
+        main = np.array([cam.cx, cam.cy] if self.main_pixel is None else np.ravel(self.main_pixel), dtype=np.float64)
+        if normalize is None:
+            xn0, yn0 = cam.pixel_to_normalized(main[0], main[1])
+        else:
+            xn0, yn0 = normalize(main[0], main[1])
+        main_range = self.main_range_m + (errors("range_m") if errors is not None else 0.0)
+        c = ell.constants
+        with np.errstate(all="ignore"):
+            nx, ny, nz, H = kernels.flat_plane(frame.R, frame.ox, frame.oy, frame.oz, xn0, yn0, main_range, *c)
+        out = run("flat_target", frame.R, frame.ox, frame.oy, frame.oz, nx, ny, nz, H, xn, yn, *c)
+        return to_fixes(out, frame.invalid, outside)
+
     @property
     def value_shape(self) -> tuple[int, ...]:
         return self.main_range_m.shape

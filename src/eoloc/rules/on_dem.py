@@ -59,8 +59,11 @@ class OnDEM(StopRule):
         # (the same geometry to shift x distance / R, ~1e-3 of the shift at 20 km)
         lat, lon, _ = geodesy.ecef_to_geodetic(rays.ox, rays.oy, rays.oz, ell=ell)
         up = -geodesy.R_ecef_ned(lat, lon)[..., :, 2]
-        s = np.broadcast_to(shift, rays.shape)
-        moved = replace(rays, ox=rays.ox - s * up[..., 0], oy=rays.oy - s * up[..., 1], oz=rays.oz - s * up[..., 2])
+        shape = np.broadcast_shapes(np.shape(shift), rays.shape)  # the shift may vary where nothing else does
+        s = np.broadcast_to(shift, shape)
+        moved = replace(rays, ox=rays.ox - s * up[..., 0], oy=rays.oy - s * up[..., 1], oz=rays.oz - s * up[..., 2],
+                        dx=np.broadcast_to(rays.dx, shape), dy=np.broadcast_to(rays.dy, shape),
+                        dz=np.broadcast_to(rays.dz, shape))
         f = self._march(moved, ell)
         return replace(f, h_m=f.h_m + s)
 

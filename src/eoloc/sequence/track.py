@@ -8,6 +8,14 @@ east/north with its covariance (the per-fix covariance of the error budget, else
 ``meas_sigma_m``). Update in Joseph form, P = (I - KH) P (I - KH)^T + K R K^T, which stays
 symmetric and positive definite in floating point where the short form does not.
 
+Errors that do not change from frame to frame do not average down in a track either. Given the
+fixes' error structure (the budget sources' effects on each fix and their behaviour in time,
+:class:`eoloc.accuracy.FixCovariance`), each fix is weighed by its noise only and the biases and
+Gauss–Markov errors are carried as *consider* parameters (the Schmidt–Kalman filter: their
+cross-covariance with the track state is propagated, exp(-dt / tau) for a Gauss–Markov source, 1 for
+a bias, but they are not estimated), so the track's covariance P is that of its true error, bias
+included, exact for the linearised errors.
+
 Detections with target ids go to their own track. Without ids (``associate=True``) each frame's
 fixes are assigned to the predicted tracks by global nearest neighbour (Hungarian algorithm,
 scipy ``linear_sum_assignment``) on the Mahalanobis distance, inside a chi-square gate of
@@ -18,6 +26,7 @@ probability ``gate_prob``; an unassigned fix starts a tentative track, confirmed
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -27,6 +36,9 @@ from scipy.stats import chi2
 from .. import geodesy
 from ..errors import InputError
 from ..result import Fixes
+
+if TYPE_CHECKING:
+    from ..accuracy.covariance import FixCovariance
 
 H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
 
@@ -127,20 +139,36 @@ def joseph_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) ->
     return x, 0.5 * (P + P.T)
 
 
-class _Live:
-    __slots__ = ("P", "hits", "t", "track", "x")
+def consider_update(x: np.ndarray, P: np.ndarray, Pxc: np.ndarray, z: np.ndarray, R: np.ndarray,
+                    A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Schmidt–Kalman update of state x (4,), covariance P (4, 4) and its cross-covariance Pxc
+    (4, C) with C consider parameters of unit variance (each the scaled error of one budget source),
+    by a position fix z (2,) = H x + A c + noise of covariance R (2, 2), A (2, C)."""
+    HP = H @ P + A @ Pxc.T  # cov(z, x)
+    S = H @ P @ H.T + H @ Pxc @ A.T + A @ Pxc.T @ H.T + A @ A.T + R
+    K = np.linalg.solve(S, HP).T
+    x = x + K @ (z - H @ x)
+    P = P - K @ S @ K.T
+    Pxc = Pxc - K @ (H @ Pxc + A)
+    return x, 0.5 * (P + P.T), Pxc
 
-    def __init__(self, track: Track, x, P, t):
-        self.track, self.x, self.P, self.t, self.hits = track, x, P, t, 1
+
+class _Live:
+    __slots__ = ("P", "Pxc", "hits", "t", "track", "x")
+
+    def __init__(self, track: Track, x, P, t, Pxc=None):
+        self.track, self.x, self.P, self.t, self.hits, self.Pxc = track, x, P, t, 1, Pxc
 
 
 def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = None, target_id: ArrayLike | None = None,
-                *, associate: bool | None = None, config: TrackerConfig | None = None,
-                origin: tuple[float, float, float] | None = None, include_tentative: bool = False,
-                progress=None) -> TrackSet:
+                *, covariance: FixCovariance | None = None, associate: bool | None = None,
+                config: TrackerConfig | None = None, origin: tuple[float, float, float] | None = None,
+                include_tentative: bool = False, progress=None) -> TrackSet:
     """Track N fixes (1-D ``fixes``; ``time_s`` (N,) seconds; ``cov_enu`` (N, 3, 3) m^2 or None;
-    ``target_id`` (N,) or None). ``associate`` defaults to True when no ids are given. Fixes whose
-    status is not OK are left out (assigned ""). ``progress(done, total)`` is called per frame."""
+    ``target_id`` (N,) or None). ``covariance``: the fixes' FixCovariance instead of cov_enu (the
+    honest way: biases and Gauss–Markov errors as consider parameters, see the module notes).
+    ``associate`` defaults to True when no ids are given. Fixes whose status is not OK are left
+    out (assigned ""). ``progress(done, total)`` is called per frame."""
     cfg = config or TrackerConfig()
     t = np.asarray(time_s, dtype=np.float64).ravel()
     n = t.size
@@ -157,6 +185,20 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
         i = int(np.flatnonzero(ok)[0])
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
     z = geodesy.ecef_to_enu(fixes.flat().p_ecef(), *origin)
+    A = tau = None
+    if covariance is not None:
+        cov_enu = covariance.cov_enu
+        keep = covariance.tau_s > 0  # noise stays in the fix's weight, the rest is considered
+        tau = covariance.tau_s[keep]
+        a = np.asarray(covariance.scaled_jacobian).reshape(n, 3, -1)
+        turn = geodesy.R_ecef_enu(*origin[:2]).T @ geodesy.R_ecef_enu(np.nan_to_num(np.ravel(fixes.lat_deg)),
+                                                                     np.nan_to_num(np.ravel(fixes.lon_deg)))
+        a = turn @ a  # each fix's source effects in the tracks' ENU axes
+        A = a[:, :2][..., keep]
+        noise = a[:, :2][..., ~keep]
+        cov_enu = np.zeros((n, 3, 3))
+        cov_enu[:, :2, :2] = noise @ np.swapaxes(noise, -1, -2)
+        cov_enu = np.where(np.isfinite(a).all(axis=(-1, -2))[:, None, None], cov_enu, np.nan)
     if cov_enu is None:
         R = np.broadcast_to(cfg.meas_sigma_m**2 * np.eye(2), (n, 2, 2))
     else:
@@ -169,7 +211,7 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
     good = good[np.argsort(t[good], kind="stable")]
     frames, starts = np.unique(t[good], return_index=True)
     for fi, (tk, here) in enumerate(zip(frames, np.split(good, starts[1:]), strict=True)):
-        for key, j in tracker.frame(tk, here, z, R, ids):
+        for key, j in tracker.frame(tk, here, z, R, ids, A=A, tau_s=tau):
             assigned[j] = key
         if progress is not None:
             progress(fi + 1, frames.size)
@@ -193,19 +235,28 @@ class Tracker:
         self.done: list[Track] = []
         self.counter = 0
 
-    def frame(self, tk: float, here: np.ndarray, z: np.ndarray, R: np.ndarray,
-              ids: np.ndarray | None) -> list[tuple[str, int]]:
+    def frame(self, tk: float, here: np.ndarray, z: np.ndarray, R: np.ndarray, ids: np.ndarray | None, *,
+              A: np.ndarray | None = None, tau_s: np.ndarray | None = None) -> list[tuple[str, int]]:
         """Update with the fixes ``here`` (indices into z (N, 3) ENU m, R (N, 2, 2) m^2 and ids
-        (N,), or None when associating) at time ``tk`` s; (track key, fix index) for each fix."""
+        (N,), or None when associating) at time ``tk`` s; (track key, fix index) for each fix.
+        With an error structure, R is each fix's noise and ``A`` (N, 2, C) the effects of its C
+        other sources (biases, Gauss–Markov errors of correlation times ``tau_s`` (C,)), carried as
+        consider parameters."""
         cfg, live = self.cfg, self.live
         for key in [k for k, lv in live.items() if tk - lv.t > cfg.max_coast_s]:  # ended
             self.done.append(live.pop(key).track)
         pred = {}
         for key, lv in live.items():
             F, Q = cv_model(tk - lv.t, cfg.accel_psd)
-            pred[key] = (F @ lv.x, F @ lv.P @ F.T + Q)
+            pxc = None
+            if lv.Pxc is not None:
+                with np.errstate(invalid="ignore"):
+                    phi = np.where(np.isinf(tau_s), 1.0, np.exp(-(tk - lv.t) / tau_s))
+                pxc = (F @ lv.Pxc) * phi
+            pred[key] = (F @ lv.x, F @ lv.P @ F.T + Q, pxc)
         if self.associate:
-            pairs, fresh = _associate(here, z, R, pred, self.gate)
+            R_gate = R if A is None else R + A @ np.swapaxes(A, -1, -2)
+            pairs, fresh = _associate(here, z, R_gate, pred, self.gate)
         else:
             pairs = [(ids[j], j) for j in here if ids[j] in live]
             fresh = [j for j in here if ids[j] not in live]
@@ -214,7 +265,11 @@ class Tracker:
         out = []
         for key, j in pairs:
             lv = live[key]
-            lv.x, lv.P = joseph_update(*pred[key], z[j, :2], R[j])
+            x, P, pxc = pred[key]
+            if pxc is None:
+                lv.x, lv.P = joseph_update(x, P, z[j, :2], R[j])
+            else:
+                lv.x, lv.P, lv.Pxc = consider_update(x, P, pxc, z[j, :2], R[j], A[j])
             lv.t, lv.hits = tk, lv.hits + 1
             lv.track.confirmed |= lv.hits >= cfg.confirm_hits
             _record(lv, j, z)
@@ -229,7 +284,12 @@ class Tracker:
             P0 = np.zeros((4, 4))
             P0[:2, :2] = R[j]
             P0[2, 2] = P0[3, 3] = cfg.init_speed_sigma_mps**2
-            lv = _Live(Track(key, confirmed=cfg.confirm_hits <= 1), x0, P0, tk)
+            pxc = None
+            if A is not None:  # the first fix's error: its noise and its considered sources
+                P0[:2, :2] += A[j] @ A[j].T
+                pxc = np.zeros((4, A.shape[-1]))
+                pxc[:2] = A[j]
+            lv = _Live(Track(key, confirmed=cfg.confirm_hits <= 1), x0, P0, tk, pxc)
             live[key] = lv
             _record(lv, j, z)
             out.append((key, int(j)))
@@ -256,7 +316,7 @@ def _associate(here: np.ndarray, z: np.ndarray, R: np.ndarray, pred: dict, gate:
         return [], list(here)
     cost = np.full((len(keys), here.size), np.inf)
     for a, key in enumerate(keys):
-        x, P = pred[key]
+        x, P = pred[key][:2]
         S = H @ P @ H.T + R[here]  # (m, 2, 2)
         r = z[here, :2] - (H @ x)[None]
         d2 = np.einsum("mi,mi->m", r, np.linalg.solve(S, r[..., None])[..., 0])

@@ -1,7 +1,9 @@
 // eoloc's live map: Leaflet, fed by eoloc live over a WebSocket (see eoloc/service/livemap.py).
 // Every drawn thing carries a CSS class (eoloc-aircraft, eoloc-aircraft-trail, eoloc-footprint,
 // eoloc-centre, eoloc-target, eoloc-cep, eoloc-track, eoloc-estimate) and window.eoloc holds what
-// the page knows, for scripts and tests.
+// the page knows, for scripts and tests. The circles are each fix's and estimate's CE90 (the 90 %
+// circle a TAK receiver draws from the same CoT ce, 2.1460 ce); a target whose fixes are
+// INCONSISTENT has no estimate marker and is listed in the panel (eoloc-inconsistent).
 (function () {
   "use strict";
   const TRAIL = 2000;      // points kept per aircraft trail and per target track
@@ -64,6 +66,7 @@
     const bounds = [];
     for (const f of m.features) {
       const p = f.properties || {}, g = f.geometry;
+      if (!g && p.what === "estimate" && p.status === "INCONSISTENT") { inconsistent(key, p); continue; }
       if (!g) { continue; }
       if (p.what === "aircraft") {
         const ll = [g.coordinates[1], g.coordinates[0]];
@@ -89,17 +92,19 @@
         Object.assign(t, {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], cep50_m: p.cep50_m, n: t.n + 1, packet: m.index});
         marker(groups.targets, drawn.target, id, ll, {radius: 5, color: COLOURS.target, className: "eoloc-target"},
                tip(`target ${p.target_id}`, `h ${num(g.coordinates[2], 1)} m`,
-                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m, CE90 ${num(p.ce90_m, 1)} m` : null));
-        circle(groups.targets, drawn.cep, id, ll, p.cep50_m, {color: COLOURS.target, className: "eoloc-cep"});
+                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m, CE90 ${num(p.ce90_m, 1)} m (circle)` : null));
+        circle(groups.targets, drawn.cep, id, ll, p.ce90_m, {color: COLOURS.target, className: "eoloc-cep"});
         trail(groups.tracks, drawn.track, id, ll, {color: COLOURS.track, className: "eoloc-track"});
       } else if (p.what === "estimate") {
         const id = `${key}/${p.target_id}`, ll = [g.coordinates[1], g.coordinates[0]];
-        S.estimates[id] = {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], cep50_m: p.cep50_m, n: p.n_fixes, model: p.model};
+        S.estimates[id] = {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], cep50_m: p.cep50_m, ce90_m: p.ce90_m,
+                           n: p.n_fixes, model: p.model, status: "OK"};
         marker(groups.estimates, drawn.estimate, id, ll, {radius: 6, color: COLOURS.estimate, className: "eoloc-estimate"},
                tip(`target ${p.target_id}: ${p.model || "estimate"} of ${p.n_fixes} fixes`,
-                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m` : null,
+                   p.cep50_m != null ? `CEP50 ${num(p.cep50_m, 1)} m, CE90 ${num(p.ce90_m, 1)} m (circle)` : null,
                    p.speed_mps != null ? `speed ${num(p.speed_mps, 1)} m/s` : null));
-        circle(groups.estimates, drawn.estimateCep, id, ll, p.cep50_m, {color: COLOURS.estimate, className: "eoloc-cep"});
+        circle(groups.estimates, drawn.estimateCep, id, ll, p.ce90_m, {color: COLOURS.estimate, className: "eoloc-cep"});
+        flagged(id, null);
       }
     }
     if (!fitted && bounds.length) {
@@ -108,6 +113,27 @@
       else { map.setView(box.getCenter(), 13); }
       fitted = true;
     }
+  }
+
+  // a target whose fixes do not agree with one point: no estimate on the map, said in the panel
+  function inconsistent(key, p) {
+    const id = `${key}/${p.target_id}`;
+    S.estimates[id] = {status: "INCONSISTENT", n: p.n_fixes, reason: p.reason || ""};
+    for (const store of [drawn.estimate, drawn.estimateCep]) {
+      if (store[id]) { groups.estimates.removeLayer(store[id]); delete store[id]; }
+    }
+    flagged(id, `target ${p.target_id}: INCONSISTENT, no estimate (${p.n_fixes} fixes scatter ` +
+                `${num(p.scatter_ratio, 0)}x more than their uncertainty allows)`);
+  }
+
+  function flagged(id, text) {
+    const list = document.getElementById("eoloc-flags");
+    const item = Array.from(list.children).find((li) => li.dataset.id === id);
+    if (text === null) { if (item) { list.removeChild(item); } return; }
+    const li = item || list.appendChild(document.createElement("li"));
+    li.dataset.id = id;
+    li.className = "eoloc-inconsistent";
+    li.textContent = text;
   }
 
   function setState(state, text, detail) {
