@@ -17,7 +17,7 @@ Targets whose covariance is flagged non-linear, or whose fixes are flagged INCON
 counted apart.
 
 Used by ``tests/integration/test_coverage.py`` (seeded, ~10^3 targets per path) and
-``bench/coverage.py`` (-n for big runs; the README's table).
+``bench/bench_coverage.py`` (-n for big runs; the README's table).
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ BUDGET = {
 RULE_SOURCE = {"height": ("terrain_m", {"normal": 3.0, "kind": "bias"}),
                "range": ("range_m", {"normal": 2.0, "kind": "noise"})}
 WIDTH, HEIGHT, HFOV_DEG = 1280, 720, 20.0
+ACCEL_PSD = 0.1  # m^2/s^3: the moving targets' white acceleration, as eoloc's TrackerConfig assumes
 
 
 def budget_for(rule: str) -> dict:
@@ -97,7 +98,8 @@ def simulate(rng: np.random.Generator, k: int, frames: int, rule: str, *, dt_s: 
              spread_deg: float | None = None, speed_mps: float = 0.0) -> Passes:
     """K passes of ``frames`` frames ``dt_s`` apart, stop rule "height" or "range"; the targets
     anywhere between 60 S and 60 N, or within ``spread_deg`` of one such place; static, or driving
-    straight at up to ``speed_mps`` on the local level."""
+    on the local level at up to ``speed_mps`` with a white acceleration of :data:`ACCEL_PSD` (the
+    model the tracker declares: its covariance is held to the truth of that model)."""
     cam = oracle_camera()
     t = np.arange(frames) * dt_s
     if spread_deg is None:
@@ -115,10 +117,20 @@ def simulate(rng: np.random.Generator, k: int, frames: int, rule: str, *, dt_s: 
     heading = (bearing + 90.0 + rng.normal(0.0, 20.0, k)) % 360.0
     speed = rng.uniform(40.0, 80.0, k)
     R_en = O.r_ecef_ned(lat_t, lon_t)  # (K, 3, 3) at the target
-    course = np.radians(rng.uniform(0.0, 360.0, k))
-    v_t = rng.uniform(0.3, 1.0, k) * speed_mps
-    drive = (t - t.mean())[:, None] * v_t[None, :]
-    moved = np.stack([drive * np.cos(course), drive * np.sin(course), np.zeros_like(drive)], -1)
+    moved = np.zeros((frames, k, 3))
+    if speed_mps > 0:  # driving on the local level: the tracker's model, white acceleration of ACCEL_PSD
+        course = np.radians(rng.uniform(0.0, 360.0, k))
+        v = (rng.uniform(0.3, 1.0, k) * speed_mps)[:, None] * np.stack([np.cos(course), np.sin(course)], -1)
+        sub = 20  # integration steps per frame
+        h_s = dt_s / sub
+        pos = np.zeros((k, 2))
+        for i in range(1, frames):
+            for _ in range(sub):
+                a = rng.normal(0.0, math.sqrt(ACCEL_PSD / h_s), (k, 2))  # white noise of PSD q, held for h
+                pos += v * h_s + 0.5 * a * h_s * h_s
+                v += a * h_s
+            moved[i, :, :2] = pos
+        moved[..., :2] -= moved[frames // 2, :, :2]  # the middle of the pass at T0
     T = T0[None] + np.einsum("kij,fkj->fki", R_en, moved)  # (F, K, 3)
     along = (t - t.mean())[:, None] * speed[None, :]  # (F, K)
     b, hd = np.radians(bearing), np.radians(heading)

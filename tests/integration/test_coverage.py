@@ -3,7 +3,7 @@
 The coverage suite (tests/coverage_lib.py): ~10^3 simulated targets per path, their telemetry
 errors drawn from a budget with biases, noise and Gauss–Markov errors; the share of truths inside
 each path's predicted 50 % and 90 % horizontal circles and 90 % vertical interval must fall in the
-binomial 99 % band of 50 % / 90 %. Seeded: the same numbers every run. `python bench/coverage.py
+binomial 99 % band of 50 % / 90 %. Seeded: the same numbers every run. `python bench/bench_coverage.py
 -n 10000` runs it big and prints the README's table.
 
 Then each case of the issue as a regression test: the demo's live run (the lake's CEP50 from 39
@@ -345,3 +345,78 @@ def test_47_near_singular_fix_covariances_make_no_false_certainty():
     assert horiz > 0.5 * np.trace(R.mean(0)[:2, :2]) / n
     info = np.linalg.inv(np.sum(np.linalg.inv(R), axis=0))  # the old information sum
     assert np.trace(info[:2, :2]) < 1e-3 * horiz
+
+
+def test_47_accuracy_of_the_flight_you_flew(tmp_path):
+    """`eoloc accuracy TELEMETRY DETECTIONS --config --dem`: the demo's pass with a budget of every
+    kind. Per target and per fix, first order and Monte Carlo (copies of the flight, errors drawn
+    by kind) agree where the chain is linear (the lake: within 20 %); the biases' CE90 of the lake's
+    estimate is that of one fix (it does not average), its noise's far smaller; the summits are
+    INCONSISTENT, and their fixes' Monte Carlo CE90 is far above first order (the ridge). Written
+    as CSV and GeoJSON, with the picture."""
+    import csv
+
+    cfg = tmp_path / "cam.toml"
+    cfg.write_text((MOUNTAIN / "camera.toml").read_text() + """
+[accuracy.budget]
+yaw_deg = {normal = 0.03, kind = "markov", tau_s = 60}
+pitch_deg = {normal = 0.03, kind = "noise"}
+roll_deg = {normal = 0.03, kind = "noise"}
+gimbal1_deg = {normal = 0.02, kind = "bias"}
+gimbal2_deg = {normal = 0.02, kind = "bias"}
+u_px = {normal = 0.7, kind = "noise"}
+v_px = {normal = 0.7, kind = "noise"}
+""")
+    out = tmp_path / "o"
+    r = subprocess.run([EOLOC, "accuracy", str(MOUNTAIN / "telemetry.csv"), str(MOUNTAIN / "detections.csv"),
+                        "--config", str(cfg), "--dem", str(MOUNTAIN / "longs_peak_srtmgl3.tif"), "-n", "300",
+                        "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    targets = {row["target_id"]: row for row in csv.DictReader((out / "accuracy_targets.csv").open())}
+    lake = {k: float(v) for k, v in targets["CHASM_LAKE"].items() if k.endswith("_m")}
+    assert targets["CHASM_LAKE"]["status"] == "OK"
+    assert lake["mc_ce90_m"] == pytest.approx(lake["ce90_m"], rel=0.2)
+    assert lake["mc_le90_m"] == pytest.approx(lake["le90_m"], rel=0.25)
+    fixes = [row for row in csv.DictReader((out / "accuracy_fixes.csv").open()) if row["status"] == "OK"]
+    lake_fixes = [f for f in fixes if f["target_id"] == "CHASM_LAKE"]
+    one_bias = np.median([float(f["ce90_bias_m"]) for f in lake_fixes])
+    one_noise = np.median([float(f["ce90_noise_m"]) for f in lake_fixes])
+    assert lake["ce90_bias_m"] == pytest.approx(one_bias, rel=0.3)  # the biases: as for one fix
+    assert lake["ce90_noise_m"] < 0.4 * one_noise  # the noise: averaged over 40 fixes
+    ratio = [float(f["mc_ce90_m"]) / float(f["ce90_m"]) for f in lake_fixes]
+    assert 0.8 < np.median(ratio) < 1.2
+    for tid in ("LONGS_PEAK", "MT_MEEKER"):
+        assert targets[tid]["status"] == "INCONSISTENT"
+        ridge = [float(f["mc_ce90_m"]) / float(f["ce90_m"]) for f in fixes if f["target_id"] == tid]
+        assert np.median(ridge) > 3.0
+    assert (out / "accuracy_targets.geojson").exists() and (out / "accuracy_flight.png").stat().st_size > 10_000
+
+
+def test_47_accuracy_of_a_klv_flight(tmp_path):
+    """`eoloc accuracy FLIGHT.klv --config --dem`: the VMTI targets as one camera with each
+    packet's zoom as a focal scale; every fix and its CE90 equal `eoloc klv`'s with the same budget
+    (its per-field-of-view groups), the lake's estimate equal to the live session's last one, and
+    its Monte Carlo CE90 within 20 % of first order."""
+    import csv
+
+    out = tmp_path / "o"
+    r = subprocess.run([EOLOC, "accuracy", str(MOUNTAIN / "flight.klv"), "--config", str(MOUNTAIN / "klv.toml"),
+                        "--dem", str(MOUNTAIN / "longs_peak_srtmgl3.tif"), "-n", "300", "--out", str(out),
+                        "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    fixes = [row for row in csv.DictReader((out / "accuracy_fixes.csv").open()) if row["status"] == "OK"]
+    ref = tmp_path / "klv"
+    r = subprocess.run([EOLOC, "klv", str(MOUNTAIN / "flight.klv"), "--config", str(MOUNTAIN / "klv.toml"),
+                        "--dem", str(MOUNTAIN / "longs_peak_srtmgl3.tif"), "--out", str(ref)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    klv = [row for row in csv.DictReader(next(ref.glob("*fixes*.csv")).open()) if row["status"] == "OK"]
+    assert len(klv) == len(fixes) == 103
+    key = {(k["target_id"], round(float(k["time_s"]), 3)): k for k in klv}
+    for f in fixes:
+        k = key[(f["target_id"], round(float(f["time_s"]), 3))]
+        assert abs(float(f["lat_deg"]) - float(k["lat_deg"])) < 1e-9
+        assert abs(float(f["lon_deg"]) - float(k["lon_deg"])) < 1e-9
+        assert float(f["ce90_m"]) == pytest.approx(float(k["ce90_m"]), rel=1e-6)
+    lake = next(row for row in csv.DictReader((out / "accuracy_targets.csv").open()) if row["target_id"] == "1")
+    assert float(lake["mc_ce90_m"]) == pytest.approx(float(lake["ce90_m"]), rel=0.2)

@@ -94,9 +94,12 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
     shapes.append(rule.value_shape)
     lead = (n,) + (1,) * len(np.broadcast_shapes(*shapes))
 
-    def z(name: str):
+    def z(name: str):  # (n,) draws: one per row; (n, *T) draws: one per row and target
         x = d.get(name)
-        return 0.0 if x is None else np.asarray(x, dtype=np.float64).reshape(lead)
+        if x is None:
+            return 0.0
+        x = np.asarray(x, dtype=np.float64)
+        return x.reshape(lead) if x.ndim == 1 else x
 
     lat = pose.lat_deg + z("lat_deg")
     lon = pose.lon_deg + z("lon_deg")
@@ -143,10 +146,12 @@ def _angles(nominal, d, prefix, axes, lead):
     names = [f"{prefix}_{a}_deg" for a in axes]
     if not any(k in d for k in names):
         return None
-    out = np.broadcast_to(np.asarray(nominal, dtype=np.float64), (*lead, 3)).copy()
+    draws = {k: (np.reshape(d[k], lead) if np.ndim(d[k]) == 1 else np.asarray(d[k])) for k in names if k in d}
+    shape = np.broadcast_shapes(lead, *(x.shape for x in draws.values()))
+    out = np.broadcast_to(np.asarray(nominal, dtype=np.float64), (*shape, 3)).copy()
     for i, k in enumerate(names):
-        if k in d:
-            out[..., i] += np.reshape(d[k], lead)
+        if k in draws:
+            out[..., i] += draws[k]
     return out
 
 

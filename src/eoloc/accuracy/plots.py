@@ -269,3 +269,51 @@ def coverage_figure(cov, *, title: str = "predicted against observed: is the unc
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(f"{title}\nsigma scale factor {cov.scale:.2f} (1 = honest)", fontsize=10)
     return fig
+
+
+def plot_flight_accuracy(fa, path: str | Path) -> Path:
+    """The accuracy of a flight (:class:`eoloc.sequence.flight.FlightAccuracy`): left, each target's
+    first-order CE90 as the share of its biases, Gauss–Markov errors and noise (stacked by variance,
+    so the bar's length is the CE90) with the Monte Carlo CE90 as a diamond and one fix's CE90 as a
+    bar; right, every fix's CE90 over time, first order and Monte Carlo, per target."""
+    fig = _figure(11.0, 4.6)
+    ax, bx = fig.subplots(1, 2)
+    rows = [r for r in fa.targets if r.get("status") == "OK"]
+    colours = {"bias": "tab:red", "markov": "tab:orange", "noise": "tab:blue"}
+    labels = {"bias": "biases (never average)", "markov": "Gauss–Markov", "noise": "noise"}
+    for i, r in enumerate(rows):
+        parts = np.array([r[f"ce90_{k}_m"] ** 2 for k in colours])
+        total = r["ce90_m"]
+        share = parts / parts.sum() * total if parts.sum() > 0 else parts
+        left = 0.0
+        for (k, c), w in zip(colours.items(), share, strict=True):
+            ax.barh(i, w, left=left, height=0.5, color=c, label=labels[k] if i == 0 else None)
+            left += w
+        ax.plot([r["mc_ce90_m"]], [i], "D", color="k", label="Monte Carlo CE90" if i == 0 else None)
+        ax.plot([r["single_fix_ce90_m"]], [i], "|", color="0.4", ms=18, mew=2,
+                label="one fix's CE90" if i == 0 else None)
+    ax.set_yticks(range(len(rows)), [r["target_id"] for r in rows])
+    ax.set_ylim(-0.75, max(len(rows), 2) - 0.25)
+    ax.set_xlabel("CE90 of the target's estimate (m)")
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.grid(True, axis="x", alpha=0.3)
+    if rows:
+        ax.legend(fontsize=8, loc="lower right")
+    flagged = [r["target_id"] for r in fa.targets if r.get("status") not in ("OK", None)]
+    ax.set_title("targets" + (f" (no estimate: {', '.join(flagged)})" if flagged else ""), fontsize=10)
+    by = {}
+    for r in fa.fixes:
+        if r.get("status") == "OK":
+            by.setdefault(r["target_id"], []).append(r)
+    for tid, fr in sorted(by.items()):
+        t = [r["time_s"] for r in fr]
+        line, = bx.plot(t, [r["ce90_m"] for r in fr], "-", lw=1.2, label=f"{tid} first order")
+        bx.plot(t, [r["mc_ce90_m"] for r in fr], "o", ms=3, color=line.get_color(), label=f"{tid} Monte Carlo")
+    bx.set_xlabel("time (s)")
+    bx.set_ylabel("CE90 of one fix (m; Monte Carlo far above first order: not linear there)")
+    bx.set_yscale("log")
+    bx.grid(True, alpha=0.3)
+    bx.legend(fontsize=7, ncol=2)
+    bx.set_title(f"every fix ({fa.samples:,} copies of the flight)", fontsize=10)
+    fig.savefig(path)
+    return Path(path)

@@ -1,10 +1,12 @@
 """The `eoloc accuracy` and `eoloc sweep` jobs: a scenario from a config or a built-in one, run by
-Monte Carlo here or on Dask."""
+Monte Carlo here or on Dask; and the accuracy of a flight flown (telemetry + detections)."""
 
 from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from ..errors import InputError
 
@@ -63,3 +65,65 @@ def accuracy_job(scn, n: int, seed: int, *, sensitivity_samples: int = 0, keep_s
                      "drms_m": st.drms, "ellipse_major_m": st.ellipse[0], "ellipse_minor_m": st.ellipse[1],
                      "ellipse_azimuth_deg": st.ellipse[2]})
     return AccuracyJob(result, rows, rows_s)
+
+
+def flight_job(cfg, config_path, telemetry, detections, rule, *, samples: int, seed: int, progress=None, **pairing):
+    """The accuracy of every fix and target of a flight (:func:`eoloc.sequence.flight.flight_accuracy`):
+    the detections located with the config's sensor and budget, then first order and Monte Carlo."""
+    from ..sequence.flight import flight_accuracy
+    from .sequence import located_detections
+    from .setup import error_budget
+
+    if cfg.accuracy is None:
+        raise InputError(f"{config_path}: the accuracy of a flight needs the config's [accuracy.budget] (the error "
+                         "of every input, and how it behaves in time: see the README, Uncertainty)")
+    job = located_detections(cfg, config_path, telemetry, detections, rule, **pairing)
+    located = job.located
+    budget = error_budget(cfg, config_path)
+    ok = located.fixes.ok
+    idx = np.flatnonzero(ok)
+    pose = located.target_pose().take(idx)
+    fa = flight_accuracy(cfg.sensor(), pose, (located.pixels[0][idx], located.pixels[1][idx]),
+                         rule_at(located.rule, idx), budget,
+                         located.fixes.flat(idx), located.covariance.take(idx), located.extra["time_s"][idx],
+                         located.extra["target_id"][idx], n=samples, seed=seed, progress=progress)
+    return fa, job
+
+
+def klv_flight_job(cfg, config_path, path, dem, *, samples: int, seed: int, progress=None):
+    """:func:`flight_job` of a KLV or MPEG-TS file's VMTI detections (on ``dem``, else each packet's
+    frame-centre elevation), with the MISB sensor and the config's [installation] and budget."""
+    from ..accuracy.covariance import locate_with_covariance
+    from ..io.klv import klv_telemetry, read_klv, vmti_detections
+    from ..sequence.flight import flight_accuracy
+    from .klvframes import vmti_flight
+    from .setup import misb_setup
+
+    sensor, budget = misb_setup(cfg)
+    if budget is None:
+        raise InputError(f"{config_path}: the accuracy of a flight needs the config's [accuracy.budget]")
+    stream = read_klv(path)
+    det = vmti_detections(stream)
+    if not len(det):
+        raise InputError(f"{path}: no ST 0903 VMTI target in the stream: nothing to analyse (the accuracy of a "
+                         "flight is that of its located targets)")
+    vf = vmti_flight(klv_telemetry(stream), det, dem, base=sensor)
+    fixes, cov = locate_with_covariance(vf.sensor, vf.pose, budget, vf.pixels, vf.rule)
+    ok = np.flatnonzero(fixes.ok)
+    if ok.size == 0:
+        raise InputError(f"{path}: none of the {len(det)} VMTI detections could be located")
+    return flight_accuracy(vf.sensor, vf.pose.take(ok), (vf.pixels[0][ok], vf.pixels[1][ok]), rule_at(vf.rule, ok),
+                           budget,
+                           fixes.flat(ok), cov.take(ok), vf.time_s[ok], vf.target_id[ok], n=samples, seed=seed,
+                           progress=progress), stream.issues
+
+
+def rule_at(rule, index):
+    """``rule`` with its per-target values (a range, a height) taken at ``index``; as it is when it
+    has one value."""
+    field_name = getattr(rule, "value_field", "")
+    if field_name and np.ndim(getattr(rule, field_name)):
+        from dataclasses import replace
+
+        return replace(rule, **{field_name: getattr(rule, field_name)[index]})
+    return rule

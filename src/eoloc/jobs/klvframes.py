@@ -18,7 +18,7 @@ from ..io.table import Table
 from ..result import Fixes, Status
 from ..rules import surface_rule
 from ..sensor.camera import Camera
-from ..sensor.model import SensorModel
+from ..sensor.model import Pose, SensorModel
 from .tables import locate_by_rule
 
 if TYPE_CHECKING:
@@ -227,3 +227,62 @@ def _frame_properties(tel: Table, i: int) -> dict:
 def _finite(x) -> float | None:
     x = float(x)
     return x if np.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class VMTIFlight:
+    """The located-able VMTI detections of a stream as one batch for the error analysis: one camera
+    (the frame size the stream's VMTI sets give, the first usable field of view) and each
+    detection's zoom as its pose's ``focal_scale``; the stop rule with one value per detection on
+    the frame-centre elevation; ``index`` the detections' rows in ``det``."""
+
+    sensor: SensorModel
+    pose: object
+    pixels: tuple[np.ndarray, np.ndarray]
+    rule: object
+    time_s: np.ndarray
+    target_id: np.ndarray
+    index: np.ndarray
+
+
+def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | None = None) -> VMTIFlight:
+    """:class:`VMTIFlight` of the detections (as :func:`locate_vmti` pairs them with their packets).
+    A stream whose VMTI frames differ in size or aspect is refused (a KLVError naming both)."""
+    from ..errors import KLVError
+
+    base = base or misb_sensor()
+    d, c = det.columns, tel.columns
+    frames = d["frame"].astype(np.int64)
+    by_packet = np.argsort(tel.line, kind="stable")
+    pos = np.clip(np.searchsorted(tel.line[by_packet], frames), 0, max(len(tel) - 1, 0))
+    row = by_packet[pos] if len(tel) else pos
+    found = tel.line[row] == frames if len(tel) else np.zeros(len(det), bool)
+    hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
+    vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])
+    w, h = d["frame_width"], d["frame_height"]
+    usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
+        (vfov > 0) & (vfov < 180)
+    if surface is None:
+        usable &= np.isfinite(c["fc_h_m"][row])
+    idx = np.flatnonzero(usable)
+    if idx.size == 0:
+        raise KLVError("no VMTI detection with its packet's pose, a field of view and a frame size: nothing to "
+                       "analyse")
+    sizes = {(int(w[i]), int(h[i])) for i in idx}
+    if len(sizes) > 1:
+        raise KLVError(f"the stream's VMTI frames have several sizes ({', '.join(f'{a}x{b}' for a, b in sorted(sizes))}"
+                       "): the accuracy of a flight takes one camera")
+    tx, ty = np.tan(np.radians(hfov[idx]) / 2.0), np.tan(np.radians(vfov[idx]) / 2.0)
+    scale, scale_y = tx[0] / tx, ty[0] / ty
+    if not np.allclose(scale, scale_y, rtol=1e-6):
+        raise KLVError("the VMTI frames' horizontal and vertical fields of view do not zoom together (the aspect "
+                       "changes): the accuracy of a flight takes one camera")
+    (wi, hi), = sizes
+    cam = Camera.from_hfov(float(hfov[idx[0]]), wi, hi, vfov_deg=float(vfov[idx[0]]))
+    sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
+                         base.lever_arm_m)
+    p = packet_pose(tel).take(row[idx])
+    pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, p.gimbal_deg, scale)
+    rule = surface_rule(surface if surface is not None else c["fc_h_m"][row[idx]])
+    return VMTIFlight(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, d["time_s"][idx],
+                      np.asarray(d["target_id"])[idx].astype(str), idx)

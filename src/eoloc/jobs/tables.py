@@ -33,6 +33,14 @@ class Located:
     covariance: FixCovariance | None = None
     compensation: dict[str, np.ndarray] | None = None
     coded: dict[str, Coded] = field(default_factory=dict)  # extra's text columns as read, coded
+    pose: Pose | None = None  # the poses the targets were located from (see target_pose)
+    pose_index: np.ndarray | None = None  # each target's element of pose (None: one pose per target)
+    pixels: tuple[np.ndarray, np.ndarray] | None = None  # each target's (u, v)
+    rule: StopRule | None = None  # the stop rule, with one value per target where it has one
+
+    def target_pose(self) -> Pose | None:
+        """Each target's pose (as located, before any compensation)."""
+        return self.pose if self.pose is None or self.pose_index is None else self.pose.take(self.pose_index)
 
 
 def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | str | None = None, *,
@@ -107,7 +115,7 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         per_target = pose if pose_index is None else pose.take(pose_index)
         fixes, comp = compensate(compensation, sensor, per_target, fixes, (u, v), rule=rule)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
-    return Located(fixes, extra, issues, cov, comp, coded)
+    return Located(fixes, extra, issues, cov, comp, coded, pose, pose_index, (u, v), rule)
 
 
 def locate_by_rule(sensor: SensorModel, pose: Pose, pixels, rule: StopRule, budget: ErrorBudget | None = None,

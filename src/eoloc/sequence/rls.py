@@ -72,6 +72,8 @@ class StaticEstimate:
     scatter_ratio: np.ndarray
     origin: tuple[float, float, float]
     status: np.ndarray | int = 0
+    cov_by_kind: dict[str, np.ndarray] | None = None  # with an error structure: the covariance of the
+    # biases, the noise and the Gauss–Markov errors alone ("bias", "noise", "markov"), summing to cov_enu
 
     @property
     def cep50_m(self) -> np.ndarray:
@@ -171,6 +173,7 @@ class RLSState:
     M: np.ndarray | None = None  # (K, 3, S) with an error structure
     tau_s: np.ndarray | None = None  # (S,)
     t_s: np.ndarray | None = None  # (K,) time of each target's last fix
+    P_kinds: np.ndarray | None = None  # (K, 3, 3, 3): P's share of the biases, the noise, the Gauss–Markov errors
 
     @classmethod
     def empty(cls, k: int, forgetting: float = 1.0) -> RLSState:
@@ -191,6 +194,7 @@ class RLSState:
         if self.M is not None:
             self.M = np.concatenate([self.M, np.zeros((k, 3, self.M.shape[-1]))])
             self.t_s = np.concatenate([self.t_s, np.full(k, np.nan)])
+            self.P_kinds = np.concatenate([self.P_kinds, np.zeros((k, 3, 3, 3))])
 
     def update(self, z: np.ndarray, R: np.ndarray, W: np.ndarray, use: np.ndarray, *, a: np.ndarray | None = None,
                tau_s: np.ndarray | None = None, time_s: float = np.nan) -> None:
@@ -229,6 +233,7 @@ class RLSState:
             if self.n.any():
                 raise ValueError("this filter was started without an error structure: no update may have one")
             self.M, self.tau_s, self.t_s = np.zeros((k_n, 3, s_n)), tau.copy(), np.full(k_n, np.nan)
+            self.P_kinds = np.zeros((k_n, 3, 3, 3))
         elif self.M.shape[-1] != s_n or not np.array_equal(self.tau_s, tau):
             raise ValueError("the error structure changed between updates (other sources or time constants)")
         lam = self.lam
@@ -241,8 +246,11 @@ class RLSState:
         r = np.where(use[:, None], r, 1.0)  # a target not seen now: its memory ages at its next fix
         g = np.einsum("kij,kjs->kis", W, np.where(use[:, None, None], a, 0.0))
         Md = lam * self.M * r[:, None, :]
-        cross = np.einsum("kis,kjs->kij", g, Md)
-        self.P = lam * lam * self.P + np.einsum("kis,kjs->kij", g, g) + cross + np.swapaxes(cross, -1, -2)
+        kind = np.stack([np.isinf(tau), tau == 0, np.isfinite(tau) & (tau > 0)], -1).astype(np.float64)  # (S, 3)
+        cross = np.einsum("kis,kjs,sq->kijq", g, Md, kind)
+        self.P_kinds = lam * lam * self.P_kinds + np.einsum("kis,kjs,sq->kijq", g, g, kind) + cross + \
+            np.swapaxes(cross, 1, 2)
+        self.P = self.P_kinds.sum(-1)
         self.M = Md + g
         self.t_s = np.where(use, t, self.t_s)
 
@@ -263,14 +271,16 @@ class RLSState:
         q = self.scatter_ratio() * dof
         return ~((self.n >= 3) & (q > chi2_quantile(1.0 - INCONSISTENT_P, dof)))
 
-    def covariance(self, correlated_fraction: float | str = "auto") -> np.ndarray:
-        """(K, 3, 3): the estimate's covariance, A^-1 P A^-1 with an error structure; without one
-        the common share (``correlated_fraction``, or "auto" from the scatter) kept undiminished."""
+    def covariance(self, correlated_fraction: float | str = "auto", kind: str | None = None) -> np.ndarray:
+        """(K, 3, 3): the estimate's covariance, A^-1 P A^-1 with an error structure (``kind``
+        "bias", "noise" or "markov": the share of those sources alone); without one the common
+        share (``correlated_fraction``, or "auto" from the scatter) kept undiminished."""
         out = np.full((len(self.x), 3, 3), np.nan)
         seen = self.wsum > 0
         Ai = np.linalg.inv(self.A[seen])
-        sand = Ai @ self.P[seen] @ Ai
-        if self.structured:
+        P = self.P if kind is None else self.P_kinds[..., ("bias", "noise", "markov").index(kind)]
+        sand = Ai @ P[seen] @ Ai
+        if self.structured or kind is not None:
             out[seen] = sand
             return out
         c = (np.clip(1.0 - np.nan_to_num(self.scatter_ratio(), nan=1.0), 0.0, 0.99)
@@ -300,7 +310,7 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
                covariance: FixCovariance | None = None, time_s: ArrayLike | None = None,
                forgetting: float = 1.0, correlated_fraction: float | str = "auto", tol_m: float | None = None,
                tol_fraction: float = 0.05, window: int = 30,
-               origin: tuple[float, float, float] | None = None) -> StaticEstimate:
+               origin: tuple[float, float, float] | None = None, check_consistency: bool = True) -> StaticEstimate:
     """Filter F frames of fixes of K static targets (``fixes`` of shape (F, K) or (F,)).
 
     covariance: the fixes' :class:`~eoloc.accuracy.FixCovariance` (from the error budget; the
@@ -314,6 +324,8 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     update that target). origin: the local frame (default: the first good fix). forgetting: lam in
     (0, 1]. Convergence: the estimate moved less than ``tol_m`` (default ``tol_fraction`` of the
     single-frame horizontal sigma, sqrt(R_ee + R_nn)) over the last ``window`` frames, and stays so.
+    ``check_consistency`` False: no INCONSISTENT status (a Monte Carlo copy of fixes that already
+    carry their errors scatters more than they declare, by construction).
     """
     check_forgetting(forgetting)
     if correlated_fraction != "auto" and not 0.0 <= float(correlated_fraction) < 1.0:
@@ -378,16 +390,19 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     n_used = use.sum(0)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_h = np.sqrt(np.nanmedian(np.where(use, R[..., 0, 0] + R[..., 1, 1], np.nan), axis=0))
-    status = np.where(state.consistent() | (cov_enu is None), Status.OK, Status.INCONSISTENT).astype(np.int8)
+    status = np.where(state.consistent() | (cov_enu is None) | (not check_consistency), Status.OK,
+                      Status.INCONSISTENT).astype(np.int8)
     cov, sig = covs[-1], np.sqrt(np.diagonal(covs, axis1=-2, axis2=-1))
     tol = np.broadcast_to(tol_fraction * sigma_h if tol_m is None else float(tol_m), (k_n,))
     conv = _converged_frame(hist, tol, window)
     p = geodesy.enu_to_ecef(np.where((status == Status.OK)[:, None], x, np.nan), *origin)
     lat, lon, h = geodesy.ecef_to_geodetic(p[:, 0], p[:, 1], p[:, 2])
-    out = StaticEstimate(lat, lon, h, cov, hist, sig, n_used, conv, scatter, tuple(origin), status)
+    parts = None if a_src is None else {k: state.covariance(kind=k) for k in ("bias", "noise", "markov")}
+    out = StaticEstimate(lat, lon, h, cov, hist, sig, n_used, conv, scatter, tuple(origin), status, parts)
     if single:
         return StaticEstimate(*(a[0] for a in (lat, lon, h, cov)), hist[:, 0], sig[:, 0], n_used[0], conv[0],
-                              scatter[0], tuple(origin), status[0])
+                              scatter[0], tuple(origin), status[0], None if parts is None else
+                              {k: v[0] for k, v in parts.items()})
     return out
 
 

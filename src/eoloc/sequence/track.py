@@ -186,23 +186,21 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
     z = geodesy.ecef_to_enu(fixes.flat().p_ecef(), *origin)
     A = tau = None
+    # a fix's covariance is in its own ENU axes: turned into the tracks' (at the origin)
+    turn = geodesy.R_ecef_enu(*origin[:2]).T @ geodesy.R_ecef_enu(np.nan_to_num(np.ravel(fixes.lat_deg)),
+                                                                 np.nan_to_num(np.ravel(fixes.lon_deg)))
     if covariance is not None:
-        cov_enu = covariance.cov_enu
         keep = covariance.tau_s > 0  # noise stays in the fix's weight, the rest is considered
         tau = covariance.tau_s[keep]
         a = np.asarray(covariance.scaled_jacobian).reshape(n, 3, -1)
-        turn = geodesy.R_ecef_enu(*origin[:2]).T @ geodesy.R_ecef_enu(np.nan_to_num(np.ravel(fixes.lat_deg)),
-                                                                     np.nan_to_num(np.ravel(fixes.lon_deg)))
-        a = turn @ a  # each fix's source effects in the tracks' ENU axes
-        A = a[:, :2][..., keep]
-        noise = a[:, :2][..., ~keep]
-        cov_enu = np.zeros((n, 3, 3))
-        cov_enu[:, :2, :2] = noise @ np.swapaxes(noise, -1, -2)
-        cov_enu = np.where(np.isfinite(a).all(axis=(-1, -2))[:, None, None], cov_enu, np.nan)
+        A = (turn @ a)[:, :2][..., keep]  # the considered sources' effects, in the tracks' axes
+        noise = a[..., ~keep]
+        cov_enu = np.where(np.isfinite(a).all(axis=(-1, -2))[:, None, None], noise @ np.swapaxes(noise, -1, -2),
+                           np.nan)  # the noise, in each fix's own axes (turned below)
     if cov_enu is None:
         R = np.broadcast_to(cfg.meas_sigma_m**2 * np.eye(2), (n, 2, 2))
     else:
-        R = np.asarray(cov_enu, dtype=np.float64).reshape(n, 3, 3)[:, :2, :2]
+        R = (turn @ np.asarray(cov_enu, dtype=np.float64).reshape(n, 3, 3) @ np.swapaxes(turn, -1, -2))[:, :2, :2]
         ok &= np.all(np.isfinite(R), (-1, -2))
     ids = None if target_id is None else np.asarray(target_id).ravel().astype(str)
     tracker = Tracker(cfg, associate)
