@@ -12,6 +12,7 @@ from .main import main
 
 COMMANDS = (  # (module, command object name): registered in this order
     ("locate", "locate"),
+    ("photo", "photo"),
     ("footprint", "footprint"),
     ("accuracy", "accuracy"),
     ("sweep", "sweep"),

@@ -1,0 +1,86 @@
+"""`eoloc photo`: drone photos located from their own EXIF/XMP."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+from rich.table import Table as RichTable
+
+from .common import open_dem, working
+from .main import console, err_console, warn
+from .options import CONVENTIONS, dem_options, formats_option, out_option, target_height_option
+
+PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
+
+\b
+eoloc photo PHOTO... [--pixel U V]... [--dem FILE | --target-height H] [--json] [--out DIR]
+  Each photo's position, camera attitude (earth-referenced: DJI's gimbal angles are the camera's,
+  not relative to the aircraft) and intrinsics (its own calibration, else the bundled drone camera
+  database, else EXIF's 35 mm focal length) are read and shown. Without --pixel the image centre
+  is located — by the laser range finder's distance when the photo has one (DJI H20/M30/M3T:
+  LRFTargetDistance; DJI's own LRFTarget answer is shown beside eoloc's), else on the DEM or the
+  target height; with --pixel U V (repeatable) every pixel given, on the DEM or the height.
+  Heights are ellipsoidal (DJI's AbsoluteAltitude converted from EGM96 where the photo's tags say
+  it is MSL). --json: one object per line (file, u, v, lat, lon, h, status, source, camera_lat,
+  camera_lon, camera_h, camera_yaw, camera_pitch, camera_roll: the optical axis' azimuth from
+  true north, its elevation, negative below the horizon, and the image's roll). A photo that
+  cannot be read is named with the tag and the fix; the others are still located.
+"""
+
+
+@click.command(help=PHOTO_HELP + CONVENTIONS)
+@click.argument("photos", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--pixel", "pixels", type=(float, float), multiple=True, metavar="U V",
+              help="A pixel to locate (column, row; 0,0 the centre of the top-left pixel); repeat for several.")
+@dem_options("Stop the rays on this DEM (GeoTIFF, DTED, SRTM, ESRI ASCII); repeat for tiles.")
+@target_height_option("Stop the rays on this ellipsoidal height (m).")
+@click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
+@out_option("photo_fixes.*", default=None)
+@formats_option()
+def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, as_json, out_dir, formats) -> None:
+    import orjson
+
+    from ..jobs.photo import photo_job
+
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    if dem is not None and target_height is not None:
+        raise click.UsageError("give --dem or --target-height, not both")
+    with working("reading the photos..."):
+        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height)
+    for msg in job.failed:
+        warn(msg)
+    if as_json:
+        out = sys.stdout.buffer
+        for row in job.rows:
+            out.write(orjson.dumps(row, option=orjson.OPT_SERIALIZE_NUMPY) + b"\n")
+        out.flush()
+    else:
+        for p in job.photos:
+            err_console.print(f"[bold]{p.path}[/]: {p.make} {p.model} {p.width}x{p.height}"
+                              f"{' thermal' if p.thermal else ''}; camera at {p.lat_deg:.7f}, {p.lon_deg:.7f}, "
+                              f"h {p.h_m:.2f} m ({p.height_rule}); yaw {p.yaw_deg:.2f}° pitch {p.pitch_deg:.2f}° "
+                              f"roll {p.roll_deg:.2f}°; intrinsics: {p.camera_source}"
+                              + (f"; laser range {p.lrf_range_m:g} m" if p.lrf_range_m else "")
+                              + "".join(f"; {n}" for n in p.notes))
+        table = RichTable(title="photo fixes (heights ellipsoidal)")
+        for c in ("photo", "pixel", "lat, lon (°)", "h (m)", "by", "status", "vs the drone's own"):
+            table.add_column(c, justify="right", overflow="fold")
+        for r in job.rows:
+            if "lat" not in r:
+                continue
+            vs = (f"{r['vendor_offset_h_m']:.2f} m horiz., {r['vendor_offset_v_m']:+.2f} m vert."
+                  if "vendor_offset_h_m" in r else "")
+            where = f"{r['lat']:.7f}, {r['lon']:.7f}" if r["lat"] is not None else ""
+            table.add_row(click.format_filename(r["file"], shorten=True), f"{r['u']:g}, {r['v']:g}", where,
+                          f"{r['h']:.2f}" if r["h"] is not None else "", r["source"], r["status"], vs)
+        console.print(table)
+    if out_dir is not None:
+        from ..io.writers import write_layer
+
+        written = write_layer(out_dir, "photo_fixes", [r for r in job.rows if "lat" in r], formats)
+        err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    if not any(r.get("status") == "OK" for r in job.rows):
+        from ..errors import InputError
+
+        raise InputError("no photo could be located" + (f" ({len(job.failed)} named above)" if job.failed else ""))

@@ -1,0 +1,99 @@
+"""The `eoloc photo` job: drone photos located from their own EXIF/XMP pose (:mod:`eoloc.io.photo`).
+
+Each photo's camera is a pinhole (or the database's lens model) whose attitude is the one the photo
+gives, earth-referenced: the pose's yaw/pitch/roll are the camera's, with a zero az-el gimbal
+(camera z along the body's x axis). The image centre is located by the laser range when the photo
+has one; every other pixel (and the centre of a photo without a range) on the DEM or the target
+height given. Every photo is its own row or rows; one that cannot be read is a row with its
+reason, and the others are still located.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.photo import PhotoPose, read_photo
+from ..result import Status
+
+
+@dataclass
+class PhotoJob:
+    rows: list[dict]
+    photos: list[PhotoPose] = field(default_factory=list)
+    failed: list[str] = field(default_factory=list)  # one line per photo that could not be located
+
+
+def photo_sensor_pose(p: PhotoPose):
+    """(SensorModel, Pose) of a photo: its camera with the photo's earth-referenced attitude."""
+    from ..sensor import AzElGimbal, Pose, SensorModel
+
+    return SensorModel(p.camera, AzElGimbal()), Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg,
+                                                      (0.0, 0.0))
+
+
+def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None) -> PhotoJob:
+    """Every photo of ``paths`` located at ``pixels`` ((u, v) pairs; none: the image centre)."""
+    from .. import geodesy
+    from ..rules import AtHeight, AtRange, OnDEM
+
+    job = PhotoJob([])
+    for path in paths:
+        try:
+            p = read_photo(path, geoid=geoid)
+        except InputError as exc:  # PhotoError, or a camera that cannot be made
+            job.failed.append(str(exc))
+            job.rows.append({"file": str(path), "status": "UNREADABLE", "reason": str(exc)})
+            continue
+        job.photos.append(p)
+        sensor, pose = photo_sensor_pose(p)
+        camera = {"camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m, "camera_yaw": p.yaw_deg,
+                  "camera_pitch": p.pitch_deg, "camera_roll": p.roll_deg}
+        if dem is not None:  # the camera must be above the ground it flies over: else its height tag is wrong
+            ground = float(dem.height(p.lat_deg, p.lon_deg))
+            if math.isfinite(ground) and p.h_m < ground - 2.0:
+                msg = (f"{path}: the camera would be {ground - p.h_m:.1f} m below the terrain under it "
+                       f"({p.height_rule}; the DEM says {ground:.1f} m): the altitude tag is suspect (RelativeAltitude "
+                       f"{p.relative_altitude_m} m above take-off)")
+                job.failed.append(msg)
+                job.rows.append({"file": str(path), "status": "SUSPECT_ALTITUDE", "reason": msg, **camera})
+                continue
+        todo = list(pixels) or [(p.camera.cx, p.camera.cy)]
+        for u, v in todo:
+            centre = not pixels
+            if centre and p.lrf_range_m is not None:
+                rule, source = AtRange(p.lrf_range_m), "laser"
+            elif dem is not None:
+                rule, source = OnDEM(dem), "dem"
+            elif target_height_m is not None:
+                rule, source = AtHeight(target_height_m), "height"
+            else:
+                msg = (f"{path}: pixel ({u:g}, {v:g}) has no laser range: give --dem FILE or --target-height H to "
+                       "stop its ray")
+                job.failed.append(msg)
+                job.rows.append({"file": str(path), "u": u, "v": v, "status": "NO_SURFACE", "reason": msg, **camera})
+                continue
+            f = rule.locate(sensor, pose, (np.array([u], float), np.array([v], float)))
+            st = Status(int(f.status[0]))
+            row = {"file": str(path), "u": float(u), "v": float(v), "lat": _f(f.lat_deg[0]), "lon": _f(f.lon_deg[0]),
+                   "h": _f(f.h_m[0]), "range_m": _f(f.range_m[0]), "status": st.name, "source": source, **camera,
+                   "camera_model": f"{p.make} {p.model}", "intrinsics": p.camera_source, "height_rule": p.height_rule}
+            if st != Status.OK:
+                row["reason"] = st.explanation
+            if source == "laser" and p.lrf_target is not None:
+                t = p.lrf_target
+                row |= {"vendor_lat": t[0], "vendor_lon": t[1], "vendor_h": t[2]}
+                if st == Status.OK:
+                    e, n, up = geodesy.ecef_to_enu(np.stack(geodesy.geodetic_to_ecef(*t), -1)[None],
+                                                   f.lat_deg[0], f.lon_deg[0], f.h_m[0])[0]
+                    row |= {"vendor_offset_h_m": float(math.hypot(e, n)), "vendor_offset_v_m": float(up)}
+            job.rows.append(row)
+    return job
+
+
+def _f(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
