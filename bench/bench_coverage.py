@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-import coverage_lib as C  # noqa: E402
+import coverage_lib as C
 
 
 def main() -> None:
@@ -83,9 +83,10 @@ def _merge(parts: list) -> C.Coverage:
     n = sum(p.n for p in parts)
     w = [p.n / n for p in parts]
     le = [p.in_le90 for p in parts]
-    return C.Coverage(parts[0].path, n, sum(p.apart for p in parts), sum(x.in50 * k for x, k in zip(parts, w)),
-                      sum(x.in90 * k for x, k in zip(parts, w)),
-                      float("nan") if np.isnan(le[0]) else sum(x * k for x, k in zip(le, w)))
+    in50 = sum(x.in50 * k for x, k in zip(parts, w, strict=True))
+    return C.Coverage(parts[0].path, n, sum(p.apart for p in parts), in50,
+                      sum(x.in90 * k for x, k in zip(parts, w, strict=True)),
+                      float("nan") if np.isnan(le[0]) else sum(x * k for x, k in zip(le, w, strict=True)))
 
 
 if __name__ == "__main__":
