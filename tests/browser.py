@@ -26,12 +26,17 @@ def chromium():
 
 
 def page_state(path, script: str):
-    """Load a local page in headless Chromium and run ``script`` (a function body returning a
-    value) in it: (that value, the console's errors)."""
+    """Load a local page in headless Chromium, wait until its images are decoded, and run ``script``
+    (a function body returning a value) in it: (that value, the console's errors)."""
     d = chromium()
     try:
         d.get(path.as_uri())
         d.implicitly_wait(2)
+        # the page's pictures decoded (an event, not a time): a loaded machine may run the script first
+        d.set_script_timeout(60)
+        d.execute_async_script(
+            "const done = arguments[arguments.length - 1];"
+            "Promise.all([...document.images].map(i => i.decode().catch(() => null))).then(() => done(true));")
         value = d.execute_script(script)
         errors = [e for e in d.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
     finally:

@@ -273,9 +273,15 @@ def check_common(rep: Report, fix, o, d, domain_bad, outside):
 
 def check_at_range(rep, fix, o, d, r, domain_bad, outside):
     ok, p, t = check_common(rep, fix, o, d, domain_bad, outside)
+    st = np.asarray(fix[4]).ravel().astype(int)
     bad = np.zeros(len(ok), bool)
     bad[ok] = np.abs(t[ok] - r[ok]) > 1e-4 + 1e-9 * np.abs(r[ok])
     rep.fail("M1 point not at the measured range", bad)
+    # a range along a ray always ends somewhere: inside the domain, with the pixel in the image,
+    # nothing but OK is justified
+    rep.fail("M1 status the rule can never give", ~np.isin(st, (OK, INVALID_INPUT, OUT_OF_IMAGE)))
+    sane = ~domain_bad & ~outside & np.isfinite(o).all(1) & np.isfinite(d).all(1)
+    rep.fail("M1 expected OK (a valid range on a valid ray) but got another status", sane & (st != OK))
 
 
 def check_at_height(rep, fix, o, d, ht, domain_bad, outside):
@@ -295,8 +301,12 @@ def check_at_height(rep, fix, o, d, ht, domain_bad, outside):
         bad[idx] = first < -M3_TOL_M
         rep.fail("M3 OK point is not the first crossing", bad)
     sane = ~domain_bad & ~outside & np.isfinite(o).all(1) & np.isfinite(d).all(1)
+    rep.fail("M3 status the rule can never give (an ellipsoid has no coverage edge, no void)",
+             ~np.isin(st, (OK, NO_INTERSECTION, BELOW_SURFACE, INVALID_INPUT, OUT_OF_IMAGE)))
     rep.fail("BELOW_SURFACE with the camera above the surface",
              (st == BELOW_SURFACE) & sane & (h_cam - ht > M3_TOL_M))
+    rep.fail("M3 expected BELOW_SURFACE (the camera under the surface) but got another status",
+             sane & (h_cam - ht < -M3_TOL_M) & (st != BELOW_SURFACE))
     rep.fail("M3 OK with the camera below the surface", ok & (h_cam - ht <= 0.0))
     # misses and hits the oracle decides: the ray's lowest point against the surface
     look = np.flatnonzero(sane & (h_cam - ht > M3_TOL_M) & ((st == NO_INTERSECTION) | (st == OK)))
@@ -367,10 +377,81 @@ class Grid:
         return self._interp(pts), on, on & (self._void(pts) > 0.0)
 
 
+M4_CLEAR_M = 0.5  # the oracle's own verdicts on a failed ray: a crossing, or a miss, by more than this
+
+
+def dem_first_event(o, d, grid: Grid, step: float | None = None, block: int = 256):
+    """The oracle's own walk along each ray (N,) from its camera, by steps of a quarter cell (no
+    eoloc code): (event, s) with event 0 = the ray dips more than M4_CLEAR_M under the terrain
+    (a crossing the rule must find), 1 = it is below the highest post off the grid, 2 = below the
+    highest post over a void, 3 = none of them before it climbs away (far_end); s the parameter
+    of the first such sample. A crossing within M4_CLEAR_M of the surface is not an event (too
+    close to call at this step)."""
+    step = step or grid.cell_m / 4.0
+    n = len(o)
+    event = np.full(n, 3)
+    s_at = np.full(n, np.inf)
+    end = far_end(o, d)
+    live = np.flatnonzero(np.isfinite(o).all(1) & np.isfinite(d).all(1))
+    s0 = np.zeros(n)
+    while live.size:
+        s = s0[live, None] + step * np.arange(block)[None, :]
+        q = o[live, None, :] + s[..., None] * d[live, None, :]
+        with np.errstate(all="ignore"):
+            la, lo, hh = geodetic(q)
+        zt, on, void = grid.sample(la, lo)
+        low = hh <= grid.hmax
+        cross = on & ~void & (hh - zt < -M4_CLEAR_M)
+        off = low & ~on
+        hole = low & void
+        kinds = np.stack([cross, off, hole], -1)  # (rays, samples, 3)
+        first = np.where(kinds.any(-1), np.arange(block)[None, :], block).min(1)
+        hit = first < block
+        for j in np.flatnonzero(hit):
+            k = first[j]
+            event[live[j]] = int(np.flatnonzero(kinds[j, k])[0])
+            s_at[live[j]] = s[j, k]
+        s0[live] += step * block
+        live = live[~hit & (s0[live] < end[live])]
+    return event, s_at
+
+
 def check_on_dem(rep, fix, o, d, grid: Grid, domain_bad, outside):
     ok, p, t = check_common(rep, fix, o, d, domain_bad, outside)
     st = np.asarray(fix[4]).ravel().astype(int)
     n = len(st)
+    rep.fail("M4 status the rule can never give", st == DEGENERATE)
+    # every failed ray justified by the oracle's own walk along it
+    sane = ~domain_bad & ~outside & np.isfinite(o).all(1) & np.isfinite(d).all(1)
+    with np.errstate(all="ignore"):
+        lat_c, lon_c, h_c = geodetic(o)
+    z_c, on_c, void_c = grid.sample(lat_c, lon_c)
+    under = sane & on_c & ~void_c & (h_c - z_c < -M4_CLEAR_M)
+    rep.fail("M4 expected BELOW_SURFACE (the camera under the terrain) but got another status",
+             under & (st != BELOW_SURFACE))
+    rep.fail("M4 BELOW_SURFACE with the camera above the terrain or off it",
+             sane & (st == BELOW_SURFACE) & ~(on_c & ~void_c & (h_c - z_c < M4_CLEAR_M)))
+    look = np.flatnonzero(sane & ~under & np.isin(st, (NO_INTERSECTION, OUT_OF_COVERAGE, DEM_VOID)))
+    if look.size:
+        event, s_at = dem_first_event(o[look], d[look], grid)
+        got = st[look]
+        # a ray may clip the corner of a void or the grid's edge between two samples: where the walk
+        # says "crossing first" against eoloc's void / edge, walk again 64 times finer up to it
+        again = np.flatnonzero((event == 0) & (got != NO_INTERSECTION))
+        if again.size:
+            fine, _ = dem_first_event(o[look[again]], d[look[again]], grid, step=grid.cell_m / 256.0, block=2048)
+            event[again] = fine
+        bad = np.zeros(n, bool)
+        bad[look] = event == 0
+        rep.fail("M4 expected OK (the ray crosses the terrain first) but got a failure", bad)
+        for status, what in ((OUT_OF_COVERAGE, "OUT_OF_COVERAGE"), (DEM_VOID, "DEM_VOID")):
+            bad = np.zeros(n, bool)
+            bad[look] = (got == status) & (event == 3)
+            rep.fail(f"M4 {what} for a ray that never goes below the highest post off the grid or over a void",
+                     bad)
+        bad = np.zeros(n, bool)
+        bad[look] = (got == NO_INTERSECTION) & np.isin(event, (1, 2))
+        rep.fail("M4 NO_INTERSECTION for a ray that goes below the highest post off the grid or over a void", bad)
     if ok.any():
         idx = np.flatnonzero(ok)
         lat, lon, h = geodetic(p[idx])

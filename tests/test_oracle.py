@@ -53,3 +53,53 @@ def test_oracle_M4_real_tile_with_voids_and_every_edge():
 def test_oracle_multiview():
     rep = _run("multiview", 800, 16, triangulate)
     _saw(rep, O.OK, O.DEGENERATE)
+
+
+class _HalfWrong:
+    """eoloc with its locate functions wrapped so that every other OK answer becomes ``status``
+    with NaN coordinates: a defect both backends would share, which only the oracle's own
+    judgement of each status can see (issue 55's experiment)."""
+
+    WRAPPED = ("locate_range", "locate_ellipsoid", "stop_at_ellipsoid", "locate_dem")
+
+    def __init__(self, status: int) -> None:
+        self.status = status
+        self.turned = 0
+
+    def __getattr__(self, name):
+        fn = getattr(eoloc, name)
+        if name not in self.WRAPPED:
+            return fn
+
+        def wrapped(*args, **kwargs):
+            f = fn(*args, **kwargs)
+            arrays = [np.array(np.broadcast_to(a, np.shape(f.status)), dtype=float) for a in
+                      (f.lat_deg, f.lon_deg, f.h_m, f.range_m)]
+            st = np.array(f.status, copy=True)
+            flat = st.reshape(-1)
+            turn = np.flatnonzero(flat == 0)[::2]
+            flat[turn] = self.status
+            for a in arrays:
+                a.reshape(-1)[turn] = np.nan
+            self.turned += turn.size
+            return eoloc.Fixes(*arrays, st)
+
+        return wrapped
+
+
+@pytest.mark.parametrize(("method", "status"), [("m1", O.NO_INTERSECTION), ("m3", O.OUT_OF_COVERAGE),
+                                                ("m4", O.NO_INTERSECTION)], ids=["M1", "M3", "M4"])
+def test_oracle_judges_every_status_a_shared_defect_is_seen(method, status):
+    """Half of the OK answers turned into a plausible failure on both backends alike: the oracle
+    must report them (M1 "NO_INTERSECTION" at a valid range, M3 "OUT_OF_COVERAGE" on an
+    ellipsoid, M4 "NO_INTERSECTION" for rays its own walk sees cross the terrain)."""
+    fake = _HalfWrong(status)
+    runner = O.Runner(fake, backends=["numpy"])
+    args = ()
+    if method == "m4":
+        z, lat0, lon0, dlat, dlon = O.real_tile(TILE, voids=12, seed=0)
+        args = (eoloc.DEM.from_array(z, lat0=lat0, lon0=lon0, dlat=dlat, dlon=dlon), O.Grid(z, lat0, lon0, dlat, dlon))
+    getattr(runner, method)(np.random.default_rng(55), 600, *args)
+    wrong = sum(rep.n_wrong for rep in runner.reports.values())
+    assert fake.turned > 100
+    assert wrong >= 0.9 * fake.turned, [rep.line() for rep in runner.reports.values()]

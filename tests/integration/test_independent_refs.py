@@ -1,0 +1,100 @@
+"""Issue 55: references that are not eoloc, where the suite used eoloc against itself.
+
+- The compiled single-target chain (``SensorModel.locate_one``: the numba twins of
+  ``r_body_cam_azel`` / ``r_body_cam_rollpitch`` / the fixed mount, the pose frame and the M1 stop)
+  against scipy ``Rotation`` + pyproj, for every gimbal kind: the camera's rotation recovered from
+  three rays, to 1e-9 rad.
+- A DEM ray that enters and leaves the terrain inside one cell (the surface bilinear, a ray dipping
+  a few centimetres to metres under its crest): eoloc's M4 point is the first root, found here by a
+  dense walk along the ray on scipy's bilinear interpolation of the posts and refined by
+  bisection. Taking the later root (the `np.maximum` mutant of issue 55) is 15 m off.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import eoloc
+import oracle_lib as O
+
+ANGLE = st.floats(-179.0, 179.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(O.KINDS), st.floats(-70, 70), st.floats(-170, 170), st.floats(100, 9000), ANGLE,
+       st.floats(-60, 60), st.floats(-60, 60), ANGLE, st.floats(-85, 85), st.floats(-45, 45))
+def test_55_compiled_camera_rotation_equals_scipy(kind, lat, lon, h, yaw, pitch, roll, g1, g2, g3):
+    """R_ecef_cam of the compiled chain = the oracle's (scipy Rotation of the README's conventions),
+    every gimbal kind: the rays of the principal point and two other pixels, stopped at 1 km by the
+    compiled single-target kernel, point where scipy's rotation says."""
+    if "numba" not in eoloc.available_backends():
+        pytest.skip("numba not installed")  # the compiled chain is what this tests
+    sensor = O._sensor(eoloc, kind)
+    c = {"lat": lat, "lon": lon, "h": h, "yaw": yaw, "pitch": pitch, "roll": roll, "g1": g1, "g2": g2, "g3": g3}
+    gim = O._gimbal_tuple({k: np.atleast_1d(v) for k, v in c.items()}, kind)
+    angles = [float(np.ravel(a)[0]) for a in gim] + [0.0] * (3 - len(gim))
+    pix = [(O.CAMERA.cx, O.CAMERA.cy), (100.0, 80.0), (1100.0, 900.0)]
+    origin = O.to_ecef(lat, lon, h)
+    for u, v in pix:
+        if kind == "fixed":
+            out = sensor.locate_one(lat, lon, h, yaw, pitch, roll, angles[0], 0.0, u, v, range_m=1000.0)
+        else:
+            out = sensor.locate_one(lat, lon, h, yaw, pitch, roll, angles[0], angles[1], u, v, g3_deg=angles[2],
+                                    range_m=1000.0)
+        assert out[4] == 0
+        got = (O.to_ecef(out[0], out[1], out[2]) - origin) / 1000.0
+        o, d, _ = O.rays(O.CAMERA, kind, lat, lon, h, yaw, pitch, roll, g1, g2, g3, np.array(u), np.array(v),
+                         R_fixed=O.R_FIXED)
+        assert np.linalg.norm(got - d.reshape(3)) < 1e-9, (kind, u, v, got, d)
+
+
+def _one_cell_dem(crest_m: float):
+    """A flat 1000 m tile, 3" posts, one cell whose two anti-diagonal corners are raised: along the
+    cell's diagonal the bilinear surface is a parabola peaking crest_m / 2 + 1000 at its middle."""
+    n = 12
+    z = np.full((n, n), 1000.0)
+    i = j = 5
+    z[i, j + 1] = z[i + 1, j] = 1000.0 + crest_m
+    d = 1.0 / 1200.0
+    return z, 40.0, -105.0, d, d, (i, j)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.02, 3.0), st.floats(-0.15, 0.15), st.floats(8.0, 30.0))
+def test_55_dem_ray_entering_and_leaving_inside_one_cell_hits_the_first_root(dip_m, shift, crest_m):
+    """A near-horizontal ray along a cell's diagonal, ``dip_m`` under the crest of the bilinear
+    surface (so it enters and leaves the terrain inside the cell): eoloc's M4 range = the first
+    root of the walk on scipy's bilinear surface, within 5 mm, on both backends."""
+    z, lat0, lon0, dlat, dlon, (i, j) = _one_cell_dem(crest_m)
+    dem = eoloc.DEM.from_array(z, lat0=lat0, lon0=lon0, dlat=dlat, dlon=dlon)
+    grid = O.Grid(z, lat0, lon0, dlat, dlon)
+    peak = 1000.0 + crest_m / 2.0
+    h_ray = peak - dip_m
+    # the ray: from 400 m before the cell's corner (i, j) to beyond (i + 1, j + 1), shifted across
+    a = np.array([lat0 + (i - 3 + shift) * dlat, lon0 + (j - 3 - shift) * dlon])
+    b = np.array([lat0 + (i + 4 + shift) * dlat, lon0 + (j + 4 - shift) * dlon])
+    pa, pb = O.to_ecef(a[0], a[1], h_ray), O.to_ecef(b[0], b[1], h_ray)
+    d = (pb - pa) / np.linalg.norm(pb - pa)
+    # scipy's bilinear surface along the ray, walked every 2 cm, the first root refined by bisection
+    s = np.arange(0.0, np.linalg.norm(pb - pa), 0.02)
+    q = pa[None] + s[:, None] * d[None]
+    la, lo, hh = O.geodetic(q)
+    zt, on, _ = grid.sample(la, lo)
+    under = np.flatnonzero(hh - zt < 0)
+    if under.size == 0:
+        return  # the shifted line passes beside the crest: nothing to hit
+    lo_s, hi_s = s[under[0] - 1], s[under[0]]
+    for _ in range(60):
+        mid = 0.5 * (lo_s + hi_s)
+        la, lo, hh = O.geodetic((pa + mid * d)[None])
+        lo_s, hi_s = (lo_s, mid) if hh[0] - grid.sample(la, lo)[0][0] < 0 else (mid, hi_s)
+    first = 0.5 * (lo_s + hi_s)
+    last = s[under[-1]]
+    rays = eoloc.Rays(*pa, *d)
+    for be in eoloc.available_backends():
+        with eoloc.use_backend(be):
+            f = eoloc.stop_at_dem(rays, dem)
+        assert int(f.status) == 0 and abs(float(f.range_m) - first) < 0.005, (be, float(f.range_m), first, last)
