@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench bytecode clean browser tak streams
+.PHONY: demo test lint bench bytecode clean browser tak streams mutants
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -64,6 +64,10 @@ test: $(STAMP) lint browser tak streams
 
 bench: $(STAMP) bytecode
 	$(BIN)/python bench/run_all.py
+
+# the mutation run (issue 55): each declared mutant must be caught by its own package's tests; ~30 min
+mutants: $(STAMP) browser tak streams
+	$(BIN)/python bench/mutants.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .ruff_cache .hypothesis

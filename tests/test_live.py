@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.klv import klv_job
 from eoloc.live.session import LiveSession
 from eoloc.terrain import open_dem
-from livecmd import free_udp_port, until_listening
+from livecmd import free_udp_port, until_listening, wait_for_packets
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 FLIGHT = MOUNTAIN / "flight.klv"
@@ -60,16 +61,24 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     sends.insert(20, b"\x00hello, not KLV")
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     head = until_listening(proc)  # the receiver has bound its socket (it imports eoloc and reads the DEM first)
+    said: list[str] = []
+    pump = threading.Thread(target=lambda: said.extend(iter(proc.stdout.readline, "")), daemon=True)
+    pump.start()
     for d in sends:
         tx.sendto(d, ("127.0.0.1", port))
         time.sleep(0.01)
-    time.sleep(1.5)  # silence: warned
+    # silence: waited for until eoloc says it (it works off its backlog first, however slow the machine)
+    deadline = time.monotonic() + 120
+    while not any("silence" in line for line in list(said)):
+        assert time.monotonic() < deadline and proc.poll() is None, "".join(said)
+        time.sleep(0.05)
     restart = circling_flight_klv(3, seed=1)  # another encoder clock, years earlier: a restart
     tx.sendto(restart, ("127.0.0.1", port))
-    time.sleep(1.0)
+    assert wait_for_packets(out, 39 + 3, proc) == 39 + 3
     proc.send_signal(signal.SIGINT)
-    log, _ = proc.communicate(timeout=30)
-    log = head + log
+    proc.wait(timeout=30)
+    pump.join(timeout=30)
+    log = head + "".join(said)
     assert proc.returncode == 0, log
     assert "Traceback" not in log
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped (SIGINT)")):].splitlines()[0])

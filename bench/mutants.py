@@ -1,0 +1,184 @@
+"""A mutation run: plausible bugs put into eoloc one at a time; each must be caught by the tests of
+its own package (issue 55). `make mutants` runs it; the list below is the declaration.
+
+    python bench/mutants.py [--only ID ...] [--list]
+
+Each mutant replaces one exact piece of source (it must occur exactly once) in the working tree,
+runs the named tests with ``-x`` (stop at the first failure), and restores the file whatever
+happens. Killed: the tests fail. Survived: they pass — a gap in the suite, printed with the
+mutant's reason. The kernels' numba cache is keyed by their source, so a kernel mutant recompiles
+(about a minute). Prints a Markdown table and the score; exit 1 if any mutant survived.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "eoloc"
+
+
+@dataclass(frozen=True)
+class Mutant:
+    id: str
+    file: str  # under src/eoloc
+    find: str
+    replace: str
+    tests: tuple[str, ...]
+    why: str
+
+
+MUTANTS = [
+    # --- kernels: geodesy, rotations, rays, stops
+    Mutant("geo-ecef-z", "kernels/core.py", "return r * co, r * so, (n * (1.0 - e2) + h) * sl",
+           "return r * co, r * so, (n + h) * sl", ("tests/test_geodesy.py",),
+           "ECEF z without the (1 - e²) of the ellipsoid"),
+    Mutant("geo-bowring-1", "kernels/core.py", "sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, 2)",
+           "sl, cl, p, h = bowring(x, y, z, a, b, e2, ep2, 1)", ("tests/test_geodesy.py",),
+           "one Bowring step: latitude 0.09 mm off at 100 km"),
+    Mutant("rot-y-sign", "kernels/core.py", "return (c, o, s, o, o + 1.0, o, -s, o, c)",
+           "return (c, o, -s, o, o + 1.0, o, s, o, c)", ("tests/test_locate.py",),
+           "rotation about y turned the wrong way (pitch and elevation mirrored)"),
+    Mutant("azel-order", "kernels/core.py",
+           "g = mat_mul(mat_mul(rot_z(az), rot_x(skew)), mat_mul(rot_y(el), rot_x(sensor_roll)))",
+           "g = mat_mul(mat_mul(rot_y(el), rot_x(skew)), mat_mul(rot_z(az), rot_x(sensor_roll)))",
+           ("tests/integration/test_independent_refs.py",), "az-el turret axes in the wrong order"),
+    Mutant("rollpitch-axes", "kernels/core.py", "return (-s[1], s[0], s[2], -s[4], s[3], s[5], -s[7], s[6], s[8])",
+           "return (s[1], -s[0], s[2], s[4], -s[3], s[5], s[7], -s[6], s[8])",
+           ("tests/integration/test_independent_refs.py",), "roll-pitch camera axes mirrored"),
+    Mutant("lever-sign", "kernels/core.py", "return R_ecef_cam, px + dx, py + dy, pz + dz",
+           "return R_ecef_cam, px - dx, py - dy, pz - dz", ("tests/test_locate.py",),
+           "lever arm applied backwards"),
+    Mutant("ray-norm", "kernels/core.py", "k = 1.0 / np.sqrt(xn * xn + yn * yn + 1.0)",
+           "k = 1.0 / np.sqrt(xn * xn + yn * yn + 1.01)", ("tests/test_oracle.py",),
+           "ray directions not unit vectors"),
+    Mutant("range-zero", "kernels/core.py",
+           "valid = ray_valid(ox, oy, oz, dx, dy, dz) & (rng > 0.0) & (rng <= MAX_RANGE_M)",
+           "valid = ray_valid(ox, oy, oz, dx, dy, dz) & (rng >= 0.0) & (rng <= MAX_RANGE_M)",
+           ("tests/test_oracle.py",), "a zero range accepted as a fix at the camera"),
+    Mutant("dem-later-root", "kernels/core.py", "first = pick(ok1 & ok2, np.minimum(r1, r2),",
+           "first = pick(ok1 & ok2, np.maximum(r1, r2),", ("tests/integration/test_independent_refs.py",),
+           "the later of two roots in a DEM cell (issue 55: 15.8 m too far)"),
+    Mutant("dem-bilinear", "kernels/core.py", "h = (1.0 - ar) * top + ar * bottom",
+           "h = (1.0 - ar) * top + ar * top", ("tests/test_terrain.py", "tests/test_dem_locate.py"),
+           "bilinear interpolation ignores the second row of posts"),
+    Mutant("project-behind", "kernels/core.py", "zs = pick(cz > 0.0, cz, np.nan)", "zs = pick(cz != 0.0, cz, np.nan)",
+           ("tests/test_locate.py", "tests/test_rectify.py", "tests/test_footprint.py"),
+           "points behind the camera projected into the image"),
+    # --- sensor
+    Mutant("half-pixel", "sensor/camera.py", "xn = (u - (self.cx + dcx)) / (self.fx * scale)",
+           "xn = (u + 0.5 - (self.cx + dcx)) / (self.fx * scale)", ("tests/test_oracle.py",),
+           "pixel convention off by half a pixel"),
+    # --- accuracy
+    Mutant("cep-small", "accuracy/cep.py", "big, small = np.maximum(a, b), np.minimum(a, b)",
+           "big, small = np.maximum(a, b), np.maximum(a, b)", ("tests/test_accuracy.py",),
+           "CEP of an elongated ellipse computed as a circle"),
+    Mutant("ellipse-minor", "accuracy/cep.py", "k * np.sqrt(np.maximum(mid - rad, 0.0))",
+           "k * np.sqrt(np.maximum(mid - 0.5 * rad, 0.0))", ("tests/test_accuracy.py", "tests/test_covariance.py"),
+           "error ellipse's minor axis wrong"),
+    Mutant("le90-one-sided", "accuracy/covariance.py", "_K90_1D = 1.6448536269514722",
+           "_K90_1D = 1.2815515655446004", ("tests/test_covariance.py",), "LE90 as a one-sided quantile"),
+    Mutant("jacobian-step", "accuracy/covariance.py", "a = a / rel_step  # J diag(sigma)",
+           "a = a / (2.0 * rel_step)  # J diag(sigma)", ("tests/test_covariance.py",),
+           "first-order covariance a quarter of what it is"),
+    Mutant("rls-no-floor", "sequence/rls.py", "WEIGHT_FLOOR = 1e-2", "WEIGHT_FLOOR = 1e-12",
+           ("tests/integration/test_coverage.py::test_47_near_singular_fix_covariances_make_no_false_certainty",),
+           "near-singular fix covariances combined into a false certainty (issue 47)"),
+    Mutant("rls-all-noise", "sequence/rls.py", "Md = lam * self.M * r[:, None, :]", "Md = lam * self.M * 0.0",
+           ("tests/integration/test_coverage.py::test_47_rls_covariance_is_the_exact_sum_over_pairs",
+            "tests/integration/test_coverage.py::test_47_averaging_never_beats_the_systematic_floor"),
+           "biases and Gauss–Markov errors averaged down like noise"),
+    Mutant("rls-never-inconsistent", "sequence/rls.py",
+           "return ~((self.n >= 3) & (q > chi2_quantile(1.0 - INCONSISTENT_P, dof)))",
+           "return np.ones(len(self.n), dtype=bool)",
+           ("tests/test_live_map.py::test_static_targets_refined_live_equal_the_batch_rls",),
+           "fixes that jump between a summit and its slope averaged into a point"),
+    Mutant("kalman-consider", "sequence/track.py", "Pxc = Pxc - K @ (H @ Pxc + A)", "Pxc = Pxc - K @ (H @ Pxc)",
+           ("tests/integration/test_coverage.py::test_47_coverage_of_kalman_tracks_with_considered_biases",),
+           "Schmidt–Kalman cross-covariance update missing the fix's own effects"),
+    Mutant("rls-forgetting", "sequence/rls.py", "self.A = lam * self.A + W", "self.A = self.A + W",
+           ("tests/test_filters_calibration.py",), "forgetting factor ignored in the information"),
+    # --- writers
+    Mutant("csv-decimals", "io/csvfile.py", 'return 9 if name.endswith("_deg") else 4',
+           'return 6 if name.endswith("_deg") else 4', ("tests/integration/test_independent_refs.py",),
+           "angles written with 6 decimals (~0.1 m) instead of the promised 9"),
+    Mutant("geojson-order", "io/geojsonfile.py", 'for k in ("lon_deg", "lat_deg", "h_m")]',
+           'for k in ("lat_deg", "lon_deg", "h_m")]', ("tests/test_geojsonfile.py",),
+           "GeoJSON coordinates as lat, lon (RFC 7946 wants lon, lat)"),
+    Mutant("cot-ce", "io/cot.py", "ce = ce90 / CE90_PER_SIGMA", "ce = ce90 / 1.1774",
+           ("tests/test_klv_outputs.py",), "CoT ce from the CE90 with the CEP50 factor"),
+    Mutant("cot-hae", "io/cot.py", 'hae="{hae:.2f}"', 'hae="{hae:.0f}"', ("tests/test_klv_outputs.py",),
+           "CoT heights rounded to the metre"),
+    Mutant("kml-msl", "io/kml.py", "h = c[:, 2] - geoid.undulation(c[:, 1], c[:, 0])",
+           "h = c[:, 2] + geoid.undulation(c[:, 1], c[:, 0])",
+           ("tests/test_geoformats.py", "tests/test_klv_outputs.py"),
+           "KML heights converted to MSL the wrong way"),
+    # --- KLV
+    Mutant("klv-bcc", "io/klv/reader.py", "return ((sum(data[0::2]) << 8) + sum(data[1::2])) & 0xFFFF",
+           "return ((sum(data[0::2]) << 7) + sum(data[1::2])) & 0xFFFF", ("tests/test_klv.py",),
+           "ST 0601 checksum computed wrong: good packets refused"),
+    Mutant("klv-heading", "io/klv/st0601.py", '5: ("Platform Heading Angle", Mapped(2, F(0), F(360))),',
+           '5: ("Platform Heading Angle", Mapped(2, F(0), F(359))),', ("tests/test_klv.py",),
+           "ST 0601 tag 5 scaled over the wrong range"),
+    Mutant("klv-alt", "io/klv/st0601.py", "_ALT = Mapped(2, F(-900), F(19000))",
+           "_ALT = Mapped(2, F(-1000), F(19000))",
+           ("tests/test_klv.py",), "ST 0601 altitudes offset by the wrong minimum"),
+    Mutant("vmti-imapb", "io/klv/st0903.py", "return s_r * (y - z) + lo", "return s_r * (y + z) + lo",
+           ("tests/test_klv.py",), "ST 1201 IMAPB decoded with the zero offset's sign flipped"),
+    # --- photos (issue 48)
+    Mutant("photo-datum", "io/photo.py", "        h = alt + n\n", "        h = alt - n\n",
+           ("tests/integration/test_photo.py",), "DJI MSL heights converted to ellipsoidal the wrong way"),
+    Mutant("photo-db-scale", "sensor/dronemodels.py", 'scale = width / e["widthPixels"]', "scale = 1.0",
+           ("tests/integration/test_photo.py",), "a resized photo's focal length not scaled"),
+]
+
+
+def run(m: Mutant, python: str) -> tuple[str, float, str]:
+    path = SRC / m.file
+    text = path.read_text(encoding="utf-8")
+    count = text.count(m.find)
+    if count != 1:
+        return "BAD SPEC", 0.0, f"the text to replace occurs {count} times in {m.file}"
+    t0 = time.perf_counter()
+    try:
+        path.write_text(text.replace(m.find, m.replace), encoding="utf-8")
+        r = subprocess.run([python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *m.tests], cwd=ROOT,
+                           capture_output=True, text=True, timeout=1800)
+    finally:
+        path.write_text(text, encoding="utf-8")
+    last = (r.stdout.strip().splitlines() or [""])[-1]
+    return ("KILLED" if r.returncode != 0 else "SURVIVED"), time.perf_counter() - t0, last
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", help="mutant ids to run")
+    ap.add_argument("--list", action="store_true", help="list the mutants and exit")
+    a = ap.parse_args()
+    todo = [m for m in MUTANTS if not a.only or m.id in a.only]
+    if a.list:
+        for m in todo:
+            print(f"{m.id:24s} {m.file:26s} {m.why}")
+        return 0
+    rows, survived = [], []
+    for m in todo:
+        verdict, secs, last = run(m, sys.executable)
+        rows.append((m, verdict, secs))
+        print(f"{m.id:24s} {verdict:9s} {secs:6.0f} s  {last}", file=sys.stderr, flush=True)
+        if verdict != "KILLED":
+            survived.append(m)
+    print(f"\n{len(rows) - len(survived)} of {len(rows)} mutants killed\n")
+    print("| mutant | module | the bug | killed by | result |\n|---|---|---|---|---|")
+    for m, verdict, secs in rows:
+        print(f"| {m.id} | {m.file} | {m.why} | {', '.join(t.split('::')[0].split('/')[-1] for t in m.tests)} | "
+              f"{verdict.lower()} ({secs:.0f} s) |")
+    return 1 if survived else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
