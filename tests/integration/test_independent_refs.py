@@ -118,3 +118,77 @@ def test_55_csv_writes_angles_with_the_promised_nine_decimals(tmp_path):
     assert np.max(np.abs(np.array([float(r["lat_deg"]) for r in back]) - lat)) < 5e-10
     assert np.max(np.abs(np.array([float(r["lon_deg"]) for r in back]) - lon)) < 5e-10
     assert np.max(np.abs(np.array([float(r["h_m"]) for r in back]) - h)) < 5e-5
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-900.0, 19000.0), st.integers(2, 4), st.sampled_from([(-900.0, 19000.0), (-19.2, 19.2),
+                                                                       (-1e6, 1e6), (0.0, 360.0)]))
+def test_55_imapb_decodes_what_stanag4609_encodes(x, length, bounds):
+    """ST 1201 IMAPB: eoloc's decoder against stanag4609's own encoder, for ranges that straddle
+    zero (where the zero offset matters) and ones that do not: within the format's resolution."""
+    from stanag4609.imap import IMAPB
+
+    from eoloc.io.klv.st0903 import imapb
+
+    lo, hi = bounds
+    x = min(max(x, lo), hi)
+    codec = IMAPB(lo, hi, length)
+    raw = codec.encode(x)
+    got = imapb(lo, hi, length)(raw)
+    want = codec.decode(raw)
+    step = 2.0 ** (np.ceil(np.log2(hi - lo)) - (8 * length - 1))
+    assert abs(got - float(want)) <= 1e-9 * max(1.0, abs(float(want))) and abs(got - x) <= step
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.01, 1.0), st.sampled_from([0.5, 0.9, 0.95]))
+def test_55_cep_of_an_elongated_ellipse_against_a_quadrature(ratio, p):
+    """cep_zero_mean(σ1, σ2, p) = the radius R with P(|e| < R) = p for e ~ N(0, diag(σ1², σ2²)),
+    R found here by scipy's quadrature of the polar density and a root search (no eoloc code)."""
+    from scipy import integrate, optimize
+
+    from eoloc.accuracy.cep import cep_zero_mean
+
+    s1, s2 = 10.0, 10.0 * ratio
+
+    def inside(R):
+        f = lambda r, t: r * np.exp(-0.5 * ((r * np.cos(t) / s1) ** 2 + (r * np.sin(t) / s2) ** 2)) / (  # noqa: E731
+            2 * np.pi * s1 * s2)
+        return integrate.dblquad(f, 0.0, 2 * np.pi, 0.0, R, epsabs=1e-10, epsrel=1e-9)[0] - p
+
+    want = optimize.brentq(inside, 1e-6, 10.0 * s1)
+    assert float(cep_zero_mean(s1, s2, p)) == pytest.approx(want, rel=2e-3)
+
+
+def test_55_le90_is_the_two_sided_90_percent_of_a_normal():
+    """A fix's LE90 = the 90 % quantile of |N(0, σ_u)| = scipy's norm.ppf(0.95) σ_u."""
+    from scipy.stats import norm
+
+    from eoloc.accuracy import ErrorBudget, locate_with_covariance
+
+    sensor = eoloc.SensorModel(eoloc.Camera.from_hfov(20.0, 1280, 720), eoloc.AzElGimbal())
+    pose = eoloc.Pose(40.0, -105.0, 3000.0, 30.0, 1.0, -2.0, (250.0, -25.0))
+    _, cov = locate_with_covariance(sensor, pose, ErrorBudget.from_mapping({"h_m": {"normal": 4.0},
+                                                                            "range_m": {"normal": 2.0}}),
+                                    (300.0, 200.0), eoloc.AtRange(5000.0))
+    assert float(cov.le90) == pytest.approx(norm.ppf(0.95) * float(cov.sigma_enu[2]), rel=1e-12)
+
+
+def test_55_points_behind_the_camera_have_no_pixel():
+    """ground_to_image: a point in front of the camera gets the oracle's pixel, the same point
+    mirrored behind the camera gets none (NaN), every gimbal kind."""
+    for kind in O.KINDS:
+        sensor = O._sensor(eoloc, kind)
+        c = {"lat": 40.0, "lon": -105.0, "h": 3000.0, "yaw": 20.0, "pitch": 2.0, "roll": -1.0, "g1": 200.0,
+             "g2": -30.0, "g3": 5.0}
+        pose = eoloc.Pose(40.0, -105.0, 3000.0, 20.0, 2.0, -1.0,
+                          O._gimbal_tuple({k: np.atleast_1d(v) for k, v in c.items()}, kind))
+        pose = eoloc.Pose(*(np.ravel(getattr(pose, f))[0] for f in ("lat_deg", "lon_deg", "h_m", "yaw_deg",
+                                                                      "pitch_deg", "roll_deg")),
+                          tuple(float(np.ravel(g)[0]) for g in pose.gimbal_deg))
+        o, d, _ = O.rays(O.CAMERA, kind, 40.0, -105.0, 3000.0, 20.0, 2.0, -1.0, 200.0, -30.0, 5.0, np.array(400.0),
+                         np.array(300.0), R_fixed=O.R_FIXED)
+        front, back = o.reshape(3) + 800.0 * d.reshape(3), o.reshape(3) - 800.0 * d.reshape(3)
+        u, v = sensor.ground_to_image(pose, np.stack([front, back]))
+        assert abs(u[0] - 400.0) < 1e-6 and abs(v[0] - 300.0) < 1e-6
+        assert np.isnan(u[1]) and np.isnan(v[1])
