@@ -213,7 +213,7 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
     for tid, (lat, lon, _h) in truth.items():
         sel = np.flatnonzero(ids == tid)
         f = m3.fixes.flat(sel)
-        est = rls_static(f, m3.covariance.cov_enu[sel])
+        est = rls_static(f, covariance=m3.covariance.take(sel), time_s=np.asarray(m3.extra["time_s"])[sel])
         single = np.nanmedian(np.where(f.ok, horizontal_distance_m(f.lat_deg, f.lon_deg, lat, lon), np.nan))
         good = sel[matched.record[sel] >= 0]
         tri = triangulate(rays.take(good), np.radians(1.0))
