@@ -124,6 +124,14 @@ def R_ecef_enu(lat: ArrayLike, lon: ArrayLike, *, degrees: bool = True) -> np.nd
     return R_ecef_ned(lat, lon, degrees=degrees) @ _NED_TO_ENU
 
 
+def enu_turn(R_to: ArrayLike, lat: ArrayLike, lon: ArrayLike) -> np.ndarray:
+    """(..., 3, 3) the rotation taking vectors in the ENU axes at (lat, lon) (deg; NaN taken as 0)
+    into the axes ``R_to`` (..., 3, 3), columns in ECEF (e.g. :func:`R_ecef_enu` at an origin):
+    ``R_to^T R_ecef_enu(lat, lon)``. A covariance C turns as ``T C T^T``."""
+    return np.swapaxes(np.asarray(R_to, dtype=np.float64), -1, -2) @ R_ecef_enu(np.nan_to_num(lat),
+                                                                                 np.nan_to_num(lon))
+
+
 def to_frame(p_ecef: ArrayLike, origin_ecef: ArrayLike, R: ArrayLike) -> np.ndarray:
     """ECEF points (..., 3) in the local frame with origin ``origin_ecef`` (..., 3) whose axes are
     the columns of ``R`` (..., 3, 3), e.g. :func:`R_ecef_enu`: R^T (p - o). For frames kept

@@ -114,6 +114,21 @@ def _zero_mean_table(p: float):
     return interpolate.CubicSpline(_RATIO_GRID, values)
 
 
+LE90_PER_SIGMA = 1.6448536269514722  # two-sided 90 % quantile of a standard normal: LE90 / sigma
+
+
+def cep_ce_le(cov: ArrayLike, vertical: bool = True) -> dict[str, np.ndarray]:
+    """``cep50_m``, ``ce90_m`` (exact radii of the zero-mean horizontal normal) and ``le90_m`` (the
+    two-sided 90 % of the vertical error) of covariances ``cov`` (..., 3, 3) ENU m^2; without
+    ``vertical``, the horizontal pair only."""
+    cov = np.asarray(cov, dtype=np.float64)
+    e = error_ellipses(cov[..., :2, :2])
+    out = {"cep50_m": cep_zero_mean(e[..., 0], e[..., 1], 0.5), "ce90_m": cep_zero_mean(e[..., 0], e[..., 1], 0.9)}
+    if vertical:
+        out["le90_m"] = LE90_PER_SIGMA * np.sqrt(np.maximum(cov[..., 2, 2], 0.0))
+    return out
+
+
 def cep_zero_mean(sigma_major: ArrayLike, sigma_minor: ArrayLike, p: float = 0.5) -> np.ndarray:
     """Vectorised parametric CEP (m) of zero-mean bivariate normals given their principal sigmas
     (any order; arrays broadcast): the radius holding probability p. NaN where a sigma is NaN."""

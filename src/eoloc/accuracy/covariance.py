@@ -30,11 +30,10 @@ from ..rules import StopRule, rule_from_options
 from ..sensor.model import Pose, SensorModel, split_pixels
 from ..terrain.dem import DEM
 from .budget import ErrorBudget
-from .cep import cep_zero_mean, error_ellipses
+from .cep import LE90_PER_SIGMA, cep_zero_mean, error_ellipses
 from .montecarlo import chain_fixes, metres_per_degree, usable_rule
 
 DEFAULT_REL_STEP = 1e-2
-_K90_1D = 1.6448536269514722  # two-sided 90 % quantile of a standard normal
 
 
 @dataclass(frozen=True)
@@ -117,7 +116,7 @@ class FixCovariance:
     @property
     def le90(self) -> np.ndarray:
         """90 % vertical error (m) of the normal up error."""
-        return _K90_1D * self.sigma_enu[..., 2]
+        return LE90_PER_SIGMA * self.sigma_enu[..., 2]
 
     def ellipse(self, p: float | None = None) -> np.ndarray:
         """(*T, 3): semi-major, semi-minor (m) and azimuth of the major axis (deg from north) of the

@@ -124,18 +124,16 @@ def chain_fixes(sensor: SensorModel, pose: Pose, u, v, rule: StopRule, d: dict[s
     bore = _angles(sensor.boresight_misalignment_deg, d, "boresight", ("x", "y"), lead)
     frame = sensor.camera_frame(perturbed, mount_misalignment_deg=mount, boresight_misalignment_deg=bore,
                                 gimbal_skew_deg=z("gimbal_skew_deg"))
-    xn, yn = sensor.camera.pixel_to_normalized(u + z("u_px"), v + z("v_px"), focal_error_px=z("focal_px"),
-                                               principal_point_error_px=(z("cx_px"), z("cy_px")),
-                                               focal_scale=pose.focal_scale)
-    # the nominal pixel decides whether a target is in the image (as eoloc.locate): a pixel outside
-    # is OUT_OF_IMAGE in every row, never a point with an uncertainty
-    xn0, yn0 = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
-    outside = sensor.camera.outside(u, v, xn0, yn0, focal_scale=pose.focal_scale)
-    def normalize(uu, vv):
+    def normalize(uu, vv):  # pixels to normalised points with the camera's perturbed intrinsics
         return sensor.camera.pixel_to_normalized(uu + z("u_px"), vv + z("v_px"), focal_error_px=z("focal_px"),
                                                  principal_point_error_px=(z("cx_px"), z("cy_px")),
                                                  focal_scale=pose.focal_scale)
 
+    xn, yn = normalize(u, v)
+    # the nominal pixel decides whether a target is in the image (as eoloc.locate): a pixel outside
+    # is OUT_OF_IMAGE in every row, never a point with an uncertainty
+    xn0, yn0 = sensor.camera.pixel_to_normalized(u, v, focal_scale=pose.focal_scale)
+    outside = sensor.camera.outside(u, v, xn0, yn0, focal_scale=pose.focal_scale)
     f = usable_rule(rule).stop_in_frame(sensor, frame, xn, yn, outside, sensor.ellipsoid, errors=z,
                                         normalize=normalize)
     shape = np.broadcast_shapes(lead, f.shape)  # rows even when no source varies

@@ -154,6 +154,25 @@ class VMTIFixes:
     tau_s: np.ndarray | None = None
 
 
+def vmti_frames(tel: Table, det: Table):
+    """Each detection's packet: (row of ``tel``, found, horizontal and vertical field of view — the
+    VMTI set's (tags 11, 12), else the packet's (16, 17) — and usable: found with a field of view
+    in (0, 180) degrees and a frame size)."""
+    n = len(det)
+    frames = det.columns["frame"].astype(np.int64)
+    by_packet = np.argsort(tel.line, kind="stable")  # rows are grouped by stream and in time order
+    pos = np.clip(np.searchsorted(tel.line[by_packet], frames), 0, max(len(tel) - 1, 0))
+    row = by_packet[pos] if len(tel) else pos
+    found = tel.line[row] == frames if len(tel) else np.zeros(n, bool)
+    d, c = det.columns, tel.columns
+    hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
+    vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])
+    w, h = d["frame_width"], d["frame_height"]
+    usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
+        (vfov > 0) & (vfov < 180)
+    return row, found, hfov, vfov, usable
+
+
 def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
                 base: SensorModel | None = None) -> VMTIFixes:
     """Geolocate VMTI detections with their own packet's pose and field of view.
@@ -165,14 +184,8 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     """
     base = base or misb_sensor()
     n = len(det)
-    frames = det.columns["frame"].astype(np.int64)
-    by_packet = np.argsort(tel.line, kind="stable")  # rows are grouped by stream and in time order
-    pos = np.clip(np.searchsorted(tel.line[by_packet], frames), 0, max(len(tel) - 1, 0))
-    row = by_packet[pos] if len(tel) else pos
-    found = tel.line[row] == frames if len(tel) else np.zeros(n, bool)
+    row, found, hfov, vfov, usable = vmti_frames(tel, det)
     d, c = det.columns, tel.columns
-    hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
-    vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])
     w, h = d["frame_width"], d["frame_height"]
     lat, lon, hh, rng = (np.full(n, np.nan) for _ in range(4))
     status = np.full(n, int(Status.NO_TELEMETRY), dtype=np.int8)
@@ -180,8 +193,6 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     cov_enu = effects = tau = None
     pose_all = packet_pose(tel).take(row) if n else None
     groups = {}
-    usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
-        (vfov > 0) & (vfov < 180)
     status[found & ~usable] = int(Status.INVALID_INPUT)
     for i in np.flatnonzero(usable):
         groups.setdefault((float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])), []).append(i)
@@ -252,16 +263,8 @@ def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | Non
 
     base = base or misb_sensor()
     d, c = det.columns, tel.columns
-    frames = d["frame"].astype(np.int64)
-    by_packet = np.argsort(tel.line, kind="stable")
-    pos = np.clip(np.searchsorted(tel.line[by_packet], frames), 0, max(len(tel) - 1, 0))
-    row = by_packet[pos] if len(tel) else pos
-    found = tel.line[row] == frames if len(tel) else np.zeros(len(det), bool)
-    hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"][row])
-    vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"][row])
+    row, _, hfov, vfov, usable = vmti_frames(tel, det)
     w, h = d["frame_width"], d["frame_height"]
-    usable = found & np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
-        (vfov > 0) & (vfov < 180)
     if surface is None:
         usable &= np.isfinite(c["fc_h_m"][row])
     idx = np.flatnonzero(usable)

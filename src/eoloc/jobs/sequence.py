@@ -87,7 +87,7 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
     INCONSISTENT and no point; without one (an assumed ``meas_sigma_m``) a target whose fixes
     scatter more than SCATTER_LIMIT times that sigma gets a warning and the fixes' own scatter as
     its uncertainty."""
-    from ..accuracy.cep import cep_zero_mean, error_ellipses
+    from ..accuracy.cep import LE90_PER_SIGMA, cep_ce_le
     from ..result import Status
     from ..sequence.rls import SCATTER_LIMIT, rls_static, scatter_inflation
 
@@ -129,11 +129,11 @@ def static_targets(job: LocateJob, *, forgetting: float, meas_sigma_m: float, wi
                            f"the fixes' own scatter, {inflate:.1f}x the static estimate's (for a moving target use "
                            "eoloc track without --static)")
         s = np.sqrt(np.diagonal(cov)) * inflate
-        e = error_ellipses(cov[:2, :2] * inflate**2)
+        spread = cep_ce_le(cov[:2, :2] * inflate**2, vertical=False)
         rows.append({**row, "lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m),
                      "sigma_e_m": float(s[0]), "sigma_n_m": float(s[1]), "sigma_u_m": float(s[2]),
-                     "cep50_m": float(cep_zero_mean(e[0], e[1], 0.5)), "ce90_m": float(cep_zero_mean(e[0], e[1], 0.9)),
-                     "le90_m": 1.6448536269514722 * float(s[2]), "first_fix_sigma_h_m": float(single),
+                     **{k: float(v) for k, v in spread.items()}, "le90_m": LE90_PER_SIGMA * float(s[2]),
+                     "first_fix_sigma_h_m": float(single),
                      "converged_at_s": float(t[sel][conv]) if conv >= 0 else None, "status": "OK",
                      "warning": warning})
     return rows

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from .. import geodesy
-from ..accuracy.cep import cep_zero_mean, error_ellipses
+from ..accuracy.cep import cep_ce_le
 from ..result import Status
 from ..sequence.rls import SCATTER_LIMIT, RLSState, random_part, scatter_inflation, weights
 from .update import PacketUpdate
@@ -110,12 +110,11 @@ class TargetFilters:
         use = np.zeros(n_slots, dtype=bool)
         use[k] = True
         RK = np.broadcast_to(np.eye(3), (n_slots, 3, 3)).copy()
-        R_kalman = R
         if effects is None:
             RK[k] = R
             st.rls.update(z, RK, weights(RK, use), use)
         else:  # the error structure: each fix's covariance and source effects in its target's frame
-            turn = np.swapaxes(st.R_ecef_enu[k], -1, -2) @ geodesy.R_ecef_enu(lat, lon)
+            turn = geodesy.enu_turn(st.R_ecef_enu[k], lat, lon)
             a = np.zeros((n_slots, 3, u.tau_s.size))
             a[k] = turn @ np.nan_to_num(effects)
             RK[k] = turn @ R @ np.swapaxes(turn, -1, -2)
@@ -123,7 +122,7 @@ class TargetFilters:
         moving = np.zeros(idx.size, dtype=bool)
         kalman = None
         if st.tracker is not None:
-            kalman = self._track(st, u, p, R_kalman, ids, lat, lon, effects)
+            kalman = self._track(st, u, p, R, ids, lat, lon, effects)
             moving = kalman["moving"] if self.model == "auto" else np.ones(idx.size, dtype=bool)
         u.estimates += self._static(u, st, k[~moving], ids[~moving], known)
         if kalman is not None and moving.any():
@@ -139,7 +138,7 @@ class TargetFilters:
         agree = rls.consistent()[k] if known else np.ones(k.size, dtype=bool)
         e = geodesy.from_frame(rls.x[k], st.origin_ecef[k], st.R_ecef_enu[k])
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
-        spread = uncertainty_props(cov)
+        spread = cep_ce_le(cov)
         inflate = np.ones(k.size)
         if not rls.structured:  # a covariance without its structure: the scatter widens the CEP
             mean_sigma = np.mean(np.sqrt(np.diagonal(cov[:, :2, :2], axis1=-2, axis2=-1)), axis=-1)
@@ -155,8 +154,7 @@ class TargetFilters:
                 out.append(_estimate(u, tid, None, None, None, props))
                 continue
             if known:
-                props |= {key: _finite(v[j] * (inflate[j] if key.startswith("c") else 1.0))
-                          for key, v in spread.items()}
+                props |= {key: _finite(v[j] * (1.0 if key == "le90_m" else inflate[j])) for key, v in spread.items()}
             else:
                 props["cep50_m"] = None
             if inflate[j] > 1.0:
@@ -177,7 +175,7 @@ class TargetFilters:
         A = tau = None
         Rh = R[:, :2, :2]
         if effects is not None:
-            turn = geodesy.R_ecef_enu(*st.track_origin[:2]).T @ geodesy.R_ecef_enu(lat, lon)
+            turn = geodesy.enu_turn(geodesy.R_ecef_enu(*st.track_origin[:2]), lat, lon)
             a = (turn @ np.nan_to_num(effects))[:, :2]
             noise = u.tau_s == 0
             Rh = a[..., noise] @ np.swapaxes(a[..., noise], -1, -2)
@@ -200,7 +198,7 @@ class TargetFilters:
         lat, lon, h = geodesy.ecef_to_geodetic(e[:, 0], e[:, 1], e[:, 2])
         C = np.zeros((len(x), 3, 3))
         C[:, :2, :2] = P[:, :2, :2]
-        spread = uncertainty_props(C, vertical=False)
+        spread = cep_ce_le(C, vertical=False)
         heading = np.degrees(np.arctan2(x[:, 2], x[:, 3])) % 360.0
         hits = np.asarray(kal["hits"])[moving]
         out = []
@@ -215,19 +213,6 @@ class TargetFilters:
 def _finite(v) -> float | None:
     v = float(v)
     return v if math.isfinite(v) else None
-
-
-def uncertainty_props(cov: np.ndarray, vertical: bool = True) -> dict[str, np.ndarray]:
-    """CEP50, CE90 (exact radii of the horizontal normal) and LE90 (m) of estimates of covariance
-    ``cov`` (K, 3, 3) ENU m^2."""
-    e = error_ellipses(cov[:, :2, :2])
-    out = {"cep50_m": cep_zero_mean(e[:, 0], e[:, 1], 0.5), "ce90_m": cep_zero_mean(e[:, 0], e[:, 1], 0.9)}
-    if vertical:
-        out["le90_m"] = LE90_PER_SIGMA * np.sqrt(cov[:, 2, 2])
-    return out
-
-
-LE90_PER_SIGMA = 1.6448536269514722  # two-sided 90 % of a normal, in sigmas
 
 
 def _estimate(u: PacketUpdate, tid: str, lon: float | None, lat: float | None, h: float | None, props: dict) -> dict:

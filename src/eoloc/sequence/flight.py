@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import geodesy
 from ..accuracy.budget import ErrorBudget
-from ..accuracy.cep import cep_zero_mean, error_ellipses
+from ..accuracy.cep import cep_ce_le
 from ..accuracy.covariance import FixCovariance
 from ..accuracy.montecarlo import chain_fixes
 from ..result import Fixes, Status
@@ -37,7 +37,6 @@ from .rls import rls_static
 PER_DETECTION = ("u_px", "v_px", "range_m")  # measured per detection; the terrain: per target
 PER_TARGET = ("terrain_m",)
 KINDS = ("bias", "markov", "noise")
-K90_1D = 1.6448536269514722
 
 
 def _series(rng: np.random.Generator, sigma: float, kind: str, tau_s: float, times: np.ndarray,
@@ -91,13 +90,6 @@ class FlightAccuracy:
     samples: int
 
 
-def _parts(cov: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
-    e = error_ellipses(cov[..., :2, :2])
-    return {f"{prefix}cep50_m": cep_zero_mean(e[..., 0], e[..., 1], 0.5),
-            f"{prefix}ce90_m": cep_zero_mean(e[..., 0], e[..., 1], 0.9),
-            f"{prefix}le90_m": K90_1D * np.sqrt(np.maximum(cov[..., 2, 2], 0.0))}
-
-
 def _spread(enu: np.ndarray, ok: np.ndarray) -> dict[str, np.ndarray]:
     """Empirical CEP50, CE90, LE90 over axis 0 of errors ``enu`` (n, ..., 3) where ``ok``."""
     r = np.where(ok, np.hypot(enu[..., 0], enu[..., 1]), np.nan)
@@ -121,13 +113,20 @@ def flight_accuracy(sensor: SensorModel, pose: Pose, pixels: tuple[np.ndarray, n
     ok = np.asarray(fixes.ok)
     p0 = fixes.p_ecef()
     R = geodesy.R_ecef_enu(np.nan_to_num(fixes.lat_deg), np.nan_to_num(fixes.lon_deg))
-    fo = _parts(cov.cov_enu)
-    parts = {k: _parts(cov.part(k))["ce90_m"] for k in KINDS}
+    fo = cep_ce_le(cov.cov_enu)
+    parts = {k: cep_ce_le(cov.part(k), vertical=False)["ce90_m"] for k in KINDS}
     targets = sorted(set(ids[ok].tolist()))
     sel = {t: np.flatnonzero((ids == t) & ok) for t in targets}
     sel = {t: s[np.argsort(time_s[s], kind="stable")] for t, s in sel.items()}
     nominal = {t: rls_static(fixes.flat(s), covariance=cov.take(s), time_s=time_s[s]) for t, s in sel.items()}
 
+    # each target's fixes as many columns as copies of the flight in a chunk: their structure,
+    # the same in every copy, broadcast along the copies
+    wide = {}
+    for t, s in sel.items():
+        c = cov.take(s)
+        wide[t] = FixCovariance(c.cov_enu[:, None], c.jacobian_enu[:, None], c.sources, c.sigma_in,
+                                c.nonlinearity[:, None], c.lat_deg[:, None], c.h_m[:, None], c.kinds, c.tau_s)
     fix_err, fix_ok = [], []
     est_err = {t: [] for t in targets}
     est_ok = {t: [] for t in targets}
@@ -143,18 +142,14 @@ def flight_accuracy(sensor: SensorModel, pose: Pose, pixels: tuple[np.ndarray, n
         fix_ok.append(good)
         for t, s in sel.items():
             fm = Fixes(*(np.asarray(a)[:, s].T for a in (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)))
-            c = cov.take(s)
-            wide = FixCovariance(c.cov_enu[:, None], c.jacobian_enu[:, None], c.sources, c.sigma_in,
-                                 c.nonlinearity[:, None], c.lat_deg[:, None], c.h_m[:, None], c.kinds, c.tau_s)
             if not fm.ok.any():
                 est_ok[t].append(np.zeros(m, bool))
                 est_err[t].append(np.full((m, 3), np.nan))
                 continue
-            e = rls_static(fm, covariance=wide, time_s=time_s[s], origin=nominal[t].origin, check_consistency=False)
+            e = rls_static(fm, covariance=wide[t], time_s=time_s[s], origin=nominal[t].origin,
+                           check_consistency=False)
             q = np.stack(geodesy.geodetic_to_ecef(e.lat_deg, e.lon_deg, e.h_m), -1)
-            q0 = np.stack(geodesy.geodetic_to_ecef(nominal[t].lat_deg, nominal[t].lon_deg, nominal[t].h_m), -1)
-            Rt = geodesy.R_ecef_enu(nominal[t].lat_deg, nominal[t].lon_deg)
-            est_err[t].append((q - q0) @ Rt)
+            est_err[t].append(geodesy.ecef_to_enu(q, nominal[t].lat_deg, nominal[t].lon_deg, nominal[t].h_m))
             est_ok[t].append(np.isfinite(e.lat_deg))
         done += m
         if progress is not None:
@@ -178,8 +173,8 @@ def flight_accuracy(sensor: SensorModel, pose: Pose, pixels: tuple[np.ndarray, n
         row = {"target_id": t, "fixes": int(sel[t].size), "status": Status(int(est.status)).name}
         if est.status == Status.OK:
             row |= {"lat_deg": float(est.lat_deg), "lon_deg": float(est.lon_deg), "h_m": float(est.h_m)}
-            row |= {k: float(v) for k, v in _parts(est.cov_enu).items()}
-            row |= {f"ce90_{k}_m": float(_parts(est.cov_by_kind[k])["ce90_m"]) for k in KINDS}
+            row |= {k: float(v) for k, v in cep_ce_le(est.cov_enu).items()}
+            row |= {f"ce90_{k}_m": float(cep_ce_le(est.cov_by_kind[k], vertical=False)["ce90_m"]) for k in KINDS}
             row["single_fix_ce90_m"] = float(np.median(fo["ce90_m"][sel[t]]))
         if est.status == Status.OK:
             row |= {k: float(v) for k, v in _spread(np.concatenate(est_err[t]), np.concatenate(est_ok[t])).items()}

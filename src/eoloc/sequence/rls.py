@@ -33,6 +33,7 @@ This needs a declared covariance that is right in total and a few tens of frames
 from __future__ import annotations
 
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -118,26 +119,15 @@ def weights(R: np.ndarray, use: np.ndarray) -> np.ndarray:
 
 
 def chi2_quantile(p: float, dof: ArrayLike) -> np.ndarray:
-    """The p-quantile of a chi-square law with ``dof`` degrees of freedom (Wilson–Hilferty: within
-    1 % of scipy's for dof >= 2 and p up to 0.9999, and no scipy import in a live session)."""
+    """The p-quantile of a chi-square law with ``dof`` degrees of freedom (Wilson–Hilferty, the
+    normal quantile from the standard library: no scipy import in a live session). At p = 0.999
+    within 2.5 % of scipy's at dof 2, 0.3 % at 20, 0.06 % at 76 (tested), a little above it, the
+    safe side for a test that should not call a consistent target inconsistent."""
     k = np.asarray(dof, dtype=np.float64)
-    z = float(np.sqrt(2.0) * _erfinv(2.0 * p - 1.0))
+    z = NormalDist().inv_cdf(p)
     with np.errstate(invalid="ignore", divide="ignore"):
         c = 2.0 / (9.0 * k)
         return k * (1.0 - c + z * np.sqrt(c)) ** 3
-
-
-def _erfinv(y: float) -> float:
-    """erf^-1 by Newton on math.erf (to 1e-12; only a handful of calls)."""
-    import math
-
-    x = 0.0
-    for _ in range(60):
-        step = (math.erf(x) - y) / (2.0 / math.sqrt(math.pi) * math.exp(-x * x))
-        x -= step
-        if abs(step) < 1e-13:
-            break
-    return x
 
 
 @dataclass
@@ -363,8 +353,7 @@ def rls_static(fixes: Fixes, cov_enu: ArrayLike | None = None, *, sigma_m: Array
     times = np.zeros(f_n)
     if a_src is not None:
         # each fix's covariance and source effects turned from its own ENU axes into the origin's
-        to_origin = geodesy.R_ecef_enu(*origin[:2]).T @ geodesy.R_ecef_enu(np.nan_to_num(fixes.lat_deg),
-                                                                          np.nan_to_num(fixes.lon_deg))
+        to_origin = geodesy.enu_turn(geodesy.R_ecef_enu(*origin[:2]), fixes.lat_deg, fixes.lon_deg)
         a_src = to_origin @ np.broadcast_to(a_src, (f_n, k_n, 3, a_src.shape[-1]))
         R = to_origin @ R @ np.swapaxes(to_origin, -1, -2)
         if time_s is not None:

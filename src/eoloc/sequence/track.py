@@ -186,9 +186,8 @@ def track_fixes(time_s: ArrayLike, fixes: Fixes, cov_enu: ArrayLike | None = Non
         origin = tuple(float(np.ravel(a)[i]) for a in (fixes.lat_deg, fixes.lon_deg, fixes.h_m))
     z = geodesy.ecef_to_enu(fixes.flat().p_ecef(), *origin)
     A = tau = None
-    # a fix's covariance is in its own ENU axes: turned into the tracks' (at the origin)
-    turn = geodesy.R_ecef_enu(*origin[:2]).T @ geodesy.R_ecef_enu(np.nan_to_num(np.ravel(fixes.lat_deg)),
-                                                                 np.nan_to_num(np.ravel(fixes.lon_deg)))
+    if covariance is not None or cov_enu is not None:  # each fix's covariance, in its own ENU axes: turned
+        turn = geodesy.enu_turn(geodesy.R_ecef_enu(*origin[:2]), np.ravel(fixes.lat_deg), np.ravel(fixes.lon_deg))
     if covariance is not None:
         keep = covariance.tau_s > 0  # noise stays in the fix's weight, the rest is considered
         tau = covariance.tau_s[keep]
