@@ -11,6 +11,7 @@ import json
 import math
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from hypothesis import strategies as st
 import coverage_lib as C
 import eoloc
 import oracle_lib as O
+from demtruth import TILE, first_crossing, tile_grid
 from dronephoto import write_photo
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "drone"
@@ -174,3 +176,106 @@ def test_48_pixel_ground_pixel_through_a_drone_camera(u, v, pitch, yaw):
         return  # a ray above the horizon at a shallow pitch: nothing to project back
     uu, vv = sensor.ground_to_image(pose, f.p_ecef())
     assert abs(uu[0] - u) < 1e-6 and abs(vv[0] - v) < 1e-6
+
+
+# -- every vendor over a real DEM tile -----------------------------------------------------------------
+
+def _vendor_case(vendor: str, rng, *, w=1280, h=960, resized=1, ir=False):
+    """(tags, exif gps, make, model, extra writer kwargs, the camera the test expects, camera pose
+    as written) of one synthetic photo per vendor's rules (each rule restated here, not eoloc's)."""
+    from dronephoto import gps_as_written
+    from eoloc.terrain.geoid import default_geoid  # the geoid grid is tested against its source elsewhere
+
+    grid = tile_grid()
+    lat, lon = float(np.mean(grid.lat_range)) + rng.uniform(-0.05, 0.05), float(np.mean(grid.lon_range)) + \
+        rng.uniform(-0.05, 0.05)
+    h_cam = grid.hmax + rng.uniform(200, 600)
+    yaw, pitch, roll = round(rng.uniform(-180, 180), 4), round(rng.uniform(-80, -45), 4), round(rng.uniform(-2, 2), 4)
+    n = float(default_geoid().undulation(lat, lon))
+    f35 = 24.0
+    cam = O.Camera(w, h, f35 / 36.0 * w, f35 / 36.0 * w, (w - 1) / 2, (h - 1) / 2)  # EXIF 35 mm: OpenAthena's rule
+    kw: dict = {"f35_mm": f35}
+    if vendor == "skydio":
+        full_w, full_h = w * resized, h * resized
+        fx, cx, cy = 1100.0 * resized, full_w / 2 - 0.5 + 3.0 * resized, full_h / 2 - 0.5 - 2.0 * resized
+        tags = {"Latitude": f"{lat:.9f}", "Longitude": f"{lon:.9f}", "AbsoluteAltitude": f"{h_cam - n:.4f}",
+                "CameraOrientationNED": {"Yaw": yaw, "Pitch": pitch, "Roll": roll},
+                "CalibratedFocalLengthX": fx, "CalibratedFocalLengthY": fx * 1.001,
+                "CalibratedOpticalCenterX": cx, "CalibratedOpticalCenterY": cy}
+        h_true = float(f"{h_cam - n:.4f}") + n
+        if ir:  # an IR frame carries the visible camera's calibration (another aspect): the 35 mm rule instead
+            tags.update(CalibratedFocalLengthX=2376.5625, CalibratedFocalLengthY=2376.5625,
+                        CalibratedOpticalCenterX=2027.5, CalibratedOpticalCenterY=1519.5)
+        else:
+            s = 1.0 / resized
+            cam = O.Camera(w, h, fx * s, fx * 1.001 * s, (cx + 0.5) * s - 0.5, (cy + 0.5) * s - 0.5)
+        return tags, None, "Skydio", "X2-Test", kw, cam, (lat, lon, h_true, yaw, pitch, roll)
+    glat, glon, galt = gps_as_written(lat, lon, h_cam - n)
+    if vendor == "parrot-ai":  # ANAFI Ai: ellipsoidal
+        glat, glon, galt = gps_as_written(lat, lon, h_cam)
+        n_used = 0.0
+    else:
+        n_used = float(default_geoid().undulation(glat, glon))
+    pose = (glat, glon, galt + n_used, yaw, pitch, roll)
+    if vendor in ("parrot", "parrot-ai"):
+        tags = {"CameraYawDegree": yaw, "CameraPitchDegree": pitch, "CameraRollDegree": roll}
+        return tags, (glat, glon, galt), "Parrot", "ANAFI Ai" if vendor == "parrot-ai" else "ANAFI USA", kw, cam, pose
+    if vendor == "autel-old":  # Pix4D's Camera:Pitch: 0 at nadir, 90 at the horizon
+        tags = {"Yaw": yaw, "Pitch": round(pitch + 90.0, 4), "Roll": roll}
+        return tags, (glat, glon, galt), "Autel Robotics", "XT701", kw, cam, pose
+    if vendor == "teal":  # platform + camera, as rationals
+        p_yaw, p_pitch, p_roll = 12.5, 1.25, -0.75
+        tags = {"PlatformYaw": f"{round(p_yaw * 1e4)}/10000", "CameraYaw": f"{round((yaw - p_yaw) * 1e4)}/10000",
+                "PlatformPitch": f"{round(p_pitch * 1e4)}/10000",
+                "CameraPitch": f"{round((pitch - p_pitch) * 1e4)}/10000",
+                "PlatformRoll": f"{round(p_roll * 1e4)}/10000", "CameraRoll": f"{round((roll - p_roll) * 1e4)}/10000"}
+        return tags, (glat, glon, galt), "Teledyne FLIR", "Teal 2", kw, cam, pose
+    raise AssertionError(vendor)
+
+
+VENDORS = ["skydio", "skydio-resized", "skydio-struct", "skydio-ir", "parrot", "parrot-ai", "autel-old", "teal"]
+
+
+@pytest.mark.parametrize("case", VENDORS)
+def test_48_synthetic_vendor_photos_on_a_real_dem_within_1cm(tmp_path, case):
+    """A photo per vendor written by the test with that vendor's own tags (Skydio drone-skydio with
+    its calibration, a quarter-size copy, a struct written as a nested Description, an IR frame
+    carrying the visible camera's calibration; Parrot ANAFI USA (EGM96) and ANAFI Ai (ellipsoidal);
+    old Autel Pix4D Camera: tags; Teal platform + camera rationals) over the real Longs Peak tile:
+    `eoloc photo --pixel U V --dem TILE` lands within 1 cm of the oracle's first DEM crossing."""
+    from dronephoto import write_vendor_photo
+
+    rng = np.random.default_rng(zlib.crc32(case.encode()))
+    vendor = case.split("-")[0] if case.startswith("skydio") else case
+    resized = 4 if case == "skydio-resized" else 1
+    w, h = (640, 512) if case == "skydio-ir" else (1280, 960)
+    tags, gps, make, model, kw, cam, pose = _vendor_case(vendor, rng, w=w, h=h, resized=resized,
+                                                         ir=case == "skydio-ir")
+    ns = {"skydio": "skydio", "parrot": "parrot", "parrot-ai": "parrot", "autel-old": "pix4d", "teal": "exif"}[vendor]
+    path = write_vendor_photo(tmp_path / f"{case}.jpg", w, h, ns, tags, make=make, model=model, gps=gps,
+                              struct_as_description=case == "skydio-struct", **kw)
+    grid = tile_grid()
+    for _ in range(3):
+        u, v = rng.uniform(20, w - 20), rng.uniform(20, h - 20)
+        truth = first_crossing(grid, cam, *pose, u, v)
+        _, (row,) = _photo(path, "--pixel", u, v, "--dem", TILE, "--vertical", "ellipsoid")
+        assert row["status"] == "OK" and row["source"] == "dem", row
+        e = C.enu_error(row["lat"], row["lon"], row["h"], truth)
+        assert np.linalg.norm(e) < 0.01, (case, e, row["intrinsics"])
+    if case == "skydio-resized":
+        assert "scaled" in row["intrinsics"]
+    if case == "skydio-ir":
+        assert "another camera's" in row["intrinsics"]
+
+
+def test_48_a_wrong_altitude_tag_is_named_on_the_dem(tmp_path):
+    """A Parrot photo whose EXIF altitude is 800 m too low puts the camera under the tile: refused,
+    naming the tag (no point kilometres off)."""
+    from dronephoto import write_vendor_photo
+
+    rng = np.random.default_rng(5)
+    tags, gps, make, model, kw, _, _ = _vendor_case("parrot", rng)
+    gps = (gps[0], gps[1], gps[2] - 1500.0)
+    path = write_vendor_photo(tmp_path / "low.jpg", 1280, 960, "parrot", tags, make=make, model=model, gps=gps, **kw)
+    r, (row,) = _photo(path, "--dem", TILE, "--vertical", "ellipsoid", check=False)
+    assert row["status"] == "SUSPECT_ALTITUDE" and "GPSAltitude" in row["reason"]

@@ -13,6 +13,7 @@ from .main import main
 COMMANDS = (  # (module, command object name): registered in this order
     ("locate", "locate"),
     ("photo", "photo"),
+    ("mux", "mux"),
     ("footprint", "footprint"),
     ("accuracy", "accuracy"),
     ("sweep", "sweep"),

@@ -18,8 +18,8 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
   Inputs: KLV streams (.klv .bin .ts .m2ts .mpg .mpeg; raw KLV or MPEG-TS), located as
   `eoloc klv` does (VMTI targets on --dem, else on each packet's frame-centre elevation); and
   telemetry CSVs (*telemetry*.csv, with the *detections*.csv of the same name beside them, or
-  the image centres without one), located as `eoloc locate` does (needs --config and
-  --target-height H or --dem).
+  the image centres without one) and DJI .SRT files, located as `eoloc locate` does (needs
+  --config and --target-height H or --dem). The file's content decides how it is read.
   Output, under DIR, one GeoParquet dataset per layer (hive-partitioned by file):
     fixes/       located targets (Point Z: lon, lat, ellipsoidal height; EPSG:4979)
     packets/     the aircraft per packet or telemetry record

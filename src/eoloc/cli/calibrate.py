@@ -30,7 +30,7 @@ eoloc calibrate TELEMETRY.csv GCPS.csv --config CAMERA.toml [--estimate mount,he
 
 
 @click.command(help=CALIBRATE_HELP)
-@click.argument("telemetry", type=click.Path(dir_okay=False))
+@click.argument("telemetry", type=click.Path())
 @click.argument("gcps", type=click.Path(dir_okay=False))
 @config_option(help_text="Camera/gimbal/installation TOML (the starting values).")
 @click.option("--estimate", default="mount", show_default=True,

@@ -10,10 +10,12 @@ from .options import (
     CONVENTIONS,
     config_option,
     dem_options,
+    flight_log_option,
     formats_option,
     grid_option,
     out_option,
     target_height_option,
+    with_flight_log,
 )
 
 FOOTPRINT_HELP = """Frame footprints: the ground outline of every telemetry record's image.
@@ -30,8 +32,9 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--target-height H | --dem FI
 
 
 @click.command(help=FOOTPRINT_HELP + CONVENTIONS)
-@click.argument("telemetry", type=click.Path(dir_okay=False))
-@config_option()
+@click.argument("telemetry", type=click.Path())
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (see the README; optional for drone "
+                                         "photos, which carry their camera).")
 @target_height_option("Ground: this ellipsoidal height (m).")
 @dem_options("Ground: DEM file(s); repeat for several tiles.")
 @click.option("--edge-samples", type=click.IntRange(1, 1000), default=16, show_default=True,
@@ -39,13 +42,15 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--target-height H | --dem FI
 @out_option("footprints.*")
 @formats_option()
 @grid_option()
+@flight_log_option
 def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir,
-              formats, grid) -> None:
+              formats, grid, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.footprints import footprint_job
 
     surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
-    cfg = load_config(config_path)
+    cfg = load_config(config_path) if config_path else None  # drone photos carry their camera
     with progress() as bar:
         task = bar.add_task("footprints", total=None)
         job = footprint_job(cfg, telemetry, surface, edge_samples=edge_samples,

@@ -13,12 +13,14 @@ from .main import console, err_console, fail, report_issues, warn
 from .options import (
     CONVENTIONS,
     config_option,
+    flight_log_option,
     formats_option,
     grid_option,
     json_option,
     out_option,
     pairing_options,
     stop_rule_options,
+    with_flight_log,
 )
 from .render import fix_summary_table, number_cell
 
@@ -33,6 +35,11 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml
     Instead of h_m: h_msl_m (EGM96). Instead of yaw/pitch/roll: qw,qx,qy,qz (body->NED,
     scalar first) or dcm_11..dcm_33 (R_ned_body). A zoom lens: hfov_deg, focal_px or
     focal_mm per record. (README: Input formats.)
+  TELEMETRY may also be any other source eoloc reads, told apart by its content: MISB ST 0601
+    KLV (raw or MPEG-TS), a DJI .SRT, an Airdata flight log, a drone photo or a folder of them
+    (their camera comes from the photos: --config optional). Drones give the camera's own
+    attitude (DJI gimbal yaw/pitch/roll, earth-referenced): the config's gimbal is not used;
+    heights above the take-off point need --dem (README: Telemetry sources).
   DETECTIONS.csv columns: time_s or frame, target_id, u_px, v_px, optional range_m.
   Without DETECTIONS the image centre of every record is located.
   --range alone takes each target's range_m from the files; --range R uses R metres for all;
@@ -58,7 +65,7 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
 
 
 @click.command(help=LOCATE_HELP + CONVENTIONS)
-@click.argument("telemetry", required=False, type=click.Path(dir_okay=False))
+@click.argument("telemetry", required=False, type=click.Path())
 @click.argument("detections", required=False, type=click.Path(dir_okay=False))
 @config_option(required=False)
 @stop_rule_options
@@ -87,9 +94,11 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
 @click.option("--compensate", "compensate_path", type=click.Path(dir_okay=False), default=None, metavar="MODEL",
               help="File mode: add a learned error correction (eoloc compensate train) to every fix inside the "
                    "model's trained range and report it per fix (default: the config's [compensation] model).")
+@flight_log_option
 def locate(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, height,
            lat, lon, yaw, pitch, roll, gimbal, gimbal_angles, sensor_roll, pixel, as_json, out_dir, formats,
-           grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path) -> None:
+           grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     budget = None
     if covariance:
         if config_path is None:
@@ -110,8 +119,6 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if lat is not None or lon is not None or height is not None or pixel is not None or gimbal_angles is not None:
         fail("give either a TELEMETRY file or --lat/--lon/--aircraft-height/--gimbal-angles/--pixel for one "
              "observation, not both")
-    if config_path is None:
-        fail("file mode needs --config CAMERA.toml (camera, gimbal, installation); see the README")
     if interpolate and detections is None:
         fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     rule = stop_rule(range_opt, target_height, dem)
@@ -120,13 +127,15 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
         from ..jobs.inputs import Prefetch
 
         detections = Prefetch(read_detections, detections)
-    cfg = load_config(config_path)
+    cfg = load_config(config_path) if config_path else None  # drone photos carry their camera
     from ..io.export import json_safe
     from ..io.writers import write_layer
     from ..jobs.locate import locate_files
     from ..jobs.setup import compensation_model
 
-    model = compensation_model(cfg, config_path, compensate_path)
+    if cfg is None and compensate_path:
+        fail("--compensate needs --config (the model was trained for a configured sensor)")
+    model = compensation_model(cfg, config_path, compensate_path) if cfg is not None else None
     with working("locating..."):
         job = locate_files(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance, budget=budget,
                            interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model)

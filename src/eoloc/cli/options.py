@@ -154,6 +154,24 @@ def config_option(required: bool = True, help_text: str = "Camera/gimbal/install
                         metavar="CONFIG.toml", help=help_text)
 
 
+def flight_log_option(f):
+    """--flight-log LOG: the flight log that completes a video's telemetry (a DJI .SRT without
+    attitude): synced by the tracks they share, it gives every record's pose."""
+    return click.option("--flight-log", "flight_log", type=click.Path(dir_okay=False), default=None,
+                        metavar="LOG.csv",
+                        help="Flight log (Airdata CSV) of the same flight: synced to the telemetry by their tracks, "
+                             "it gives each record's pose (a DJI .SRT carries no attitude on most models).")(f)
+
+
+def with_flight_log(telemetry, flight_log):
+    """The telemetry argument as the jobs take it: the path, or the path with its flight log."""
+    if flight_log is None or telemetry is None:
+        return telemetry
+    from ..jobs.flightlog import WithFlightLog
+
+    return WithFlightLog(str(telemetry), str(flight_log))
+
+
 def out_option(what: str, default: str = "eoloc-out"):
     return click.option("--out", "out_dir", type=click.Path(file_okay=False), default=default, show_default=True,
                         help=f"Folder for {what} (created if needed).")

@@ -14,23 +14,26 @@ from .options import CONVENTIONS, dem_options, formats_option, out_option, targe
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
 \b
-eoloc photo PHOTO... [--pixel U V]... [--dem FILE | --target-height H] [--json] [--out DIR]
+eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [--json] [--out DIR]
+  A FOLDER stands for every photo in it (JPEG/TIFF by content, sorted by name).
   Each photo's position, camera attitude (earth-referenced: DJI's gimbal angles are the camera's,
   not relative to the aircraft) and intrinsics (its own calibration, else the bundled drone camera
   database, else EXIF's 35 mm focal length) are read and shown. Without --pixel the image centre
   is located — by the laser range finder's distance when the photo has one (DJI H20/M30/M3T:
   LRFTargetDistance; DJI's own LRFTarget answer is shown beside eoloc's), else on the DEM or the
   target height; with --pixel U V (repeatable) every pixel given, on the DEM or the height.
-  Heights are ellipsoidal (DJI's AbsoluteAltitude converted from EGM96 where the photo's tags say
-  it is MSL). --json: one object per line (file, u, v, lat, lon, h, status, source, camera_lat,
-  camera_lon, camera_h, camera_yaw, camera_pitch, camera_roll: the optical axis' azimuth from
-  true north, its elevation, negative below the horizon, and the image's roll). A photo that
+  Vendors: DJI (drone-dji:), Skydio (drone-skydio:), Parrot (drone-parrot:), Autel (drone-dji:
+  or Pix4D Camera:), Teal (exif:Platform*/Camera*). Heights are ellipsoidal (converted from EGM96
+  where the vendor's tag is MSL: README, Input formats).
+  --json: one object per line (file, u, v, lat, lon, h, status, source, camera_lat, camera_lon,
+  camera_h, camera_yaw, camera_pitch, camera_roll: the optical axis' azimuth from true north, its
+  elevation, negative below the horizon, and the image's roll). A photo that
   cannot be read is named with the tag and the fix; the others are still located.
 """
 
 
 @click.command(help=PHOTO_HELP + CONVENTIONS)
-@click.argument("photos", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("photos", nargs=-1, required=True, type=click.Path())
 @click.option("--pixel", "pixels", type=(float, float), multiple=True, metavar="U V",
               help="A pixel to locate (column, row; 0,0 the centre of the top-left pixel); repeat for several.")
 @dem_options("Stop the rays on this DEM (GeoTIFF, DTED, SRTM, ESRI ASCII); repeat for tiles.")

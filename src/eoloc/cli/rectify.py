@@ -10,7 +10,7 @@ from rich.table import Table as RichTable
 
 from .common import ground, load_config, open_dem, working
 from .main import console, err_console, report_issues
-from .options import CONVENTIONS, config_option, ortho_options, out_option
+from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
 
 RECTIFY_HELP = """Orthorectify one frame (visible or IR, any band count) onto the ellipsoid or a DEM
 and write a georeferenced GeoTIFF in UTM, Gauss-Krüger or any CRS (M5).
@@ -29,23 +29,27 @@ image's bounds) against the rigorous ray.
 
 @click.command(help=RECTIFY_HELP + CONVENTIONS)
 @click.argument("image", type=click.Path(dir_okay=False, exists=True))
-@config_option()
-@click.option("--telemetry", required=True, type=click.Path(dir_okay=False), help="Telemetry CSV with the pose.")
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (see the README; optional for drone "
+                                         "photos, which carry their camera).")
+@click.option("--telemetry", required=True, type=click.Path(),
+              help="Telemetry with the pose: any source eoloc reads (CSV, KLV, DJI SRT, flight log, photos).")
 @click.option("--frame", type=int, default=None, help="The telemetry record of this frame number.")
 @click.option("--time", "time_s", type=float, default=None, help="Or: the record nearest this time (s).")
 @ortho_options()
 @click.option("--grid-step", type=click.FloatRange(0.0, min_open=True), default=32, show_default=True,
               help="Ground grid spacing (pixels).")
 @out_option("ortho.tif, footprint.geojson, ground_grid.csv and rectify.json")
+@flight_log_option
 def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd,
-            resampling, nodata, occlusion, grid_step, out_dir) -> None:
+            resampling, nodata, occlusion, grid_step, out_dir, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     from ..io.export import fix_records
     from ..io.raster import write_ortho
     from ..io.writers import write_layer
     from ..jobs.rectify import rectify_job
 
     surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
-    cfg = load_config(config_path)
+    cfg = load_config(config_path) if config_path else None  # drone photos carry their camera
     with working("rectifying..."):
         job = rectify_job(cfg, image, telemetry, surface, frame=frame, time_s=time_s, crs=crs, gsd_m=gsd,
                           resampling=resampling, nodata=nodata, occlusion=occlusion, grid_step_px=grid_step)

@@ -10,11 +10,13 @@ from .main import console, err_console, fail, report_issues, warn
 from .options import (
     CONVENTIONS,
     config_option,
+    flight_log_option,
     formats_option,
     grid_option,
     out_option,
     pairing_options,
     stop_rule_options,
+    with_flight_log,
 )
 
 TRACK_HELP = """Filter detections over time: moving targets into tracks (M7), or static targets by RLS (M6).
@@ -41,7 +43,7 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
 
 
 @click.command(help=TRACK_HELP + CONVENTIONS)
-@click.argument("telemetry", type=click.Path(dir_okay=False))
+@click.argument("telemetry", type=click.Path())
 @click.argument("detections", type=click.Path(dir_okay=False))
 @config_option()
 @stop_rule_options
@@ -61,9 +63,11 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
               help="Fix sigma (m per axis) when the config has no [accuracy.budget].")
 @click.option("--max-coast", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
               help="Tracks: seconds without a detection before a track ends.")
+@flight_log_option
 def track(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs,
           time_tolerance, interpolate, max_gap, time_offset, out_dir, formats, grid, static, associate, forgetting,
-          window, accel_psd, meas_sigma, max_coast) -> None:
+          window, accel_psd, meas_sigma, max_coast, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.sequence import located_detections, static_targets, track_job
 

@@ -7,7 +7,15 @@ from rich.table import Table as RichTable
 
 from .common import load_config
 from .main import console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, formats_option, grid_option, out_option
+from .options import (
+    CONVENTIONS,
+    config_option,
+    flight_log_option,
+    formats_option,
+    grid_option,
+    out_option,
+    with_flight_log,
+)
 
 TRIANGULATE_HELP = """Multi-view triangulation (M8): each target seen from two or more poses, located
 without a range or a terrain model by intersecting its rays.
@@ -22,7 +30,7 @@ eoloc triangulate TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml [--ray-sigma
 
 
 @click.command(help=TRIANGULATE_HELP + CONVENTIONS)
-@click.argument("telemetry", type=click.Path(dir_okay=False))
+@click.argument("telemetry", type=click.Path())
 @click.argument("detections", type=click.Path(dir_okay=False))
 @config_option()
 @click.option("--ray-sigma-deg", type=click.FloatRange(0.0, min_open=True), default=0.05, show_default=True,
@@ -34,8 +42,10 @@ eoloc triangulate TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml [--ray-sigma
 @out_option("triangulated.*")
 @formats_option()
 @grid_option()
+@flight_log_option
 def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, time_tolerance, out_dir,
-                formats, grid) -> None:
+                formats, grid, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.sequence import triangulate_job
 

@@ -11,7 +11,7 @@ from rich.table import Table as RichTable
 
 from .common import load_config, open_dem, progress
 from .main import console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, ortho_options, out_option
+from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
 GeoTIFF, a mosaic of the pass, XYZ map tiles.
@@ -61,7 +61,8 @@ All frames share one grid (--crs, cell --gsd: default the first frame's native G
 @click.option("--klv", "klv_path", type=click.Path(dir_okay=False), default=None,
               help="KLV file (raw .klv/.bin or MPEG-TS) beside the video, paired by its time stamps.")
 @click.option("--telemetry", type=click.Path(dir_okay=False), default=None,
-              help="Telemetry CSV beside the video (needs --config), paired by time_s.")
+              help="Telemetry beside the video (needs --config), paired by time_s: an eoloc CSV, a DJI .SRT "
+                   "(its time codes are the video's clock) or a flight log.")
 @config_option(required=False, help_text="Camera/gimbal/installation TOML (with --telemetry).")
 @click.option("--stream", "klv_stream", default=None, metavar="NAME",
               help='The KLV stream to use when there are several, as eoloc klv names them ("PID 497").')
@@ -83,9 +84,11 @@ All frames share one grid (--crs, cell --gsd: default the first frame's native G
 @click.option("--player/--no-player", default=True, show_default=True,
               help="Write player.html: the video beside the map (the video remuxed or transcoded to MP4).")
 @out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
+@flight_log_option
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
-          mosaic, tiles, player, out_dir) -> None:
+          mosaic, tiles, player, out_dir, flight_log) -> None:
+    telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
 

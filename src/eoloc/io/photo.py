@@ -25,8 +25,32 @@ tags; the datum rule is the one OpenAthena settled on after its issue #65):
   ``LRFStatus`` Normal) — the centre is then located by range — and DJI's own answer
   ``LRFTargetLat/Lon/AbsAlt`` (the last in ``AbsoluteAltitude``'s datum), shown beside eoloc's.
 
-Other vendors (Skydio ``drone-skydio:``, Autel, Parrot ``drone-parrot:``, Teal) are named and
-refused with what is missing, until their readers land.
+**Skydio** (``drone-skydio:``): ``Latitude``/``Longitude`` (else EXIF GPS); height ``AbsoluteAltitude``
+  above the EGM96 geoid (OpenAthena's reading of Skydio 2/X2 files), else EXIF ``GPSAltitude``,
+  ellipsoidal (Skydio's X10 metadata overview); attitude ``CameraOrientationNED`` ``Yaw``/``Pitch``/
+  ``Roll`` (the camera's, earth-referenced; pitch negative below the horizon); intrinsics
+  ``CalibratedFocalLengthX/Y`` and ``CalibratedOpticalCenterX/Y`` (pixels; Skydio's "camera and
+  metadata overview").
+
+**Parrot** (``drone-parrot:``, Parrot's "photo metadata" reference): position and height from EXIF
+GPS; the height is above the EGM96 geoid on ANAFI 4K/Thermal/USA and above the WGS-84 ellipsoid on
+ANAFI Ai; attitude ``CameraYawDegree``/``CameraPitchDegree``/``CameraRollDegree``.
+
+**Autel**: newer firmware writes DJI's ``drone-dji:`` tags (read as DJI's, but its
+``AbsoluteAltitude`` taken as ellipsoidal, as OpenAthena does); older firmware Pix4D's ``Camera:``
+tags: ``Yaw``, ``Pitch`` (0 at nadir, 90 at the horizon: eoloc's pitch is ``Pitch`` - 90),
+``Roll``, with the position and an EGM96 height from EXIF GPS (that firmware says ellipsoidal and
+is not; OpenAthena's finding).
+
+**Teal** (Teledyne FLIR): EXIF GPS (height above EGM96); the camera's attitude is the platform's
+plus the camera's relative angles, ``exif:PlatformYaw`` + ``exif:CameraYaw`` (and Pitch, Roll;
+rationals), as OpenAthena sums them.
+
+The XMP is parsed with its namespaces (defusedxml), so one vendor's tag is never taken for
+another's. A calibration in the file is used when it fits the image: scaled when the image was
+resized (its principal point gives the size it was made for), refused when it belongs to another
+camera (a Skydio IR frame carries the visible camera's calibration: another aspect ratio); then the
+camera database; then EXIF 35 mm equivalent with a note.
 """
 
 from __future__ import annotations
@@ -72,6 +96,7 @@ class PhotoPose:
 
 
 def _num(xmp: dict, key: str, path: str, *, required: bool = True) -> float | None:
+    """A tag's number (a rational "a/b" too); None (or a PhotoError naming it, when required) if absent."""
     raw = xmp.get(key)
     if raw is None or (isinstance(raw, str) and not raw.strip()):
         if required:
@@ -79,35 +104,84 @@ def _num(xmp: dict, key: str, path: str, *, required: bool = True) -> float | No
                              "re-saved by an editor may have lost its drone tags: use the original file)")
         return None
     try:
-        v = float(str(raw).strip())
-    except ValueError:
+        text = str(raw).strip()
+        num, _, den = text.partition("/")
+        v = float(num) / float(den) if den else float(text)
+    except (ValueError, ZeroDivisionError):
         raise PhotoError(f"{path}: XMP {key} = {raw!r} is not a number") from None
     if not math.isfinite(v):
         raise PhotoError(f"{path}: XMP {key} = {raw!r} is not a finite number")
     return v
 
 
-def _description(xmp: dict) -> dict:
-    """The flat tags of the XMP's rdf:Description (Pillow gives nested dicts; several Descriptions
-    are merged)."""
-    try:
-        desc = xmp["xmpmeta"]["RDF"]["Description"]
-    except (KeyError, TypeError):
-        return {}
-    if isinstance(desc, list):
-        out: dict = {}
-        for d in desc:
-            if isinstance(d, dict):
-                out.update(d)
+#: The vendors' XMP namespaces, by a part of their URI (http or https, with or without the slash).
+NAMESPACES = {"dji": "dji.com/drone-dji", "skydio": "skydio.com/drone-skydio", "parrot": "parrot.com/drone-parrot",
+              "pix4d": "pix4d.com/camera", "exif": "ns.adobe.com/exif/1.0", "tiff": "ns.adobe.com/tiff/1.0",
+              "rdf": "www.w3.org/1999/02/22-rdf-syntax-ns"}
+
+
+def parse_xmp(raw: bytes | str | None) -> dict[str, dict[str, str]]:
+    """An XMP packet's values by vendor (the keys of :data:`NAMESPACES`; "other" for the rest):
+    {vendor: {name: text}}, from the rdf:Description attributes and leaf elements; a struct's fields
+    as "Struct.Field", a list's items joined by commas. Parsed with defusedxml (no entity expansion)."""
+    from defusedxml.ElementTree import ParseError, fromstring
+
+    out: dict[str, dict[str, str]] = {}
+    if not raw:
         return out
-    return desc if isinstance(desc, dict) else {}
+    text = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw
+    text = text[text.find("<x:xmpmeta"):] if "<x:xmpmeta" in text else text
+    end = text.rfind("</x:xmpmeta>")
+    text = text[:end + len("</x:xmpmeta>")] if end >= 0 else text
+    try:
+        root = fromstring(text.strip().lstrip("\ufeff"))
+    except (ParseError, ValueError) as exc:
+        raise PhotoError(f"the XMP packet is not valid XML ({exc})") from None
+
+    def vendor(tag: str) -> tuple[str, str]:
+        uri, _, local = tag[1:].partition("}") if tag.startswith("{") else ("", "", tag)
+        return next((k for k, frag in NAMESPACES.items() if frag in uri), "other"), local
+
+    def put(tag: str, value: str, prefix: str = "") -> None:
+        v, local = vendor(tag)
+        out.setdefault(v, {}).setdefault(prefix + local, value)
+
+    def walk(el, prefix: str = "") -> None:
+        for k, val in el.attrib.items():
+            if vendor(k)[0] != "rdf":
+                put(k, val, prefix)
+        for child in el:
+            v, local = vendor(child.tag)
+            if v == "rdf" and local in ("Description", "li"):
+                walk(child, prefix)
+            elif v == "rdf" and local in ("Seq", "Bag", "Alt"):
+                continue
+            elif len(child) == 0 and not any(vendor(k)[0] != "rdf" for k in child.attrib):
+                put(child.tag, (child.text or "").strip(), prefix)
+            else:
+                items = [li for li in child.iter() if vendor(li.tag) == ("rdf", "li")]
+                if items and all(len(li) == 0 for li in items):
+                    put(child.tag, ",".join((li.text or "").strip() for li in items), prefix)
+                else:
+                    walk(child, f"{prefix}{local}.")
+
+    for desc in root.iter():
+        if vendor(desc.tag) == ("rdf", "Description"):
+            walk(desc)
+    return out
 
 
 def _exif_gps(exif) -> tuple[float | None, float | None]:
+    lat, lon, _ = _exif_gps_3d(exif)
+    return lat, lon
+
+
+def _exif_gps_3d(exif) -> tuple[float | None, float | None, float | None]:
+    """EXIF GPS latitude, longitude (degrees) and GPSAltitude (m; negative when GPSAltitudeRef is 1)."""
     try:
         gps = exif.get_ifd(0x8825)
     except Exception:
-        return None, None
+        return None, None, None
 
     def deg(values, ref, neg):
         if not values or len(values) != 3:
@@ -116,14 +190,17 @@ def _exif_gps(exif) -> tuple[float | None, float | None]:
         v = d + m / 60.0 + s / 3600.0
         return -v if ref in neg else v
 
-    return deg(gps.get(2), gps.get(1), ("S",)), deg(gps.get(4), gps.get(3), ("W",))
+    alt = gps.get(6)
+    try:
+        alt = None if alt is None else float(alt) * (-1.0 if gps.get(5) in (1, b"\x01") else 1.0)
+    except (TypeError, ValueError, ZeroDivisionError):
+        alt = None
+    return deg(gps.get(2), gps.get(1), ("S",)), deg(gps.get(4), gps.get(3), ("W",)), alt
 
 
 def read_photo(path: str | Path, *, geoid=None) -> PhotoPose:
     """The :class:`PhotoPose` of a drone photo; a :class:`PhotoError` naming the file, the tag and
     the fix when it cannot be read."""
-    import warnings
-
     from PIL import Image, UnidentifiedImageError
 
     path = str(path)
@@ -131,9 +208,7 @@ def read_photo(path: str | Path, *, geoid=None) -> PhotoPose:
         with Image.open(path) as im:
             width, height = im.size
             exif = im.getexif()
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")  # "XMP data cannot be read without defusedxml" is a missing dependency
-                xmp = im.getxmp() if hasattr(im, "getxmp") else {}
+            raw = im.info.get("xmp") or (im.tag_v2.get(700) if hasattr(im, "tag_v2") else None)
     except FileNotFoundError:
         raise PhotoError(f"{path}: no such file") from None
     except UnidentifiedImageError:
@@ -141,64 +216,120 @@ def read_photo(path: str | Path, *, geoid=None) -> PhotoPose:
             from None
     except OSError as exc:
         raise PhotoError(f"{path}: the image cannot be read ({exc}): truncated or damaged?") from None
-    tags = _description(xmp)
-    make = str(tags.get("Make") or exif.get(271) or "").strip()
-    model = str(tags.get("Model") or exif.get(272) or "").strip()
-    if "GimbalYawDegree" in tags or "GimbalPitchDegree" in tags or str(tags.get("about", "")).startswith("DJI"):
-        return _dji(path, tags, exif, make or "DJI", model, width, height, geoid)
-    vendor = make or "unknown"
-    if not tags:
-        raise PhotoError(f"{path}: no XMP drone tags ({vendor} {model}): eoloc reads the camera's pose from the "
-                         "drone's XMP (DJI drone-dji:...); was the photo exported or re-saved without its metadata?")
-    known = {"skydio": "Skydio", "autel": "Autel", "parrot": "Parrot", "teal": "Teal"}
-    name = next((v for k, v in known.items() if k in vendor.lower()), vendor)
-    raise PhotoError(f"{path}: {name} photos are not read yet (only DJI's drone-dji: tags); its pose can be given "
-                     "as a telemetry CSV to eoloc locate")
+    try:
+        xmp = parse_xmp(raw)
+    except PhotoError as exc:
+        raise PhotoError(f"{path}: {exc}") from None
+    tiff = xmp.get("tiff", {})
+    make = str(tiff.get("Make") or exif.get(271) or "").strip().strip("\x00")
+    model = str(tiff.get("Model") or exif.get(272) or "").strip().strip("\x00")
+    photo = Photo(path, make, model, width, height, exif, xmp, geoid)
+    dji = xmp.get("dji", {})
+    if dji:
+        return _dji(photo, dji)
+    for vendor, reader in (("skydio", _skydio), ("parrot", _parrot), ("pix4d", _pix4d)):
+        if xmp.get(vendor):
+            return reader(photo, xmp[vendor])
+    if "PlatformYaw" in xmp.get("exif", {}) or "CameraYaw" in xmp.get("exif", {}):
+        return _teal(photo, xmp["exif"])
+    name = make or "unknown make"
+    if not raw:
+        raise PhotoError(f"{path}: no XMP drone tags ({name} {model}): eoloc reads the camera's pose from the "
+                         "drone's XMP (DJI drone-dji:, Skydio drone-skydio:, Parrot drone-parrot:, Autel Camera:, Teal "
+                         "exif:Platform*); was the photo exported or re-saved without its metadata?")
+    raise PhotoError(f"{path}: its XMP holds no drone pose eoloc knows ({name} {model}: none of the DJI, Skydio, "
+                     "Parrot, Autel or Teal tags); give its pose as a telemetry CSV to eoloc locate")
 
 
-def _dji(path, tags, exif, make, model, width, height, geoid) -> PhotoPose:
-    from ..sensor import dronemodels
+@dataclass(frozen=True)
+class Photo:
+    """What every vendor's reader starts from."""
 
-    notes: list[str] = []
-    lat = _num(tags, "GpsLatitude", path, required=False)
-    lon = _num(tags, "GpsLongitude", path, required=False)
-    if lat is None or lon is None:
-        lat, lon = _exif_gps(exif)
+    path: str
+    make: str
+    model: str
+    width: int
+    height: int
+    exif: object
+    xmp: dict
+    geoid: object
+
+    def undulation(self, lat: float, lon: float) -> float:
+        from ..terrain.geoid import default_geoid
+
+        return float((self.geoid or default_geoid()).undulation(lat, lon))
+
+    def position(self, tags: dict | None = None, lat_key: str = "", lon_key: str = "") -> tuple[float, float, list]:
+        """(lat, lon, notes) from the vendor's tags when it has them, else EXIF GPS."""
+        notes: list[str] = []
+        lat = _num(tags, lat_key, self.path, required=False) if tags and lat_key else None
+        lon = _num(tags, lon_key, self.path, required=False) if tags and lon_key else None
         if lat is None or lon is None:
-            raise PhotoError(f"{path}: no position: neither XMP GpsLatitude/GpsLongitude nor EXIF GPS")
-        notes.append("position from EXIF GPS (the XMP has none)")
-    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-        raise PhotoError(f"{path}: position {lat!r}, {lon!r} is not a latitude/longitude")
+            lat, lon = _exif_gps(self.exif)
+            if lat is None or lon is None:
+                where = f"XMP {lat_key}/{lon_key} nor " if lat_key else ""
+                raise PhotoError(f"{self.path}: no position: neither {where}EXIF GPS")
+            if lat_key:
+                notes.append("position from EXIF GPS (the XMP has none)")
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise PhotoError(f"{self.path}: position {lat!r}, {lon!r} is not a latitude/longitude")
+        return lat, lon, notes
+
+    def exif_height(self, lat: float, lon: float, *, msl: bool, why: str) -> tuple[float, str]:
+        """EXIF GPSAltitude as an ellipsoidal height (``msl``: above EGM96, converted) and the rule said."""
+        alt = _exif_gps_3d(self.exif)[2]
+        if alt is None or not math.isfinite(alt):
+            raise PhotoError(f"{self.path}: no height: EXIF GPSAltitude is missing")
+        if msl:
+            n = self.undulation(lat, lon)
+            return alt + n, f"EXIF GPSAltitude {alt:g} m above the EGM96 geoid ({why}) + N {n:.2f} m"
+        return alt, f"EXIF GPSAltitude {alt:g} m above the WGS-84 ellipsoid ({why})"
+
+    def finish(self, vendor: str, lat, lon, h, rule, yaw, pitch, roll, *, calib: dict, thermal: bool,
+               notes: list, **more) -> PhotoPose:
+        """The pose with its camera (:func:`eoloc.sensor.dronemodels.camera_for`)."""
+        from ..sensor import dronemodels
+
+        if yaw == 0.0 and pitch == 0.0 and roll == 0.0:
+            raise PhotoError(f"{self.path}: the camera's yaw, pitch and roll are all 0: this drone writes 0 when it "
+                             "does not know the camera's attitude (DJI Mini 2 does); give the pose as a telemetry CSV "
+                             "to eoloc locate instead")
+        camera, source = dronemodels.camera_for(self.make or vendor, self.model, self.width, self.height,
+                                                thermal=thermal, tags=calib, exif=self.exif, path=self.path)
+        if source.startswith("EXIF"):
+            notes.append(f"intrinsics from {source}: approximate (no calibrated values, model not in the database)")
+        time = str(self.exif.get(306) or "") or None
+        return PhotoPose(self.path, vendor, self.make or vendor, self.model, self.width, self.height, lat, lon, h, rule,
+                         yaw, pitch, roll, camera, source, thermal, time=more.pop("time", None) or time,
+                         notes=notes, **more)
+
+
+def _dji(p: Photo, tags: dict) -> PhotoPose:
+    path = p.path
+    lat, lon, notes = p.position(tags, "GpsLatitude", "GpsLongitude")
     alt = _num(tags, "AbsoluteAltitude", path)
     version = str(tags.get("Version", "0")).strip()
     rtk = str(tags.get("GpsStatus", "")).strip().upper() == "RTK" or (_num(tags, "RtkFlag", path, required=False)
                                                                         or 0) > 0
-    older = _version(version) < (1, 5)
-    if older and not rtk:
-        from ..terrain.geoid import default_geoid
-
-        n = float((geoid or default_geoid()).undulation(lat, lon))
-        h = alt + n
-        rule = f"AbsoluteAltitude {alt:g} m above the EGM96 geoid (XMP Version {version} < 1.5, no RTK) + N {n:.2f} m"
-        to_ell = n
+    autel = "autel" in p.make.lower()
+    to_ell = 0.0
+    if autel:
+        h, rule = alt, f"AbsoluteAltitude {alt:g} m taken as above the WGS-84 ellipsoid (Autel's drone-dji tags, as " \
+                       "OpenAthena reads them)"
+    elif _version(version) < (1, 5) and not rtk:
+        to_ell = p.undulation(lat, lon)
+        h = alt + to_ell
+        rule = (f"AbsoluteAltitude {alt:g} m above the EGM96 geoid (XMP Version {version} < 1.5, no RTK) + N "
+                f"{to_ell:.2f} m")
     else:
         h = alt
         rule = (f"AbsoluteAltitude {alt:g} m above the WGS-84 ellipsoid (XMP Version {version}"
                 + (", RTK" if rtk else "") + ")")
-        to_ell = 0.0
     yaw = _num(tags, "GimbalYawDegree", path)
     pitch = _num(tags, "GimbalPitchDegree", path)
     roll = _num(tags, "GimbalRollDegree", path, required=False) or 0.0
-    if yaw == 0.0 and pitch == 0.0 and roll == 0.0:
-        raise PhotoError(f"{path}: GimbalYawDegree, GimbalPitchDegree and GimbalRollDegree are all 0: this drone "
-                         "writes 0 when it does not know the camera's attitude (DJI Mini 2 does); give the pose as a "
-                         "telemetry CSV to eoloc locate instead")
     thermal = str(tags.get("ImageSource", "")).lower().startswith("infrared") or \
         str(tags.get("BandName", "")).upper().find("LWIR") >= 0
-    camera, source = dronemodels.camera_for(make, model, width, height, thermal=thermal, tags=tags, exif=exif,
-                                            path=path)
-    if source.startswith("EXIF"):
-        notes.append(f"intrinsics from {source}: approximate (no calibrated values, model not in the database)")
     lrf = lrf_target = None
     d = _num(tags, "LRFTargetDistance", path, required=False)
     if d is not None and d > 0 and str(tags.get("LRFStatus", "Normal")).strip().lower() == "normal":
@@ -207,14 +338,61 @@ def _dji(path, tags, exif, make, model, width, height, geoid) -> PhotoPose:
         t_lon = _num(tags, "LRFTargetLon", path, required=False)
         t_alt = _num(tags, "LRFTargetAbsAlt", path, required=False)
         if None not in (t_lat, t_lon, t_alt):
-            if to_ell:
-                from ..terrain.geoid import default_geoid
+            lrf_target = (t_lat, t_lon, t_alt + (p.undulation(t_lat, t_lon) if to_ell else 0.0))
+    return p.finish("Autel" if autel else "DJI", lat, lon, h, rule, yaw, pitch, roll, calib=tags, thermal=thermal,
+                    notes=notes, relative_altitude_m=_num(tags, "RelativeAltitude", path, required=False),
+                    lrf_range_m=lrf, lrf_target=lrf_target, time=str(tags.get("CreateDate") or "") or None)
 
-                to_ell = float((geoid or default_geoid()).undulation(t_lat, t_lon))
-            lrf_target = (t_lat, t_lon, t_alt + to_ell)
-    return PhotoPose(path, "DJI", make, model, width, height, lat, lon, h, rule, yaw, pitch, roll, camera, source,
-                     thermal, _num(tags, "RelativeAltitude", path, required=False), lrf, lrf_target,
-                     str(tags.get("CreateDate") or exif.get(306) or "") or None, notes)
+
+def _skydio(p: Photo, tags: dict) -> PhotoPose:
+    path = p.path
+    lat, lon, notes = p.position(tags, "Latitude", "Longitude")
+    alt = _num(tags, "AbsoluteAltitude", path, required=False)
+    if alt is not None:
+        n = p.undulation(lat, lon)
+        h = alt + n
+        rule = f"AbsoluteAltitude {alt:g} m above the EGM96 geoid (Skydio, as OpenAthena reads it) + N {n:.2f} m"
+    else:
+        h, rule = p.exif_height(lat, lon, msl=False, why="Skydio's X10 metadata overview")
+    yaw = _num(tags, "CameraOrientationNED.Yaw", path)
+    pitch = _num(tags, "CameraOrientationNED.Pitch", path)
+    roll = _num(tags, "CameraOrientationNED.Roll", path, required=False) or 0.0
+    thermal = "thermal" in p.model.lower() or p.model.endswith("_40")
+    return p.finish("Skydio", lat, lon, h, rule, yaw, pitch, roll, calib=tags, thermal=thermal, notes=notes)
+
+
+def _parrot(p: Photo, tags: dict) -> PhotoPose:
+    lat, lon, notes = p.position()
+    ai = "anafiai" in p.model.lower().replace(" ", "")
+    h, rule = p.exif_height(lat, lon, msl=not ai, why="ANAFI Ai: ellipsoidal" if ai else
+                            "ANAFI 4K/Thermal/USA: EGM96, Parrot's photo metadata reference")
+    yaw = _num(tags, "CameraYawDegree", p.path)
+    pitch = _num(tags, "CameraPitchDegree", p.path)
+    roll = _num(tags, "CameraRollDegree", p.path, required=False) or 0.0
+    thermal = "thermal" in p.model.lower() and p.width <= 640
+    return p.finish("Parrot", lat, lon, h, rule, yaw, pitch, roll, calib={}, thermal=thermal, notes=notes)
+
+
+def _pix4d(p: Photo, tags: dict) -> PhotoPose:
+    lat, lon, notes = p.position()
+    h, rule = p.exif_height(lat, lon, msl=True, why="older Autel firmware: says ellipsoidal, is not (OpenAthena)")
+    yaw = _num(tags, "Yaw", p.path)
+    pitch = _num(tags, "Pitch", p.path) - 90.0  # Pix4D's Camera:Pitch is 0 at nadir, 90 at the horizon
+    roll = _num(tags, "Roll", p.path, required=False) or 0.0
+    return p.finish("Autel", lat, lon, h, rule, yaw, pitch, roll, calib={}, thermal=False, notes=notes)
+
+
+def _teal(p: Photo, tags: dict) -> PhotoPose:
+    lat, lon, notes = p.position()
+    h, rule = p.exif_height(lat, lon, msl=True, why="Teal, as OpenAthena reads it")
+
+    def total(axis: str, required: bool = True) -> float:
+        a = _num(tags, f"Platform{axis}", p.path, required=required)
+        b = _num(tags, f"Camera{axis}", p.path, required=required)
+        return (a or 0.0) + (b or 0.0)
+
+    return p.finish("Teal", lat, lon, h, rule + "; attitude = platform + camera angles", total("Yaw"), total("Pitch"),
+                    total("Roll", required=False), calib={}, thermal=False, notes=notes)
 
 
 def _version(v: str) -> tuple[int, ...]:

@@ -152,7 +152,7 @@ def read_telemetry(path: str | Path, *, geoid=None) -> Table:
                         for line in t.line[np.isnan(t.columns[zoom[0]])] if int(line) not in named)
         t.issues.sort(key=lambda i: i.line)
     t.add_missing(["gimbal1_deg", "gimbal2_deg", "sensor_roll_deg", "range_m", "time_s", "frame"])
-    return _without_repeated_times(t)
+    return without_repeated_times(t)
 
 
 MSL_AGREEMENT_M = 5.0  # h_m and h_msl_m + N further apart than this: one of them is mislabelled
@@ -231,7 +231,7 @@ def _attitude(t: Table) -> None:
     t.issues.sort(key=lambda i: i.line)
 
 
-def _without_repeated_times(t: Table) -> Table:
+def without_repeated_times(t: Table) -> Table:
     """Records that repeat a time_s: an exact copy of an earlier record is dropped; records that
     give different poses at one time are all dropped (which one is right cannot be told). Each
     is reported with the line it repeats."""

@@ -2,8 +2,9 @@
 per layer.
 
 A task is one file: a KLV stream (raw KLV or MPEG-TS: ``.klv``, ``.bin``, ``.ts``, ``.m2ts``,
-``.mpg``, ``.mpeg``) or a telemetry CSV with its detections beside it (``X_telemetry.csv`` +
-``X_detections.csv``, or ``telemetry.csv`` + ``detections.csv`` in one folder). The task reads the
+``.mpg``, ``.mpeg``), a telemetry CSV with its detections beside it (``X_telemetry.csv`` +
+``X_detections.csv``, or ``telemetry.csv`` + ``detections.csv`` in one folder) or a DJI ``.SRT``;
+the file's content decides its reader (:mod:`eoloc.io.sources`). The task reads the
 file itself (on whichever worker runs it: only its path and the settings travel), writes its
 rows as one partition per layer, ``OUT/<layer>/file=<key>/part-0.parquet``, and returns a small
 summary. Layers: ``fixes`` (located targets), ``packets`` (the aircraft, per packet/record),
@@ -99,7 +100,13 @@ class Task:
 
     @property
     def kind(self) -> str:
-        return "csv" if self.path.lower().endswith(".csv") else "klv"
+        """"klv" for a KLV stream (found as one by its name, or one by its content: its reader says what
+        is wrong with a .klv that is not), else "telemetry" (any other telemetry source)."""
+        from ..io.sources import identify
+
+        if self.path.lower().endswith(KLV_SUFFIXES):
+            return "klv"
+        return "klv" if identify(self.path).name == "klv" else "telemetry"
 
 
 @dataclass
@@ -159,14 +166,14 @@ def find_tasks(patterns: Sequence[str]) -> list[Task]:
             f = f.resolve()  # absolute: a worker on another machine has another working directory
             if name.endswith(KLV_SUFFIXES):
                 found.setdefault(str(f), Task(str(f), None, task_key(f)))
-            elif name.endswith(".csv") and "telemetry" in name:
+            elif name.endswith(".srt") or (name.endswith(".csv") and "telemetry" in name):
                 det = f.with_name(f.name.replace("telemetry", "detections").replace("Telemetry", "Detections"))
                 found.setdefault(str(f), Task(str(f), str(det) if det.is_file() else None, task_key(f)))
         if len(found) == n:
             empty.append(pattern)
     if empty:
-        raise InputError(f"no KLV stream ({', '.join(KLV_SUFFIXES)}) or telemetry CSV (*telemetry*.csv) found in "
-                         + ", ".join(repr(p) for p in empty))
+        raise InputError(f"no KLV stream ({', '.join(KLV_SUFFIXES)}), telemetry CSV (*telemetry*.csv) or DJI .SRT "
+                         "found in " + ", ".join(repr(p) for p in empty))
     return sorted(found.values(), key=lambda t: t.path)
 
 
@@ -293,7 +300,7 @@ def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileR
     try:
         inputs = {q: _stamp(q) for q in (task.path, task.detections) if q}
         remove_partitions(out_dir, task.key)
-        layers, n = (_layers_csv if task.kind == "csv" else _layers_klv)(task, settings)
+        layers, n = (_layers_klv if task.kind == "klv" else _layers_csv)(task, settings)
         for layer, (records, features) in layers.items():
             _write_partition(out_dir, layer, task.key, records, features, task.path, settings.grid)
         fixes = layers["fixes"][0]

@@ -10,7 +10,7 @@ from ..errors import InputError
 from ..io.export import json_safe
 from ..io.records import plain_value
 from ..io.table import Issue
-from .inputs import read_inputs
+from .inputs import job_inputs
 
 
 @dataclass
@@ -39,9 +39,9 @@ def calibrate_job(cfg, telemetry, gcps, *, groups: tuple[str, ...], pixel_sigma_
     bad = [g for g in groups if g not in GROUPS]
     if bad or not groups:
         raise InputError(f"--estimate: unknown {bad or list(groups)}; choose from {', '.join(GROUPS)}")
-    sensor = cfg.sensor()
     # the raw telemetry: the config's heading bias is the starting value, not a correction here
-    inputs = read_inputs(telemetry, gcps, reader=read_gcps, msl_geoid=cfg.telemetry.msl_geoid)
+    inputs = job_inputs(cfg, telemetry, gcps, reader=read_gcps, heading_bias=False)
+    sensor = inputs.sensor(cfg.sensor())
     tel, obs, issues = inputs.telemetry, inputs.other, list(inputs.issues)
     hb0, dt0 = cfg.telemetry.heading_bias_deg, cfg.telemetry.time_offset_s
     keep = np.ones(len(obs), dtype=bool)

@@ -11,7 +11,7 @@ from ..ground.footprint import Footprint, footprint_features, footprints
 from ..io.records import plain_value
 from ..io.table import Issue
 from ..io.telemetry import telemetry_pose
-from .inputs import read_inputs
+from .inputs import job_inputs
 
 
 @dataclass
@@ -39,10 +39,9 @@ def footprint_job(cfg, telemetry, surface, *, edge_samples: int = 16, chunk: int
                   progress: Callable[[int], None] | None = None) -> FootprintJob:
     """Footprints of every record of ``telemetry`` on ``surface`` (an ellipsoidal height or a DEM),
     in chunks of ``chunk`` frames (``progress(k)`` after each)."""
-    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
-                         msl_geoid=cfg.telemetry.msl_geoid)
+    inputs = job_inputs(cfg, telemetry, dem=surface)
     tel = inputs.telemetry
-    sensor = cfg.sensor()
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
     prints: list[Footprint] = []
     for start in range(0, len(tel), chunk):
         idx = np.arange(start, min(start + chunk, len(tel)))

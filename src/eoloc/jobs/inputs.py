@@ -8,16 +8,36 @@ from typing import Any
 
 from ..errors import InputError
 from ..io.table import Issue, Table
-from ..io.telemetry import read_detections, read_telemetry, with_heading_bias
+from ..io.telemetry import read_detections, with_heading_bias
 
 
 @dataclass
 class Inputs:
-    """The telemetry, the second table (detections, GCPs) or None, and every issue met reading them."""
+    """The telemetry, the second table (detections, GCPs) or None, every issue met reading them,
+    and what the telemetry's source knows beside the poses (:class:`eoloc.io.sources.SourceData`)."""
 
     telemetry: Table
     other: Table | None
     issues: list[Issue] = field(default_factory=list)
+    source: Any = None  # SourceData
+
+    def sensor(self, configured=None):
+        """The sensor to locate with: the config's (``configured``), with the camera the telemetry
+        carries when there is no config, and an az-el gimbal at zero when the telemetry gives the
+        camera's own attitude (drones) rather than the aircraft's and the gimbal's."""
+        from dataclasses import replace
+
+        from ..sensor import AzElGimbal, SensorModel
+
+        src = self.source
+        if configured is None:
+            if src is None or src.camera is None:
+                raise InputError(f"{self.telemetry.path} does not say which camera took it: give --config "
+                                 "CAMERA.toml")
+            configured = SensorModel(src.camera)
+        if src is not None and src.camera_attitude and not isinstance(configured.gimbal, AzElGimbal):
+            configured = replace(configured, gimbal=AzElGimbal())
+        return configured
 
 
 class Prefetch:
@@ -41,20 +61,43 @@ class Prefetch:
 
 
 def read_inputs(telemetry, other=None, *, heading_bias_deg: float = 0.0, reader=read_detections,
-                msl_geoid: str | None = None) -> Inputs:
+                msl_geoid: str | None = None, dem=None) -> Inputs:
     """Both tables; an InputError (with the issues that explain it) when either has no usable record.
+    ``telemetry``: any file or folder a telemetry source reads (:mod:`eoloc.io.sources`), or a
+    :class:`~eoloc.jobs.flightlog.WithFlightLog` (a video's telemetry and its flight log);
     ``other``: the second file's path, or a :class:`Prefetch` of it; ``msl_geoid``: the geoid
-    grid for telemetry heights given as h_msl_m (default EGM96)."""
+    grid for telemetry heights given above mean sea level (default EGM96); ``dem``: for drone
+    heights given above the take-off point, and their plausibility check."""
+    from ..io.sources import read_source
+
     geoid = None
     if msl_geoid is not None:
         from ..terrain.geoid import Geoid
 
         geoid = Geoid(msl_geoid)
-    tel = with_heading_bias(read_telemetry(telemetry, geoid=geoid), heading_bias_deg)
+    from .flightlog import WithFlightLog, with_flight_log
+
+    if isinstance(telemetry, WithFlightLog):
+        src = with_flight_log(read_source(telemetry.path, geoid=geoid, dem=dem),
+                              read_source(telemetry.log, geoid=geoid, dem=dem))
+    else:
+        src = read_source(telemetry, geoid=geoid, dem=dem)
+    tel = with_heading_bias(src.telemetry, heading_bias_deg)
     det = other.result() if isinstance(other, Prefetch) else reader(other) if other else None
-    issues = list(tel.issues) + (list(det.issues) if det is not None else [])
+    notes = [Issue(tel.path, int(tel.line[0]) if len(tel) else 0, note) for note in src.notes]
+    issues = notes + list(tel.issues) + (list(det.issues) if det is not None else [])
     if len(tel) == 0:
         raise InputError(f"telemetry file {str(telemetry)!r} has no usable record", issues)
     if det is not None and len(det) == 0:
         raise InputError(f"file {det.path!r} has no usable record (only a header?): nothing to locate", issues)
-    return Inputs(tel, det, issues)
+    return Inputs(tel, det, issues, src)
+
+
+def job_inputs(cfg, telemetry, other=None, *, reader=read_detections, dem=None, heading_bias: bool = True) -> Inputs:
+    """:func:`read_inputs` with the config's [telemetry] settings (``cfg`` None: a source that
+    carries its camera, read as it is); ``dem`` a DEM or anything else (a target height: ignored)."""
+    tel_cfg = cfg.telemetry if cfg is not None else None
+    return read_inputs(telemetry, other, reader=reader,
+                       heading_bias_deg=tel_cfg.heading_bias_deg if tel_cfg is not None and heading_bias else 0.0,
+                       msl_geoid=tel_cfg.msl_geoid if tel_cfg is not None else None,
+                       dem=dem if hasattr(dem, "height") else None)

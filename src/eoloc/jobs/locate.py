@@ -14,7 +14,7 @@ from ..io.records import Records
 from ..io.table import Issue, Table
 from ..result import Status
 from ..rules import StopRule
-from .inputs import Prefetch, read_inputs
+from .inputs import Prefetch, job_inputs
 from .tables import Located, locate_tables
 
 NONLINEARITY_LIMIT = 0.1  # past it the first-order covariance does not describe the fix
@@ -44,11 +44,14 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
     """Locate every detection (or every record's image centre) of the files with the config's
     sensor (``detections``: a path, or a :class:`Prefetch` of one started before the config was
     loaded); ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
-    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg,
-                         msl_geoid=cfg.telemetry.msl_geoid)
-    located = locate_tables(cfg.sensor(), inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
+    inputs = job_inputs(cfg, telemetry, detections, dem=getattr(rule, "dem", None))
+    tel_cfg = cfg.telemetry if cfg is not None else None
+    if time_offset_s is None:
+        time_offset_s = tel_cfg.time_offset_s if tel_cfg is not None else 0.0
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    located = locate_tables(sensor, inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
                             budget=budget, compensation=compensation, interpolate=interpolate, max_gap_s=max_gap_s,
-                            time_offset_s=cfg.telemetry.time_offset_s if time_offset_s is None else time_offset_s)
+                            time_offset_s=time_offset_s)
     notes: list[str] = []
     after = None
     if located.covariance is not None:

@@ -37,11 +37,24 @@ def photo_sensor_pose(p: PhotoPose):
 
 def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None) -> PhotoJob:
     """Every photo of ``paths`` located at ``pixels`` ((u, v) pairs; none: the image centre)."""
+    from pathlib import Path
+
     from .. import geodesy
+    from ..io.sources.photos import photo_files
     from ..rules import AtHeight, AtRange, OnDEM
 
     job = PhotoJob([])
+    expanded = []
     for path in paths:
+        if Path(path).is_dir():
+            found = photo_files(Path(path))
+            if not found:
+                job.failed.append(f"{path}: a folder with no photo in it")
+                job.rows.append({"file": str(path), "status": "UNREADABLE", "reason": "a folder with no photo in it"})
+            expanded += found
+        else:
+            expanded.append(path)
+    for path in expanded:
         try:
             p = read_photo(path, geoid=geoid)
         except InputError as exc:  # PhotoError, or a camera that cannot be made

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.table import Issue
-from .inputs import read_inputs
+from .inputs import job_inputs
 
 
 @dataclass
@@ -64,11 +64,10 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     from ..ground.footprint import footprints
     from ..io.telemetry import telemetry_pose
 
-    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
-                         msl_geoid=cfg.telemetry.msl_geoid)
+    inputs = job_inputs(cfg, telemetry, dem=surface)
     tel = inputs.telemetry
     k = record_of(tel, telemetry, frame, time_s)
-    sensor = cfg.sensor()
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
     pose = telemetry_pose(tel, k, sensor.camera)
     img = read_image(image)
     try:

@@ -12,7 +12,7 @@ from ..io.export import fix_records
 from ..io.records import Records
 from ..io.table import Issue
 from ..result import Fixes
-from .inputs import read_inputs
+from .inputs import job_inputs
 from .locate import LocateJob, locate_files
 
 
@@ -152,12 +152,11 @@ def triangulate_job(cfg, telemetry, detections, *, ray_sigma_deg: float, min_ang
     from ..io.telemetry import match_detections, telemetry_pose
     from ..rules.multiview import triangulate as tri
 
-    inputs = read_inputs(telemetry, detections, heading_bias_deg=cfg.telemetry.heading_bias_deg,
-                         msl_geoid=cfg.telemetry.msl_geoid)
+    inputs = job_inputs(cfg, telemetry, detections)
     tel, det = inputs.telemetry, inputs.other
     matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
     has = matched.record >= 0
-    sensor = cfg.sensor()
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
     pose = telemetry_pose(tel, np.where(has, matched.record, 0), sensor.camera)
     rays = sensor.rays(pose, (det.columns["u_px"], det.columns["v_px"]))
     ids = np.asarray(det.columns["target_id"]).astype(str)

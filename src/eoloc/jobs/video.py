@@ -163,22 +163,26 @@ def locate_video_vmti(vmti: VMTISource, surface, first_pts_s: float) -> list[dic
     return [dict(zip(cols, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
 
 
-def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | None = None) -> tuple[Metadata, list]:
-    """A telemetry CSV's records on the frames' clock: time_s minus ``time_offset_s`` (default:
-    the config's [telemetry] time_offset_s) is the time since the first frame."""
+def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | None = None,
+                 dem=None) -> tuple[Metadata, list, object]:
+    """A telemetry file's records (any source: a CSV, a DJI SRT, a flight log) on the frames'
+    clock: time_s minus ``time_offset_s`` (default: the config's [telemetry] time_offset_s) is the
+    time since the first frame. Also the sensor to use (the config's, as the source needs it)."""
     from ..io.telemetry import telemetry_pose
-    from .inputs import read_inputs
+    from .inputs import job_inputs
 
-    inputs = read_inputs(telemetry, heading_bias_deg=cfg.telemetry.heading_bias_deg,
-                         msl_geoid=cfg.telemetry.msl_geoid)
+    inputs = job_inputs(cfg, telemetry, dem=dem)
     tel = inputs.telemetry
     t = tel.columns["time_s"]
     if not np.isfinite(t).any():
         raise InputError(f"{telemetry}: no time_s column: a video's frames are paired with telemetry by time")
-    offset = float(cfg.telemetry.time_offset_s if time_offset_s is None else time_offset_s)
-    pose = telemetry_pose(tel, slice(None), cfg.sensor().camera)
+    offset = float((cfg.telemetry.time_offset_s if cfg is not None else 0.0) if time_offset_s is None
+                   else time_offset_s)
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    pose = telemetry_pose(tel, slice(None), sensor.camera)
     how = f"telemetry {Path(telemetry).name} by time_s" + (f", offset {offset:+.3f} s" if offset else "")
-    return Metadata(t - offset + first_pts_s, pose, {"unix_s": np.full(t.shape, np.nan)}, how), inputs.issues
+    return (Metadata(t - offset + first_pts_s, pose, {"unix_s": np.full(t.shape, np.nan)}, how), inputs.issues,
+            sensor)
 
 
 # -- the job ---------------------------------------------------------------------------------------
@@ -222,10 +226,8 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     t0 = float(times[0])
     vmti_source = None
     if telemetry is not None:
-        if cfg is None:
-            raise InputError("a telemetry CSV needs the camera: give --config")
-        meta, issues = csv_metadata(telemetry, cfg, t0, time_offset_s=time_offset_s)
-        base_sensor = cfg.sensor()
+        meta, issues, base_sensor = csv_metadata(telemetry, cfg, t0, time_offset_s=time_offset_s,
+                                                 dem=surface)
     else:
         src = klv if klv is not None else video
         meta, issues, vmti_source = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,

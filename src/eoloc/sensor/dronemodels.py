@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+from fractions import Fraction
 from functools import lru_cache
 from importlib.resources import files
 
@@ -72,15 +73,14 @@ def _exif_float(exif, tag: int) -> float | None:
 def camera_for(make: str, model: str, width: int, height: int, *, thermal: bool, tags: dict, exif,
                path: str = "") -> tuple[Camera, str]:
     """(camera, where its values came from) for a photo (see the module notes)."""
-    f_cal = tags.get("CalibratedFocalLength")
-    if f_cal not in (None, ""):
-        try:
-            f = float(f_cal)
-            cx = float(tags.get("CalibratedOpticalCenterX", (width - 1) / 2.0))
-            cy = float(tags.get("CalibratedOpticalCenterY", (height - 1) / 2.0))
-        except ValueError:
-            raise InputError(f"{path}: XMP CalibratedFocalLength / CalibratedOpticalCenter are not numbers") from None
-        return Camera(width, height, f, f, cx, cy), "the photo's calibration (CalibratedFocalLength)"
+    cal = calibration(tags, width, height, path)
+    if cal is not None and not isinstance(cal, str):
+        return cal
+    camera, source = _from_database(make, model, width, height, thermal, exif, path)
+    return camera, source if cal is None else f"{source}; {cal}"  # cal: why the file's own was not used
+
+
+def _from_database(make, model, width, height, thermal, exif, path) -> tuple[Camera, str]:
     e = entry(make, model, width, height, thermal=thermal)
     if e is not None:
         if e["lensType"] == "fisheye":
@@ -100,6 +100,45 @@ def camera_for(make: str, model: str, width: int, height: int, *, thermal: bool,
         return (Camera(width, height, fx, fy, (width - 1) / 2.0, (height - 1) / 2.0, dist),
                 f"the camera database ({e['makeModel']}, {band}, {f_mm:g} mm)")
     return _from_35mm(make, model, width, height, thermal, exif, path, "")
+
+
+ASPECT_TOLERANCE = 0.04  # a calibration's image and the photo: the same aspect ratio within this
+
+
+def calibration(tags: dict, width: int, height: int, path: str = "") -> tuple[Camera, str] | str | None:
+    """The photo's own calibration (``CalibratedFocalLength`` or ``CalibratedFocalLengthX/Y``,
+    ``CalibratedOpticalCenterX/Y``, pixels) as a camera for this image: scaled when the image was
+    resized (the principal point tells the size the calibration was made for: about twice it);
+    a string saying why not when it belongs to an image of another shape (a thermal frame carrying
+    the visible camera's calibration); None when there is none."""
+    fx = tags.get("CalibratedFocalLengthX", tags.get("CalibratedFocalLength"))
+    if fx in (None, ""):
+        return None
+    try:
+        fx = float(fx)
+        fy = float(tags.get("CalibratedFocalLengthY", fx))
+        cx = float(tags.get("CalibratedOpticalCenterX", (width - 1) / 2.0))
+        cy = float(tags.get("CalibratedOpticalCenterY", (height - 1) / 2.0))
+    except ValueError:
+        raise InputError(f"{path}: XMP CalibratedFocalLength / CalibratedOpticalCenter are not numbers") from None
+    if not all(math.isfinite(x) and x > 0 for x in (fx, fy, cx, cy)):
+        raise InputError(f"{path}: XMP CalibratedFocalLength / CalibratedOpticalCenter are not positive numbers")
+    w0, h0 = 2.0 * cx + 1.0, 2.0 * cy + 1.0  # the calibrated image's size, from its principal point
+    if abs((w0 / h0) / (width / height) - 1.0) > ASPECT_TOLERANCE:
+        return (f"its calibration (principal point {cx:g}, {cy:g}: a {w0:.0f} x {h0:.0f} image) is another camera's, "
+                f"not this {width} x {height} frame's: not used")
+    # the resize factor: a simple ratio (1/2, 1/4, 2/3, ...) near width / w0, since the principal
+    # point sits a few pixels off the centre
+    scale = Fraction(width / w0).limit_denominator(8)
+    if abs(float(scale) * w0 / width - 1.0) > ASPECT_TOLERANCE or scale <= 0:
+        return (f"its calibration (principal point {cx:g}, {cy:g}) fits no simple resize of this {width} x {height} "
+                "image: not used")
+    if scale == 1:
+        return Camera(width, height, fx, fy, cx, cy), "the photo's calibration (CalibratedFocalLength)"
+    k = float(scale)
+    cam = Camera(width, height, fx * k, fy * k, (cx + 0.5) * k - 0.5, (cy + 0.5) * k - 0.5)
+    return cam, (f"the photo's calibration, made for an image {1 / k:g} times as large, scaled to this {width} x "
+                 f"{height} image")
 
 
 def _from_35mm(make, model, width, height, thermal, exif, path, why: str) -> tuple[Camera, str]:

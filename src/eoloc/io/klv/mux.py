@@ -108,6 +108,54 @@ def add_sync_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[i
     return dest
 
 
+def remux_with_klv(video_in: str | Path, dest: str | Path, packets: Sequence[tuple[bytes, float]]) -> Path:
+    """The video of ``video_in`` (any container PyAV reads: MP4, MOV, TS) copied packet for packet
+    into the MPEG-TS ``dest`` with one asynchronous KLV data stream (stream_type 0x06, 'KLVA'):
+    each (raw ST 0601 packet, time s) at that presentation time on the video's own clock (the
+    video's PTS, in seconds). H.264/HEVC from MP4/MOV is turned to Annex B on the way (the
+    ``h264_mp4toannexb`` / ``hevc_mp4toannexb`` bitstream filters); nothing is decoded."""
+    import av
+    from av.bitstream import BitStreamFilterContext
+
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    with av.open(str(video_in)) as src, av.open(str(dest), "w", format="mpegts") as out:
+        vin = src.streams.video[0]
+        vout = out.add_stream_from_template(vin)
+        codec = vin.codec_context.name
+        bsf = None
+        if codec in ("h264", "hevc") and (vin.codec_context.extradata or b"")[:1] == b"\x01":  # avcC/hvcC: MP4 style
+            bsf = BitStreamFilterContext(f"{codec}_mp4toannexb", vin, vout)
+        data = out.add_data_stream(codec_name="klv")
+        tb = vin.time_base
+        queue = sorted(((round(t / tb), raw) for raw, t in packets), key=lambda x: x[0])
+        q = 0
+
+        def klv_until(pts: int | None) -> None:
+            nonlocal q
+            while q < len(queue) and (pts is None or queue[q][0] <= pts):
+                pkt = av.Packet(queue[q][1])
+                pkt.stream = data
+                pkt.pts = pkt.dts = queue[q][0]
+                pkt.time_base = tb
+                out.mux(pkt)
+                q += 1
+
+        for pkt in src.demux(vin):
+            if pkt.dts is None and pkt.pts is None:
+                continue
+            klv_until(pkt.dts if pkt.dts is not None else pkt.pts)
+            for p2 in (bsf.filter(pkt) if bsf is not None else [pkt]):
+                p2.stream = vout
+                out.mux(p2)
+        if bsf is not None:
+            for p2 in bsf.filter(None):
+                p2.stream = vout
+                out.mux(p2)
+        klv_until(None)
+    return dest
+
+
 def index_frame(i: int, size: tuple[int, int] = (160, 96)) -> np.ndarray:
     """A grey frame (height, width) that shows its index ``i``: 16 bits as black/white blocks
     across the top row of blocks, most significant first, readable after lossy coding."""

@@ -1,0 +1,129 @@
+"""The `eoloc mux` job: a drone video with its telemetry (a DJI .SRT, a flight log, any source)
+into an MPEG-TS with a MISB ST 0601 KLV stream, so that drone footage enters `eoloc video`, the
+player, `eoloc live` and other tools (QGIS FMV, Esri, jMISB).
+
+One ST 0601 packet per video frame, carried with the frame's own presentation time:
+asynchronously (stream_type 0x06, 'KLVA', the packet's PTS = the frame's) or synchronously (ST
+1402: stream_type 0x15, one metadata access unit per video access unit). The frame's pose is the
+telemetry interpolated at its time (:func:`eoloc.sequence.interp.interpolate_poses`; the records'
+time_s are the video's clock, a DJI SRT's subtitle times). Drone telemetry gives the camera's own
+attitude, so the packet says so the way ST 0601 can: platform heading = the camera's yaw, platform
+pitch and roll 0, sensor relative azimuth 0, relative elevation = the camera's pitch, relative roll
+= its roll (the same rotation, Rz(yaw) Ry(pitch) Rx(roll)). Tags: 2 (UNIX time), 5-7, 13, 14, 15
+(MSL, EGM96) and 75 (ellipsoidal), 16/17 (fields of view of the configured camera), 18-20, 65;
+with a ground (a DEM or a height) also the frame centre 21, 23, 24, 25. A frame the telemetry does
+not cover (before, after, or in a gap) gets no packet, and the count is said.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.table import Issue
+
+
+@dataclass
+class MuxJob:
+    path: Path
+    frames: int
+    packets: int
+    carriage: str
+    issues: list[Issue] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: datetime | None = None,
+            surface=None, max_gap_s: float = 1.5) -> MuxJob:
+    """Write ``dest`` (see the module)."""
+    from ..io.klv.encode import encode_uas_packet
+    from ..io.klv.mux import add_sync_klv, remux_with_klv
+    from ..io.telemetry import telemetry_pose
+    from ..io.videofile import frame_times
+    from ..rules import AtHeight, OnDEM
+    from ..sequence.interp import interpolate_poses
+    from ..terrain.geoid import default_geoid
+    from .inputs import job_inputs
+
+    if carriage not in ("async", "sync"):
+        raise InputError(f"--carriage {carriage!r}: choose async or sync")
+    times = frame_times(video)
+    if times.size == 0:
+        raise InputError(f"{video}: the video stream has no frame with a presentation time")
+    inputs = job_inputs(cfg, telemetry, dem=surface)
+    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    tel = inputs.telemetry
+    t_rec = tel.columns["time_s"]
+    if not np.isfinite(t_rec).any():
+        raise InputError(f"{tel.path}: no times: a video's frames are paired with telemetry by time")
+    notes: list[str] = []
+    got = interpolate_poses(t_rec, telemetry_pose(tel, camera=sensor.camera), times - times[0], max_gap_s=max_gap_s)
+    if not got.ok.any():
+        raise InputError(f"{tel.path}: no frame of {video} falls within the telemetry's records (its times "
+                         f"{np.nanmin(t_rec):g} to {np.nanmax(t_rec):g} s; the video lasts "
+                         f"{times[-1] - times[0]:.2f} s)",
+                         inputs.issues)
+    if start_utc is not None:
+        unix0 = start_utc.timestamp()
+    else:
+        dates = tel.columns.get("date_s")
+        k = int(np.flatnonzero(np.isfinite(dates))[0]) if dates is not None and np.isfinite(dates).any() else -1
+        if k < 0:
+            raise InputError(f"{tel.path} gives no date: give --start-utc (the UTC time of the video's first frame, "
+                             "ISO 8601) for the packets' time stamps (tag 2)")
+        unix0 = float(dates[k] - t_rec[k])
+        notes.append(f"time stamps from the telemetry's dates ({datetime.fromtimestamp(unix0, UTC).isoformat()} at "
+                     "the first frame), taken as UTC: DJI writes its controller's local time; give --start-utc to "
+                     "set it")
+    p = got.pose
+    cam = sensor.camera
+    hfov = math.degrees(2 * math.atan(cam.width / 2 / cam.fx))
+    vfov = math.degrees(2 * math.atan(cam.height / 2 / cam.fy))
+    n_geoid = default_geoid().undulation(p.lat_deg, p.lon_deg)
+    centre = None
+    if surface is not None:
+        from ..sensor import AzElGimbal, Pose, SensorModel
+
+        rule = OnDEM(surface) if hasattr(surface, "height") else AtHeight(float(surface))
+        flat = SensorModel(cam, AzElGimbal())
+        pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, (0.0, 0.0))
+        centre = rule.locate(flat, pose, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
+    packets: list[tuple[bytes, float]] = []
+    by_frame: dict[int, bytes] = {}
+    for i in np.flatnonzero(got.ok):
+        values = {2: datetime.fromtimestamp(unix0 + float(times[i] - times[0]), UTC), 5: float(p.yaw_deg[i] % 360.0),
+                  6: 0.0, 7: 0.0, 13: float(p.lat_deg[i]), 14: float(p.lon_deg[i]),
+                  15: float(p.h_m[i] - n_geoid[i]), 75: float(p.h_m[i]), 16: hfov, 17: vfov, 18: 0.0,
+                  19: float(p.pitch_deg[i]), 20: float(p.roll_deg[i] % 360.0)}
+        if centre is not None and centre.ok[i]:
+            n_c = float(default_geoid().undulation(centre.lat_deg[i], centre.lon_deg[i]))
+            values.update({21: float(centre.range_m[i]), 23: float(centre.lat_deg[i]), 24: float(centre.lon_deg[i]),
+                           25: float(centre.h_m[i] - n_c)})
+        raw = encode_uas_packet(values)
+        packets.append((raw, float(times[i])))
+        by_frame[int(i)] = raw
+    missing = int((~got.ok).sum())
+    if missing:
+        notes.append(f"{missing} of {times.size} frames lie outside the telemetry or in a gap of it (> {max_gap_s:g} "
+                     "s): no packet for them")
+    dest = Path(dest)
+    if carriage == "async":
+        remux_with_klv(video, dest, packets)
+    else:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            plain = remux_with_klv(video, Path(tmp) / "video.ts", [])
+
+            def packet_for(n: int, pts_s: float) -> bytes | None:
+                """The packet of the frame shown at pts_s (frame_times are in presentation order)."""
+                j = int(np.argmin(np.abs(times - pts_s)))
+                return by_frame.get(j) if abs(times[j] - pts_s) < 1e-3 else None
+
+            add_sync_klv(plain, dest, packet_for)
+    return MuxJob(dest, int(times.size), len(packets), carriage, list(inputs.issues), notes)
