@@ -26,6 +26,7 @@ bytecode:
 demo: $(STAMP)
 	$(BIN)/eoloc demo --out out/demo
 	$(BIN)/python examples/video_demo.py --out out/demo/video
+	$(BIN)/python examples/drone_demo.py --out out/demo/drone
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench examples

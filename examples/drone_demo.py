@@ -35,13 +35,12 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from PIL import Image
 
-import eoloc
 from eoloc import AzElGimbal, Camera, Pose, SensorModel, open_dem
 from eoloc.geodesy import horizontal_distance_m
 from eoloc.rules import locate_dem
 
 sys.path.insert(0, str(Path(__file__).parent))
-from video_demo import DEM_PATH, corner_errors, hillshade, texture  # noqa: E402
+from video_demo import DEM_PATH, corner_errors, hillshade, texture
 
 REPO = Path(__file__).resolve().parents[1]
 H20N = REPO / "tests" / "data" / "drone" / "H20N__DJI_0006_R.JPG"
@@ -56,11 +55,11 @@ def camera() -> Camera:
 
 
 def flight(t: np.ndarray, ground0: float) -> dict:
-    """The drone 150 m above its take-off point, flying west at 8 m/s, the gimbal 40° down and
+    """The drone 300 m above its take-off point, flying west at 8 m/s, the gimbal 45° down and
     panning from 240° to 300° (the camera's own, earth-referenced attitude)."""
     t = np.asarray(t, dtype=float)
     return {"lat": TAKEOFF[0] + 0.0 * t, "lon": TAKEOFF[1] - 8.0 * t / (111_320 * np.cos(np.radians(TAKEOFF[0]))),
-            "rel": 150.0 + 0.0 * t, "h": ground0 + 150.0 + 0.0 * t, "yaw": 240.0 + 5.0 * t, "pitch": -40.0 + 0.0 * t,
+            "rel": 300.0 + 0.0 * t, "h": ground0 + 300.0 + 0.0 * t, "yaw": 240.0 + 5.0 * t, "pitch": -45.0 + 0.0 * t,
             "roll": 0.0 * t}
 
 
@@ -177,16 +176,16 @@ def main(argv: list[str] | None = None) -> int:
         rows = [r for r in csv.DictReader(line for line in fh if not line.startswith("#"))][:SECONDS]
     got = np.array([[float(r["lat_deg"] or "nan"), float(r["lon_deg"] or "nan")] for r in rows])
     err = horizontal_distance_m(got[:, 0], got[:, 1], truth[:, 0], truth[:, 1])
-    print(f"  the SRT's image centres, one a second ({len(rows)}): median {np.nanmedian(err):.2f} m, max "
-          f"{np.nanmax(err):.2f} m from where their rays truly land (the SRT rounds the gimbal angles to 0.1°)")
+    print(f"  the SRT's image centres, one a second ({len(rows)}): median {np.nanmedian(err):.3f} m, max "
+          f"{np.nanmax(err):.3f} m from where their rays truly land (heights from the DEM's take-off ground + H)")
     eoloc("mux", str(out / "clip.mp4"), "--telemetry", str(out / "clip.SRT"), "--config", str(cam_toml), *dem_args,
           "-o", str(out / "clip.ts"), "--start-utc", "2026-07-14T16:00:00Z")
     eoloc("video", str(out / "clip.ts"), *dem_args, "--gsd", f"{CELL_M:g}", "--out", str(out / "video"))
     err_c, gsd = corner_errors(out / "video", shade)
     if err_c.size:
         px = err_c * CELL_M / gsd
-        print(f"  the muxed video rectified by `eoloc video`: {err_c.size} board corners found by OpenCV in the mosaic, "
-              f"median {np.median(px):.2f} px of the frames' own ({np.median(gsd):.2f} m GSD), p95 "
+        print(f"  the muxed video rectified by `eoloc video`: {err_c.size} board corners found by OpenCV in the "
+              f"mosaic, median {np.median(px):.2f} px of the frames' own ({np.median(gsd):.2f} m GSD), p95 "
               f"{np.percentile(px, 95):.2f} px")
     print(f"  the player: open {out / 'video' / 'player.html'} in a browser (offline)")
 
@@ -201,8 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     truth = centre_truth(dem, sensor, f, ks)
     got = np.array([[row["lat"], row["lon"]] for row in rows])
     err = horizontal_distance_m(got[:, 0], got[:, 1], truth[:, 0], truth[:, 1])
-    print(f"  {len(rows)} photos located from their own XMP (no --config): centres within {np.max(err) * 100:.2f} cm of "
-          "the truth")
+    print(f"  {len(rows)} photos located from their own XMP (no --config): centres within {np.max(err) * 100:.2f} cm "
+          "of the truth")
     eoloc("footprint", str(photos), *dem_args, "--out", str(out / "photo_footprints"))
     print(f"  their footprints: {out / 'photo_footprints' / 'footprints.geojson'}")
     print(f"drone demo done in {time.perf_counter() - t0:.1f} s")

@@ -279,3 +279,54 @@ def test_48_a_wrong_altitude_tag_is_named_on_the_dem(tmp_path):
     path = write_vendor_photo(tmp_path / "low.jpg", 1280, 960, "parrot", tags, make=make, model=model, gps=gps, **kw)
     r, (row,) = _photo(path, "--dem", TILE, "--vertical", "ellipsoid", check=False)
     assert row["status"] == "SUSPECT_ALTITUDE" and "GPSAltitude" in row["reason"]
+
+
+def test_48_the_database_tle_figure_is_given_beside_the_fix(tmp_path):
+    """A DJI Mavic 2 Zoom (FC2200) photo: its row carries the database's own target-location-error
+    model, tle_m = a + b x slant range, with a and b read here from the bundled JSON."""
+    import json as _json
+
+    db = _json.loads((Path(eoloc.__file__).parent / "data" / "drone" / "droneModels.json").read_text())
+    e = next(x for x in db["droneCCDParams"] if x["makeModel"] == "djiFC2200")
+    path = write_photo(tmp_path / "zoom.jpg", 4000, 3000, _dji_tags(40.0, -105.0, 3000.0, 20.0, -50.0, 0.0),
+                       model="FC2200", focal_mm=4.386)
+    _, (row,) = _photo(path, "--target-height", 2800)
+    assert row["status"] == "OK" and "djiFC2200" in row["intrinsics"]
+    assert row["tle_m"] == pytest.approx(e["tle_model_y_intercept"] + e["tle_model_slant_range_coeff"] * row["range_m"],
+                                         rel=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0, 4383), st.floats(0, 3287), st.floats(-85, -30), st.floats(-180, 180))
+def test_48_pixel_ground_pixel_through_a_fisheye_drone_camera(u, v, pitch, yaw):
+    """The database's fisheye DJI FC200 (Phantom 2 Vision, Pix4D's polynomial): pixel -> ground ->
+    pixel < 1e-6 px (hypothesis), and the pixel eoloc projects a ground point to equals Pix4D's
+    published formula written out here (theta = 2/pi atan(r), rho(theta), the affine (C D; E F))
+    applied to the oracle's camera coordinates."""
+    from eoloc.sensor import dronemodels
+
+    db = json.loads((Path(eoloc.__file__).parent / "data" / "drone" / "droneModels.json").read_text())
+    e = next(x for x in db["droneCCDParams"] if x["makeModel"] == "djiFC200")
+
+    class Exif(dict):
+        def get_ifd(self, tag):
+            return {}
+
+    cam, source = dronemodels.camera_for("DJI", "FC200", 4384, 3288, thermal=False, tags={}, exif=Exif())
+    assert "fisheye" in source
+    sensor = eoloc.SensorModel(cam, eoloc.AzElGimbal())
+    pose = eoloc.Pose(40.0, -105.0, 2500.0, yaw, pitch, 0.0, (0.0, 0.0))
+    f = eoloc.locate(sensor, pose, eoloc.AtHeight(1800.0), (np.array([u]), np.array([v])))
+    if not f.ok[0]:
+        return  # above the horizon at this attitude
+    uu, vv = sensor.ground_to_image(pose, f.p_ecef())
+    assert abs(uu[0] - u) < 1e-6 and abs(vv[0] - v) < 1e-6
+    # Pix4D's formula by hand, on the oracle's camera frame (scipy rotations, pyproj)
+    R_ec = O.r_ecef_ned(40.0, -105.0) @ O._euler("ZYX", yaw, pitch, 0.0) @ O.r_body_cam("az-el", 0.0, 0.0, 0.0)
+    X, Y, Z = R_ec.T @ (f.p_ecef()[0] - O.to_ecef(40.0, -105.0, 2500.0))
+    theta = 2 / np.pi * np.arctan(np.hypot(X, Y) / Z)
+    rho = sum(e[f"poly{i}"] * theta**i for i in range(5))
+    xh, yh = rho * X / np.hypot(X, Y), rho * Y / np.hypot(X, Y)
+    pu = e["c"] * xh + e["d"] * yh + (4384 - 1) / 2
+    pv = e["e"] * xh + e["f"] * yh + (3288 - 1) / 2
+    assert abs(pu - u) < 1e-5 and abs(pv - v) < 1e-5, (pu - u, pv - v)

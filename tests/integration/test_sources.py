@@ -447,3 +447,53 @@ def test_48_mux_drone_video_to_misb_read_back_frame_by_frame(tmp_path, carriage)
     r = subprocess.run([EOLOC, "video", str(out), "--target-height", "1500", "--out", str(tmp_path / "v"),
                         "--every", "10", "--no-player", "--no-tiles"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+
+
+def test_48_a_new_source_is_one_class_and_one_registry_line(tmp_path, monkeypatch):
+    """The README's recipe: a class with name, summary, sniff and read, put in the registry before
+    the generic CSV; `eoloc locate` (in-process, so the registry seen is this one) then takes the new
+    file with no other change, and its fixes equal those of the same poses as an eoloc CSV."""
+    from click.testing import CliRunner
+
+    import eoloc.io.sources as sources
+    from eoloc.cli.main import main
+    from eoloc.io.sources import SourceData
+    from eoloc.io.table import Table
+
+    class MyLog:  # "#MYLOG" then "time lat lon h yaw pitch roll az el" per line, spaces between
+        name = "mylog"
+        summary = "MyCompany flight log ('#MYLOG' first line)"
+
+        def sniff(self, path, head: bytes) -> bool:
+            return head.startswith(b"#MYLOG")
+
+        def read(self, path, *, geoid=None, dem=None) -> SourceData:
+            rows = np.loadtxt(path, comments="#", ndmin=2)
+            names = ("time_s", "lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "gimbal1_deg",
+                     "gimbal2_deg")
+            cols = {k: rows[:, i] for i, k in enumerate(names)}
+            n = rows.shape[0]
+            cols.update(frame=np.full(n, np.nan), sensor_roll_deg=np.zeros(n), range_m=np.full(n, np.nan))
+            return SourceData(Table(str(path), cols, np.arange(2, n + 2)), self.name)
+
+    monkeypatch.setattr(sources, "SOURCES", [*sources.SOURCES[:-1], MyLog(), sources.SOURCES[-1]])
+    poses = [(0.0, 40.0, -105.0, 3000.0, 10.0, 1.0, -2.0, 30.0, -60.0), (1.0, 40.001, -105.0, 3001.0, 12.0, 0.5, 0.0,
+                                                                          35.0, -55.0)]
+    log = tmp_path / "flight.mylog"
+    log.write_text("#MYLOG\n" + "\n".join(" ".join(map(str, p)) for p in poses) + "\n", encoding="utf-8")
+    csv_path = tmp_path / "telemetry.csv"
+    csv_path.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                        + "\n".join(",".join(map(str, p)) for p in poses) + "\n", encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text(CAMERA_TOML, encoding="utf-8")
+    outs = []
+    for tel in (log, csv_path):
+        out = tmp_path / f"o-{tel.suffix[1:]}"
+        r = CliRunner().invoke(main, ["locate", str(tel), "--config", str(cfg), "--target-height", "1500",
+                                      "--out", str(out), "--format", "csv"])
+        assert r.exit_code == 0, r.output
+        outs.append(pd.read_csv(out / "fixes.csv", comment="#"))
+    assert identify(log).name == "mylog"
+    np.testing.assert_array_equal(outs[0][["lat_deg", "lon_deg", "h_m"]].to_numpy(),
+                                  outs[1][["lat_deg", "lon_deg", "h_m"]].to_numpy())
+    assert (outs[0]["status"] == "OK").all()

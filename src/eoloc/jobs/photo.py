@@ -42,6 +42,7 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
     from .. import geodesy
     from ..io.sources.photos import photo_files
     from ..rules import AtHeight, AtRange, OnDEM
+    from ..sensor import dronemodels
 
     job = PhotoJob([])
     expanded = []
@@ -75,6 +76,7 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
                 job.rows.append({"file": str(path), "status": "SUSPECT_ALTITUDE", "reason": msg, **camera})
                 continue
         todo = list(pixels) or [(p.camera.cx, p.camera.cy)]
+        tle = dronemodels.tle_model(p.make, p.model, p.width, p.height, thermal=p.thermal)
         for u, v in todo:
             centre = not pixels
             if centre and p.lrf_range_m is not None:
@@ -96,6 +98,8 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
                    "camera_model": f"{p.make} {p.model}", "intrinsics": p.camera_source, "height_rule": p.height_rule}
             if st != Status.OK:
                 row["reason"] = st.explanation
+            elif tle is not None:  # the database's flight-test figure for this camera: a + b x slant range
+                row["tle_m"] = tle[0] + tle[1] * float(f.range_m[0])
             if source == "laser" and p.lrf_target is not None:
                 t = p.lrf_target
                 row |= {"vendor_lat": t[0], "vendor_lon": t[1], "vendor_h": t[2]}

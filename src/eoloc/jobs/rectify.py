@@ -39,7 +39,10 @@ def read_image(path) -> np.ndarray:
 
 
 def record_of(tel, telemetry, frame: int | None, time_s: float | None) -> int:
-    """The telemetry record of --frame N, or nearest --time T (refused outside the telemetry)."""
+    """The telemetry record of --frame N, or nearest --time T (refused outside the telemetry); a
+    telemetry of one record (a photo rectified with its own pose) needs neither."""
+    if frame is None and time_s is None and len(tel) == 1:
+        return 0
     if (frame is None) == (time_s is None):
         raise InputError("choose the frame's telemetry record: --frame N or --time T")
     if frame is not None:

@@ -364,10 +364,14 @@ def project_point(R_ecef_cam, ox, oy, oz, px, py, pz):
 
 # Distortion model codes and their packed parameters ``dp`` (eoloc.sensor.distortion):
 # DIST_BROWN: (k1, k2, p1, p2, k3), OpenCV's order; DIST_RATIO: (w0, n, n breakpoints of the
-# normalised field, then 4 cubic coefficients per interval, highest power first).
-DIST_NONE, DIST_BROWN, DIST_RATIO = 0, 1, 2
+# normalised field, then 4 cubic coefficients per interval, highest power first); DIST_FISHEYE:
+# Pix4D's fisheye (p0 .. p4 of the polynomial in theta = 2/pi atan(r), then the affine a, b, c, d
+# that takes its (xh, yh) to distorted normalised coordinates).
+DIST_NONE, DIST_BROWN, DIST_RATIO, DIST_FISHEYE = 0, 1, 2, 3
 _BROWN_NEWTON_STEPS = 12
 _RATIO_FIXED_POINT_STEPS = 30
+_FISHEYE_NEWTON_STEPS = 30
+_TWO_OVER_PI = 0.6366197723675814
 
 
 @compiled()
@@ -420,6 +424,44 @@ def distortion_ratio(r, dp):
 
 
 @compiled()
+def fisheye_rho(t, dp):
+    """Pix4D's fisheye polynomial rho(theta) and its derivative."""
+    rho = dp[0] + t * (dp[1] + t * (dp[2] + t * (dp[3] + t * dp[4])))
+    drho = dp[1] + t * (2.0 * dp[2] + t * (3.0 * dp[3] + t * 4.0 * dp[4]))
+    return rho, drho
+
+
+@compiled()
+def distort_fisheye(x, y, dp):
+    """Pix4D's fisheye: ideal normalised (x, y) = (X/Z, Y/Z) -> distorted normalised: theta =
+    2/pi atan(r), rho(theta), (xh, yh) = rho (x, y) / r, then the affine (a b; c d)."""
+    r = np.sqrt(x * x + y * y)
+    t = _TWO_OVER_PI * np.arctan(r)
+    rho, _ = fisheye_rho(t, dp)
+    s = pick(r > 1e-12, rho / pick(r > 1e-12, r, 1.0), dp[1] * _TWO_OVER_PI)
+    xh = s * x
+    yh = s * y
+    return dp[5] * xh + dp[6] * yh, dp[7] * xh + dp[8] * yh
+
+
+@compiled()
+def undistort_fisheye(xd, yd, dp):
+    """Inverse of :func:`distort_fisheye`: the affine inverted, rho(theta) = |(xh, yh)| solved by
+    Newton from theta = rho / p1, r = tan(pi/2 theta)."""
+    det = dp[5] * dp[8] - dp[6] * dp[7]
+    xh = (dp[8] * xd - dp[6] * yd) / det
+    yh = (dp[5] * yd - dp[7] * xd) / det
+    rho = np.sqrt(xh * xh + yh * yh)
+    t = rho / dp[1]
+    for _ in range(_FISHEYE_NEWTON_STEPS):
+        f, df = fisheye_rho(t, dp)
+        t = t - (f - rho) / df
+    r = np.tan(t / _TWO_OVER_PI)
+    s = pick(rho > 1e-12, r / pick(rho > 1e-12, rho, 1.0), 1.0 / (dp[1] * _TWO_OVER_PI))
+    return s * xh, s * yh
+
+
+@compiled()
 def undistort(kind, dp, xd, yd):
     """Distorted normalised image coordinates -> ideal ones, for distortion model ``kind``."""
     if kind == DIST_BROWN:
@@ -427,6 +469,8 @@ def undistort(kind, dp, xd, yd):
     if kind == DIST_RATIO:
         k = 1.0 + distortion_ratio(np.sqrt(xd * xd + yd * yd), dp)
         return xd / k, yd / k
+    if kind == DIST_FISHEYE:
+        return undistort_fisheye(xd, yd, dp)
     return xd, yd
 
 
@@ -465,6 +509,12 @@ def undistort_ok(kind, dp, xd, yd, x, y):
         return back & (jxx * jyy - jxy * jxy > 0.0) & (jxx > 0.0)
     if kind == DIST_RATIO:  # x = xd / (1 + D): 1 + D > 0 exactly where no sign flips (and all finite)
         return ((x - x) == 0.0) & ((y - y) == 0.0) & (x * xd >= 0.0) & (y * yd >= 0.0)
+    if kind == DIST_FISHEYE:  # in front of the lens (theta < 1: under 90 deg off axis), on the rising branch
+        fx, fy = distort_fisheye(x, y, dp)
+        t = _TWO_OVER_PI * np.arctan(np.sqrt(x * x + y * y))
+        _, drho = fisheye_rho(t, dp)
+        back = np.abs(fx - xd) + np.abs(fy - yd) <= 1e-9 * (1.0 + np.abs(xd) + np.abs(yd))
+        return back & (t < 1.0) & (drho > 0.0)
     return (x - x) == 0.0
 
 
@@ -473,6 +523,8 @@ def distort(kind, dp, x, y):
     """Ideal normalised image coordinates -> distorted ones, for distortion model ``kind``."""
     if kind == DIST_BROWN:
         return distort_brown(x, y, dp[0], dp[1], dp[2], dp[3], dp[4])
+    if kind == DIST_FISHEYE:
+        return distort_fisheye(x, y, dp)
     if kind == DIST_RATIO:
         zeta = np.sqrt(x * x + y * y)
         eta = zeta

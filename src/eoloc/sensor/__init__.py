@@ -1,7 +1,7 @@
 """Sensor model: camera intrinsics, gimbal models, misalignment and lever arm -> rays."""
 
 from .camera import Camera
-from .distortion import BrownConrady, DistortionRatio
+from .distortion import BrownConrady, DistortionRatio, FisheyePix4D
 from .gimbal import AzElGimbal, FixedMount, Gimbal, GimbalKind, RollPitchGimbal, gimbal_from_name
 from .model import Pose, Rays, SensorModel
 
@@ -10,6 +10,7 @@ __all__ = [
     "BrownConrady",
     "Camera",
     "DistortionRatio",
+    "FisheyePix4D",
     "FixedMount",
     "Gimbal",
     "GimbalKind",

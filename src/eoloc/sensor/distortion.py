@@ -10,7 +10,10 @@
   cubic polynomials (PCHIP). Undistorting is direct (x_r = x / (1 + D)); distorting solves
   eta = zeta (1 + D(w(eta))) by fixed-point iteration.
 
-Both models are evaluated by :mod:`eoloc.kernels.core` (``undistort`` / ``distort``), so the
+- :class:`FisheyePix4D` — Pix4D's fisheye polynomial and affine (the drone camera database's fisheye
+  lenses); undistorting is Newton's method on the polynomial.
+
+All models are evaluated by :mod:`eoloc.kernels.core` (``undistort`` / ``distort``), so the
 compiled frame kernels and the array path share one implementation.
 Every stop rule sees undistorted rays: the camera applies ``undistort`` in pixel -> ray and
 ``distort`` in ground -> pixel.
@@ -112,8 +115,41 @@ class DistortionRatio:
         return kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
 
 
+@dataclass(frozen=True)
+class FisheyePix4D:
+    """Pix4D's fisheye lens model (the drone camera database's ``lensType = fisheye`` entries):
+    a ray at angle phi off the axis has theta = 2 phi / pi, rho = p0 + p1 theta + ... + p4 theta^4,
+    and lands at (xh, yh) = rho (X, Y) / sqrt(X^2 + Y^2), then pixel = (C D; E F) (xh, yh) + (cx, cy).
+    Here in normalised coordinates of a camera whose fx = fy = C: ``affine`` = (1, D/C, E/C, F/C).
+    Undistorting solves rho(theta) by Newton; rays 90 degrees or more off the axis are not rays."""
+
+    poly: tuple[float, float, float, float, float]
+    affine: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 1.0)
+
+    name = "pix4d-fisheye"
+    kind: ClassVar[int] = kernels.DIST_FISHEYE
+
+    def __post_init__(self) -> None:
+        if len(self.poly) != 5 or not self.poly[1] > 0:
+            raise ValueError(f"the fisheye polynomial needs p0..p4 with p1 > 0, got {self.poly!r}")
+        a, b, c, d = self.affine
+        if not abs(a * d - b * c) > 0:
+            raise ValueError(f"the fisheye affine {self.affine!r} is singular")
+
+    @cached_property
+    def packed(self) -> np.ndarray:
+        return np.array([*self.poly, *self.affine], dtype=np.float64)
+
+    def distort(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        return kernels.distort(self.kind, self.packed, _f64(x), _f64(y))
+
+    def undistort(self, xd: ArrayLike, yd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        with np.errstate(all="ignore"):
+            return kernels.undistort(self.kind, self.packed, _f64(xd), _f64(yd))
+
+
 def _f64(x: ArrayLike) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
 
 
-Distortion = BrownConrady | DistortionRatio
+Distortion = BrownConrady | DistortionRatio | FisheyePix4D

@@ -9,12 +9,14 @@ target-location-error model from flight tests.
 
 A photo's camera, in order (:func:`camera_for`):
 
-1. the photo's own calibration (DJI ``CalibratedFocalLength`` and ``CalibratedOpticalCenterX/Y``,
-   pixels), scaled to the image when it was resized;
+1. the photo's own calibration (``CalibratedFocalLength`` or ``CalibratedFocalLengthX/Y`` and
+   ``CalibratedOpticalCenterX/Y``, pixels), scaled to the image when it was resized (by the simple
+   ratio its principal point shows), refused when it is another camera's (another aspect ratio);
 2. the database entry of its make, model and band (visible/thermal; a model name shared by a
    payload's visible and thermal cameras is told apart by ``isThermal`` and the image size), its
    focal length (the entry's, else EXIF FocalLength in mm) over its pixel pitch, scaled when the
-   image is smaller than the entry's; never another band's values;
+   image is smaller than the entry's; never another band's values; a fisheye entry by Pix4D's
+   polynomial and affine (:class:`eoloc.sensor.distortion.FisheyePix4D`);
 3. EXIF FocalLengthIn35mmFilm (the horizontal field of view of a 36 mm wide frame), with a note.
 """
 
@@ -56,6 +58,16 @@ def entry(make: str, model: str, width: int, height: int, *, thermal: bool) -> d
     return max(cands, key=lambda e: e["widthPixels"]) if cands else None
 
 
+def tle_model(make: str, model: str, width: int, height: int, *, thermal: bool) -> tuple[float, float] | None:
+    """(a, b) of the database's target-location-error model of this camera, TLE = a + b x slant
+    range (m; fitted by Theta Informatics on flight tests against surveyed points, 33 cameras),
+    or None."""
+    e = entry(make, model, width, height, thermal=thermal)
+    if e is None or "tle_model_y_intercept" not in e:
+        return None
+    return float(e["tle_model_y_intercept"]), float(e["tle_model_slant_range_coeff"])
+
+
 def _exif_float(exif, tag: int) -> float | None:
     try:
         v = exif.get_ifd(0x8769).get(tag)
@@ -83,9 +95,14 @@ def camera_for(make: str, model: str, width: int, height: int, *, thermal: bool,
 def _from_database(make, model, width, height, thermal, exif, path) -> tuple[Camera, str]:
     e = entry(make, model, width, height, thermal=thermal)
     if e is not None:
-        if e["lensType"] == "fisheye":
-            raise InputError(f"{path}: {make} {model} has a fisheye lens (database {e['makeModel']}): fisheye "
-                             "photos are not located yet")
+        if e["lensType"] == "fisheye":  # Pix4D's model: the affine holds the focal length in pixels
+            from .distortion import FisheyePix4D
+
+            scale = width / e["widthPixels"]
+            c, d, ee, f = (float(e[k]) for k in ("c", "d", "e", "f"))
+            dist = FisheyePix4D(tuple(float(e[f"poly{i}"]) for i in range(5)), (1.0, d / c, ee / c, f / c))
+            return (Camera(width, height, c * scale, c * scale, (width - 1) / 2.0, (height - 1) / 2.0, dist),
+                    f"the camera database ({e['makeModel']}, fisheye, Pix4D's polynomial)")
         f_mm = e.get("focalLength") or _exif_float(exif, 37386)  # EXIF FocalLength
         if f_mm is None:
             why = f" ({e['makeModel']} has no focal length and neither has EXIF FocalLength)"
