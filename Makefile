@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench bytecode clean browser tak streams mutants
+.PHONY: demo test lint bench bytecode clean browser tak streams mutants geoconvert
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,12 @@ browser:
 	  { apt-get update -q >/dev/null && apt-get install -y -q chromium chromium-driver >/dev/null; }; } || \
 	  { echo "install Debian's chromium and chromium-driver (as root) for the map test"; exit 1; }
 
+# GeographicLib's GeoConvert: the reference for the MGRS test (Debian's geographiclib-tools), installed here when missing.
+geoconvert:
+	@command -v GeoConvert >/dev/null || { apt-get install -y -q geographiclib-tools >/dev/null 2>&1 || \
+	  { apt-get update -q >/dev/null && apt-get install -y -q geographiclib-tools >/dev/null; }; } || \
+	  { echo "install Debian's geographiclib-tools (as root) for the MGRS test"; exit 1; }
+
 # Real network senders for the live-source test: an RTSP server (GStreamer's gst-rtsp-server,
 # through Debian's python3-gi) and SRT's own tools (srt-live-transmit), installed here when missing.
 STREAM_DEBS := python3-gi gir1.2-gst-rtsp-server-1.0 gstreamer1.0-plugins-good gstreamer1.0-plugins-bad srt-tools
@@ -60,7 +66,7 @@ $(TAK_STAMP):
 
 tak: $(TAK_STAMP)
 
-test: $(STAMP) lint browser tak streams
+test: $(STAMP) lint browser tak streams geoconvert
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP) bytecode

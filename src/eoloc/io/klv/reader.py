@@ -35,6 +35,26 @@ from .st0601 import decode_values
 
 UAS_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
 TS_PACKET = 188
+KEY_HEAD, KEY_TAIL = UAS_KEY[:5], UAS_KEY[5:]  # 06 0E 2B 34 02 | 0B 01 01 0E 01 03 01 01 00 00 00
+
+
+def restore_key_heads(data: bytes) -> tuple[bytes, int]:
+    """The bytes with the first 5 bytes of the ST 0601 key (06 0E 2B 34 02) put back before every
+    occurrence of its last 11 that lacks them (streams cut that way: sitrec's day/night samples),
+    and how many were put back (0: the bytes unchanged)."""
+    at, pos = [], data.find(KEY_TAIL)
+    while pos >= 0:
+        if data[max(pos - 5, 0):pos] != KEY_HEAD:
+            at.append(pos)
+        pos = data.find(KEY_TAIL, pos + 1)
+    if not at:
+        return data, 0
+    parts, prev = [], 0
+    for a in at:
+        parts += [data[prev:a], KEY_HEAD]
+        prev = a
+    parts.append(data[prev:])
+    return b"".join(parts), len(at)
 
 
 @dataclass(frozen=True)
@@ -227,7 +247,27 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
 
     pts: optional (byte offset, PTS seconds) marks: a packet takes the PTS of the last mark at or
     before its key. first_index: the number of the first packet (streams of one file count on).
+    Packets whose key lost its first 5 bytes are recovered when that gives more good packets (each
+    must still pass its checksum), and a note says so.
     """
+    result = _decode_klv_bytes(data, path, pts=pts, container=container, stream=stream, first_index=first_index,
+                               strict=strict)
+    repaired, count = restore_key_heads(data)
+    if count and pts is None:  # (a transport stream's PTS marks are byte offsets of the unrepaired bytes)
+        again = _decode_klv_bytes(repaired, path, container=container, stream=stream, first_index=first_index,
+                                  strict=strict)
+        if again.n_good > result.n_good:
+            note = StreamNote(stream, "damaged key", "key", f"{count} packet key(s) lacked their first 5 bytes "
+                              f"({KEY_HEAD.hex(' ')}): put back, and {again.n_good - result.n_good} more packet(s) "
+                              "then pass their checksum; byte offsets are those of the repaired stream",
+                              count, again.packets[0].index if again.packets else first_index)
+            return KLVStream(again.path, again.container, again.packets, again.issues, [note, *again.notes])
+    return result
+
+
+def _decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int, float | None]] | None = None,
+                      container: str = "klv", stream: str = "", first_index: int = 0,
+                      strict: bool = False) -> KLVStream:
     packets: list[KLVPacket] = []
     issues: list[KLVIssue] = []
     notes = _Notes()

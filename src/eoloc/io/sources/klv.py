@@ -12,10 +12,11 @@ UL_PREFIX = b"\x06\x0e\x2b\x34"  # every SMPTE universal label starts so
 
 
 def looks_like_klv(head: bytes) -> bool:
-    """An MPEG-TS (a sync byte every 188 bytes) or bytes that hold a SMPTE key."""
-    from ..klv.reader import looks_like_ts
+    """An MPEG-TS (a sync byte every 188 bytes) or bytes that hold a SMPTE key (or the ST 0601
+    key's last 11 bytes: packets whose key lost its head, which the reader puts back)."""
+    from ..klv.reader import KEY_TAIL, looks_like_ts
 
-    return looks_like_ts(head) or UL_PREFIX in head
+    return looks_like_ts(head) or UL_PREFIX in head or KEY_TAIL in head
 
 
 class KlvStream:
