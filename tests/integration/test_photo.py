@@ -315,6 +315,11 @@ def test_48_pixel_ground_pixel_through_a_fisheye_drone_camera(u, v, pitch, yaw):
     cam, source = dronemodels.camera_for("DJI", "FC200", 4384, 3288, thermal=False, tags={}, exif=Exif())
     assert "fisheye" in source
     sensor = eoloc.SensorModel(cam, eoloc.AzElGimbal())
+    # pixels that surely see the ground (the centre, and around it) must be located: a lens model
+    # that refused every pixel would pass the rest of this test vacuously
+    near = eoloc.locate(sensor, eoloc.Pose(40.0, -105.0, 2500.0, 0.0, -80.0, 0.0, (0.0, 0.0)), eoloc.AtHeight(1800.0),
+                        (np.array([2191.5, 1500.0, 2900.0, 2191.5]), np.array([1643.5, 1643.5, 1643.5, 800.0])))
+    assert near.ok.all()
     pose = eoloc.Pose(40.0, -105.0, 2500.0, yaw, pitch, 0.0, (0.0, 0.0))
     f = eoloc.locate(sensor, pose, eoloc.AtHeight(1800.0), (np.array([u]), np.array([v])))
     if not f.ok[0]:

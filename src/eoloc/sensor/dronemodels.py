@@ -98,10 +98,10 @@ def _from_database(make, model, width, height, thermal, exif, path) -> tuple[Cam
         if e["lensType"] == "fisheye":  # Pix4D's model: the affine holds the focal length in pixels
             from .distortion import FisheyePix4D
 
-            scale = width / e["widthPixels"]
+            resize = width / e["widthPixels"]
             c, d, ee, f = (float(e[k]) for k in ("c", "d", "e", "f"))
             dist = FisheyePix4D(tuple(float(e[f"poly{i}"]) for i in range(5)), (1.0, d / c, ee / c, f / c))
-            return (Camera(width, height, c * scale, c * scale, (width - 1) / 2.0, (height - 1) / 2.0, dist),
+            return (Camera(width, height, c * resize, c * resize, (width - 1) / 2.0, (height - 1) / 2.0, dist),
                     f"the camera database ({e['makeModel']}, fisheye, Pix4D's polynomial)")
         f_mm = e.get("focalLength") or _exif_float(exif, 37386)  # EXIF FocalLength
         if f_mm is None:
