@@ -86,6 +86,41 @@ def _location(raw: bytes) -> Location:
     return Location(_LAT(raw[0:4]), _LON(raw[4:8]), _HAE(raw[8:10]), *sig)
 
 
+# -- ST 0903.3 and older (VMTI LS version <= 3): linear mappings, not ST 1201 IMAPB -------------------
+
+def _linear(lo: float, hi: float, length: int, *, signed: bool = False):
+    """ST 0903.3's mappings: an unsigned integer over [lo, hi], or a signed one over +-hi."""
+    top = (1 << (8 * length)) - 1
+
+    def decode(raw: bytes) -> float:
+        if len(raw) != length:
+            raise FieldError(f"{length} bytes expected, {len(raw)} sent")
+        if signed:
+            return int.from_bytes(raw, "big", signed=True) * hi / ((1 << (8 * length - 1)) - 1)
+        return lo + int.from_bytes(raw, "big") * (hi - lo) / top
+    return decode
+
+
+_FOV3, _HAE3, _OFFSET3 = _linear(0.0, 180.0, 2), _linear(-900.0, 19000.0, 2), _linear(0, 19.2, 3, signed=True)
+_LAT3, _LON3, _SIGMA3 = _linear(-90.0, 90.0, 4), _linear(-180.0, 180.0, 4), _linear(0.0, 650.0, 2)
+
+
+def _location3(raw: bytes) -> Location:
+    if len(raw) not in (10, 16, 22):
+        raise FieldError(f"10, 16 or 22 bytes expected, {len(raw)} sent")
+    sig = [_SIGMA3(raw[i:i + 2]) for i in range(10, 16, 2)] if len(raw) >= 16 else []
+    return Location(_LAT3(raw[0:4]), _LON3(raw[4:8]), _HAE3(raw[8:10]), *sig)
+
+
+#: What ST 0903.3 and older encode differently (jMISB's LEGACY encoding mode: the same tags)
+LEGACY_VMTI = {11: ("vmtiHorizontalFov", _FOV3), 12: ("vmtiVerticalFov", _FOV3)}
+LEGACY_VTARGET = {10: ("targetLocationOffsetLat", _OFFSET3), 11: ("targetLocationOffsetLon", _OFFSET3),
+                  12: ("targetHae", _HAE3), 13: ("boundingBoxTopLeftLatOffset", _OFFSET3),
+                  14: ("boundingBoxTopLeftLonOffset", _OFFSET3), 15: ("boundingBoxBottomRightLatOffset", _OFFSET3),
+                  16: ("boundingBoxBottomRightLonOffset", _OFFSET3), 17: ("targetLocation", _location3)}
+LEGACY_VERSION = 3  # sets of this LS version or older
+
+
 #: ST 0903.6 VMTI local set items: tag -> (name, decoder); 101 (targets) is read separately
 VMTI_FIELDS: dict[int, tuple[str, Any]] = {
     2: ("precisionTimeStamp", misb_time), 3: ("vmtiSystemName", _text), 4: ("vmtiLsVersionNum", _uint),
@@ -129,14 +164,25 @@ class VMTISet:
 
 
 def decode_vmti(raw: bytes, *, prefix: str = "") -> tuple[VMTISet, list[Note]]:
-    """An embedded VMTI local set (the value of ST 0601 tag 74), from what is there."""
+    """An embedded VMTI local set (the value of ST 0601 tag 74), from what is there. A set whose LS
+    version (tag 4) is 3 or older is read with ST 0903.3's mappings (fields of view, target HAE,
+    location offsets, target location: linear, not IMAPB), with a note."""
     items, notes = parse_items(raw, prefix=prefix)
     series = [v for t, v in items if t == 101]
-    values, more = decode_table([(t, v) for t, v in items if t not in (1, 101)], VMTI_FIELDS, prefix)
+    version = next((v for t, v in items if t == 4), None)
+    legacy = False
+    if version is not None and 1 <= len(version) <= 8:
+        legacy = int.from_bytes(version, "big") <= LEGACY_VERSION
+    table = {**VMTI_FIELDS, **LEGACY_VMTI} if legacy else VMTI_FIELDS
+    values, more = decode_table([(t, v) for t, v in items if t not in (1, 101)], table, prefix)
     notes += more
+    if legacy:
+        notes.append(Note("legacy version", f"{prefix}4", f"ST 0903 LS version {values.get(4)}: fields of view, "
+                                                        "target HAE, offsets and locations read with ST 0903.3's "
+                                                        "linear mappings"))
     targets: list[VTarget] = []
     if series:
-        targets, more = decode_targets(series[-1], prefix=f"{prefix}101.")
+        targets, more = decode_targets(series[-1], prefix=f"{prefix}101.", legacy=legacy)
         notes += more
     if len(series) > 1:
         notes.append(Note("duplicate tag", f"{prefix}101", "VTarget series sent more than once; the last is used"))
@@ -149,8 +195,10 @@ def decode_vmti(raw: bytes, *, prefix: str = "") -> tuple[VMTISet, list[Note]]:
     return VMTISet(values, targets), notes
 
 
-def decode_targets(raw: bytes, *, prefix: str = "") -> tuple[list[VTarget], list[Note]]:
-    """A VTarget series: BER-length-prefixed packs of (target id, items)."""
+def decode_targets(raw: bytes, *, prefix: str = "", legacy: bool = False) -> tuple[list[VTarget], list[Note]]:
+    """A VTarget series: BER-length-prefixed packs of (target id, items); ``legacy``: ST 0903.3's
+    mappings."""
+    table = {**VTARGET_FIELDS, **LEGACY_VTARGET} if legacy else VTARGET_FIELDS
     targets: list[VTarget] = []
     notes: list[Note] = []
     pos, end = 0, len(raw)
@@ -164,7 +212,7 @@ def decode_targets(raw: bytes, *, prefix: str = "") -> tuple[list[VTarget], list
             notes.append(Note("truncated item", prefix.rstrip("."), f"{exc}; the targets before it are kept"))
             break
         items, n = parse_items(raw, q, p + length, prefix=f"{prefix}{tid}.")
-        values, m = decode_table(items, VTARGET_FIELDS, f"{prefix}{tid}.")
+        values, m = decode_table(items, table, f"{prefix}{tid}.")
         targets.append(VTarget(tid, values))
         notes += n + m
         pos = p + length
