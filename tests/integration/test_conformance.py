@@ -148,3 +148,31 @@ def test_49_1_st0903_current_and_legacy_sets_read_as_jmisb_reads_them(vec):
     else:
         assert got == pytest.approx(vec["expect"], abs=max(vec["tol"], 1e-9)), vec["from"]
     assert any(n.kind == "legacy version" for n in notes) == (vec["version"] <= 3)
+
+
+# the VMTI set's outermost items as jMISB's VmtiLocalSetFactoryTest lists them: time stamp, system
+# name, LS version, frame number, width, height, source sensor, VTarget, Algorithm, Ontology series
+JMISB_0903_TAGS = {2, 3, 4, 7, 8, 9, 10, 101, 102, 103}
+
+
+def test_49_2_stand_alone_st0903_sets_are_read_and_their_checksum_checked(tmp_path):
+    """jMISB's 0903.bin: five stand-alone VMTI sets read (their targets under tag 74, as when
+    embedded), each with jMISB's outer items; each checksum verifies by the standard's sum; a set
+    with one byte spoilt is refused by its checksum, named, and the other four kept."""
+    from eoloc.io.klv import read_klv
+
+    path = DATA / "conformance" / "jmisb_0903.bin"
+    stream = read_klv(path)
+    assert stream.n_good == 5 and stream.n_bad == 0
+    for p in stream.packets:
+        vset = p.fields[74]
+        assert set(vset.values) | {101} == JMISB_0903_TAGS and len(vset.targets) == 2
+        assert p.standard == "ST 0903" and _bcc16(p.raw) == int.from_bytes(p.raw[-2:], "big")
+    raw = bytearray(path.read_bytes())
+    second = stream.packets[1]
+    raw[second.offset + 40] ^= 0x20
+    spoilt = tmp_path / "spoilt.bin"
+    spoilt.write_bytes(bytes(raw))
+    again = read_klv(spoilt)
+    assert again.n_good == 4 and [i.kind for i in again.issues] == ["checksum"]
+    assert again.issues[0].packet == 1

@@ -34,6 +34,7 @@ from .localset import Note, SetError, ber_length, parse_items
 from .st0601 import decode_values
 
 UAS_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
+VMTI_KEY = bytes.fromhex("060E2B34020B01010E01030306000000")  # a stand-alone ST 0903 VMTI local set
 TS_PACKET = 188
 KEY_HEAD, KEY_TAIL = UAS_KEY[:5], UAS_KEY[5:]  # 06 0E 2B 34 02 | 0B 01 01 0E 01 03 01 01 00 00 00
 
@@ -205,6 +206,11 @@ def decode_packet(raw: bytes, value_start: int) -> tuple[str, dict[int, Any], li
     if raw[:16] == EG0104_KEY:
         values, notes = decode_eg0104(raw[value_start:])
         return "EG 0104", values, notes
+    if raw[:16] == VMTI_KEY:  # its targets under tag 74, as when it rides in an ST 0601 packet
+        from .st0903 import decode_vmti
+
+        vset, notes = decode_vmti(raw[value_start:], prefix="74.")
+        return "ST 0903", {74: vset}, notes
     items, notes = parse_items(raw, value_start, len(raw) - 4)
     if items and items[0][0] != 2 and any(t == 2 for t, _ in items):
         notes.append(Note("out of order", "2", "Precision Time Stamp is not the first item (read anyway)"))
@@ -218,6 +224,8 @@ def _strict_check(raw: bytes) -> str | None:
 
     if raw[:16] == EG0104_KEY:
         return "EG 0104 is not ST 0601 (obsolete; read only without --strict)"
+    if raw[:16] == VMTI_KEY:
+        return None  # a stand-alone ST 0903 set: its own standard, checked by its checksum
     try:
         decode_uas_local_set(raw)
     except Exception as exc:  # stanag4609's verdict, whatever its exception type
@@ -230,7 +238,7 @@ class PacketKeys:
 
     def __init__(self, data: bytes) -> None:
         self.data = data
-        self.next = {UAS_KEY: data.find(UAS_KEY), EG0104_KEY: data.find(EG0104_KEY)}
+        self.next = {UAS_KEY: data.find(UAS_KEY), EG0104_KEY: data.find(EG0104_KEY), VMTI_KEY: data.find(VMTI_KEY)}
 
     def find(self, pos: int) -> int:
         for key, at in self.next.items():
@@ -295,7 +303,8 @@ def _decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int
             pos = k + 1  # the next key may sit inside what the bad length claimed
             continue
         raw = data[k:end]
-        if raw[:16] == UAS_KEY and (why := checksum_problem(raw)) is not None:
+        vmti_sum = raw[:16] == VMTI_KEY and raw[-4:-2] == b"\x01\x02"  # ST 0903's checksum item is optional
+        if (raw[:16] == UAS_KEY or vmti_sum) and (why := checksum_problem(raw)) is not None:
             issues.append(KLVIssue(path, n, k, "checksum", why))
             n += 1
             pos = k + 1
