@@ -176,3 +176,32 @@ def test_49_2_stand_alone_st0903_sets_are_read_and_their_checksum_checked(tmp_pa
     again = read_klv(spoilt)
     assert again.n_good == 4 and [i.kind for i in again.issues] == ["checksum"]
     assert again.issues[0].packet == 1
+
+
+def test_49_5_eg0104_labels_carry_the_registrys_version_bytes():
+    """Every element eoloc writes into an EG 0104 packet has the full 16-byte label jMISB's table
+    has (its version byte included: jMISB dropped 17 of 29 elements written with 01), and the
+    packet still reads back to the values written."""
+    import json
+    from datetime import UTC, datetime
+
+    from eoloc.io.klv.eg0104 import LABELS, decode_eg0104, encode_eg0104
+
+    registry = set(json.loads((DATA / "conformance" / "jmisb_eg0104_labels.json").read_text())["labels"].values())
+    values = {}
+    for _, kind, name in LABELS.values():
+        values[name] = (datetime(2024, 1, 4, 22, 23, 10, tzinfo=UTC) if kind == "time" else "EO" if kind == "text"
+                        else 12.5)
+    packet = encode_eg0104(values)
+    body, pos, written = packet[17:] if packet[16] < 0x80 else packet[16 + 1 + (packet[16] & 0x7F):], 0, []
+    while pos < len(body):
+        label = body[pos:pos + 16]
+        n = body[pos + 16]
+        start = pos + 17 if n < 0x80 else pos + 17 + (n & 0x7F)
+        length = n if n < 0x80 else int.from_bytes(body[pos + 17:start], "big")
+        written.append(label.hex().upper())
+        pos = start + length
+    assert len(written) == len(LABELS) == 29
+    assert set(written) <= registry, sorted(set(written) - registry)
+    decoded, notes = decode_eg0104(packet[16 + (1 if packet[16] < 0x80 else 1 + (packet[16] & 0x7F)):])
+    assert decoded[13] == 12.5 and decoded[16] == 12.5 and not [n for n in notes if n.kind != "field"]

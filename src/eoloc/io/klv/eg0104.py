@@ -54,6 +54,22 @@ LABELS: dict[bytes, tuple[int, str, str]] = {
 }
 
 
+#: The version byte (byte 8) of each element's label as the SMPTE registry gives it (RP 210; the
+#: same as jMISB's and KWIVER's tables): written by :func:`encode_eg0104`, ignored when reading.
+REGISTRY_VERSION: dict[bytes, int] = {
+    bytes.fromhex(k): v for k, v in {
+        "0702010101050000": 0x03, "0701100106000000": 0x07, "0701100105000000": 0x07, "0701100104000000": 0x07,
+        "0101200100000000": 0x01, "0420010201010000": 0x01, "0701010100000000": 0x01, "0701020102040200": 0x03,
+        "0701020102060200": 0x03, "0701020102020000": 0x01, "0420020101080000": 0x02, "04200201010A0100": 0x07,
+        "0701100102000000": 0x01, "0701100103000000": 0x01, "0701100101000000": 0x01, "0701080101000000": 0x01,
+        "0701090201000000": 0x01, "0701020103020000": 0x01, "0701020103040000": 0x01, "0701020103160000": 0x0A,
+        "0105050000000000": 0x01,
+        **{f"07010201030{7 + k:X}0100": 0x03 for k in range(4)},
+        **{f"07010201030{0xB + k:X}0100": 0x03 for k in range(4)},
+    }.items()
+}
+
+
 def _value(kind: str, raw: bytes) -> Any:
     if kind == "f64":
         if len(raw) != 8:
@@ -101,7 +117,7 @@ def decode_eg0104(value: bytes) -> tuple[dict[int, Any], list[Note]]:
 
 def encode_eg0104(values: dict[str, Any]) -> bytes:
     """One EG 0104 packet from {element name: value} (names as in :data:`LABELS`; floats, text,
-    datetime for the time stamp), labels with version byte 01."""
+    datetime for the time stamp), each label with its registry version byte (:data:`REGISTRY_VERSION`)."""
     by_name = {name: (label, kind) for label, (_, kind, name) in LABELS.items()}
     body = bytearray()
     for name, v in values.items():
@@ -114,5 +130,6 @@ def encode_eg0104(values: dict[str, Any]) -> bytes:
             raw = ((v - EPOCH) // timedelta(microseconds=1)).to_bytes(8, "big")
         else:
             raw = str(v).encode("ascii")
-        body += bytes.fromhex("060E2B3401010101") + label + encode_length(len(raw)) + raw
+        head = bytes.fromhex("060E2B34010101") + bytes([REGISTRY_VERSION[label]])
+        body += head + label + encode_length(len(raw)) + raw
     return EG0104_KEY + encode_length(len(body)) + bytes(body)
