@@ -205,3 +205,46 @@ def test_49_5_eg0104_labels_carry_the_registrys_version_bytes():
     assert set(written) <= registry, sorted(set(written) - registry)
     decoded, notes = decode_eg0104(packet[16 + (1 if packet[16] < 0x80 else 1 + (packet[16] & 0x7F)):])
     assert decoded[13] == 12.5 and decoded[16] == 12.5 and not [n for n in notes if n.kind != "field"]
+
+
+def test_49_6_a_footprint_across_the_antimeridian_is_cut(tmp_path):
+    """A frame seen at 179.999°E looking straight down: `eoloc footprint` writes it as a MultiPolygon
+    cut at ±180 (RFC 7946 §3.1.9): shapely finds it valid, every longitude in [-180, 180], every
+    exterior ring counter-clockwise, the parts' geodesic areas (pyproj.Geod) add up to the frame's;
+    the KML holds the two parts in a MultiGeometry (read back by the standard library's parser)."""
+    import json
+    import xml.etree.ElementTree as ET
+
+    import shapely
+    from click.testing import CliRunner
+    from pyproj import Geod
+
+    from eoloc.cli.main import main
+
+    tel = tmp_path / "telemetry.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                   "0,10.0,179.999,3000,0,0,0,0,-90\n1,10.0,-179.9995,3000,30,0,0,0,-90\n", encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text("[camera]\nwidth = 1280\nheight = 960\nfx = 1000.0\n", encoding="utf-8")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["footprint", str(tel), "--config", str(cfg), "--target-height", "0",
+                                  "--out", str(out), "--format", "geojson", "--format", "kml"])
+    assert r.exit_code == 0, r.output
+    feats = json.loads((out / "footprints.geojson").read_text())["features"]
+    geod = Geod(ellps="WGS84")
+    for f in feats:
+        g = f["geometry"]
+        assert g["type"] == "MultiPolygon" and len(g["coordinates"]) == 2
+        shape = shapely.from_geojson(json.dumps(g))
+        assert shape.is_valid
+        area = 0.0
+        for (ring,) in g["coordinates"]:
+            lon = np.array([c[0] for c in ring])
+            lat = np.array([c[1] for c in ring])
+            assert (np.abs(lon) <= 180.0).all() and shapely.Polygon(list(zip(lon, lat, strict=True))).exterior.is_ccw
+            area += geod.polygon_area_perimeter(lon, lat)[0]
+        assert area == pytest.approx(f["properties"]["area_m2"], rel=1e-3)
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    root = ET.parse(out / "footprints.kml").getroot()
+    multis = root.findall(".//k:MultiGeometry", ns)
+    assert len(multis) == len(feats) and all(len(m.findall("k:Polygon", ns)) == 2 for m in multis)

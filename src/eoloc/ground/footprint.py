@@ -81,13 +81,55 @@ class Footprint:
 
 def polygon_geometry(lon_deg, lat_deg, h_m) -> dict:
     """An RFC 7946 Polygon from one ring of vertices (lon, lat, h): closed and counter-clockwise,
-    whichever way the vertices came (image borders run clockwise on the ground)."""
-    ring = np.column_stack([lon_deg, lat_deg, h_m])
+    whichever way the vertices came (image borders run clockwise on the ground). A ring that
+    crosses the antimeridian is cut there into a MultiPolygon (RFC 7946 §3.1.9), each part within
+    [-180, 180] and counter-clockwise, the cut edges on ±180 exactly (latitude and height
+    interpolated linearly in unwrapped longitude)."""
+    ring = np.column_stack([lon_deg, lat_deg, h_m]).astype(np.float64)
     area, _ = _geod().polygon_area_perimeter(ring[:, 0], ring[:, 1])
     if area < 0:  # pyproj: positive = counter-clockwise
         ring = ring[::-1]
+    lon = np.asarray(ring[:, 0])
+    unwrapped = lon[0] + np.concatenate([[0.0], np.cumsum((np.diff(lon) + 180.0) % 360.0 - 180.0)])
+    closing = (lon[0] - lon[-1] + 180.0) % 360.0 - 180.0
+    if abs(unwrapped[-1] + closing - unwrapped[0]) > 1e-9:  # the ring winds round a pole: not cut here
+        unwrapped = lon
+    shift = 360.0 * np.round(np.mean(unwrapped) / 360.0)
+    u = np.column_stack([unwrapped - shift, ring[:, 1:]])
+    if u[:, 0].max() <= 180.0 and u[:, 0].min() >= -180.0:
+        return {"type": "Polygon", "coordinates": [_closed(u)]}
+    edge = 180.0 if u[:, 0].max() > 180.0 else -180.0
+    inside = _clip(u, edge, keep_below=edge > 0)
+    outside = _clip(u, edge, keep_below=edge < 0)
+    outside[:, 0] -= 2.0 * edge
+    parts = [_closed(p) for p in (inside, outside) if len(p) >= 3]
+    return {"type": "MultiPolygon", "coordinates": [[p] for p in parts]}
+
+
+def _closed(ring: np.ndarray) -> list:
     ring = np.vstack([ring, ring[:1]])
-    return {"type": "Polygon", "coordinates": [[[round(float(c), 10) for c in p] for p in ring]]}
+    return [[round(float(c), 10) for c in p] for p in ring]
+
+
+def _clip(ring: np.ndarray, x0: float, *, keep_below: bool) -> np.ndarray:
+    """Sutherland–Hodgman: the part of a ring with x <= x0 (``keep_below``) or x >= x0, the points
+    on the line interpolated linearly (the other columns too)."""
+    def inside(p):
+        return p[0] <= x0 if keep_below else p[0] >= x0
+
+    out = []
+    for i in range(len(ring)):
+        a, b = ring[i - 1], ring[i]
+        if inside(b):
+            if not inside(a):
+                out.append(a + (b - a) * (x0 - a[0]) / (b[0] - a[0]))
+            out.append(b)
+        elif inside(a):
+            out.append(a + (b - a) * (x0 - a[0]) / (b[0] - a[0]))
+    pts = np.array(out) if out else np.zeros((0, ring.shape[1]))
+    if len(pts):
+        pts[:, 0] = np.where(np.abs(pts[:, 0] - x0) < 1e-12, x0, pts[:, 0])
+    return pts
 
 
 def border_pixels(camera, edge_samples: int) -> np.ndarray:

@@ -65,7 +65,7 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
             if not geom:
                 continue
             kind = geom["type"]
-            if kind not in ("Point", "LineString", "Polygon"):
+            if kind not in ("Point", "LineString", "Polygon", "MultiPolygon"):
                 raise ValueError(f"write_kml: {kind} geometries are not supported (layer {layer!r}, feature {k})")
             props = feat.get("properties") or {}
             mark = sub(folder, "Placemark")
@@ -82,7 +82,7 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
                 line = sub(style, "LineStyle")
                 sub(line, "color", colour)
                 sub(line, "width", str(width))
-                if kind == "Polygon":
+                if kind in ("Polygon", "MultiPolygon"):
                     sub(sub(style, "PolyStyle"), "color", "40" + colour[2:])
             data = [(key, val) for key, val in props.items() if val is not None and not isinstance(val, (list, dict))]
             if data:
@@ -91,6 +91,14 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
                     item = sub(extended, "Data")
                     item.set("name", xml_text(key))
                     sub(item, "value", val)
+            if kind == "MultiPolygon":  # (a footprint cut at the antimeridian)
+                multi = sub(mark, "MultiGeometry")
+                for part in geom["coordinates"]:
+                    poly = sub(multi, "Polygon")
+                    sub(poly, "altitudeMode", "absolute")
+                    ring = sub(sub(poly, "outerBoundaryIs"), "LinearRing")
+                    sub(ring, "coordinates", _coordinates(_msl(part[0], geoid)))
+                continue
             shape = sub(mark, kind)
             sub(shape, "altitudeMode", "absolute")
             if kind == "Point":

@@ -158,11 +158,13 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
             g = group(name)
             for f in layer:
                 geom = f.get("geometry")
-                if geom and geom["type"] == "Polygon":
+                if geom and geom["type"] in ("Polygon", "MultiPolygon"):
                     props = f.get("properties") or {}
-                    folium.Polygon(_latlon(geom["coordinates"][0]), color=_COLOURS[name], weight=1, fill=True,
-                                   fill_opacity=0.08, class_name=cls,
-                                   tooltip=tip(f"{name}: frame {props.get('frame', '')}")).add_to(g)
+                    rings = [geom["coordinates"][0]] if geom["type"] == "Polygon" else [p[0] for p in
+                                                                                       geom["coordinates"]]
+                    for ring in rings:  # a footprint cut at the antimeridian: each part
+                        folium.Polygon(_latlon(ring), color=_COLOURS[name], weight=1, fill=True, fill_opacity=0.08,
+                                       class_name=cls, tooltip=tip(f"{name}: frame {props.get('frame', '')}")).add_to(g)
     if tracks:
         g = group("tracks")
         for f in tracks:
@@ -205,6 +207,8 @@ def _coords(geom: dict):
         return c
     if t == "Polygon":
         return c[0]
+    if t == "MultiPolygon":
+        return [p for part in c for p in part[0]]
     return []
 
 

@@ -152,7 +152,10 @@ class PlayerData:
         og = offline_grid(sensor, pose, ground, grid_step_px(sensor.camera.width, sensor.camera.height), hidden_px)
         geom = footprint.get("geometry")
         p = footprint["properties"]
-        entry = {"footprint": [[c[1], c[0]] for c in geom["coordinates"][0]] if geom else None,
+        rings = ([geom["coordinates"][0]] if geom["type"] == "Polygon" else [q[0] for q in geom["coordinates"]]) \
+            if geom else []
+        latlon = [[[c[1], c[0]] for c in r] for r in rings]  # a MultiPolygon (cut at ±180°): Leaflet's nested form
+        entry = {"footprint": (latlon[0] if len(latlon) == 1 else latlon) if geom else None,
                  "centre": [p["centre_lat_deg"], p["centre_lon_deg"], p["centre_h_m"]]
                  if p.get("centre_lat_deg") is not None else None,
                  "grid": f"player/grid/{index:06d}.js", "drape": f"player/drape/{index:06d}.webp"}

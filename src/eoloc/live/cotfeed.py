@@ -118,7 +118,8 @@ class CotFeed:
                                  lon=lon, hae=h, detail=element_xml("contact", callsign=f"{name} SPI") + link
                                  + element_xml("remarks", f"eoloc frame centre of {name} at {when}")))
         if u.footprint is not None and not u.late and self._due(base + "-footprint", now_s):
-            ring = u.footprint["coordinates"][0]
+            fp = u.footprint  # cut at the antimeridian: CoT has one shape, so the larger part
+            ring = fp["coordinates"][0] if fp["type"] == "Polygon" else max((q[0] for q in fp["coordinates"]), key=len)
             lon, lat, h = (sum(c) / (len(ring) - 1) for c in zip(*ring[:-1], strict=True))  # the centroid
             detail = "".join(element_xml("link", point=f"{p[1]:.8f},{p[0]:.8f},{p[2]:.2f}") for p in ring)
             detail += (element_xml("strokeColor", value="-256") + element_xml("strokeWeight", value="2.0")

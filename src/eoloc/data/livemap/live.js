@@ -75,12 +75,13 @@
                tip(p.name || key, `h ${num(p.h_m, 0)} m, heading ${num(p.heading_deg, 1)}°`, p.time_utc || ""));
         trail(groups.aircraft, drawn.trail, key, ll, {color: COLOURS.aircraft, className: "eoloc-aircraft-trail"});
         bounds.push(ll);
-      } else if (p.what === "footprint" && g.type === "Polygon") {
-        const ring = g.coordinates[0].map((c) => [c[1], c[0]]);
+      } else if (p.what === "footprint" && (g.type === "Polygon" || g.type === "MultiPolygon")) {
+        const flip = (r) => r.map((c) => [c[1], c[0]]);  // a MultiPolygon: cut at the antimeridian
+        const ring = g.type === "Polygon" ? flip(g.coordinates[0]) : g.coordinates.map((part) => flip(part[0]));
         if (drawn.footprint[key]) { drawn.footprint[key].setLatLngs(ring); }
         else { drawn.footprint[key] = L.polygon(ring, {color: COLOURS.footprint, weight: 1, fillOpacity: 0.08,
                                                        className: "eoloc-footprint"}).addTo(groups.footprints); }
-        ring.forEach((ll) => bounds.push(ll));
+        (g.type === "Polygon" ? ring : ring.flat()).forEach((ll) => bounds.push(ll));
       } else if (p.what === "frame centre") {
         const ll = [g.coordinates[1], g.coordinates[0]];
         S.centres[key] = ll;
