@@ -28,10 +28,12 @@ def xmp_packet(tags: dict, ns: tuple[str, str] = ("drone-dji", "http://www.dji.c
     return xml.encode("utf-8")
 
 
-def write_photo(path: Path, width: int, height: int, tags: dict | None, *, make: str = "DJI", model: str = "FC330",
-                focal_mm: float | None = None, f35_mm: float | None = None) -> Path:
-    """A grey JPEG of width x height with EXIF (make, model, focal length) and, unless ``tags`` is
-    None, the drone-dji XMP ``tags``."""
+def _jpeg(width: int, height: int, *, make: str, model: str, focal_mm: float | None, f35_mm: float | None,
+          gps: tuple[float, float, float] | None = None) -> bytes:
+    """A grey JPEG with EXIF Make/Model, the focal lengths and (``gps``) latitude, longitude and
+    altitude to 1e-6 arc-second and 1 mm."""
+    from PIL.TiffImagePlugin import IFDRational
+
     im = Image.new("RGB", (width, height), (90, 90, 90))
     exif = Image.Exif()
     exif[271], exif[272] = make, model
@@ -40,14 +42,29 @@ def write_photo(path: Path, width: int, height: int, tags: dict | None, *, make:
         sub[37386] = focal_mm
     if f35_mm is not None:
         sub[41989] = int(f35_mm)
+    if gps is not None:
+        lat, lon, alt = gps
+        g = exif.get_ifd(0x8825)
+        g[1], g[2] = ("N" if lat >= 0 else "S"), _dms(lat)
+        g[3], g[4] = ("E" if lon >= 0 else "W"), _dms(lon)
+        g[5], g[6] = (1 if alt < 0 else 0), IFDRational(round(abs(alt) * 1000), 1000)
     buf = io.BytesIO()
     im.save(buf, "JPEG", exif=exif, quality=70)
-    data = buf.getvalue()
-    if tags is not None:  # the XMP segment right after SOI, where drones put theirs
-        body = XMP_HEADER + xmp_packet(tags)
-        seg = b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body
-        data = data[:2] + seg + data[2:]
-    path.write_bytes(data)
+    return buf.getvalue()
+
+
+def _with_xmp(data: bytes, xmp: bytes) -> bytes:
+    """The JPEG with an XMP segment right after SOI, where drones put theirs."""
+    body = XMP_HEADER + xmp
+    return data[:2] + b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body + data[2:]
+
+
+def write_photo(path: Path, width: int, height: int, tags: dict | None, *, make: str = "DJI", model: str = "FC330",
+                focal_mm: float | None = None, f35_mm: float | None = None) -> Path:
+    """A grey JPEG of width x height with EXIF (make, model, focal length) and, unless ``tags`` is
+    None, the drone-dji XMP ``tags``."""
+    data = _jpeg(width, height, make=make, model=model, focal_mm=focal_mm, f35_mm=f35_mm)
+    path.write_bytes(data if tags is None else _with_xmp(data, xmp_packet(tags)))
     return path
 
 
@@ -99,28 +116,8 @@ def write_vendor_photo(path: Path, width: int, height: int, vendor: str, tags: d
                        f35_mm: float | None = None, struct_as_description: bool = False) -> Path:
     """A grey JPEG with EXIF Make/Model (+ GPS latitude, longitude, altitude to 1e-6 arc-second and
     1 mm when ``gps`` is given) and the vendor's XMP ``tags``."""
-    from PIL.TiffImagePlugin import IFDRational
-
-    im = Image.new("RGB", (width, height), (90, 90, 90))
-    exif = Image.Exif()
-    exif[271], exif[272] = make, model
-    sub = exif.get_ifd(0x8769)
-    if focal_mm is not None:
-        sub[37386] = focal_mm
-    if f35_mm is not None:
-        sub[41989] = int(f35_mm)
-    if gps is not None:
-        lat, lon, alt = gps
-        g = exif.get_ifd(0x8825)
-        g[1], g[2] = ("N" if lat >= 0 else "S"), _dms(lat)
-        g[3], g[4] = ("E" if lon >= 0 else "W"), _dms(lon)
-        g[5], g[6] = (1 if alt < 0 else 0), IFDRational(round(abs(alt) * 1000), 1000)
-    buf = io.BytesIO()
-    im.save(buf, "JPEG", exif=exif, quality=70)
-    data = buf.getvalue()
-    body = XMP_HEADER + xmp_document(vendor, tags, struct_as_description=struct_as_description)
-    seg = b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body
-    path.write_bytes(data[:2] + seg + data[2:])
+    data = _jpeg(width, height, make=make, model=model, focal_mm=focal_mm, f35_mm=f35_mm, gps=gps)
+    path.write_bytes(_with_xmp(data, xmp_document(vendor, tags, struct_as_description=struct_as_description)))
     return path
 
 
