@@ -195,6 +195,14 @@ def _vendor_case(vendor: str, rng, *, w=1280, h=960, resized=1, ir=False):
     f35 = 24.0
     cam = O.Camera(w, h, f35 / 36.0 * w, f35 / 36.0 * w, (w - 1) / 2, (h - 1) / 2)  # EXIF 35 mm: OpenAthena's rule
     kw: dict = {"f35_mm": f35}
+    if vendor in ("dji", "dji-old"):  # Version 7.0: ellipsoidal; Version 1.4 without RTK: above EGM96
+        old = vendor == "dji-old"
+        alt = round(h_cam - n if old else h_cam, 3)
+        tags = {"Version": "1.4" if old else "7.0", "GpsStatus": "Normal", "GpsLatitude": f"{lat:.9f}",
+                "GpsLongitude": f"{lon:.9f}", "AbsoluteAltitude": f"{alt:.3f}", "GimbalYawDegree": yaw,
+                "GimbalPitchDegree": pitch, "GimbalRollDegree": roll}
+        return tags, None, "DJI", "FC-TEST", kw, cam, (round(lat, 9), round(lon, 9), alt + (n if old else 0.0), yaw,
+                                                       pitch, roll)
     if vendor == "skydio":
         full_w, full_h = w * resized, h * resized
         fx, cx, cy = 1100.0 * resized, full_w / 2 - 0.5 + 3.0 * resized, full_h / 2 - 0.5 - 2.0 * resized
@@ -233,13 +241,15 @@ def _vendor_case(vendor: str, rng, *, w=1280, h=960, resized=1, ir=False):
     raise AssertionError(vendor)
 
 
-VENDORS = ["skydio", "skydio-resized", "skydio-struct", "skydio-ir", "parrot", "parrot-ai", "autel-old", "teal"]
+VENDORS = ["dji", "dji-old", "skydio", "skydio-resized", "skydio-struct", "skydio-ir", "parrot", "parrot-ai",
+           "autel-old", "teal"]
 
 
 @pytest.mark.parametrize("case", VENDORS)
 def test_48_synthetic_vendor_photos_on_a_real_dem_within_1cm(tmp_path, case):
-    """A photo per vendor written by the test with that vendor's own tags (Skydio drone-skydio with
-    its calibration, a quarter-size copy, a struct written as a nested Description, an IR frame
+    """A photo per vendor written by the test with that vendor's own tags (DJI drone-dji, its
+    AbsoluteAltitude ellipsoidal (Version 7.0) or above EGM96 (Version 1.4, no RTK); Skydio
+    drone-skydio with its calibration, a quarter-size copy, a struct written as a nested Description, an IR frame
     carrying the visible camera's calibration; Parrot ANAFI USA (EGM96) and ANAFI Ai (ellipsoidal);
     old Autel Pix4D Camera: tags; Teal platform + camera rationals) over the real Longs Peak tile:
     `eoloc photo --pixel U V --dem TILE` lands within 1 cm of the oracle's first DEM crossing."""
@@ -251,7 +261,8 @@ def test_48_synthetic_vendor_photos_on_a_real_dem_within_1cm(tmp_path, case):
     w, h = (640, 512) if case == "skydio-ir" else (1280, 960)
     tags, gps, make, model, kw, cam, pose = _vendor_case(vendor, rng, w=w, h=h, resized=resized,
                                                          ir=case == "skydio-ir")
-    ns = {"skydio": "skydio", "parrot": "parrot", "parrot-ai": "parrot", "autel-old": "pix4d", "teal": "exif"}[vendor]
+    ns = {"dji": "dji", "dji-old": "dji", "skydio": "skydio", "parrot": "parrot", "parrot-ai": "parrot",
+          "autel-old": "pix4d", "teal": "exif"}[vendor]
     path = write_vendor_photo(tmp_path / f"{case}.jpg", w, h, ns, tags, make=make, model=model, gps=gps,
                               struct_as_description=case == "skydio-struct", **kw)
     grid = tile_grid()
