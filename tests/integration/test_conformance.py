@@ -248,3 +248,19 @@ def test_49_6_a_footprint_across_the_antimeridian_is_cut(tmp_path):
     root = ET.parse(out / "footprints.kml").getroot()
     multis = root.findall(".//k:MultiGeometry", ns)
     assert len(multis) == len(feats) and all(len(m.findall("k:Polygon", ns)) == 2 for m in multis)
+
+
+def test_49_9_two_st0601_leniencies_are_decided_and_said():
+    """Where jMISB refuses and eoloc reads, as decided (README "Conformance"): tag 47 with a zero
+    length is ST 0601 §6.2's "no longer known" (read as such, no note: the standard allows it);
+    tag 65 sent as two bytes 00 00 is read as version 0, with a note naming the length."""
+    from eoloc.io.klv.encode import build_uas_packet
+    from eoloc.io.klv.reader import decode_klv_bytes
+    from eoloc.io.klv.st0601 import Special
+
+    items = [(2, (1_700_000_000 * 10**6).to_bytes(8, "big")), (13, b"\x20\x00\x00\x00"), (47, b""), (65, b"\x00\x00")]
+    stream = decode_klv_bytes(build_uas_packet(items))
+    (p,) = stream.packets
+    assert p.fields[47] is Special.UNKNOWN and p.fields[65] == 0
+    notes = [str(n) for n in stream.notes]
+    assert any("tag 65" in n and "2 bytes" in n for n in notes) and not any("tag 47" in n for n in notes)

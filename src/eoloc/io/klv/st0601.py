@@ -153,6 +153,10 @@ def decode_values(items: list[tuple[int, bytes]], prefix: str = "", *, depth: in
                   ) -> tuple[dict[int, Any], list[Note]]:
     """tag -> value for the items of one ST 0601 set (the last of a repeated tag), and notes."""
     values, notes = decode_table([(t, v) for t, v in items if t not in MULTIPLE], TABLE, prefix)
+    version = [v for t, v in items if t == 65]
+    if version and len(version[-1]) > 1 and 65 in values:  # jMISB refuses it; the value is plain, so it is kept
+        notes.append(Note("field", f"{prefix}65", f"UAS Datalink LS Version Number sent in {len(version[-1])} bytes "
+                                                  f"(ST 0601: 1); read as {values[65]}"))
     if 74 in values:  # kept raw by the table: the VMTI set is read item by item too
         values[74], more = decode_vmti(values[74], prefix=f"{prefix}74.")
         notes += more
