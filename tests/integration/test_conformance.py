@@ -264,3 +264,42 @@ def test_49_9_two_st0601_leniencies_are_decided_and_said():
     assert p.fields[47] is Special.UNKNOWN and p.fields[65] == 0
     notes = [str(n) for n in stream.notes]
     assert any("tag 65" in n and "2 bytes" in n for n in notes) and not any("tag 47" in n for n in notes)
+
+
+def test_49_7_every_kml_eoloc_writes_is_valid_ogc_kml_2_2(tmp_path):
+    """The KML of a KLV flight (points, footprints, the aircraft's track), of footprints cut at the
+    antimeridian (MultiGeometry) and of moving-target tracks: each valid against the OGC KML 2.2
+    schema (ogckml22.xsd with its Atom and xAL imports, as pykml ships them), checked by xmlschema."""
+    from importlib.resources import files
+
+    import xmlschema
+    from click.testing import CliRunner
+
+    import eoloc
+    from eoloc.cli.main import main
+
+    schema = xmlschema.XMLSchema(str(files("pykml") / "schemas" / "ogckml22.xsd"))
+    demo = Path(eoloc.__file__).parent / "data" / "demo"
+    runner = CliRunner()
+    outs = []
+    r = runner.invoke(main, ["klv", str(demo / "mountain" / "flight.klv"), "--out", str(tmp_path / "klv")])
+    assert r.exit_code == 0, r.output
+    outs += sorted((tmp_path / "klv").glob("*.kml"))
+    tel = tmp_path / "telemetry.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                   "0,10.0,179.999,3000,0,0,0,0,-90\n", encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text("[camera]\nwidth = 1280\nheight = 960\nfx = 1000.0\n", encoding="utf-8")
+    r = runner.invoke(main, ["footprint", str(tel), "--config", str(cfg), "--target-height", "0",
+                             "--out", str(tmp_path / "fp"), "--format", "kml"])
+    assert r.exit_code == 0, r.output
+    outs += sorted((tmp_path / "fp").glob("*.kml"))
+    r = runner.invoke(main, ["track", str(demo / "telemetry.csv"), str(demo / "detections.csv"), "--config",
+                             str(demo / "camera.toml"), "--target-height", "600", "--out", str(tmp_path / "tr"),
+                             "--format", "kml"])
+    assert r.exit_code == 0, r.output
+    outs += sorted((tmp_path / "tr").glob("*.kml"))
+    assert len(outs) >= 3
+    for path in outs:
+        errors = [str(e)[:300] for e in schema.iter_errors(str(path))]
+        assert not errors, (path.name, errors[:3])
