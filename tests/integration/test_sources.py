@@ -323,6 +323,8 @@ def test_48_real_srt_synced_with_its_flight_log():
     c = inputs.telemetry.columns
     np.testing.assert_allclose(c["pitch_deg"], np.interp(t, t_log, log["gimbal_pitch(degrees)"]), atol=0.05)
     assert np.isfinite(c["yaw_deg"]).all() and np.isfinite(c["h_m"]).all()
+    # what the SRT alone lacked (attitude, a placeable height) the log answered: no longer reported
+    assert not [i for i in inputs.issues if "no camera attitude" in i.message or "placed in height" in i.message]
 
 
 def test_48_a_log_of_another_flight_is_refused(tmp_path):
@@ -497,3 +499,33 @@ def test_48_a_new_source_is_one_class_and_one_registry_line(tmp_path, monkeypatc
     np.testing.assert_array_equal(outs[0][["lat_deg", "lon_deg", "h_m"]].to_numpy(),
                                   outs[1][["lat_deg", "lon_deg", "h_m"]].to_numpy())
     assert (outs[0]["status"] == "OK").all()
+
+
+def test_48_mux_writes_an_aircraft_turret_as_it_is(tmp_path):
+    """Telemetry of an aircraft with an az-el turret (an eoloc CSV, not a drone's camera attitude):
+    each packet carries the platform's heading/pitch/roll and the turret's azimuth/elevation as the
+    CSV gives them, linearly interpolated at the frame's time (klvdata decodes them), not the
+    camera-attitude mapping drones get."""
+    import klvdata
+
+    from eoloc.io.klv import read_klv
+    from eoloc.io.videofile import frame_times
+
+    video = _drone_mp4(tmp_path / "clip.mp4", seconds=2.0)
+    tel = tmp_path / "telemetry.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,azimuth_deg,elevation_deg\n"
+                   "0,40.0,-105.0,3000,10,2,-5,30,-40\n2,40.001,-105.0,3000,14,3,-3,34,-44\n", encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text("[camera]\nwidth = 160\nheight = 96\nfx = 140.0\n", encoding="utf-8")
+    out = tmp_path / "out.ts"
+    r = subprocess.run([EOLOC, "mux", str(video), "--telemetry", str(tel), "--config", str(cfg), "-o", str(out),
+                        "--start-utc", "2024-01-04T22:23:10Z"], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    t = frame_times(out)
+    t = t - t[0]
+    for i, p in enumerate(sorted(read_klv(out).packets, key=lambda p: p.pts_s)):
+        (ref,) = list(klvdata.StreamParser(p.raw))
+        v = {k: float(val[3]) for k, val in ref.MetadataList().items() if k in (5, 6, 7, 18, 19)}
+        want = {5: 10 + 2 * t[i], 6: 2 + 0.5 * t[i], 7: -5 + t[i], 18: 30 + 2 * t[i], 19: -40 - 2 * t[i]}
+        for tag, w in want.items():
+            assert v[tag] == pytest.approx(w, abs=0.01), (i, tag)

@@ -41,7 +41,7 @@ def calibrate_job(cfg, telemetry, gcps, *, groups: tuple[str, ...], pixel_sigma_
         raise InputError(f"--estimate: unknown {bad or list(groups)}; choose from {', '.join(GROUPS)}")
     # the raw telemetry: the config's heading bias is the starting value, not a correction here
     inputs = job_inputs(cfg, telemetry, gcps, reader=read_gcps, heading_bias=False)
-    sensor = inputs.sensor(cfg.sensor())
+    sensor = inputs.sensor(cfg)
     tel, obs, issues = inputs.telemetry, inputs.other, list(inputs.issues)
     hb0, dt0 = cfg.telemetry.heading_bias_deg, cfg.telemetry.time_offset_s
     keep = np.ones(len(obs), dtype=bool)

@@ -106,7 +106,7 @@ def find_log_offset(video: Table, log: Table) -> LogSync:
     best: list[tuple[float, float, float, float]] = []  # (cost, offset, rms_h, rms_v) per candidate
     for c in candidates:
         trials = c + np.arange(-REFINE_S, REFINE_S + STEP_S / 2, STEP_S)
-        fits = [(*_misfit(video, log, o)[:1], o, *_misfit(video, log, o)[1:]) for o in trials]
+        fits = [(m[0], o, m[1], m[2]) for o in trials for m in [_misfit(video, log, o)]]
         best.append(min(fits, key=lambda f: f[0]))
     best.sort(key=lambda f: f[0])
     cost, offset, rms_h, rms_v = best[0]

@@ -41,7 +41,7 @@ def footprint_job(cfg, telemetry, surface, *, edge_samples: int = 16, chunk: int
     in chunks of ``chunk`` frames (``progress(k)`` after each)."""
     inputs = job_inputs(cfg, telemetry, dem=surface)
     tel = inputs.telemetry
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     prints: list[Footprint] = []
     for start in range(0, len(tel), chunk):
         idx = np.arange(start, min(start + chunk, len(tel)))

@@ -21,23 +21,24 @@ class Inputs:
     issues: list[Issue] = field(default_factory=list)
     source: Any = None  # SourceData
 
-    def sensor(self, configured=None):
-        """The sensor to locate with: the config's (``configured``), with the camera the telemetry
-        carries when there is no config, and an az-el gimbal at zero when the telemetry gives the
-        camera's own attitude (drones) rather than the aircraft's and the gimbal's."""
+    def sensor(self, cfg=None):
+        """The sensor to locate with: the config's (``cfg``; None: the camera the telemetry
+        carries), with an az-el gimbal at zero when the telemetry gives the camera's own attitude
+        (drones) rather than the aircraft's and the gimbal's."""
         from dataclasses import replace
 
         from ..sensor import AzElGimbal, SensorModel
 
         src = self.source
-        if configured is None:
-            if src is None or src.camera is None:
-                raise InputError(f"{self.telemetry.path} does not say which camera took it: give --config "
-                                 "CAMERA.toml")
-            configured = SensorModel(src.camera)
-        if src is not None and src.camera_attitude and not isinstance(configured.gimbal, AzElGimbal):
-            configured = replace(configured, gimbal=AzElGimbal())
-        return configured
+        if cfg is not None:
+            sensor = cfg.sensor()
+        elif src is not None and src.camera is not None:
+            sensor = SensorModel(src.camera)
+        else:
+            raise InputError(f"{self.telemetry.path} does not say which camera took it: give --config CAMERA.toml")
+        if src is not None and src.camera_attitude and not isinstance(sensor.gimbal, AzElGimbal):
+            sensor = replace(sensor, gimbal=AzElGimbal())
+        return sensor
 
 
 class Prefetch:

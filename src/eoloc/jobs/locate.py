@@ -48,7 +48,7 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
     tel_cfg = cfg.telemetry if cfg is not None else None
     if time_offset_s is None:
         time_offset_s = tel_cfg.time_offset_s if tel_cfg is not None else 0.0
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     located = locate_tables(sensor, inputs.telemetry, inputs.other, rule, time_tolerance_s=time_tolerance_s,
                             budget=budget, compensation=compensation, interpolate=interpolate, max_gap_s=max_gap_s,
                             time_offset_s=time_offset_s)

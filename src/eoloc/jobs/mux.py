@@ -6,8 +6,9 @@ One ST 0601 packet per video frame, carried with the frame's own presentation ti
 asynchronously (stream_type 0x06, 'KLVA', the packet's PTS = the frame's) or synchronously (ST
 1402: stream_type 0x15, one metadata access unit per video access unit). The frame's pose is the
 telemetry interpolated at its time (:func:`eoloc.sequence.interp.interpolate_poses`; the records'
-time_s are the video's clock, a DJI SRT's subtitle times). Drone telemetry gives the camera's own
-attitude, so the packet says so the way ST 0601 can: platform heading = the camera's yaw, platform
+time_s are the video's clock, a DJI SRT's subtitle times). An aircraft's telemetry with an az-el
+turret is written as it is (platform attitude 5-7, turret angles 18-20). Drone telemetry gives the
+camera's own attitude, so the packet says so the way ST 0601 can: platform heading = the camera's yaw, platform
 pitch and roll 0, sensor relative azimuth 0, relative elevation = the camera's pitch, relative roll
 = its roll (the same rotation, Rz(yaw) Ry(pitch) Rx(roll)). Tags: 2 (UNIX time), 5-7, 13, 14, 15
 (MSL, EGM96) and 75 (ellipsoidal), 16/17 (fields of view of the configured camera), 18-20, 65;
@@ -38,6 +39,27 @@ class MuxJob:
     notes: list[str] = field(default_factory=list)
 
 
+def _st0601_attitude(inputs, sensor, p) -> dict[int, np.ndarray]:
+    """ST 0601 attitude tags of the interpolated poses: the camera's own attitude (drones) as
+    platform heading + relative elevation/roll (5, 6, 7 = yaw, 0, 0; 18, 19, 20 = 0, pitch, roll), an
+    aircraft with an az-el turret as it is (5-7 the platform, 18-20 the turret); pitch and roll past
+    ST 0601's short ranges (+-20, +-50 deg) in the full-range tags 90 and 91."""
+    from ..sensor import AzElGimbal
+
+    zero = np.zeros_like(p.yaw_deg)
+    if inputs.source is not None and inputs.source.camera_attitude:
+        return {5: p.yaw_deg % 360.0, 6: zero, 7: zero, 18: zero, 19: p.pitch_deg, 20: p.roll_deg % 360.0}
+    if not isinstance(sensor.gimbal, AzElGimbal):
+        raise InputError(f"{inputs.telemetry.path}: ST 0601 describes an az-el turret; telemetry for a "
+                         f"{sensor.gimbal.name} gimbal cannot be written as its relative angles")
+    az, el, *rest = (np.broadcast_to(np.asarray(g, dtype=np.float64), p.yaw_deg.shape) for g in p.gimbal_deg)
+    roll_s = rest[0] if rest else zero
+    pitch_tag = 6 if np.nanmax(np.abs(p.pitch_deg), initial=0.0) <= 20.0 else 90
+    roll_tag = 7 if np.nanmax(np.abs(p.roll_deg), initial=0.0) <= 50.0 else 91
+    return {5: p.yaw_deg % 360.0, pitch_tag: p.pitch_deg, roll_tag: p.roll_deg, 18: az % 360.0, 19: el,
+            20: roll_s % 360.0}
+
+
 def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: datetime | None = None,
             surface=None, max_gap_s: float = 1.5) -> MuxJob:
     """Write ``dest`` (see the module)."""
@@ -56,7 +78,7 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
     if times.size == 0:
         raise InputError(f"{video}: the video stream has no frame with a presentation time")
     inputs = job_inputs(cfg, telemetry, dem=surface)
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     tel = inputs.telemetry
     t_rec = tel.columns["time_s"]
     if not np.isfinite(t_rec).any():
@@ -85,25 +107,21 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
     hfov = math.degrees(2 * math.atan(cam.width / 2 / cam.fx))
     vfov = math.degrees(2 * math.atan(cam.height / 2 / cam.fy))
     n_geoid = default_geoid().undulation(p.lat_deg, p.lon_deg)
-    centre = None
+    attitude = _st0601_attitude(inputs, sensor, p)
+    centre = n_centre = None
     if surface is not None:
-        from ..sensor import AzElGimbal, Pose, SensorModel
-
         rule = OnDEM(surface) if hasattr(surface, "height") else AtHeight(float(surface))
-        flat = SensorModel(cam, AzElGimbal())
-        pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, (0.0, 0.0))
-        centre = rule.locate(flat, pose, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
+        centre = rule.locate(sensor, p, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
+        n_centre = default_geoid().undulation(centre.lat_deg, centre.lon_deg)
     packets: list[tuple[bytes, float]] = []
     by_frame: dict[int, bytes] = {}
     for i in np.flatnonzero(got.ok):
-        values = {2: datetime.fromtimestamp(unix0 + float(times[i] - times[0]), UTC), 5: float(p.yaw_deg[i] % 360.0),
-                  6: 0.0, 7: 0.0, 13: float(p.lat_deg[i]), 14: float(p.lon_deg[i]),
-                  15: float(p.h_m[i] - n_geoid[i]), 75: float(p.h_m[i]), 16: hfov, 17: vfov, 18: 0.0,
-                  19: float(p.pitch_deg[i]), 20: float(p.roll_deg[i] % 360.0)}
+        values = {2: datetime.fromtimestamp(unix0 + float(times[i] - times[0]), UTC), 13: float(p.lat_deg[i]),
+                  14: float(p.lon_deg[i]), 15: float(p.h_m[i] - n_geoid[i]), 75: float(p.h_m[i]), 16: hfov,
+                  17: vfov, **{tag: float(v[i]) for tag, v in attitude.items()}}
         if centre is not None and centre.ok[i]:
-            n_c = float(default_geoid().undulation(centre.lat_deg[i], centre.lon_deg[i]))
             values.update({21: float(centre.range_m[i]), 23: float(centre.lat_deg[i]), 24: float(centre.lon_deg[i]),
-                           25: float(centre.h_m[i] - n_c)})
+                           25: float(centre.h_m[i] - n_centre[i])})
         raw = encode_uas_packet(values)
         packets.append((raw, float(times[i])))
         by_frame[int(i)] = raw
@@ -121,8 +139,9 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
             plain = remux_with_klv(video, Path(tmp) / "video.ts", [])
 
             def packet_for(n: int, pts_s: float) -> bytes | None:
-                """The packet of the frame shown at pts_s (frame_times are in presentation order)."""
-                j = int(np.argmin(np.abs(times - pts_s)))
+                """The packet of the frame shown at pts_s (frame_times are sorted)."""
+                j = int(np.clip(np.searchsorted(times, pts_s), 1, max(times.size - 1, 1)))
+                j = j - 1 if j > 0 and abs(times[j - 1] - pts_s) <= abs(times[j] - pts_s) else j
                 return by_frame.get(j) if abs(times[j] - pts_s) < 1e-3 else None
 
             add_sync_klv(plain, dest, packet_for)

@@ -70,7 +70,7 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     inputs = job_inputs(cfg, telemetry, dem=surface)
     tel = inputs.telemetry
     k = record_of(tel, telemetry, frame, time_s)
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     pose = telemetry_pose(tel, k, sensor.camera)
     img = read_image(image)
     try:

@@ -156,7 +156,7 @@ def triangulate_job(cfg, telemetry, detections, *, ray_sigma_deg: float, min_ang
     tel, det = inputs.telemetry, inputs.other
     matched = match_detections(tel, det, time_tolerance_s=time_tolerance_s)
     has = matched.record >= 0
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     pose = telemetry_pose(tel, np.where(has, matched.record, 0), sensor.camera)
     rays = sensor.rays(pose, (det.columns["u_px"], det.columns["v_px"]))
     ids = np.asarray(det.columns["target_id"]).astype(str)

@@ -178,7 +178,7 @@ def csv_metadata(telemetry, cfg, first_pts_s: float, *, time_offset_s: float | N
         raise InputError(f"{telemetry}: no time_s column: a video's frames are paired with telemetry by time")
     offset = float((cfg.telemetry.time_offset_s if cfg is not None else 0.0) if time_offset_s is None
                    else time_offset_s)
-    sensor = inputs.sensor(cfg.sensor() if cfg is not None else None)
+    sensor = inputs.sensor(cfg)
     pose = telemetry_pose(tel, slice(None), sensor.camera)
     how = f"telemetry {Path(telemetry).name} by time_s" + (f", offset {offset:+.3f} s" if offset else "")
     return (Metadata(t - offset + first_pts_s, pose, {"unix_s": np.full(t.shape, np.nan)}, how), inputs.issues,

@@ -34,6 +34,7 @@ import numpy as np
 from ...errors import TableError
 from ..table import Issue, Table
 from .base import SourceData, is_text
+from .heights import resolve_heights
 
 _TIMECODE = re.compile(r"(\d+):(\d{2}):(\d{2})[,.](\d{1,3})\s*-->")
 _COUNTER = re.compile(r"\b(?:FrameCnt|SrtCnt)\s*:\s*(\d+)")
@@ -212,8 +213,9 @@ def read_srt(path: str | Path, *, geoid=None, dem=None) -> SourceData:
         k = int(np.flatnonzero(np.isfinite(h_rel) & ~missing)[0]) if (np.isfinite(h_rel) & ~missing).any() else -1
         if k >= 0 and abs(h_rel[k]) < 2.0:
             takeoff, how = (float(lat[k]), float(lon[k])), f"the first record, {rel_tag} {h_rel[k]:g} m"
-    h, found, how_h = _heights(src, line, lat, lon, h_msl if np.isfinite(h_msl).any() else None,
-                               h_rel if np.isfinite(h_rel).any() else None, takeoff, msl_tag, rel_tag, how, geoid, dem)
+    h, found, how_h = resolve_heights(src, line, lat, lon, h_msl=h_msl if np.isfinite(h_msl).any() else None,
+                                      h_rel=h_rel if np.isfinite(h_rel).any() else None, takeoff=takeoff,
+                                      msl_tag=msl_tag, rel_tag=rel_tag, takeoff_how=how, geoid=geoid, dem=dem)
     issues += found
     notes.append(f"heights: {how_h}")
 
@@ -257,13 +259,6 @@ def read_srt(path: str | Path, *, geoid=None, dem=None) -> SourceData:
         cols["aircraft_pitch_deg"], cols["aircraft_roll_deg"], cols["aircraft_yaw_deg"] = fp.T
     table = Table(src, cols, line, sorted(issues, key=lambda i: i.line))
     return SourceData(table, DjiSrt.name, camera_attitude=True, notes=notes)
-
-
-def _heights(src, line, lat, lon, h_msl, h_rel, takeoff, msl_tag, rel_tag, how, geoid, dem):
-    from .heights import resolve_heights
-
-    return resolve_heights(src, line, lat, lon, h_msl=h_msl, h_rel=h_rel, takeoff=takeoff, msl_tag=msl_tag,
-                           rel_tag=rel_tag, takeoff_how=how, geoid=geoid, dem=dem)
 
 
 def _tuple(s: str | None) -> list[float]:
