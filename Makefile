@@ -52,9 +52,12 @@ streams:
 	  { apt-get update -q >/dev/null && apt-get install -y -q --no-install-recommends $(STREAM_DEBS) >/dev/null; }; } || \
 	  { echo "install Debian's $(STREAM_DEBS) (as root) for the live-source test"; exit 1; }
 
-# A real TAK server for the CoT test: FreeTAKServer from PyPI in a venv of its own (its pins clash
-# with ours); opentelemetry is held at the release it was built against (1.23 broke its tracer).
+# Real TAK servers for the CoT tests, each in a venv of its own (their pins clash with ours):
+# FreeTAKServer (plain TCP; opentelemetry held at the release it was built against, 1.23 broke its
+# tracer) and taky (TLS with client certificates: FreeTAKServer 2.2's TLS port reads and writes each
+# client's TLS socket from different threads and stops reading a client that streams).
 TAK_VENV  := .venv-tak
+TAKY_VENV := .venv-taky
 TAK_STAMP := $(TAK_VENV)/.installed
 
 $(TAK_STAMP):
@@ -62,6 +65,9 @@ $(TAK_STAMP):
 	$(TAK_VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(TAK_VENV)/bin/python -m pip install --quiet "FreeTAKServer==2.2.1" "opentelemetry-sdk==1.22.0" \
 	  "opentelemetry-api==1.22.0"
+	$(PYTHON) -m venv $(TAKY_VENV)
+	$(TAKY_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(TAKY_VENV)/bin/python -m pip install --quiet "taky==0.10"
 	touch $(TAK_STAMP)
 
 tak: $(TAK_STAMP)

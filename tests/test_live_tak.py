@@ -5,6 +5,7 @@ mid-stream, a full queue — on a plain TCP server."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import socket
 import subprocess
@@ -145,7 +146,7 @@ class TcpSink:
     def events(self, k: int) -> list[bytes]:
         with self.lock:
             data = self.received[k] if k < len(self.received) else b""
-        return [e for e in data.split(b"<?xml") if e]
+        return [e for e in re.split(rb"(?=<event[ >/])", data) if e.strip()]
 
 
 def _wait(cond, timeout_s: float = 20.0) -> None:

@@ -12,7 +12,7 @@ import click
 
 from .common import open_dem
 from .main import err_console, fail, warn
-from .options import allow_host_option, config_option, dem_options
+from .options import allow_host_option, config_option, dem_options, tak_connection, tak_options
 
 LIVE_HELP = """Locate the VMTI targets of a live MISB ST 0601 stream, packet by packet, as it arrives,
 and send them on as NDJSON and Cursor-on-Target (TAK).
@@ -43,11 +43,14 @@ Outputs (any combination, at least one):
                     status with a null geometry), estimate (the refined target: model,
                     n_fixes, cep50_m, speed_mps); flushed per packet.
   --cot URL         Cursor-on-Target, repeatable: udp://239.2.3.1:6969 (ATAK's SA multicast;
-                    ?ttl=N), udp://HOST:PORT, or tcp://HOST:8087 (a TAK server's CoT port;
-                    reconnects with back-off, never holds up the rest). Per packet: the
-                    aircraft with its sensor's field of view, the frame centre (sensor point of
-                    interest), the footprint as a shape, and each located target with ce/le
-                    (1 sigma) from its covariance; stale after 10 packet intervals.
+                    ?ttl=N), udp://HOST:PORT, tcp://HOST:8087 (a TAK server's CoT port;
+                    reconnects with back-off, never holds up the rest) or tls://HOST:8089
+                    (its TLS port: --tak-cert CLIENT.p12 [--tak-ca CA.pem] or --tak-package
+                    CONNECTION.zip, the data package its admin hands out; a certificate
+                    problem ends the run with one line). --tak-protocol 1: protobuf. Per
+                    packet: the aircraft with its sensor's field of view, the frame centre
+                    (sensor point of interest), the footprint as a shape, and each located
+                    target with ce/le (1 sigma) from its covariance; stale after 10 packet intervals.
                     --cot-targets estimates: each target's refined estimate (--refine)
                     under the same uid instead, ce = its CEP50/1.1774; both: the two.
   --klv-out URL|FILE  the stream re-sent (udp://HOST:PORT, multicast ?ttl=N) or recorded (FILE)
@@ -69,6 +72,8 @@ datagrams, packets, detections, fixes, faults, what each output sent and the lat
 datagram's arrival to its outputs sent.
 """
 
+STREAM_SCHEMES = ("udp", "srt", "rtsp", "rtsps", "rtp", "rtmp", "http", "https")  # a SOURCE a TAK user could open too
+
 
 @click.command(help=LIVE_HELP)
 @click.argument("source")
@@ -77,8 +82,14 @@ datagram's arrival to its outputs sent.
                                          "[accuracy.budget] (uncertainty).")
 @click.option("--ndjson", "ndjson", default=None, metavar="FILE|-",
               help="Write one GeoJSON feature per line ('-': stdout).")
-@click.option("--cot", "cot_urls", multiple=True, metavar="URL",
-              help="Send Cursor-on-Target to udp://HOST:PORT (multicast too) or tcp://HOST:PORT; repeatable.")
+@tak_options
+@click.option("--video-url", "video_url", default=None, metavar="URL",
+              help="The video TAK users open from the aircraft's marker (a <__video> link in its CoT): the stream's "
+                   "URL as they reach it (rtsp://, srt://, udp://...). Default: SOURCE when it is a stream URL.")
+@click.option("--video-package", "video_package", type=click.Path(dir_okay=False), default=None,
+              metavar="FILE.zip",
+              help="Write a TAK data package with the video connection (--video-url) for this mission: imported "
+                   "in ATAK/WinTAK, the stream appears in the video list.")
 @click.option("--klv-out", "klv_out", default=None, metavar="URL|FILE",
               help="Re-send the stream with the target locations in ST 0601 tags 40-42, 45, 46: udp://HOST:PORT or "
                    "a file.")
@@ -103,8 +114,9 @@ datagram's arrival to its outputs sent.
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
 @allow_host_option
-def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, klv_out, map_at, cot_targets,
-         cot_interval, refine, realtime, max_packets, duration, silence, allow_hosts) -> None:
+def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, tak_cert, tak_cert_password,
+         tak_ca, tak_package, tak_protocol, video_url, video_package, klv_out, map_at, cot_targets, cot_interval,
+         refine, realtime, max_packets, duration, silence, allow_hosts) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cotfeed import CotFeed
     from ..live.senders import cot_sender
@@ -112,6 +124,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     from ..live.sources import open_source
     from .common import load_config
 
+    cot_urls, tak_tls = tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package)
     if ndjson is None and not cot_urls and map_at is None and klv_out is None:
         fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
              "--map HOST:PORT")
@@ -132,8 +145,17 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
 
         rewriter = KlvOut(klv_out)
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=rewriter)
-    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets)
-    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence) for url in cot_urls]
+    if video_url is None and source.split("://")[0].lower() in STREAM_SCHEMES:
+        video_url = source
+    if video_package is not None:
+        from ..io.cot import write_video_package
+
+        if video_url is None:
+            fail("--video-package: give the stream's URL (--video-url rtsp://...; SOURCE is not a stream URL)")
+        write_video_package(video_package, video_url, uid="eoloc-video", alias="eoloc video")
+    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets, video_url=video_url)
+    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence, tls=tak_tls,
+                          protocol=tak_protocol, uid=feed_cot.presence_uid()) for url in cot_urls]
     hub = server = None
     if map_at is not None:
         hub, server = start_map(map_host, map_port, session, source, silence, dem, config, allow_hosts)
@@ -145,6 +167,8 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
             stopping["why"] = stopping["why"] or f"--duration {duration:g} s"
         if max_packets is not None and session.counters.packets >= max_packets:
             stopping["why"] = stopping["why"] or f"--packets {max_packets}"
+        if (fatal := next((s.fatal for s in senders if s.fatal), None)) is not None:
+            stopping["why"], stopping["fatal"] = stopping["why"] or "a TAK connection failed", fatal
         return stopping["why"] is not None
 
     def on_signal(signum, _frame) -> None:
@@ -211,6 +235,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
         summary["klv_out"] = rewriter.summary()
     err_console.print(f"eoloc live stopped ({stopping['why'] or 'end of the source'}): "
                       + json.dumps(summary), soft_wrap=True, highlight=False)
+    fatal = stopping.get("fatal") or next((s.fatal for s in senders if s.fatal), None)
+    if fatal:
+        fail(fatal)
 
 
 def parse_host_port(text: str) -> tuple[str, int]:

@@ -257,3 +257,55 @@ def evaluation_options(fn):
         click.option("--cooks-threshold", type=click.FloatRange(0.0, min_open=True), default=None, metavar="D",
                      help="Cook's distance above which a point is left out of the TLE model [default: 4/n]."),
     ])(fn)
+
+
+def tak_options(fn):
+    """How eoloc reaches a TAK server: --cot URL(s), and for TLS the client certificate (or a
+    connection data package), and the TAK protocol version."""
+    return _apply([
+        click.option("--cot", "cot_urls", multiple=True, metavar="URL",
+                     help="Send Cursor-on-Target to udp://HOST:PORT (multicast too, e.g. ATAK's udp://239.2.3.1:6969), "
+                          "tcp://HOST:PORT (a TAK server's plain port, 8087) or tls://HOST:PORT (its TLS port, 8089: "
+                          "needs --tak-cert or --tak-package); repeatable."),
+        click.option("--tak-cert", "tak_cert", type=click.Path(dir_okay=False), default=None, metavar="CLIENT.p12",
+                     help="eoloc's client certificate for tls:// (the .p12 the TAK server's admin made, or a PEM with "
+                          "its key); its CA certificates check the server unless --tak-ca is given."),
+        click.option("--tak-cert-password", "tak_cert_password", default=None, metavar="PASSWORD",
+                     envvar="EOLOC_TAK_CERT_PASSWORD", show_envvar=True,
+                     help="The .p12's password (default: none, then TAK Server's atakatak and FreeTAKServer's "
+                          "supersecret are tried). The environment variable keeps it out of the process list."),
+        click.option("--tak-ca", "tak_ca", type=click.Path(dir_okay=False), default=None, metavar="CA.pem",
+                     help="The TAK server's CA (PEM, DER, or a truststore .p12 opened with --tak-cert-password): "
+                          "the server is trusted when its certificate chains to it, as ATAK does (its host name is "
+                          "not compared unless the URL ends ?check_hostname=1)."),
+        click.option("--tak-package", "tak_package", type=click.Path(dir_okay=False), default=None,
+                     metavar="CONNECTION.zip",
+                     help="A TAK connection data package (the zip with a .pref and the certificates an admin hands "
+                          "out for ATAK): its server is added to --cot, its certificates and passwords used."),
+        click.option("--tak-protocol", "tak_protocol", type=click.Choice(["xml", "1"]), default="xml",
+                     show_default=True,
+                     help="TAK protocol: xml (version 0, what every TAK speaks) or 1 (protobuf: mesh datagrams on "
+                          "udp://; on tcp:// and tls:// when the server offers it, else XML)."),
+    ])(fn)
+
+
+def tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package):
+    """(the --cot URLs, the TLS credentials or None) of the TAK options; the package's server is
+    added to the URLs. Certificate problems raise InputError here, before anything starts."""
+    from ..live.tls import credentials_from_files, read_connection_package
+
+    urls, creds = list(cot_urls), None
+    if tak_package is not None:
+        if tak_cert is not None or tak_ca is not None:
+            raise click.UsageError("--tak-package brings its own certificates: give it without --tak-cert/--tak-ca")
+        package = read_connection_package(tak_package)
+        creds = package.credentials
+        if package.url not in urls:
+            urls.append(package.url)
+    elif tak_cert is not None:
+        if not any(u.startswith("tls://") for u in urls):
+            raise click.UsageError("--tak-cert is for a TLS connection: give --cot tls://HOST:PORT")
+        creds = credentials_from_files(tak_cert, tak_cert_password, tak_ca)
+    elif tak_ca is not None:
+        raise click.UsageError("--tak-ca checks the server for eoloc's client certificate: give --tak-cert too")
+    return urls, creds

@@ -158,3 +158,60 @@ def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", 
         ET.indent(manifest)
         zf.writestr("MANIFEST/manifest.xml", ET.tostring(manifest, encoding="utf-8", xml_declaration=True))
     return path, len(events)
+
+
+def video_link(url: str, uid: str, alias: str) -> dict[str, str]:
+    """ATAK's description of a video stream (its ``ConnectionEntry``): protocol, address, port and
+    path of ``url`` (rtsp://, rtsps://, srt://, udp://, rtmp://, http(s)://), with the uid and the
+    name shown in ATAK's video list."""
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url)
+    default_port = {"rtsp": 554, "rtsps": 322, "rtmp": 1935, "http": 80, "https": 443}.get(u.scheme, -1)
+    try:
+        port = u.port
+    except ValueError:
+        port = None
+    path = u.path + (f"?{u.query}" if u.query else "")
+    return {"protocol": u.scheme, "address": u.hostname or "", "port": str(port or default_port), "path": path,
+            "uid": uid, "alias": alias}
+
+
+def video_detail(url: str, uid: str, alias: str) -> str:
+    """The ``<__video>`` detail of a platform's CoT event: the stream a TAK user opens from its
+    marker (``url``, and ATAK's ``ConnectionEntry`` of it)."""
+    v = video_link(url, uid, alias)
+    entry = element_xml("ConnectionEntry", networkTimeout="12000", uid=v["uid"], path=v["path"],
+                        protocol=v["protocol"], bufferTime="-1", address=v["address"], port=v["port"],
+                        roverPort="-1", rtspReliable="0", ignoreEmbeddedKLV="false", alias=v["alias"])
+    return f"<__video uid={_attr(uid)} url={_attr(url)}>{entry}</__video>"
+
+
+def write_video_package(path: str | Path, url: str, uid: str, alias: str) -> Path:
+    """A TAK data package holding the video connection (ATAK's ``<videoConnections><feed>``, the
+    form TAK servers' video manager serves): imported, the stream appears in ATAK's video list."""
+    import zipfile
+
+    v = video_link(url, uid, alias)
+    feeds = ET.Element("videoConnections")
+    feed = ET.SubElement(feeds, "feed")
+    for key, value in (("protocol", v["protocol"]), ("alias", alias), ("uid", uid), ("address", v["address"]),
+                       ("port", v["port"]), ("roverPort", "-1"), ("ignoreEmbeddedKLV", "false"),
+                       ("preferredMacAddress", ""), ("preferredInterfaceAddress", ""), ("path", v["path"]),
+                       ("buffer", "-1"), ("timeout", "12000"), ("rtspReliable", "0")):
+        ET.SubElement(feed, key).text = xml_text(value)
+    name = _FILE_NAME.sub("_", uid)[:100] or "video"
+    entry = f"{name}/{name}.xml"
+    manifest = ET.Element("MissionPackageManifest", version="2")
+    conf = ET.SubElement(manifest, "Configuration")
+    for key, value in (("uid", f"{uid}-package"), ("name", f"{alias} video"), ("onReceiveImport", "true")):
+        ET.SubElement(conf, "Parameter", name=key, value=value)
+    contents = ET.SubElement(manifest, "Contents")
+    ET.SubElement(contents, "Content", ignore="false", zipEntry=entry)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ET.indent(manifest)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr(entry, ET.tostring(feeds, encoding="utf-8", xml_declaration=True))
+        zf.writestr("MANIFEST/manifest.xml", ET.tostring(manifest, encoding="utf-8", xml_declaration=True))
+    return path

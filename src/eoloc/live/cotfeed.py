@@ -7,7 +7,8 @@ Per packet, each event one standalone XML document:
   designation or the stream) at the sensor's position, with a ``<sensor>`` detail — azimuth
   and elevation of the line of sight, horizontal and vertical field of view, range to the frame
   centre, model — which ATAK and WinTAK draw as the sensor's field-of-view cone, and its heading
-  in ``<track course>``;
+  in ``<track course>``, and with ``video_url`` a ``<__video>`` link to the stream (ATAK opens it
+  from the marker);
 - the **sensor point of interest** (``b-m-p-s-p-i``, uid ``<platform>-spi``): eoloc's frame
   centre on the chosen surface, linked to the platform (``relation="p-p"``);
 - the **footprint** as a closed shape (``u-d-f``, uid ``<platform>-footprint``: a ``<link
@@ -40,7 +41,7 @@ import statistics
 from collections import deque
 from datetime import UTC, datetime, timedelta
 
-from ..io.cot import ce_le, element_xml, event_xml, fix_remarks, iso_utc
+from ..io.cot import ce_le, element_xml, event_xml, fix_remarks, iso_utc, video_detail
 from .update import PacketUpdate
 
 PLATFORM_TYPE = "a-f-A-M-F-Q"  # friendly / air / military / fixed wing / UAV
@@ -55,11 +56,13 @@ class CotFeed:
     optional minimum interval per uid (``interval_s``; ``held`` counts the events left out)."""
 
     def __init__(self, *, uid_prefix: str = "eoloc", stale_packets: float = 10.0, min_stale_s: float = 2.0,
-                 max_stale_s: float = 60.0, interval_s: float = 0.0, targets: str = "fixes") -> None:
+                 max_stale_s: float = 60.0, interval_s: float = 0.0, targets: str = "fixes",
+                 video_url: str | None = None) -> None:
         if targets not in TARGET_CHOICES:
             raise ValueError(f"targets must be one of {TARGET_CHOICES}, not {targets!r}")
         self.uid_prefix = uid_prefix
         self.targets = targets
+        self.video_url = video_url
         self.stale_packets, self.min_stale_s, self.max_stale_s = stale_packets, min_stale_s, max_stale_s
         self.interval_s = interval_s
         self.period_s: dict[str, float] = {}  # stream -> its packet interval (median of the last 15)
@@ -176,9 +179,14 @@ class CotFeed:
                              fov=_fmt(look.get("hfov_deg")), vfov=_fmt(look.get("vfov_deg")),
                              range=_fmt(look.get("range_m")), model=look.get("sensor"))
         track = element_xml("track", course=_fmt(p.get("heading_deg"))) if p.get("heading_deg") is not None else ""
-        detail = element_xml("contact", callsign=name) + sensor + track + element_xml("remarks", remarks)
+        video = video_detail(self.video_url, f"{uid}-video", name) if self.video_url else ""
+        detail = element_xml("contact", callsign=name) + sensor + track + video + element_xml("remarks", remarks)
         return event_xml(uid=uid, cot_type=PLATFORM_TYPE, how="m-g", time=now, stale=stale, lat=p["lat_deg"],
                          lon=p["lon_deg"], hae=p["h_m"], detail=detail)
+
+    def presence_uid(self) -> str:
+        """eoloc's own uid as a TAK client (its presence event's)."""
+        return f"{self.uid_prefix}-{socket.gethostname()}"
 
     def presence(self, now: datetime | None = None) -> bytes:
         """eoloc itself as a TAK client announces itself (a friendly ground sensor with a contact
@@ -190,7 +198,7 @@ class CotFeed:
                   + element_xml("__group", name="Cyan", role="Team Member")
                   + element_xml("takv", platform="eoloc", version=__version__, device="ground station", os="")
                   + element_xml("remarks", "eoloc live: geolocated targets from MISB KLV"))
-        return event_xml(uid=f"{self.uid_prefix}-{socket.gethostname()}", cot_type="a-f-G-E-S", how="h-g-i-g-o",
+        return event_xml(uid=self.presence_uid(), cot_type="a-f-G-E-S", how="h-g-i-g-o",
                          time=now, stale=now + timedelta(hours=1), lat=0.0, lon=0.0, hae=0.0, detail=detail)
 
     def silence(self, quiet_s: float, now: datetime | None = None) -> list[bytes]:
