@@ -114,6 +114,20 @@ def test_config_builds_the_sensor(tmp_path):
     assert s.camera.cx == 319.5 and s.camera.cy == 255.5
 
 
+def test_config_without_a_camera(tmp_path):
+    """A config with only [accuracy.budget] (for inputs that bring their camera: KLV, drone photos)
+    reads; a command that needs the camera's geometry says so, naming the file; through the CLI
+    (eoloc locate) one line, exit 2."""
+    path = _write(tmp_path / "b.toml", "[accuracy.budget]\nyaw_deg = {normal = 1.0}\n")
+    cfg = load_config(path)
+    assert cfg.camera is None and cfg.accuracy.budget == {"yaw_deg": {"normal": 1.0}}
+    with pytest.raises(ConfigError, match=r"b\.toml' has no \[camera\] section"):
+        cfg.sensor()
+    r = CliRunner().invoke(main, ["locate", *S13_ARGS, "--target-height", "400", "--pixel", "100", "700",
+                                  "--config", str(path), "--json"])
+    assert r.exit_code == 2 and "has no [camera] section" in r.output and "Traceback" not in r.output, r.output
+
+
 def test_config_distortion_models(tmp_path):
     base = "[camera]\nwidth = 640\nheight = 512\nhfov_deg = 30\n"
     bc = load_config(_write(tmp_path / "b.toml", base + '[camera.distortion]\nmodel = "brown-conrady"\n'

@@ -7,10 +7,12 @@ ground point chosen first, the pixel found by the oracle's projection (scipy, py
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
 
@@ -346,3 +348,76 @@ def test_48_pixel_ground_pixel_through_a_fisheye_drone_camera(u, v, pitch, yaw):
     pu = e["c"] * xh + e["d"] * yh + (4384 - 1) / 2
     pv = e["e"] * xh + e["f"] * yh + (3288 - 1) / 2
     assert abs(pu - u) < 1e-5 and abs(pv - v) < 1e-5, (pu - u, pv - v)
+
+
+def _ray_to_height(o: np.ndarray, d: np.ndarray, h: float) -> np.ndarray:
+    """The oracle's point where the ray o + s d comes down to ellipsoidal height h (bisection)."""
+    lo, hi = 0.0, 50_000.0
+    for _ in range(80):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if O.height((o + mid * d)[None])[0] > h else (lo, mid)
+    return o + lo * d
+
+
+def test_51_photo_fixes_sent_to_tak_with_coverage_tested_uncertainty(tmp_path):
+    """`eoloc photo FOLDER --config budget.toml --cot udp://…` (issue 51, item 4; OpenAthena's
+    use): 300 DJI photos whose XMP pose carries errors drawn from the budget, the image centre
+    located on the target height (the true ground off it by the budget's terrain error); each CoT
+    event a receiver parses is the JSON fix (1e-8 degrees) with ce = CE90 / 2.1460 and le =
+    LE90 / 1.6449, and the truths (each true pose's centre ray on the true ground, by the oracle)
+    fall inside the stated CEP50, CE90 and LE90 and inside the CoT's own circles as often as
+    claimed (binomial 99 % bands)."""
+    import socket
+
+    rng = np.random.default_rng(51)
+    sigma = {"lat_deg": 2e-5, "lon_deg": 2.5e-5, "h_m": 3.0, "yaw_deg": 1.5, "pitch_deg": 0.5, "roll_deg": 0.5,
+             "terrain_m": 2.0}  # the ground is not exactly at the height given either
+    budget = tmp_path / "budget.toml"
+    budget.write_text("[accuracy.budget]\n" + "".join(f"{k} = {{normal = {v}}}\n" for k, v in sigma.items()))
+    cam, target_h, n = O.Camera(640, 480, 550.0, 550.0, 319.5, 239.5), 1500.0, 300
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    truths = []
+    for k in range(n):
+        lat, lon, h_cam = 40 + rng.uniform(-1, 1), -105 + rng.uniform(-1, 1), target_h + rng.uniform(150, 600)
+        yaw, pitch, roll = rng.uniform(-180, 180), rng.uniform(-75, -35), rng.uniform(-3, 3)
+        o, d, _ = O.rays(cam, "az-el", lat, lon, h_cam, yaw, pitch, roll, 0.0, 0.0, 0.0, np.array(cam.cx),
+                         np.array(cam.cy))
+        e = {key: rng.normal(0.0, s) for key, s in sigma.items()}
+        ground = target_h + e["terrain_m"]
+        truths.append(np.array(O.geodetic(_ray_to_height(o, d, ground))).ravel())  # lat, lon, h
+        write_photo(folder / f"p{k:03d}.jpg", 640, 480,
+                    _dji_tags(lat + e["lat_deg"], lon + e["lon_deg"], h_cam + e["h_m"], yaw + e["yaw_deg"],
+                              pitch + e["pitch_deg"], roll + e["roll_deg"], CalibratedFocalLength="550.0",
+                              CalibratedOpticalCenterX="319.5", CalibratedOpticalCenterY="239.5"))
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    rx.settimeout(2.0)
+    r, rows = _photo(folder, "--target-height", target_h, "--config", budget, "--cot",
+                     f"udp://127.0.0.1:{rx.getsockname()[1]}")
+    events = {}
+    with contextlib.suppress(TimeoutError):
+        while True:
+            data = rx.recv(65536)
+            ev = ET.fromstring(data[data.find(b"<event"):])
+            events[ev.get("uid")] = ev
+    rx.close()
+    assert len(rows) == n and all(row["status"] == "OK" for row in rows) and len(events) == n, r.stderr
+    truth = np.array(truths)
+    err = np.array([C.enu_error(row["lat"], row["lon"], row["h"], t) for row, t in zip(rows, truth, strict=True)])
+    col = {k: np.array([row[k] for row in rows]) for k in ("cep50_m", "ce90_m", "le90_m", "nonlinearity")}
+    ce, le = np.empty(n), np.empty(n)
+    for i, row in enumerate(rows):
+        ev = events[f"eoloc-{Path(row['file']).stem}"]
+        pt = ev.find("point")
+        assert abs(float(pt.get("lat")) - row["lat"]) < 1e-8 and abs(float(pt.get("lon")) - row["lon"]) < 1e-8
+        ce[i], le[i] = float(pt.get("ce")), float(pt.get("le"))
+        assert ce[i] == pytest.approx(row["ce90_m"] / 2.1460, rel=1e-3, abs=0.006)
+        assert le[i] == pytest.approx(row["le90_m"] / 1.6449, rel=1e-3, abs=0.006)
+    keep = col["nonlinearity"] <= 0.1
+    assert keep.mean() > 0.95
+    stated = C.coverage("photo fixes", err, col["cep50_m"], col["ce90_m"], col["le90_m"], keep)
+    parsed = C.coverage("photo CoT as parsed", err, np.full(n, np.inf), 2.1460 * ce, 1.6449 * le, keep)
+    assert all(stated.within().values()), stated.row()
+    assert parsed.within()["CE90"] and parsed.within()["LE90"], parsed.row()

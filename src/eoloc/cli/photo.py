@@ -9,7 +9,16 @@ from rich.table import Table as RichTable
 
 from .common import open_dem, working
 from .main import console, err_console, warn
-from .options import CONVENTIONS, dem_options, formats_option, out_option, target_height_option
+from .options import (
+    CONVENTIONS,
+    config_option,
+    dem_options,
+    formats_option,
+    out_option,
+    tak_connection,
+    tak_options,
+    target_height_option,
+)
 
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
@@ -29,6 +38,13 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
   camera_h, camera_yaw, camera_pitch, camera_roll: the optical axis' azimuth from true north, its
   elevation, negative below the horizon, and the image's roll). A photo that
   cannot be read is named with the tag and the fix; the others are still located.
+  --config C.toml with [accuracy.budget] (the camera comes from the photos): each fix's
+  first-order uncertainty (sigma_e_m, sigma_n_m, sigma_u_m, cep50_m, ce90_m, le90_m; yaw_deg,
+  pitch_deg, roll_deg are the camera attitude's errors, lat_deg, lon_deg, h_m the position's,
+  range_m the laser's).
+  --cot URL: each located point sent to TAK as it is sent by eoloc live (udp://, tcp://, tls://
+  with --tak-cert or --tak-package), uid eoloc-<photo name>[-<pixel>], ce/le its 1-sigma
+  errors from the budget (unknown, 9999999, without one).
 """
 
 
@@ -38,19 +54,30 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
               help="A pixel to locate (column, row; 0,0 the centre of the top-left pixel); repeat for several.")
 @dem_options("Stop the rays on this DEM (GeoTIFF, DTED, SRTM, ESRI ASCII); repeat for tiles.")
 @target_height_option("Stop the rays on this ellipsoidal height (m).")
+@config_option(required=False, help_text="TOML with [accuracy.budget]: each fix's uncertainty (the camera comes "
+                                         "from the photos).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
 @out_option("photo_fixes.*", default=None)
 @formats_option()
-def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, as_json, out_dir, formats) -> None:
+@tak_options
+def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, config_path, as_json, out_dir, formats,
+          cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package, tak_protocol) -> None:
     import orjson
 
     from ..jobs.photo import photo_job
 
+    cot_urls, tak_tls = tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package)
+    budget = None
+    if config_path is not None:
+        from ..jobs.setup import error_budget
+        from .common import load_config
+
+        budget = error_budget(load_config(config_path), config_path)
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is not None and target_height is not None:
         raise click.UsageError("give --dem or --target-height, not both")
     with working("reading the photos..."):
-        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height)
+        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget)
     for msg in job.failed:
         warn(msg)
     if as_json:
@@ -83,7 +110,36 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, as
 
         written = write_layer(out_dir, "photo_fixes", [r for r in job.rows if "lat" in r], formats)
         err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    if cot_urls:
+        send_photo_fixes(job.rows, cot_urls, tak_tls, tak_protocol, pixels_given=bool(pixels))
     if not any(r.get("status") == "OK" for r in job.rows):
         from ..errors import InputError
 
         raise InputError("no photo could be located" + (f" ({len(job.failed)} named above)" if job.failed else ""))
+
+
+def send_photo_fixes(rows: list[dict], urls: list[str], tls, protocol: str, *, pixels_given: bool) -> None:
+    """Each located point as a CoT event to every URL (one summary line; a certificate problem
+    ends the command with its one-line error)."""
+    import json
+    from pathlib import Path
+
+    from ..io.cot import cot_event_bytes
+    from ..live.cotfeed import CotFeed
+    from ..live.senders import send_events
+    from .main import fail
+
+    events, per_photo = [], {}
+    for r in rows:
+        if r.get("status") != "OK":
+            continue
+        k = per_photo[r["file"]] = per_photo.get(r["file"], -1) + 1
+        name = Path(r["file"]).stem + (f"-{k}" if pixels_given else "")
+        events.append(cot_event_bytes({**r, "lat_deg": r["lat"], "lon_deg": r["lon"], "h_m": r["h"],
+                                       "target_id": name}, stale_s=3600.0))
+    feed = CotFeed()
+    summaries, fatal = send_events(urls, events, tls=tls, protocol=protocol, hello=feed.presence,
+                                   uid=feed.presence_uid(), on_state=lambda m: warn(m, "cot"))
+    if fatal:
+        fail(fatal)
+    err_console.print(f"CoT: {len(events)} events -> " + json.dumps(summaries), soft_wrap=True, highlight=False)

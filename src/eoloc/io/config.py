@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from ..errors import ConfigError
 from ..sensor import BrownConrady, Camera, DistortionRatio, SensorModel, gimbal_from_name
@@ -213,7 +213,8 @@ class AccuracyConfig(_Strict):
 
 
 class Config(_Strict):
-    camera: CameraConfig
+    camera: CameraConfig | None = None  # absent where the inputs bring their own (KLV, drone photos)
+    _path: str = PrivateAttr("")  # the file it was read from, for messages
     gimbal: GimbalConfig = GimbalConfig()
     installation: InstallationConfig = InstallationConfig()
     telemetry: TelemetryConfig = TelemetryConfig()
@@ -227,6 +228,10 @@ class Config(_Strict):
             extra = {"quaternion": self.gimbal.quaternion, "matrix": self.gimbal.matrix}
         elif self.gimbal.quaternion is not None or self.gimbal.matrix is not None:
             raise ConfigError(f"gimbal.quaternion/matrix only apply to model = 'fixed', not {self.gimbal.model!r}")
+        if self.camera is None:
+            where = f"config file {self._path!r}" if self._path else "the config"
+            raise ConfigError(f"{where} has no [camera] section (width, height, and hfov_deg or focal_px): this "
+                              "command takes the camera's geometry from it")
         return SensorModel(self.camera.build(), gimbal_from_name(self.gimbal.model, **extra),
                            self.installation.mount_misalignment_deg, self.installation.boresight_misalignment_deg,
                            self.installation.lever_arm_m)
@@ -252,7 +257,9 @@ def load_config(path: str | Path) -> Config:
         if isinstance(geoid, str) and not Path(geoid).is_absolute():  # relative to the config file
             raw["telemetry"] = {**raw["telemetry"], "msl_geoid": str(path.parent / geoid)}
         cfg = Config.model_validate(raw)
-        cfg.sensor()
+        cfg._path = str(path)
+        if cfg.camera is not None:
+            cfg.sensor()
     except ValidationError as exc:
         lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}" for e in exc.errors()]
         raise ConfigError(f"config file {str(path)!r} is invalid:\n" + "\n".join(lines)) from None
@@ -289,7 +296,9 @@ def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresigh
         doc[section][key] = [round(float(v), 6) for v in value] if np.ndim(value) else round(float(value), 6)
     text = tomlkit.dumps(doc)
     try:
-        Config.model_validate(_tuples(tomllib.loads(text))).sensor()
+        cfg = Config.model_validate(_tuples(tomllib.loads(text)))
+        if cfg.camera is not None:
+            cfg.sensor()
     except (ValidationError, ValueError) as exc:
         raise ConfigError(f"the calibrated config would not validate, {str(path)!r} left unchanged: {exc}") from None
     tmp = path.with_suffix(path.suffix + ".tmp")

@@ -5,7 +5,10 @@ gives, earth-referenced: the pose's yaw/pitch/roll are the camera's, with a zero
 (camera z along the body's x axis). The image centre is located by the laser range when the photo
 has one; every other pixel (and the centre of a photo without a range) on the DEM or the target
 height given. Every photo is its own row or rows; one that cannot be read is a row with its
-reason, and the others are still located.
+reason, and the others are still located. With an error budget every fix also gets its
+first-order uncertainty (:func:`eoloc.accuracy.covariance.locate_with_covariance`: the budget's
+``yaw_deg``/``pitch_deg``/``roll_deg`` are the camera attitude's errors here, ``lat_deg``/
+``lon_deg``/``h_m`` the position's, ``range_m`` the laser's, ``terrain_m`` the surface's).
 """
 
 from __future__ import annotations
@@ -35,8 +38,10 @@ def photo_sensor_pose(p: PhotoPose):
                                                       (0.0, 0.0))
 
 
-def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None) -> PhotoJob:
-    """Every photo of ``paths`` located at ``pixels`` ((u, v) pairs; none: the image centre)."""
+def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None,
+              budget=None) -> PhotoJob:
+    """Every photo of ``paths`` located at ``pixels`` ((u, v) pairs; none: the image centre);
+    ``budget`` (an ErrorBudget): each fix's covariance columns (sigma_e_m ... ce90_m, le90_m)."""
     from pathlib import Path
 
     from .. import geodesy
@@ -91,15 +96,24 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
                 job.failed.append(msg)
                 job.rows.append({"file": str(path), "u": u, "v": v, "status": "NO_SURFACE", "reason": msg, **camera})
                 continue
-            f = rule.locate(sensor, pose, (np.array([u], float), np.array([v], float)))
+            uv = (np.array([u], float), np.array([v], float))
+            if budget is not None:
+                from ..accuracy.covariance import covariance_columns, locate_with_covariance
+
+                f, cov = locate_with_covariance(sensor, pose, budget, uv, rule)
+                uncertainty = {k: _f(c[0]) for k, c in covariance_columns(cov, f.ok).items()}
+            else:
+                f, uncertainty = rule.locate(sensor, pose, uv), {}
             st = Status(int(f.status[0]))
             row = {"file": str(path), "u": float(u), "v": float(v), "lat": _f(f.lat_deg[0]), "lon": _f(f.lon_deg[0]),
                    "h": _f(f.h_m[0]), "range_m": _f(f.range_m[0]), "status": st.name, "source": source, **camera,
                    "camera_model": f"{p.make} {p.model}", "intrinsics": p.camera_source, "height_rule": p.height_rule}
             if st != Status.OK:
                 row["reason"] = st.explanation
-            elif tle is not None:  # the database's flight-test figure for this camera: a + b x slant range
-                row["tle_m"] = tle[0] + tle[1] * float(f.range_m[0])
+            else:
+                row |= {k: x for k, x in uncertainty.items() if x is not None}
+                if tle is not None:  # the database's flight-test figure for this camera: a + b x slant range
+                    row["tle_m"] = tle[0] + tle[1] * float(f.range_m[0])
             if source == "laser" and p.lrf_target is not None:
                 t = p.lrf_target
                 row |= {"vendor_lat": t[0], "vendor_lon": t[1], "vendor_h": t[2]}

@@ -264,3 +264,16 @@ def cot_sender(url: str, on_state=None, hello=None, tls: TlsCredentials | None =
     if scheme == "udp":
         return UdpSender(url, protocol=protocol)
     return TcpSender(url, on_state=on_state, hello=hello, tls=tls, protocol=protocol, uid=uid)
+
+
+def send_events(urls, events, *, tls: TlsCredentials | None = None, protocol: str = "xml", hello=None,
+                uid: str = "eoloc", on_state=None, timeout_s: float = 10.0) -> tuple[list[dict], str | None]:
+    """Send ``events`` (XML CoT) once to every URL, waiting up to ``timeout_s`` for the streams to
+    deliver: (each sender's summary, the first certificate problem or None)."""
+    senders = [cot_sender(u, on_state=on_state, hello=hello, tls=tls, protocol=protocol, uid=uid) for u in urls]
+    for event in events:
+        for s in senders:
+            s.send(event)
+    for s in senders:
+        s.close(timeout_s)
+    return [s.summary() for s in senders], next((s.fatal for s in senders if s.fatal), None)
