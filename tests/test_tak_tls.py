@@ -231,7 +231,7 @@ def test_51_certificates_good_and_bad(tak, tmp_path, case):
     if expect is None:
         assert r.returncode == 0, log
         sent = summary_of(log)["cot"][0]
-        assert sent["sent"] > 10 and sent["connects"] == 1 and sent["lost"] == 0
+        assert sent["sent"] > 10 and sent["connects"] == 1 and sent["lost"] == 0, log
         return
     errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
     assert r.returncode == 2 and len(errors) == 1 and expect in errors[0], log
@@ -533,3 +533,47 @@ def test_51_tls_urls_need_a_certificate():
     r = subprocess.run([EOLOC, "live", str(FLIGHT), "--cot", "udp://127.0.0.1:9", "--tak-cert", "x.p12"],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "give --cot tls://HOST:PORT" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_51_a_silent_tls_server_is_not_a_dead_one(tmp_path):
+    """A TLS 1.3 server sends session tickets after the handshake and then nothing: the socket is
+    readable with no data for eoloc. The sender must not wait on it (it did, 5 s per connection,
+    then counted the connection as failed and retried for ever): connected once, every event
+    delivered, in well under a second after the handshake."""
+    from eoloc.live.senders import TcpSender
+    from eoloc.live.tls import credentials
+
+    ca = make_ca("loopback CA")
+    server_cert, server_key = make_client(*ca, "server")
+    client_cert, client_key = make_client(*ca, "eoloc")
+    (tmp_path / "server.pem").write_bytes(pem(server_cert) + server_key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
+    ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    ctx.minimum_version = ssl.TLSVersion.TLSv1_3
+    ctx.verify_mode = ssl.CERT_REQUIRED
+    ctx.load_verify_locations(cadata=pem(ca[0]).decode())
+    ctx.load_cert_chain(tmp_path / "server.pem")
+    listener_sock = socket.create_server(("127.0.0.1", 0))
+    port, received = listener_sock.getsockname()[1], []
+
+    def serve() -> None:
+        conn, _ = listener_sock.accept()
+        with ctx.wrap_socket(conn, server_side=True) as tls:  # sends its tickets, then only reads
+            while data := tls.recv(65536):
+                received.append(data)
+
+    threading.Thread(target=serve, daemon=True).start()
+    creds = credentials(p12(client_cert, client_key, [ca[0]], "pw"), "eoloc.p12", "pw")
+    t0 = time.monotonic()
+    sender = TcpSender(f"tls://127.0.0.1:{port}", tls=creds)
+    for k in range(20):
+        sender.send(b"<event uid='e%d'/>" % k)
+    deadline = time.monotonic() + 10
+    while sender.sent < 20 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    elapsed = time.monotonic() - t0
+    sender.close()
+    assert sender.sent == 20 and sender.connects == 1 and sender.fatal is None, sender.summary()
+    assert elapsed < 3.0  # the 1 s probe for a refusal, not a 5 s wait on the tickets
+    time.sleep(0.2)
+    assert b"".join(received).count(b"<event") == 20

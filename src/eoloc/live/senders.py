@@ -35,6 +35,7 @@ from .tls import TlsCredentials, handshake_problem
 
 QUEUE_EVENTS = 10_000
 BACKOFF_S = (0.5, 8.0)
+HANDSHAKE_S = 15.0  # a TLS handshake's limit: slow links and busy servers (a single-threaded one under load)
 PROBE_S = 1.0  # after a TLS handshake: how long to listen for the server refusing our certificate
 NEGOTIATE_S = 3.0  # TAK protocol 1: how long to wait for the server's offer, then for its answer
 
@@ -106,6 +107,8 @@ class TcpSender:
         self.stopping = threading.Event()
         self.sent = self.dropped = self.lost = self.connects = 0
         self.fatal: str | None = None
+        self.connecting = False  # a connection attempt under way (bounded by its timeouts)
+        self.attempts = 0
         self.wire = "xml"  # what the current connection carries: "xml" or "1"
         self.on_state = on_state or (lambda message: None)
         self.hello = hello  # () -> bytes: sent first on every connection (a TAK client's presence)
@@ -128,6 +131,18 @@ class TcpSender:
         else:
             self.on_state(f"{self.url}: TLS failed ({exc}); retrying")
 
+    def _alert(self, sock: socket.socket) -> bool:
+        """After a failed write on TLS: whether the server had refused our certificate (its alert
+        read now; ``fatal`` set, the socket closed)."""
+        try:
+            sock.settimeout(0.5)
+            sock.recv(1)
+        except (ssl.SSLError, OSError) as exc:
+            if handshake_problem(exc, self.url, self.tls) is not None:
+                self._refused(exc, sock)
+                return True
+        return False
+
     def _listen(self, sock: socket.socket, seconds: float, negotiation: takwire.Negotiation | None) -> bool:
         """Read what the server sends for up to ``seconds`` (less once the negotiation is settled):
         False if the connection failed (the reason reported)."""
@@ -138,17 +153,19 @@ class TcpSender:
             if not select.select([sock], [], [], min(left, 0.2))[0]:
                 continue
             try:
-                data = sock.recv(65536)
+                data = read_now(sock)
             except (ssl.SSLError, OSError) as exc:
                 self._refused(exc, sock)
                 return False
+            if data is None:  # TLS records that carry no data (TLS 1.3 session tickets), or a partial one
+                continue
             if not data:
                 sock.close()
                 self.on_state(f"{self.url}: the server closed the connection at once; retrying")
                 return False
             if negotiation is not None and (reply := negotiation.feed(data)):
                 sock.sendall(reply)
-                deadline = time.monotonic() + NEGOTIATE_S  # the offer came: wait for the answer
+                deadline = max(deadline, time.monotonic() + NEGOTIATE_S)  # the offer came: wait for the answer
         return True
 
     def _connect(self) -> socket.socket | None:
@@ -161,18 +178,26 @@ class TcpSender:
         sock.settimeout(5.0)
         if self.context is not None:
             try:
+                sock.settimeout(HANDSHAKE_S)
                 sock = self.context.wrap_socket(sock, server_hostname=self.host)
+                sock.settimeout(5.0)
             except (ssl.SSLError, OSError) as exc:
                 self._refused(exc, sock)
                 return None
         negotiation = takwire.Negotiation(self.uid) if self.protocol == "1" else None
         try:
+            # TLS: the server's verdict on our certificate first (TLS 1.3 gives it after the handshake)
+            if self.context is not None and not self._listen(sock, PROBE_S, negotiation):
+                return None
             if self.hello is not None:
-                sock.sendall(undeclared(self.hello()))
-            wait = NEGOTIATE_S if negotiation is not None else PROBE_S if self.context is not None else 0.0
-            if not self._listen(sock, wait, negotiation):
+                hello = self.hello()
+                agreed = negotiation is not None and negotiation.state == "proto"
+                sock.sendall(takwire.stream(hello) if agreed else undeclared(hello))
+            if negotiation is not None and not self._listen(sock, NEGOTIATE_S, negotiation):
                 return None
         except OSError as exc:
+            if self.context is not None and self._alert(sock):
+                return None
             self.on_state(f"{self.url}: connection lost at once ({exc.strerror or exc}); retrying")
             sock.close()
             return None
@@ -189,11 +214,12 @@ class TcpSender:
         """Whether the server has closed the connection (what it sends us is read and ignored)."""
         while select.select([sock], [], [], 0)[0] or (isinstance(sock, ssl.SSLSocket) and sock.pending()):
             try:
-                if not sock.recv(65536):
-                    return True
-            except (ssl.SSLWantReadError, TimeoutError):  # a TLS record not complete yet: still open
-                return False
+                data = read_now(sock)
             except OSError:
+                return True
+            if data is None:  # nothing but TLS records without data, or a partial one: still open
+                return False
+            if not data:
                 return True
         return False
 
@@ -201,7 +227,11 @@ class TcpSender:
         sock, backoff = None, BACKOFF_S[0]
         while not self.stopping.is_set() or self.queue:
             if sock is None:
-                sock = self._connect()
+                self.connecting, self.attempts = True, self.attempts + 1
+                try:
+                    sock = self._connect()
+                finally:
+                    self.connecting = False
                 if sock is None:
                     if self.fatal is not None or self.stopping.wait(backoff):
                         return
@@ -231,14 +261,18 @@ class TcpSender:
             sock.close()
 
     def close(self, timeout_s: float = 2.0) -> None:
-        """Send what is queued (for up to ``timeout_s``), then stop."""
+        """Send what is queued (for up to ``timeout_s``, and through a connection attempt under way,
+        and a second one if the first failed: a TLS handshake with a busy server can stall once),
+        then stop."""
         deadline = time.monotonic() + timeout_s
-        while self.queue and time.monotonic() < deadline and self.fatal is None and self.thread.is_alive():
+        while self.queue and self.fatal is None and self.thread.is_alive() and (
+                time.monotonic() < deadline or self.connecting or (self.connects == 0 and self.attempts < 2)):
             time.sleep(0.02)
+        deadline = max(deadline, time.monotonic())
         self.stopping.set()
         with self.cond:
             self.cond.notify()
-        self.thread.join(timeout=max(deadline - time.monotonic(), 0.1))
+        self.thread.join(timeout=max(deadline - time.monotonic(), 1.0))
 
     def summary(self) -> dict:
         out = {"url": self.url, "sent": self.sent, "queued": len(self.queue), "dropped": self.dropped,
@@ -246,6 +280,19 @@ class TcpSender:
         if self.protocol == "1":
             out["tak_protocol"] = self.wire
         return out
+
+
+def read_now(sock: socket.socket) -> bytes | None:
+    """What the socket holds now, without waiting: None when a readable TLS socket has no data for
+    us (a TLS 1.3 session ticket, a record not complete yet), b"" when the peer has closed."""
+    timeout = sock.gettimeout()
+    sock.settimeout(0.0)
+    try:
+        return sock.recv(65536)
+    except (ssl.SSLWantReadError, BlockingIOError):
+        return None
+    finally:
+        sock.settimeout(timeout)
 
 
 def undeclared(event: bytes) -> bytes:
