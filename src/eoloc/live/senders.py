@@ -123,13 +123,13 @@ class TcpSender:
             self.cond.notify()
 
     def _refused(self, exc: BaseException, sock: socket.socket) -> None:
-        """A TLS failure: fatal when it is a certificate problem, else retried."""
+        """A failed connection: fatal when it is a certificate problem, else retried."""
         sock.close()
         problem = handshake_problem(exc, self.url, self.tls)
         if problem is not None:
             self.fatal = problem  # not retried; the job reports it and ends
         else:
-            self.on_state(f"{self.url}: TLS failed ({exc}); retrying")
+            self.on_state(f"{self.url}: {'TLS ' if self.tls is not None else ''}connection failed ({exc}); retrying")
 
     def _alert(self, sock: socket.socket) -> bool:
         """After a failed write on TLS: whether the server had refused our certificate (its alert
