@@ -577,3 +577,28 @@ def test_51_a_silent_tls_server_is_not_a_dead_one(tmp_path):
     assert elapsed < 3.0  # the 1 s probe for a refusal, not a 5 s wait on the tickets
     time.sleep(0.2)
     assert b"".join(received).count(b"<event") == 20
+
+
+def test_51_a_plain_port_given_as_tls_is_named(tmp_path):
+    """--cot tls:// pointed at a plain TCP port (8087 instead of 8089): one line saying the server
+    does not speak TLS there, exit 2, not a retry loop."""
+    ca = make_ca("test CA")
+    cert, key = make_client(*ca, "desk")
+    (tmp_path / "desk.p12").write_bytes(p12(cert, key, [ca[0]], "pw"))
+    plain = socket.create_server(("127.0.0.1", 0))
+    port = plain.getsockname()[1]
+
+    def answer() -> None:  # a plain CoT port: whatever comes, it answers with XML
+        conn, _ = plain.accept()
+        conn.recv(4096)
+        conn.sendall(b"<?xml version='1.0'?><event version='2.0' uid='x' type='t-x-c-t'/>" * 20)
+        time.sleep(2)
+        conn.close()
+
+    threading.Thread(target=answer, daemon=True).start()
+    r = subprocess.run([EOLOC, "live", str(FLIGHT), "--packets", "5", "--cot", f"tls://127.0.0.1:{port}", "--tak-cert",
+                        str(tmp_path / "desk.p12"), "--tak-cert-password", "pw"], capture_output=True, text=True,
+                       timeout=120)
+    errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
+    assert r.returncode == 2 and len(errors) == 1 and "does not speak TLS on this port" in errors[0], r.stderr
+    assert "Traceback" not in r.stderr
