@@ -147,13 +147,13 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=rewriter)
     if video_url is None and source.split("://")[0].lower() in STREAM_SCHEMES:
         video_url = source
+    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets, video_url=video_url)
     if video_package is not None:
         from ..io.cot import write_video_package
 
         if video_url is None:
             fail("--video-package: give the stream's URL (--video-url rtsp://...; SOURCE is not a stream URL)")
-        write_video_package(video_package, video_url, uid="eoloc-video", alias="eoloc video")
-    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets, video_url=video_url)
+        write_video_package(video_package, video_url, uid=feed_cot.video_uid(), alias="eoloc video")
     senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence, tls=tak_tls,
                           protocol=tak_protocol, uid=feed_cot.presence_uid()) for url in cot_urls]
     hub = server = None

@@ -131,33 +131,40 @@ def cot_event_bytes(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-
 def write_cot(path: str | Path, rows: list[dict], *, name: str = "eoloc fixes", **kwargs) -> tuple[Path, int]:
     """All OK fixes as a TAK data package (zip: one ``<uid>/<uid>.cot`` per event, the uid made a
     safe file name, and ``MANIFEST/manifest.xml``); returns (path, number of events)."""
+    events = [e for e in (cot_event_bytes(row, **kwargs) for row in rows) if e is not None]
+    entries, used = [], set()
+    for k, ev in enumerate(events):
+        uid = ET.fromstring(ev).get("uid")
+        # ATAK's layout, <uid>/<uid>.cot, with the uid as a file name (it holds what the inputs
+        # said: slashes, "..", anything) and numbered where two events would share an entry
+        stem = _FILE_NAME.sub("_", uid)[:100] or "event"
+        stem = stem if stem not in used else f"{stem}-{k}"
+        used.add(stem)
+        entries.append((f"{stem}/{stem}.cot", ev, uid))
+    return write_package(path, f"eoloc-{Path(path).stem}", name, entries), len(events)
+
+
+def write_package(path: str | Path, uid: str, name: str, entries: list[tuple[str, bytes, str | None]]) -> Path:
+    """A TAK data package: a zip of ``entries`` ((zip entry, bytes, the content's uid or None)) and
+    ``MANIFEST/manifest.xml`` (version 2, imported on receipt) listing them."""
     import zipfile
 
-    events = [e for e in (cot_event_bytes(row, **kwargs) for row in rows) if e is not None]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     manifest = ET.Element("MissionPackageManifest", version="2")
     conf = ET.SubElement(manifest, "Configuration")
-    ET.SubElement(conf, "Parameter", name="uid", value=f"eoloc-{path.stem}")
-    ET.SubElement(conf, "Parameter", name="name", value=name)
-    ET.SubElement(conf, "Parameter", name="onReceiveImport", value="true")
+    for key, value in (("uid", uid), ("name", name), ("onReceiveImport", "true")):
+        ET.SubElement(conf, "Parameter", name=key, value=value)
     contents = ET.SubElement(manifest, "Contents")
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        used: set[str] = set()
-        for k, ev in enumerate(events):
-            uid = ET.fromstring(ev).get("uid")
-            # ATAK's layout, <uid>/<uid>.cot, with the uid as a file name (it holds what the inputs
-            # said: slashes, "..", anything) and numbered where two events would share an entry
-            name = _FILE_NAME.sub("_", uid)[:100] or "event"
-            name = name if name not in used else f"{name}-{k}"
-            used.add(name)
-            entry = f"{name}/{name}.cot"
-            zf.writestr(entry, ev)
+        for entry, data, content_uid in entries:
+            zf.writestr(entry, data)
             c = ET.SubElement(contents, "Content", ignore="false", zipEntry=entry)
-            ET.SubElement(c, "Parameter", name="uid", value=uid)
+            if content_uid is not None:
+                ET.SubElement(c, "Parameter", name="uid", value=content_uid)
         ET.indent(manifest)
         zf.writestr("MANIFEST/manifest.xml", ET.tostring(manifest, encoding="utf-8", xml_declaration=True))
-    return path, len(events)
+    return path
 
 
 def video_link(url: str, uid: str, alias: str) -> dict[str, str]:
@@ -190,8 +197,6 @@ def video_detail(url: str, uid: str, alias: str) -> str:
 def write_video_package(path: str | Path, url: str, uid: str, alias: str) -> Path:
     """A TAK data package holding the video connection (ATAK's ``<videoConnections><feed>``, the
     form TAK servers' video manager serves): imported, the stream appears in ATAK's video list."""
-    import zipfile
-
     v = video_link(url, uid, alias)
     feeds = ET.Element("videoConnections")
     feed = ET.SubElement(feeds, "feed")
@@ -200,18 +205,6 @@ def write_video_package(path: str | Path, url: str, uid: str, alias: str) -> Pat
                        ("preferredMacAddress", ""), ("preferredInterfaceAddress", ""), ("path", v["path"]),
                        ("buffer", "-1"), ("timeout", "12000"), ("rtspReliable", "0")):
         ET.SubElement(feed, key).text = xml_text(value)
-    name = _FILE_NAME.sub("_", uid)[:100] or "video"
-    entry = f"{name}/{name}.xml"
-    manifest = ET.Element("MissionPackageManifest", version="2")
-    conf = ET.SubElement(manifest, "Configuration")
-    for key, value in (("uid", f"{uid}-package"), ("name", f"{alias} video"), ("onReceiveImport", "true")):
-        ET.SubElement(conf, "Parameter", name=key, value=value)
-    contents = ET.SubElement(manifest, "Contents")
-    ET.SubElement(contents, "Content", ignore="false", zipEntry=entry)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ET.indent(manifest)
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr(entry, ET.tostring(feeds, encoding="utf-8", xml_declaration=True))
-        zf.writestr("MANIFEST/manifest.xml", ET.tostring(manifest, encoding="utf-8", xml_declaration=True))
-    return path
+    stem = _FILE_NAME.sub("_", uid)[:100] or "video"
+    return write_package(path, f"{uid}-package", f"{alias} video",
+                         [(f"{stem}/{stem}.xml", ET.tostring(feeds, encoding="utf-8", xml_declaration=True), None)])

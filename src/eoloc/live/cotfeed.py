@@ -179,10 +179,14 @@ class CotFeed:
                              fov=_fmt(look.get("hfov_deg")), vfov=_fmt(look.get("vfov_deg")),
                              range=_fmt(look.get("range_m")), model=look.get("sensor"))
         track = element_xml("track", course=_fmt(p.get("heading_deg"))) if p.get("heading_deg") is not None else ""
-        video = video_detail(self.video_url, f"{uid}-video", name) if self.video_url else ""
+        video = video_detail(self.video_url, self.video_uid(), name) if self.video_url else ""
         detail = element_xml("contact", callsign=name) + sensor + track + video + element_xml("remarks", remarks)
         return event_xml(uid=uid, cot_type=PLATFORM_TYPE, how="m-g", time=now, stale=stale, lat=p["lat_deg"],
                          lon=p["lon_deg"], hae=p["h_m"], detail=detail)
+
+    def video_uid(self) -> str:
+        """The uid of the video link (the same in the platform's CoT and in the video package)."""
+        return f"{self.uid_prefix}-video"
 
     def presence_uid(self) -> str:
         """eoloc's own uid as a TAK client (its presence event's)."""

@@ -268,7 +268,6 @@ class TcpSender:
         while self.queue and self.fatal is None and self.thread.is_alive() and (
                 time.monotonic() < deadline or self.connecting or (self.connects == 0 and self.attempts < 2)):
             time.sleep(0.02)
-        deadline = max(deadline, time.monotonic())
         self.stopping.set()
         with self.cond:
             self.cond.notify()

@@ -54,11 +54,12 @@ def request(uid: str, now: datetime | None = None) -> bytes:
 class Negotiation:
     """The client side of a stream's negotiation, fed what the server sends while it is in XML.
     ``state``: "xml" (nothing offered yet, or refused), "asked" (request sent, waiting),
-    "proto" (version 1 from now on). :meth:`feed` returns the bytes to send (the request) if any,
-    and keeps what follows the server's answer (already protobuf) in ``rest``."""
+    "proto" (version 1 from now on: what the server sends after is protobuf, not read here).
+    :meth:`feed` returns the bytes to send (the request) if any. Each event is parsed from its
+    ``<event`` on, so no DTD (and no entity) ever reaches the parser."""
 
     def __init__(self, uid: str) -> None:
-        self.uid, self.state, self.buffer, self.rest, self.note = uid, "xml", b"", b"", ""
+        self.uid, self.state, self.buffer, self.note = uid, "xml", b"", ""
 
     def feed(self, data: bytes) -> bytes:
         self.buffer += data
@@ -83,7 +84,7 @@ class Negotiation:
                 self.state = "proto" if ok else "xml"
                 self.note = "TAK protocol 1 (protobuf) agreed" if ok else "the server refused TAK protocol 1: XML kept"
         if self.state == "proto":
-            self.rest, self.buffer = self.buffer, b""
+            self.buffer = b""
         elif len(self.buffer) > 1 << 20:  # a server that sends no </event>: keep memory bounded
             self.buffer = self.buffer[-65536:]
         return out

@@ -89,7 +89,7 @@ class ConnectionPackage:
     """A TAK connection data package, read: the server (``url``) and the credentials."""
 
     url: str
-    credentials: TlsCredentials
+    credentials: TlsCredentials | None  # None for a plain tcp:// or udp:// server
 
 
 def _valid_now(cert, what: str) -> None:
@@ -119,8 +119,8 @@ def _load_p12(data: bytes, password: str | None, what: str, option: str):
     if password is not None:
         raise InputError(f"{what}: wrong password ({option}); it is the one given with the .p12 "
                          "(TAK Server's default is atakatak)")
-    raise InputError(f"{what}: the .p12 is password-protected and neither no password nor the TAK defaults open it; "
-                     f"give its password ({option})")
+    raise InputError(f"{what}: the .p12 opens neither without a password nor with the TAK defaults; give its "
+                     f"password ({option})")
 
 
 def _load_pem(data: bytes, password: str | None, what: str):
@@ -157,15 +157,14 @@ def credentials(cert_file: bytes, cert_what: str, password: str | None, ca_file:
     """The credentials of a client certificate (.p12, or PEM with its key) and, optionally, a CA
     file (PEM, DER or .p12 truststore); without a CA file the CA certificates in the client's
     .p12 are used."""
-    from cryptography.hazmat.primitives.asymmetric import ec, rsa
-
     key, certs = read_certificates(cert_file, cert_what, password)
     if key is None or not certs:
         raise InputError(f"{cert_what}: holds no client key and certificate; give the client's .p12 "
                          "(or a PEM file with its certificate and private key)")
-    pub = key.public_key().public_numbers() if isinstance(key, rsa.RSAPrivateKey | ec.EllipticCurvePrivateKey) \
-        else None
-    cert = next((c for c in certs if pub is not None and c.public_key().public_numbers() == pub), certs[0])
+    cert = next((c for c in certs if c.public_key() == key.public_key()), None)  # the key's own certificate
+    if cert is None:
+        raise InputError(f"{cert_what}: no certificate in it belongs to its private key; give the client's .p12 "
+                         "as the TAK server's admin made it")
     others = [c for c in certs if c is not cert]
     _valid_now(cert, cert_what)
     if ca_file is not None:
@@ -252,7 +251,7 @@ def read_connection_package(path: Path) -> ConnectionPackage:
 
         url = f"{scheme}://{host}:{port}"
         if scheme != "tls":
-            return ConnectionPackage(url=url, credentials=None)  # type: ignore[arg-type]
+            return ConnectionPackage(url=url, credentials=None)
         cert, cert_what = entry(pref("certificateLocation"), "client certificate")
         ca = pref("caLocation")
         ca_bytes, ca_what = entry(ca, "CA truststore") if ca else (None, "")
@@ -267,8 +266,12 @@ def handshake_problem(exc: BaseException, url: str, creds: TlsCredentials | None
     if isinstance(exc, ssl.SSLCertVerificationError):
         where = f" ({creds.source})" if creds is not None else ""
         reason = exc.verify_message or str(exc)
-        return (f"{url}: the server's certificate cannot be trusted ({reason}): it is not signed by the CA given"
-                f"{where}; give the server's own CA (--tak-ca) or the connection data package its admin made")
+        why = {62: "its name is not the host's (leave ?check_hostname=1 out, as ATAK does, or use the name it "
+                   "was issued for)",
+               10: "it has expired: the server's admin must renew it"}.get(exc.verify_code,
+               f"it is not signed by the CA given{where}; give the server's own CA (--tak-ca) or the connection "
+               "data package its admin made")
+        return f"{url}: the server's certificate cannot be trusted ({reason}): {why}"
     if isinstance(exc, ssl.SSLError):
         reason = (exc.reason or str(exc)).lower()
         name = creds.subject() if creds is not None else "eoloc's certificate"
@@ -279,7 +282,7 @@ def handshake_problem(exc: BaseException, url: str, creds: TlsCredentials | None
         for key, why in refused.items():
             if key in reason.replace(" ", "_"):
                 return (f"{url}: the server refused eoloc's client certificate {name!r}: it {why} "
-                        "(TLS alert {0}); ask the server's admin for a certificate it accepts".format(key))
+                        f"(TLS alert {key}); ask the server's admin for a certificate it accepts")
         if "wrong_version" in reason or "record_layer" in reason or "packet_length" in reason:
             return (f"{url}: the server does not speak TLS on this port ({exc.reason}); a TAK server's TLS port "
                     "is usually 8089 and its plain one 8087 (tcp://)")
