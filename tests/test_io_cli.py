@@ -158,8 +158,9 @@ def test_cli_one_observation_json_S13():
 def test_cli_one_observation_above_horizon_is_no_intersection():
     args = [a if a != "-75" else "10" for a in S13_ARGS]
     r = CliRunner().invoke(main, ["locate", *args, "--target-height", "0", "--json"])
-    assert r.exit_code == 0
-    assert json.loads(r.output) == {"lat": None, "lon": None, "h": None, "range": None, "status": "NO_INTERSECTION"}
+    assert r.exit_code == 3  # ran, located nothing (`eoloc --help`: exit status)
+    assert json.loads(r.stdout) == {"lat": None, "lon": None, "h": None, "range": None, "status": "NO_INTERSECTION"}
+    assert "check the pointing" in r.stderr  # the reason and what to do
 
 
 def test_cli_one_observation_pixel_with_config(camera_toml):
@@ -382,7 +383,7 @@ def test_a_dem_that_misses_the_flight_is_summed_up_in_one_line(tmp_path):
     r = CliRunner().invoke(main, ["locate", str(DEMO / "telemetry.csv"), "--config", str(DEMO / "camera.toml"),
                                   "--dem", str(dem), "--out", str(tmp_path)])  # the demo flight is in Shanxi
     text = " ".join(r.output.split())
-    assert r.exit_code == 0 and "no target was located" in text and "OUT_OF_COVERAGE" in text
+    assert r.exit_code == 3 and "nothing was located" in text and "OUT_OF_COVERAGE" in text
     assert "covering lat 40.2008..40.3100" in text
 
 

@@ -166,7 +166,7 @@ def test_track_static_and_triangulate_on_the_demo(tmp_path):
             assert d < limit  # single frames: ~28 m CEP50
             assert d < 3.5 * np.hypot(float(row["sigma_e_m"]), float(row["sigma_n_m"]))
     r3 = CliRunner().invoke(main, ["track", *args, "--range", "--out", str(tmp_path)])
-    assert r3.exit_code == 2 and "none of the" in r3.output
+    assert r3.exit_code == 2 and "nothing was located" in r3.output and "--range R" in r3.output
 
 
 def test_calibrate_with_undetermined_parameters_names_them_and_refuses_to_write(tmp_path):

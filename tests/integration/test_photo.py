@@ -155,7 +155,7 @@ def test_48_bad_photos_are_named_and_the_good_ones_still_located(tmp_path):
     assert "cut.jpg" in why["cut.jpg"]
     assert all(str(p) in r.stderr for p in bad)
     r, _ = _photo(*bad, check=False)
-    assert r.returncode == 2 and "no photo could be located" in r.stderr  # the house's code for bad input
+    assert r.returncode == 3 and "no photo could be located" in r.stderr  # ran, located nothing (CONVENTIONS)
 
 
 @settings(max_examples=40, deadline=None)

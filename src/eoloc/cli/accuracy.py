@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import click
-from rich.table import Table as RichTable
 
 from .common import load_config, open_dem, progress, stop_rule, working
 from .main import console, err_console, report_issues
@@ -16,6 +15,7 @@ from .options import (
     pairing_options,
     stop_rule_options,
 )
+from .render import titled_table
 
 ACCURACY_HELP = """Accuracy budget by Monte Carlo: perturb every input by its error law, locate with the
 same chain as real fixes, and report the scatter per target.
@@ -110,7 +110,7 @@ def _report(job, scn, n: int, seed: int, out_dir, plots: bool) -> None:
 
     console.print(f"[bold]{scn.name}[/]: {n:,} samples, seed {seed}, stop rule {scn.rule.describe()}; budget: "
                   + ", ".join(f"{s.name} {s.describe()}" for s in scn.budget))
-    table = RichTable(title="scatter per target, about the error-free fix")
+    table = titled_table("scatter per target, about the error-free fix")
     table.add_column("quantity")
     for k in range(len(job.rows)):
         table.add_column(f"target {k}", justify="right")
@@ -137,7 +137,7 @@ def _report_sensitivity(job, sensitivity_samples: int, out_dir) -> None:
 
     from ..io.writers import write_layer
 
-    t2 = RichTable(title=f"sensitivity, each source alone (target 0, {sensitivity_samples:,} samples each)")
+    t2 = titled_table(f"sensitivity, each source alone (target 0, {sensitivity_samples:,} samples each)")
     for c in ("source", "law", "μ lat (deg/unit)", "μ lon (deg/unit)", "μ h (m/unit)", "σ horizontal (m)"):
         t2.add_column(c, justify="right")
     for r in job.sensitivity:
@@ -167,7 +167,7 @@ def _flight(inputs, config_path, rule, pairing: dict | None, formats, n: int, se
                                  progress=lambda k: bar.advance(task, k), **pairing)
             issues = job.issues
     report_issues(issues)
-    table = RichTable(title=f"the flight's targets: first order and Monte Carlo ({n:,} copies of the flight)")
+    table = titled_table(f"the flight's targets: first order and Monte Carlo ({n:,} copies of the flight)")
     for c in ("target", "fixes", "CE90", "MC", "LE90", "MC", "bias", "G–M", "noise", "1 fix"):
         table.add_column(c, justify="right", overflow="fold")
     f = lambda r, k: f"{r[k]:.2f}" if isinstance(r.get(k), float) else ""  # noqa: E731

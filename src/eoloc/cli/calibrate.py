@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import click
-from rich.table import Table as RichTable
 
 from .common import load_config, working
 from .main import console, err_console, report_issues, warn
 from .options import config_option, out_option
+from .render import titled_table
 
 CALIBRATE_HELP = """Boresight / mounting calibration from ground control points seen in frames.
 
@@ -73,13 +73,13 @@ def _print_calibration(job) -> None:
     start = {**dict(zip(("mount_x_deg", "mount_y_deg", "mount_z_deg"), sensor.mount_misalignment_deg, strict=True)),
              **dict(zip(("boresight_x_deg", "boresight_y_deg", "boresight_z_deg"), sensor.boresight_misalignment_deg,
                         strict=True)), "heading_bias_deg": job.heading_bias_deg, "time_offset_s": job.time_offset_s}
-    t = RichTable(title=f"calibration from {int(cal.used.sum())} GCP observations (s0 = {cal.s0:.2f})")
+    t = titled_table(f"calibration from {int(cal.used.sum())} GCP observations (s0 = {cal.s0:.2f})")
     for col in ("parameter", "was", "estimate", "± 1σ"):
         t.add_column(col, justify="right")
     for name, v, s in zip(cal.names, cal.values, cal.sigma, strict=True):
         t.add_row(name, f"{start[name]:.4f}", f"{v:.4f}", f"{s:.4f}")
     console.print(t)
-    r = RichTable(title="residuals (RMS)")
+    r = titled_table("residuals (RMS)")
     for col in ("", "before", "after"):
         r.add_column(col, justify="right")
     r.add_row("pixels", f"{cal.rms(cal.residual_px_before):.2f}", f"{cal.rms(cal.residual_px_after):.2f}")

@@ -55,7 +55,8 @@ def ground(target_height, dem):
 
 class LineProgress:
     """rich.progress's API (add_task, advance, update) for a stream that is not a terminal: one line
-    on stderr when a task starts, then at most every ``every_s`` seconds, and when it ends."""
+    on stderr when a task starts (at its first report: its inputs are checked by then), then at most
+    every ``every_s`` seconds, and when it ends."""
 
     def __init__(self, every_s: float = 5.0) -> None:
         self.every_s = every_s
@@ -72,17 +73,28 @@ class LineProgress:
     def add_task(self, description: str, total=None, **_) -> int:
         k = len(self.tasks)
         self.tasks[k] = {"description": description, "total": total, "done": 0, "shown": time.monotonic(),
-                         "start": time.monotonic()}
-        err_console.print(f"{description}: started" + (f" ({total:,} to do)" if total else ""), highlight=False)
+                         "start": time.monotonic(), "announced": False}
         return k
+
+    def _announce(self, t: dict) -> None:
+        """"started" once the job reports its first progress: its inputs have been checked by then,
+        so a mistake in them is the only line printed, never after a "started"."""
+        if not t["announced"]:
+            t["announced"] = True
+            err_console.print(f"{t['description']}: started" + (f" ({t['total']:,} to do)" if t["total"] else ""),
+                              highlight=False)
 
     def advance(self, task: int, advance: float = 1) -> None:
         t = self.tasks[task]
+        self._announce(t)
         t["done"] += advance
         self._line(t)
 
     def update(self, task: int, completed=None, total=None, description: str | None = None, **_) -> None:
         t = self.tasks[task]
+        if total is not None and not t["announced"]:
+            t["total"] = total
+        self._announce(t)
         if total is not None:
             t["total"] = total
         if completed is not None:

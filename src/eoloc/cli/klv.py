@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import sys
 import textwrap
 
 import click
 
 from ..io.klv.conventions import CONVENTIONS
 from .common import load_config, open_dem, working
-from .main import console, err_console, warn
+from .main import NOTHING_LOCATED, console, err_console, warn
 from .options import config_option, dem_options, formats_option, grid_option, out_option
 
 KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV data stream), check it,
@@ -95,4 +96,8 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
                                         klv_out=write_klv)
     for note in notes:
         warn(note, "note")
+    for i, note in enumerate(job.notes):
+        warn(("nothing was located: " if job.located_nothing and i == 0 else "") + note)
     err_console.print("wrote " + ", ".join(str(p) for p in written))
+    if job.located_nothing:
+        sys.exit(NOTHING_LOCATED)

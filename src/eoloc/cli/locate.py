@@ -9,7 +9,7 @@ import numpy as np
 
 from ..result import RANGE_FROM_FILES, Status
 from .common import load_config, open_dem, stop_rule, working
-from .main import console, err_console, fail, report_issues, warn
+from .main import console, err_console, exit_if_nothing_located, fail, report_issues, warn
 from .options import (
     CONVENTIONS,
     config_option,
@@ -22,7 +22,7 @@ from .options import (
     stop_rule_options,
     with_flight_log,
 )
-from .render import fix_summary_table, number_cell
+from .render import fix_summary_table, number_cell, titled_table
 
 LOCATE_HELP = """Geolocate targets: from files, or one observation given as options.
 
@@ -151,6 +151,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     for note in job.notes:
         warn(note)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    exit_if_nothing_located(job.located.fixes)
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
@@ -191,18 +192,25 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
         out.update({k: _num(v[0]) for k, v in covariance_columns(cov, f.ok).items()})
     if as_json:
         click.echo(json.dumps(out))
-        return
-    from rich.table import Table as RichTable
-
-    table = RichTable(title="eoloc fix", show_header=True)
-    for k in ("lat", "lon", "h", "range", "status"):
-        table.add_column(k + {"lat": " (deg)", "lon": " (deg)", "h": " (m, ellipsoidal)", "range": " (m)"}.get(k, ""))
-    table.add_row(*(number_cell(k, out[k]) for k in ("lat", "lon", "h", "range", "status")))
-    console.print(table)
-    if cov is not None and status == Status.OK:
-        _print_uncertainty(out)
+    else:
+        table = titled_table("eoloc fix", show_header=True)
+        for k in ("lat", "lon", "h", "range", "status"):
+            table.add_column(k + {"lat": " (deg)", "lon": " (deg)", "h": " (m, ellipsoidal)",
+                                  "range": " (m)"}.get(k, ""))
+        table.add_row(*(number_cell(k, out[k]) for k in ("lat", "lon", "h", "range", "status")))
+        console.print(table)
+        if cov is not None and status == Status.OK:
+            _print_uncertainty(out)
     if status != Status.OK:
-        err_console.print(f"[yellow]{status.name}[/]: {status.explanation}")
+        from ..jobs.explain import explain_failures, telemetry_names
+
+        names = {**telemetry_names(sensor.gimbal.angle_names, rule), "lat_deg": "--lat", "lon_deg": "--lon",
+                 "h_m": "--aircraft-height", "yaw_deg": "--yaw", "pitch_deg": "--pitch", "roll_deg": "--roll",
+                 "u_px": "--pixel", "v_px": "--pixel",
+                 **{f"gimbal{i + 1}": f"--gimbal-angles ({a})" for i, a in enumerate(sensor.gimbal.angle_names)}}
+        warn(explain_failures(f, pose=pose, pixels=pixels, rule=rule, names=names, what="observation")
+             or f"{status.name}: {status.explanation}")
+    exit_if_nothing_located(f)
 
 
 def _print_uncertainty(u: dict) -> None:

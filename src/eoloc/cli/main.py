@@ -4,6 +4,7 @@ click commands that ``eoloc.cli`` registers, so no command module sits in an imp
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
@@ -15,8 +16,21 @@ from ..errors import EolocError
 from .options import CONVENTIONS, negative_values_kept
 from .render import print_issues
 
-console = Console()
-err_console = Console(stderr=True)
+#: Off a terminal (a pipe, a file, CI) rich would wrap and cut at 80 columns: cells cut to "statu",
+#: file names over three lines. There, lines are as long as they need to be (COLUMNS still rules).
+WIDTH_OFF_TERMINAL = 1000
+
+
+def make_console(stderr: bool = False) -> Console:
+    """A console for stdout or stderr: the terminal's width on a terminal, else unwrapped lines."""
+    c = Console(stderr=stderr)
+    if c.is_terminal or os.environ.get("COLUMNS"):
+        return c
+    return Console(stderr=stderr, width=WIDTH_OFF_TERMINAL)
+
+
+console = make_console()
+err_console = make_console(stderr=True)
 
 
 def fail(message: str) -> None:
@@ -24,6 +38,19 @@ def fail(message: str) -> None:
     # messages name config sections ([accuracy]): escaped; one line, never wrapped, so paths stay whole
     err_console.print(f"[bold red]error:[/] {escape(message)}", soft_wrap=True)
     sys.exit(2)
+
+
+#: The exit status of a run that wrote its outputs but located nothing at all (CONVENTIONS).
+NOTHING_LOCATED = 3
+
+
+def exit_if_nothing_located(fixes) -> None:
+    """Exit with :data:`NOTHING_LOCATED` when there were targets and none was located: a script
+    must not take an all-failed run for a good one (the warning before says why)."""
+    from ..jobs.explain import nothing_located
+
+    if nothing_located(fixes):
+        sys.exit(NOTHING_LOCATED)
 
 
 def report_issues(issues, limit: int = 15) -> None:

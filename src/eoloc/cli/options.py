@@ -24,6 +24,8 @@ Units and conventions (the same everywhere in eoloc):
                BELOW_SURFACE (camera on or under the surface), OUT_OF_IMAGE (pixel outside the image),
                DEGENERATE (multi-view rays do not determine a point); coordinates are empty
                wherever the status is not OK
+  exit status  0 done; 2 a usage mistake or an input that cannot be used (one line says which);
+               3 ran and wrote its outputs but located nothing (a warning says why); 1 a bug in eoloc
 """
 
 MINUS = "\u2212"  # a negative --range value travels as U+2212 past click's "looks like an option" test

@@ -5,10 +5,9 @@ from __future__ import annotations
 import sys
 
 import click
-from rich.table import Table as RichTable
 
 from .common import open_dem, working
-from .main import console, err_console, warn
+from .main import NOTHING_LOCATED, console, err_console, warn
 from .options import (
     CONVENTIONS,
     config_option,
@@ -19,6 +18,7 @@ from .options import (
     tak_options,
     target_height_option,
 )
+from .render import titled_table
 
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
@@ -93,7 +93,7 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
                               f"roll {p.roll_deg:.2f}°; intrinsics: {p.camera_source}"
                               + (f"; laser range {p.lrf_range_m:g} m" if p.lrf_range_m else "")
                               + "".join(f"; {n}" for n in p.notes))
-        table = RichTable(title="photo fixes (heights ellipsoidal)")
+        table = titled_table("photo fixes (heights ellipsoidal)")
         for c in ("photo", "pixel", "lat, lon (°)", "h (m)", "by", "status", "vs the drone's own"):
             table.add_column(c, justify="right", overflow="fold")
         for r in job.rows:
@@ -113,9 +113,9 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
     if cot_urls:
         send_photo_fixes(job.rows, cot_urls, tak_tls, tak_protocol, pixels_given=bool(pixels))
     if not any(r.get("status") == "OK" for r in job.rows):
-        from ..errors import InputError
-
-        raise InputError("no photo could be located" + (f" ({len(job.failed)} named above)" if job.failed else ""))
+        warn("nothing was located: no photo could be located" +
+             (f" ({len(job.failed)} named above)" if job.failed else ""))
+        sys.exit(NOTHING_LOCATED)
 
 
 def send_photo_fixes(rows: list[dict], urls: list[str], tls, protocol: str, *, pixels_given: bool) -> None:

@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import click
-from rich.table import Table as RichTable
 
 from .common import ground, load_config, open_dem, working
 from .main import console, err_console, report_issues
 from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
+from .render import titled_table
 
 RECTIFY_HELP = """Orthorectify one frame (visible or IR, any band count) onto the ellipsoid or a DEM
 and write a georeferenced GeoTIFF in UTM, Gauss-Krüger or any CRS (M5).
@@ -72,7 +72,7 @@ def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_pat
     js = out / "rectify.json"
     js.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     written.append(js)
-    t = RichTable(title=f"{Path(image).name} rectified", show_header=False)
+    t = titled_table(f"{Path(image).name} rectified", show_header=False)
     t.add_row("output", f"{ortho.shape[1]} x {ortho.shape[0]} cells, {ortho.data.shape[0]} band(s), "
                         f"{ortho.data.dtype.name}")
     t.add_row("CRS", f"{ortho.crs.name} ({ortho.crs.to_string()})")

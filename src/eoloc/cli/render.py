@@ -5,11 +5,36 @@ the batch table. Presentation only: the jobs return data, this turns it into tab
 from __future__ import annotations
 
 import numpy as np
+from rich.cells import cell_len
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table as RichTable
+from rich.text import Text
 
 from ..io.records import Records
+
+
+class TitledTable(RichTable):
+    """A rich table whose title, when wider than the table, is a line of its own above it (wrapped
+    at the console's width, not the table's): rich would wrap it at the table's width ("91
+    targets: INVALID_INPUT 90," over "NO_TELEMETRY 1")."""
+
+    def __rich_console__(self, console, options):
+        title = self.title
+        if not isinstance(title, str) or cell_len(title) <= self.__rich_measure__(console, options).maximum:
+            yield from super().__rich_console__(console, options)
+            return
+        yield Text(title, style="table.title")
+        self.title = None
+        try:
+            yield from super().__rich_console__(console, options)
+        finally:
+            self.title = title
+
+
+def titled_table(title: str, **kwargs) -> RichTable:
+    """A table with a title that is never wrapped at the table's width (:class:`TitledTable`)."""
+    return TitledTable(title=title, **kwargs)
 
 
 def number_cell(key: str, v) -> str:
@@ -24,7 +49,7 @@ def number_cell(key: str, v) -> str:
 def fix_summary_table(records: Records, counts: dict[str, int], limit: int = 12) -> RichTable:
     """The first ``limit`` fix records, with the status counts in the title; empty columns dropped."""
     n = len(records)
-    table = RichTable(title=f"{n} targets: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    table = titled_table(f"{n} targets: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     cols = ("time_s", "frame", "target_id", "lat_deg", "lon_deg", "h_m", "range_m", "status")
     cols = tuple(c for c in cols if c in records.columns and _has_values(records[c]))
     for c in cols:
@@ -44,7 +69,7 @@ def _has_values(v: np.ndarray) -> bool:
 
 def band_table(rows, title: str) -> RichTable:
     """CEP50 by oblique band, located and after each correction, with the change."""
-    t = RichTable(title=title, caption="CEP50 in metres; Δ: change against 'located'")
+    t = titled_table(title, caption="CEP50 in metres; Δ: change against 'located'")
     t.add_column("oblique")
     t.add_column("n", justify="right")
     t.add_column("located", justify="right")
@@ -108,7 +133,7 @@ def print_klv_job(job, console: Console, err_console: Console) -> None:
         if not any(n for _, n, *_ in stats):
             console.print(f"{label}nothing to compare with the encoder (no frame centre, corner or slant range sent)")
             continue
-        table = RichTable(title=f"{label}eoloc vs the encoder: horizontal distance (m), ours on {surface}")
+        table = titled_table(f"{label}eoloc vs the encoder: horizontal distance (m), ours on {surface}")
         for col in ("", "packets", "median", "p90", "max"):
             table.add_column(col, justify="right")
         for what, n, med, p90, mx in stats:
@@ -139,7 +164,7 @@ def print_diagnoses(diagnoses, console: Console) -> None:
         console.print(escape("convention check: " + dg.sentence()))
         if dg.follows is None and not dg.disagrees:
             continue
-        table = RichTable(title=f"{dg.what}: eoloc vs the encoder under each reading (m)")
+        table = titled_table(f"{dg.what}: eoloc vs the encoder under each reading (m)")
         for col in ("reading", "stop", "n", "median", "p90"):
             table.add_column(col, justify="right" if col in ("n", "median", "p90") else "left")
         for t in dg.trials:
@@ -153,7 +178,7 @@ def print_diagnoses(diagnoses, console: Console) -> None:
 def rich_table(t) -> RichTable:
     """A table given as data (title, header, rows of strings, caption, alignment()) as a rich
     table: the jobs say what a table holds, the CLI and the HTML report how it looks."""
-    r = RichTable(title=t.title, caption=t.caption or None)
+    r = titled_table(t.title, caption=t.caption or None)
     for h, a in zip(t.header, t.alignment(), strict=True):
         r.add_column(h, justify="left" if a == "l" else "right")
     for row in t.rows:
@@ -172,7 +197,7 @@ def batch_table(job, limit: int = 40) -> RichTable:
     counts = job.counts()
     paths = [os.path.abspath(r.path) for r in results]
     base = os.path.dirname(os.path.commonpath(paths)) if len(paths) == 1 else os.path.commonpath(paths) if paths else ""
-    t = RichTable(title=f"{len(job.results)} files under {base}: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
+    t = titled_table(f"{len(job.results)} files under {base}: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                   caption=None if len(results) <= limit else f"first {limit} of {len(results)} (all in "
                                                              "batch_status.csv)")
     for col in ("file", "status", "packets", "fixes", "OK", "issues", "s", "message"):

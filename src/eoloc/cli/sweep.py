@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-from rich.table import Table as RichTable
 
 from .common import progress
 from .main import console, err_console, warn
 from .options import dask_option, float_list, out_option
+from .render import titled_table
 
 SWEEP_HELP = """Accuracy against the pointing angle and the terrain relief, ellipsoid vs DEM (Qiao et al.,
 Fig. 10).
@@ -50,7 +50,7 @@ def sweep(config_path, scenario, angle, angles, terrain_sigmas, samples, seed, d
         task = bar.add_task("sweep points", total=len(angle_list) * len(sigma_list) * len(methods))
         points = terrain_sweep(scn, angle_list, sigma_list, angle=angle, n=n, seed=seed, methods=methods,
                                mapper=m, progress=lambda k: bar.advance(task, k))
-    table = RichTable(title=f"{scn.name}: CEP50 (m), {n:,} samples per point; ellipsoid / DEM")
+    table = titled_table(f"{scn.name}: CEP50 (m), {n:,} samples per point; ellipsoid / DEM")
     table.add_column(f"{angle} (deg)", justify="right")
     for s in sigma_list:
         table.add_column(f"relief σ {s:g} m", justify="right")

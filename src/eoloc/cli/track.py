@@ -18,6 +18,7 @@ from .options import (
     stop_rule_options,
     with_flight_log,
 )
+from .render import titled_table
 
 TRACK_HELP = """Filter detections over time: moving targets into tracks (M7), or static targets by RLS (M6).
 
@@ -94,7 +95,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
             task = bar.add_task("tracking", total=None)
             tj = track_job(job, associate=associate, accel_psd=accel_psd, meas_sigma_m=meas_sigma,
                            max_coast_s=max_coast, progress=lambda k, n: bar.update(task, completed=k, total=n))
-        table = RichTable(title=f"{len(tj.tracks.tracks)} tracks from {int(job.located.fixes.ok.sum())} located "
+        table = titled_table(f"{len(tj.tracks.tracks)} tracks from {int(job.located.fixes.ok.sum())} located "
                                 "detections")
         for c in ("track", "updates", "from (s)", "to (s)", "speed (m/s)", "heading (°)"):
             table.add_column(c, justify="right")
@@ -113,7 +114,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
 
 
 def _static_table(rows) -> RichTable:
-    table = RichTable(title="static targets: recursive least squares over all frames")
+    table = titled_table("static targets: recursive least squares over all frames")
     for c in ("target", "fixes", "lat, lon (°)", "h (m)", "CEP50 (m)", "scatter", "converged"):
         table.add_column(c, justify="right")
     for r in rows:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import sys
+
 import click
-from rich.table import Table as RichTable
 
 from .common import load_config
-from .main import console, err_console, report_issues, warn
+from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import (
     CONVENTIONS,
     config_option,
@@ -16,6 +17,7 @@ from .options import (
     out_option,
     with_flight_log,
 )
+from .render import titled_table
 
 TRIANGULATE_HELP = """Multi-view triangulation (M8): each target seen from two or more poses, located
 without a range or a terrain model by intersecting its rays.
@@ -52,7 +54,7 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
     job = triangulate_job(load_config(config_path), telemetry, detections, ray_sigma_deg=ray_sigma_deg,
                           min_angle_deg=min_angle, time_tolerance_s=time_tolerance)
     report_issues(job.issues)
-    table = RichTable(title="triangulated targets (M8)")
+    table = titled_table("triangulated targets (M8)")
     for c in ("target", "rays", "lat (°)", "lon (°)", "h (m)", "σ e/n/u (m)", "angle (°)"):
         table.add_column(c, justify="right")
     for r in job.rows:
@@ -67,3 +69,6 @@ def triangulate(telemetry, detections, config_path, ray_sigma_deg, min_angle, ti
             warn(f"target {r['target_id']}: {r['warning']}")
     written = write_layer(out_dir, "triangulated", job.rows, formats, grid=grid)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    if job.rows and not any(r["status"] == "OK" for r in job.rows):
+        warn("nothing was located: no target was triangulated (the status column says why for each)")
+        sys.exit(NOTHING_LOCATED)

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import click
-from rich.table import Table as RichTable
 
 from .common import load_config, open_dem, progress
-from .main import console, err_console, report_issues, warn
+from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
+from .render import titled_table
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
 GeoTIFF, a mosaic of the pass, XYZ map tiles.
@@ -146,7 +147,7 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     js = out / "video.json"
     js.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     written.append(js)
-    t = RichTable(title=f"{Path(video).name}", show_header=False)
+    t = titled_table(f"{Path(video).name}", show_header=False)
     t.add_row("video", f"{info.width} x {info.height} {info.codec}, {info.fps:.3g} fps, {info.container}")
     t.add_row("metadata", job.metadata.source)
     t.add_row("frames", ", ".join(f"{n} {k}" for k, n in statuses.items()) + f" (of {len(job.rows)} selected)")
@@ -172,7 +173,8 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         err_console.print(f"open {job.player} in a browser; for exact clicks on every frame serve it:")
         err_console.print(f"  {serve_line}", soft_wrap=True, markup=False)
     if not job.n_rectified:
-        warn("no frame was rectified: see the status and note columns of frames.csv")
+        warn("nothing was located: no frame was rectified: see the status and note columns of frames.csv")
+        sys.exit(NOTHING_LOCATED)
 
 
 def serve_command(out: Path, dem_name: str, dem_paths, vertical: str, geoid, dem_crs, config_path) -> str:

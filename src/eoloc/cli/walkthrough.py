@@ -20,6 +20,7 @@ from ..jobs.setup import error_budget
 from ..jobs.tables import RANGE_FROM_FILES, locate_tables
 from ..rules import AtHeight, OnDEM, locate_range
 from ..sensor import AzElGimbal, Camera, Pose, SensorModel
+from .render import titled_table
 
 S13_EXPECTED = (42.02058646, 125.03195512, 419.58)
 
@@ -45,7 +46,7 @@ def _read_truth(path: Path) -> dict[str, tuple[float, float, float]]:
 
 
 def _error_table(title: str, ids: np.ndarray, err: np.ndarray) -> RichTable:
-    t = RichTable(title=title)
+    t = titled_table(title)
     for c in ("target", "fixes", "mean error (m)", "CEP50 (m)", "max (m)"):
         t.add_column(c, justify="right")
     for tid in sorted(set(ids.tolist())):
@@ -206,7 +207,7 @@ def _many_frames(console: Console, sensor, tel, det, truth, budget) -> None:
     ids = np.asarray(m3.extra["target_id"]).astype(str)
     matched = match_detections(tel, det)
     rays = sensor.rays(telemetry_pose(tel, np.maximum(matched.record, 0)), (det.columns["u_px"], det.columns["v_px"]))
-    table = RichTable(title="many frames: one estimate per target from all its frames")
+    table = titled_table("many frames: one estimate per target from all its frames")
     for c in ("target", "frames", "1-frame CEP50 (m)", "RLS error (m)", "RLS CEP50 pred. (m)",
               "triangulated error (m)"):
         table.add_column(c, justify="right")

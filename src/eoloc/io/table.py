@@ -10,6 +10,7 @@ with ``#`` and blank lines are comments.
 from __future__ import annotations
 
 import csv
+import difflib
 import math
 import re
 from dataclasses import dataclass, field
@@ -79,13 +80,15 @@ class Table:
 
 
 def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple[str, ...],
-               keep_other: bool = False) -> Table:
+               keep_other: bool = False, name_unknown: bool = True) -> Table:
     """Read a CSV with a header into a :class:`Table`.
 
     ``key``: the columns of which at least one must parse for a record to be kept (e.g. time or
     frame) — without it the record cannot be matched to anything; an empty ``key`` keeps every
     record (the caller judges them). ``keep_other``: the columns not declared are kept too, as
-    text, under their header names (lower case).
+    text, under their header names (lower case). ``name_unknown``: every other column is named in
+    an issue with the closest declared name (a ``gimbal_az`` column is not silently ignored); off
+    for files that carry many columns by design (a flight log).
 
     The lines are sorted out first, vectorised over the file's bytes (comments, blank lines, lines
     of only commas, wrong field counts, bytes that are not UTF-8: each bad line reported with its
@@ -119,6 +122,7 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
         columns = [*columns, *(Column(h, text=True, required=False) for h in dict.fromkeys(header)
                                if h and h not in claimed)]
     index = _map_columns(header, columns, src, what)
+    unknown = unknown_columns(header, columns, index, what) if name_unknown and not keep_other else []
     wanted = [c for c in columns if c.name in index]
     cols = {c.name: index[c.name] for c in wanted}
     text = {c.name for c in wanted if c.text}
@@ -129,6 +133,7 @@ def read_table(path: str | Path, columns: list[Column], *, what: str, key: tuple
         numbers, issues = lines.numbers, lines.issues
     else:
         numbers, issues = np.arange(2, 2 + _size(raw), dtype=np.int64), []
+    issues = [Issue(src, 0, m) for m in unknown] + issues
     n = numbers.size
     arrays: dict[str, np.ndarray] = {}
     coded: dict[str, Coded] = {}
@@ -454,6 +459,54 @@ def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             vals.append(c)
             mixed = True
     return np.array(vals, dtype=object if mixed else np.float64), np.array([c == "" for c in cells], dtype=bool)
+
+
+#: Abbreviations expanded before a header name is compared with the declared ones.
+_SPELLED_OUT = {"az": "azimuth", "el": "elevation", "elev": "elevation", "hdg": "heading", "lng": "lon",
+                "long": "lon", "t": "time", "ts": "time", "timestamp": "time", "alt": "height", "hfov": "hfov"}
+_UNITS = {"deg", "m", "s", "px", "mm", "rad", "ms"}
+
+
+def _words(name: str) -> list[str]:
+    return [_SPELLED_OUT.get(w, w) for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
+
+
+def closest_column(name: str, columns: list[Column]) -> tuple[str, str] | None:
+    """The declared name (or alias) nearest to a header ``name``, with its column's canonical name:
+    abbreviations spelled out (az, el, hdg, ...), a shared word (not a unit) worth more than a
+    similar spelling; None when nothing is near."""
+    words = _words(name)
+    spelled = "_".join(words)
+    best, best_score = None, 0.0
+    for col in columns:
+        for known in (col.name, *col.aliases):
+            shared = (set(words) - _UNITS) & (set(_words(known)) - _UNITS)
+            score = difflib.SequenceMatcher(None, spelled, known).ratio() + 0.5 * len(shared)
+            if score > best_score:
+                best, best_score = (known, col.name), score
+    return best if best_score >= 0.6 else None
+
+
+def unknown_columns(header: list[str], columns: list[Column], index: dict[str, int], what: str) -> list[str]:
+    """One message per header name that no declared column takes: another name of a column the file
+    already gives, or not one eoloc reads (with the closest name it does read)."""
+    used = set(index.values())
+    names = {n: c.name for c in columns for n in (c.name, *c.aliases)}
+    messages = []
+    for i, h in enumerate(header):
+        if i in used or not h:
+            continue
+        if h in names:
+            messages.append(f"column {h!r} is another name for {names[h]!r}, which the file also has; {h!r} ignored")
+            continue
+        near = closest_column(h, columns)
+        hint = ""
+        if near is not None:
+            known, canonical = near
+            hint = f" (did you mean {known!r}" + (f", i.e. {canonical!r}" if known != canonical else "") + "?)"
+        messages.append(f"column {h!r} is not one eoloc reads in a {what} file; ignored{hint}. "
+                        "See `eoloc locate --help` for the columns")
+    return messages
 
 
 def _map_columns(header: list[str], columns: list[Column], path: str, what: str) -> dict[str, int]:

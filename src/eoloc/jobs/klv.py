@@ -32,6 +32,16 @@ class KLVJob:
     issues: list = field(default_factory=list)
     diagnoses: list = field(default_factory=list)
     assume: tuple[str, ...] = ()
+    notes: list[str] = field(default_factory=list)  # why most targets or every footprint failed
+
+    @property
+    def located_nothing(self) -> bool:
+        """The stream has VMTI targets, and neither one of them nor one footprint was located: the
+        run gave nothing on the ground. (A stream without targets read for its telemetry and
+        checks is not a failed run, whatever its footprints: their note says why they are missing.)"""
+        if self.vmti is None or bool(self.vmti.fixes.ok.any()):
+            return False
+        return not any(f.get("geometry") for f in self.layers["footprints"])
 
     @property
     def surface(self) -> str:
@@ -55,6 +65,7 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
         check_frames,
         corner_footprint_features,
         dem_footprint_features,
+        explain_vmti,
         locate_vmti,
     )
 
@@ -90,8 +101,17 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
                 return d, locate_vmti(tel, d, dem, base=sensor).fixes
 
             diagnoses += diagnose_vmti(det, v.fixes, other_numbering, assume=assume)
+    notes = []
+    if len(tel) and not any(f.get("geometry") for f in prints):
+        notes.append("no footprint could be drawn: " + (
+            "the DEM is not under any frame" if dem is not None else
+            "no packet gives the frame-centre elevation (tag 78, or 25 + geoid) that the corners stop at: give --dem"))
+    if v is not None:
+        why = explain_vmti(tel, det, v.fixes, dem)
+        if why:
+            notes.append(why)
     return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, [*tel.issues, *det.issues],
-                  diagnoses, assume)
+                  diagnoses, assume, notes)
 
 
 def telemetry_records(tel, time_origin="unix") -> Records:

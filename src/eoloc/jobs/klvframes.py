@@ -289,3 +289,36 @@ def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | Non
     rule = surface_rule(surface if surface is not None else c["fc_h_m"][row[idx]])
     return VMTIFlight(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, d["time_s"][idx],
                       np.asarray(d["target_id"])[idx].astype(str), idx)
+
+
+#: The ST 0601 items behind each input of a VMTI fix, as :func:`explain_vmti` names them.
+KLV_NAMES = {"lat_deg": "the sensor latitude (tag 13)", "lon_deg": "the sensor longitude (tag 14)",
+             "h_m": "the sensor height (tag 75, or 15 + geoid)", "yaw_deg": "the platform heading (tag 5)",
+             "pitch_deg": "the platform pitch (tag 6)", "roll_deg": "the platform roll (tag 7)",
+             "gimbal1": "the sensor relative azimuth (tag 18)", "gimbal2": "the sensor relative elevation (tag 19)",
+             "gimbal3": "the sensor relative roll (tag 20)", "u_px": "the target's pixel (ST 0903 centroid)",
+             "v_px": "the target's pixel (ST 0903 centroid)"}
+
+
+def explain_vmti(tel: Table, det: Table, fixes: Fixes, surface=None) -> str | None:
+    """One line when most VMTI detections failed for one reason, naming the KLV items at fault: a
+    stream without a frame-centre elevation (tags 78, 25) located without --dem, no field of view,
+    no frame size, no matching packet (:func:`eoloc.jobs.explain.explain_failures`)."""
+    from .explain import explain_failures
+
+    if not len(det):
+        return None
+    row, found, hfov, vfov, _ = vmti_frames(tel, det)
+    d = det.columns
+    with np.errstate(invalid="ignore"):
+        more = {"the detection's packet (no ST 0601 packet carries its VMTI set)": ~found,
+                "the field of view (tags 16, 17 or the VMTI set's 11, 12)":
+                    found & ~((hfov > 0) & (hfov < 180) & (vfov > 0) & (vfov < 180)),
+                "the VMTI frame size (ST 0903 tags 8, 9)": found & ~((d["frame_width"] > 0) & (d["frame_height"] > 0))}
+    if surface is None:
+        more["the frame-centre elevation (tag 78, or 25 + geoid)"] = (
+            found & ~np.isfinite(tel.columns["fc_h_m"][row]),
+            "without a DEM the rays stop at that height: give --dem")
+    pose = packet_pose(tel).take(row) if len(tel) else None
+    return explain_failures(fixes, pose=pose, pixels=(d["u_px"], d["v_px"]), names=KLV_NAMES,
+                            what="VMTI detections", more=more)

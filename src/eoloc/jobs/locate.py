@@ -12,8 +12,8 @@ import numpy as np
 from ..io.export import fix_records, with_utc
 from ..io.records import Records
 from ..io.table import Issue, Table
-from ..result import Status
 from ..rules import StopRule
+from .explain import explain_failures, nothing_located, telemetry_names
 from .inputs import Prefetch, job_inputs
 from .tables import Located, locate_tables
 
@@ -74,20 +74,11 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
                    + (f" (median shift {np.median(shift):.1f} m, max {shift.max():.1f} m)" if shift.size else "")
                    + f"; {int(flagged.sum())} outside the model's trained range left as located (column comp_flag "
                      "says why)")
-    nothing = none_located(located.fixes, rule)
-    if nothing:
-        notes.append(nothing)
+    stop = rule.describe() if isinstance(rule, StopRule) else "range from the files"
+    why = explain_failures(located.fixes, pose=located.target_pose(), pixels=located.pixels, rule=located.rule,
+                           names=telemetry_names(sensor.gimbal.angle_names, located.rule), what=f"targets ({stop})")
+    if why:
+        notes.append(("nothing was located: " if nothing_located(located.fixes) else "") + why)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
     return LocateJob(fix_records(located.fixes, extra, after, coded=located.coded), located, extra,
                      inputs.issues + located.issues, notes, summary, inputs.telemetry)
-
-
-def none_located(fixes, rule) -> str | None:
-    """One line when nothing at all was located: the commonest status, what it means and the rule
-    (a DEM that does not overlap the flight, a target height above the aircraft, ...)."""
-    counts = fixes.status_counts()
-    if not len(fixes) or counts.get("OK"):
-        return None
-    name, n = max(counts.items(), key=lambda kv: kv[1])
-    what = rule.describe() if isinstance(rule, StopRule) else "range from the files"
-    return f"no target was located ({what}): {n} of {len(fixes)} are {name}: {Status[name].explanation}"

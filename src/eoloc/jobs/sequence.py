@@ -24,8 +24,10 @@ def located_detections(cfg, config_path, telemetry, detections, rule, **kw) -> L
     budget = error_budget(cfg, config_path) if cfg.accuracy is not None else None
     job = locate_files(cfg, telemetry, detections, rule, budget=budget, **kw)
     if not job.located.fixes.ok.any():
-        raise InputError(f"none of the {len(job.located.fixes)} detections could be located; check the stop rule "
-                         "(--range needs range_m in the files, else give --range R or --target-height H)", job.issues)
+        why = next((n for n in job.notes if n.startswith("nothing was located")), None)
+        raise InputError(why or f"none of the {len(job.located.fixes)} detections could be located; check the stop "
+                         "rule (--range needs range_m in the files, else give --range R or --target-height H)",
+                         job.issues)
     t = np.asarray(job.located.extra["time_s"], dtype=np.float64)
     if not np.isfinite(t[job.located.fixes.ok]).all():
         raise InputError("tracking needs time_s in the detections file (frame numbers alone give no time)",

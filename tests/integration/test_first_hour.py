@@ -1,0 +1,172 @@
+"""Issue 50: a new user's first hour. Each item a newcomer hit is a regression test named after it,
+run through the `eoloc` command in a subprocess as the user runs it (stdout and stderr are pipes,
+not a terminal: what a script or a CI log sees).
+
+Independent checks: statuses and counts are read back from the written CSVs; the KLV stream
+without a frame-centre elevation is the bundled flight with tags 23-25 and 78 removed item by
+item (on the DEM the same statuses as the untouched stream's).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import eoloc
+
+DEMO = Path(eoloc.__file__).parent / "data" / "demo"
+MOUNTAIN = DEMO / "mountain"
+NOTHING_LOCATED = 3  # `eoloc --help`: exit status
+
+
+def eoloc_cli(*args, cwd=None) -> subprocess.CompletedProcess:
+    """`eoloc ARGS` as a user runs it, output to pipes; COLUMNS unset (a CI log, a script)."""
+    env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+    r = subprocess.run([sys.executable, "-m", "eoloc", *map(str, args)], capture_output=True, text=True,
+                       env=env, cwd=cwd, timeout=300)
+    assert "Traceback" not in r.stderr, r.stderr
+    return r
+
+
+def _statuses(path: Path) -> list[str]:
+    with path.open(newline="", encoding="utf-8") as fh:
+        return [row["status"] for row in csv.DictReader(fh)]
+
+
+def test_50_2_an_unknown_column_is_named_and_an_all_invalid_run_says_why_and_fails(tmp_path):
+    """The demo telemetry with its gimbal columns called gimbal_az, gimbal_el: each is named with
+    the column it probably means, the run says once that every target lacks the gimbal angles,
+    writes every row, and exits 3; the same file with the right names locates (exit 0)."""
+    text = (DEMO / "telemetry.csv").read_text(encoding="utf-8")
+    assert "azimuth_deg,elevation_deg" in text
+    bad = tmp_path / "renamed.csv"
+    bad.write_text(text.replace("azimuth_deg,elevation_deg", "gimbal_az,gimbal_el"), encoding="utf-8")
+    args = ["--config", DEMO / "camera.toml", "--target-height", 600]
+    r = eoloc_cli("locate", bad, DEMO / "detections.csv", *args, "--out", tmp_path / "bad")
+    assert r.returncode == NOTHING_LOCATED, r.stderr
+    err = " ".join(r.stderr.split())
+    assert "column 'gimbal_az' is not one eoloc reads" in err and "'azimuth_deg', i.e. 'gimbal1_deg'" in err
+    assert "column 'gimbal_el' is not one eoloc reads" in err and "'elevation_deg', i.e. 'gimbal2_deg'" in err
+    assert "nothing was located" in err
+    assert "gimbal1_deg (the gimbal's azimuth) is missing or out of range in all of them" in err
+    assert err.count("nothing was located") == 1  # said once, not per row
+    statuses = _statuses(tmp_path / "bad" / "fixes.csv")
+    assert len(statuses) == 91 and "OK" not in statuses  # every record kept, each with its status
+    assert statuses.count("INVALID_INPUT") == 90 and statuses.count("NO_TELEMETRY") == 1
+    good = eoloc_cli("locate", DEMO / "telemetry.csv", DEMO / "detections.csv", *args, "--out", tmp_path / "good")
+    assert good.returncode == 0, good.stderr
+    assert "is not one eoloc reads" not in good.stderr and "nothing was located" not in good.stderr
+    assert _statuses(tmp_path / "good" / "fixes.csv").count("OK") >= 80
+
+
+def test_50_2_a_column_given_twice_under_two_names_is_named(tmp_path):
+    text = (DEMO / "telemetry.csv").read_text(encoding="utf-8").splitlines()
+    header = next(i for i, line in enumerate(text) if line.startswith("time_s"))
+    text = [line + (",lat" if i == header else "," + line.split(",")[1] if i > header and line else "")
+            for i, line in enumerate(text)]
+    path = tmp_path / "twice.csv"
+    path.write_text("\n".join(text) + "\n", encoding="utf-8")
+    r = eoloc_cli("locate", path, "--config", DEMO / "camera.toml", "--target-height", 600, "--out", tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "column 'lat' is another name for 'lat_deg', which the file also has; 'lat' ignored" in r.stderr
+
+
+def _without_frame_centre(src: Path, dst: Path) -> Path:
+    """The stream with the frame-centre items (tags 23, 24, 25, 78) taken out of every packet."""
+    from eoloc.io.klv.encode import build_uas_packet, uas_items
+    from eoloc.io.klv.reader import split_klv
+
+    def checksum_ok(packet: bytes) -> bool:  # ST 0601 §6.5.3's 16-bit sum, restated
+        s = sum(b << (8 * ((i + 1) % 2)) for i, b in enumerate(packet[:-2])) & 0xFFFF
+        return s == int.from_bytes(packet[-2:], "big")
+
+    out = bytearray()
+    for packet, _ in split_klv(src.read_bytes(), str(src)):
+        if not checksum_ok(packet):  # the flight's one spoilt packet stays out, as the reader leaves it out
+            continue
+        out += build_uas_packet([(t, v) for t, v in uas_items(packet) if t not in (1, 23, 24, 25, 78)])
+    dst.write_bytes(bytes(out))
+    return dst
+
+
+def test_50_2_klv_targets_without_a_frame_centre_elevation_say_why_and_fail(tmp_path):
+    """VMTI targets with no frame-centre elevation to stop at (no --dem): the run names the missing
+    tags and the fix (--dem), says why no footprint was drawn, and exits 3; with --dem every
+    target is located (exit 0)."""
+    stream = _without_frame_centre(MOUNTAIN / "flight.klv", tmp_path / "no_centre.klv")
+    r = eoloc_cli("klv", stream, "--out", tmp_path / "a")
+    assert r.returncode == NOTHING_LOCATED, r.stderr
+    err = " ".join(r.stderr.split())
+    statuses = _statuses(tmp_path / "a" / "fixes.csv")
+    assert statuses and set(statuses) == {"INVALID_INPUT"}
+    assert f"{len(statuses)} of {len(statuses)} VMTI detections are INVALID_INPUT" in err
+    assert "the frame-centre elevation (tag 78, or 25 + geoid) is missing or out of range in all of them" in err
+    assert "give --dem" in err and "no footprint could be drawn" in err
+    dem = MOUNTAIN / "longs_peak_srtmgl3.tif"
+    r = eoloc_cli("klv", stream, "--dem", dem, "--out", tmp_path / "b")
+    assert r.returncode == 0, r.stderr
+    on_dem = _statuses(tmp_path / "b" / "fixes.csv")
+    assert len(on_dem) == len(statuses) and on_dem.count("OK") > 0.9 * len(on_dem)
+    # the DEM does not need the frame centre: the same statuses as the untouched stream's on the DEM
+    r = eoloc_cli("klv", MOUNTAIN / "flight.klv", "--dem", dem, "--out", tmp_path / "c")
+    assert r.returncode == 0 and _statuses(tmp_path / "c" / "fixes.csv") == on_dem
+
+
+def test_50_2_one_observation_that_fails_says_why_and_exits_3():
+    r = eoloc_cli("locate", "--lat", 42, "--lon", 125, "--aircraft-height", 1000, "--gimbal-angles", 0, "nan",
+                  "--target-height", 0, "--json")
+    assert r.returncode == NOTHING_LOCATED
+    assert '"status": "INVALID_INPUT"' in r.stdout
+    assert "--gimbal-angles (elevation) is missing or out of range" in r.stderr
+
+
+def test_50_9_tables_and_paths_are_whole_off_a_terminal(tmp_path):
+    """Off a terminal no cell is cut ("statu"), no title or file name is wrapped: every table row
+    is one line that starts and ends with its border, and the long names appear whole."""
+    deep = tmp_path / ("a_folder_with_a_long_name_" * 3) / "recordings"
+    deep.mkdir(parents=True)
+    names = [f"sortie_2026_11_27_platform_ALPHA_{i}_with_a_long_descriptive_name.klv" for i in range(2)]
+    for n in names:
+        (deep / n).write_bytes((MOUNTAIN / "flight.klv").read_bytes())
+    r = eoloc_cli("batch", deep, "--out", tmp_path / "archive", "--config", MOUNTAIN / "camera.toml",
+                  "--target-height", 3600)
+    assert r.returncode == 0, r.stderr
+    rows = [line for line in r.stdout.splitlines() if line.startswith("│")]
+    assert len(rows) == 2 and all(line.endswith("│") for line in rows)
+    for n in names:
+        assert sum(n in line for line in rows) == 1  # whole, on its row
+    assert f"files under {deep}" in r.stdout  # the title's path whole
+    assert f"{tmp_path / 'archive'}" in r.stderr.splitlines()[-1]  # the "wrote" line whole
+    bad = tmp_path / "renamed.csv"
+    bad.write_text((DEMO / "telemetry.csv").read_text(encoding="utf-8").replace("azimuth_deg", "gimbal_az"),
+                   encoding="utf-8")
+    r = eoloc_cli("locate", bad, DEMO / "detections.csv", "--config", DEMO / "camera.toml", "--target-height", 600,
+                  "--out", tmp_path / "fixes")
+    assert "91 targets: INVALID_INPUT 90, NO_TELEMETRY 1" in r.stdout.splitlines()  # the title on one line
+    cells = [c.strip() for line in r.stdout.splitlines() if line.startswith("│") for c in line.strip("│").split("│")]
+    assert "INVALID_INPUT" in cells and not any(c.endswith("…") for c in cells)
+
+
+def test_50_9_no_progress_line_before_a_mistake_is_reported(tmp_path):
+    """A mistake the job finds in its inputs is the only thing said: no "rectifying frames: started"
+    before it; a good run still says when it starts (off a terminal too)."""
+    from datetime import UTC, datetime
+
+    from eoloc.io.klv.encode import encode_uas_packet
+    from eoloc.io.klv.mux import write_klv_ts
+
+    def packet(t: float) -> bytes:  # 3 km up near Boulder, the turret 45° down
+        return encode_uas_packet({2: datetime.fromtimestamp(1.7e9 + t, UTC), 5: 90.0, 6: 0.0, 7: 0.0, 13: 40.0,
+                                  14: -105.0, 15: 3000.0, 16: 20.0, 17: 12.0, 18: 0.0, 19: -45.0, 20: 0.0,
+                                  25: 0.0, 78: 0.0})
+
+    video = write_klv_ts(tmp_path / "pass.ts", [[(packet(k / 10), k / 10) for k in range(21)]], video_fps=10.0)
+    r = eoloc_cli("video", video, "--out", tmp_path / "v", "--start", 50)
+    assert r.returncode == 2 and "no frame of" in r.stderr and "--start" in r.stderr
+    assert "started" not in r.stderr
+    r = eoloc_cli("video", video, "--out", tmp_path / "v", "--every", 5)
+    assert r.returncode == 0, r.stderr
+    assert "rectifying frames: started" in r.stderr
