@@ -170,3 +170,164 @@ def test_50_9_no_progress_line_before_a_mistake_is_reported(tmp_path):
     r = eoloc_cli("video", video, "--out", tmp_path / "v", "--every", 5)
     assert r.returncode == 0, r.stderr
     assert "rectifying frames: started" in r.stderr
+
+
+def _commands():
+    """Every command and subcommand of `eoloc`, as (name, click command)."""
+    import click
+
+    from eoloc.cli import main
+
+    ctx = click.Context(main)
+    for name in main.list_commands(ctx):
+        cmd = main.get_command(ctx, name)
+        if isinstance(cmd, click.Group):
+            yield from ((f"{name} {n}", cmd.get_command(ctx, n)) for n in cmd.list_commands(ctx))
+        else:
+            yield name, cmd
+
+
+def _options(cmd) -> dict:
+    return {o: p for p in cmd.params for o in getattr(p, "opts", [])}
+
+
+def _front_range_asc(folder: Path) -> Path:
+    """The bundled Front Range DEM as an ESRI ASCII grid without a .prj (no CRS), as SRTM's
+    .asc grids come."""
+    import rasterio
+
+    with rasterio.open(MOUNTAIN / "longs_peak_srtmgl3.tif") as src:
+        z, transform = src.read(1), src.transform
+    path = folder / "front.asc"
+    with rasterio.open(path, "w", driver="AAIGrid", height=z.shape[0], width=z.shape[1], count=1, dtype="int16",
+                       transform=transform, nodata=0) as dst:
+        dst.write(z, 1)
+    for other in folder.glob("front.*"):
+        if other != path:
+            other.unlink()
+    return path
+
+
+ACCURACY_TOML = """[camera]
+width = 1280
+height = 720
+hfov_deg = 25.0
+
+[accuracy]
+stop = "dem"
+dem = ["front.asc"]
+samples = 500
+{extra}
+[accuracy.pose]
+lat_deg = 40.25
+lon_deg = -105.56
+h_m = 6000
+gimbal_deg = [270, -45]
+
+[accuracy.budget]
+yaw_deg = {{normal = 0.1}}
+"""
+
+
+def test_50_4_the_dem_options_are_declared_once_and_offered_by_every_command_with_a_dem(tmp_path):
+    """Every command that takes --dem takes --vertical, --geoid and --dem-crs, the same options
+    (same help, type, default); `eoloc accuracy` takes a CRS-less DEM of its config through
+    --dem-crs or the config's dem_crs (the config refused dem_crs before), `eoloc map` too."""
+    seen = {}
+    for name, cmd in _commands():
+        opts = _options(cmd)
+        if "--dem" not in opts:
+            continue
+        assert {"--vertical", "--geoid", "--dem-crs"} <= set(opts), name
+        for flag in ("--dem", "--vertical", "--geoid", "--dem-crs"):
+            p = opts[flag]
+            shape = (p.name, type(p.type).__name__, p.default, p.multiple, flag == "--dem" or p.help)
+            assert seen.setdefault(flag, shape) == shape, (name, flag)
+    assert {"accuracy", "map", "locate", "serve", "live"} <= {n for n, c in _commands() if "--dem" in _options(c)}
+
+    dem = _front_range_asc(tmp_path)
+    config = tmp_path / "acc.toml"
+    config.write_text(ACCURACY_TOML.format(extra=""), encoding="utf-8")
+    r = eoloc_cli("accuracy", config, "--no-sensitivity", "--no-plots", "--out", tmp_path / "a")
+    assert r.returncode == 2 and "--dem-crs EPSG:4326" in r.stderr and "dem_crs" in r.stderr
+    r = eoloc_cli("accuracy", config, "--no-sensitivity", "--no-plots", "--dem-crs", "EPSG:4326",
+                  "--out", tmp_path / "b")
+    assert r.returncode == 0, r.stderr
+    config.write_text(ACCURACY_TOML.format(extra='dem_crs = "EPSG:4326"\n'), encoding="utf-8")
+    r = eoloc_cli("accuracy", config, "--no-sensitivity", "--no-plots", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    # the same Monte Carlo (seeded) on the same terrain: the same figures whichever way the CRS came
+    assert (tmp_path / "b" / "accuracy.csv").read_text() == (tmp_path / "c" / "accuracy.csv").read_text()
+    rows = list(csv.DictReader((tmp_path / "c" / "accuracy.csv").open(encoding="utf-8")))
+    assert rows and all(float(row["cep50_m"]) > 0 for row in rows)
+
+    args = ["map", "--telemetry", MOUNTAIN / "telemetry.csv", "--dem", dem, "--out", tmp_path / "m"]
+    r = eoloc_cli(*args)
+    assert r.returncode == 2 and "--dem-crs EPSG:4326" in r.stderr
+    r = eoloc_cli(*args, "--dem-crs", "EPSG:4326")
+    assert r.returncode == 0 and (tmp_path / "m" / "map.html").is_file(), r.stderr
+
+
+def test_50_5_out_is_one_folder_per_command_by_default_and_means_a_folder_everywhere(tmp_path):
+    """--out is the same option on every command that writes files (a folder, default
+    eoloc-out/COMMAND): `eoloc locate` and `eoloc klv`, which both write fixes.csv, no longer
+    overwrite each other; `eoloc map` writes eoloc-out/map/map.html."""
+    for name, cmd in _commands():
+        opts = _options(cmd)
+        if "--out" in opts:
+            p = opts["--out"]
+            assert p.default is None and p.callback is not None and p.metavar == "DIR", name
+            assert not p.type.file_okay, name
+    r = eoloc_cli("locate", DEMO / "telemetry.csv", DEMO / "detections.csv", "--config", DEMO / "camera.toml",
+                  "--target-height", 600, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = eoloc_cli("klv", MOUNTAIN / "flight.klv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = eoloc_cli("map", "--fixes", tmp_path / "eoloc-out" / "klv" / "fixes.geojson", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = eoloc_cli("compensate", "simulate", "--help")
+    assert "[default:eoloc-out/compensate-simulate]" in "".join(r.stdout.split())  # click wraps the help
+    out = tmp_path / "eoloc-out"
+    assert (out / "map" / "map.html").is_file()
+    located = _statuses(out / "locate" / "fixes.csv")
+    vmti = _statuses(out / "klv" / "fixes.csv")
+    assert len(located) == 91 and len(vmti) == 108  # each command's own fixes, neither overwritten
+
+
+def test_50_5_a_repeated_dem_is_tiles_of_one_dem_in_serve_too(tmp_path):
+    """`eoloc serve --dem WEST --dem EAST` (two tiles) serves one DEM, named after the first file,
+    as --dem means on every command; a ray that lands on the second tile is located on it, to the
+    library's answer on the whole DEM."""
+    import httpx
+    import numpy as np
+    import rasterio
+    from rasterio.windows import Window
+
+    from eoloc import OnDEM, Pose
+    from eoloc.io.config import load_config
+    from eoloc.terrain import open_dem
+    from served import eoloc_serve
+
+    whole = MOUNTAIN / "longs_peak_srtmgl3.tif"
+    with rasterio.open(whole) as src:
+        half = src.width // 2
+        parts = {}
+        for name, win in (("west", Window(0, 0, half + 1, src.height)),
+                          ("east", Window(half, 0, src.width - half, src.height))):
+            profile = {**src.profile, "width": win.width, "height": win.height,
+                       "transform": src.window_transform(win)}
+            parts[name] = tmp_path / f"{name}.tif"
+            with rasterio.open(parts[name], "w", **profile) as dst:
+                dst.write(src.read(1, window=win), 1)
+    cfg = load_config(MOUNTAIN / "camera.toml")
+    pose = {"lat_deg": 40.25, "lon_deg": -105.56, "h_m": 6000.0, "yaw_deg": 0.0, "pitch_deg": 0.0,
+            "roll_deg": 0.0, "gimbal_deg": [270.0, -60.0]}  # over the east half, looking down to the west
+    with eoloc_serve("--config", str(MOUNTAIN / "camera.toml"), "--dem", str(parts["west"]),
+                     "--dem", str(parts["east"])) as url:
+        health = httpx.get(url + "/v1/health").json()
+        assert health["dems"] == ["west"]
+        fix = httpx.post(url + "/v1/locate", json={"pose": pose, "stop": {"dem": "west"}}).json()["fixes"][0]
+    ref = OnDEM(open_dem(whole)).locate(cfg.sensor(), Pose(**{**pose, "gimbal_deg": tuple(pose["gimbal_deg"])}))
+    assert fix["status"] == "OK" and int(ref.status) == 0
+    assert fix["lon_deg"] > -105.6254  # on the east tile
+    assert np.hypot((fix["lat_deg"] - float(ref.lat_deg)) * 111e3, (fix["lon_deg"] - float(ref.lon_deg)) * 85e3) < 0.01

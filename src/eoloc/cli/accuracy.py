@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from ..result import RANGE_FROM_FILES
 from .common import load_config, open_dem, progress, stop_rule, working
 from .main import console, err_console, report_issues
 from .options import (
@@ -24,6 +25,8 @@ same chain as real fixes, and report the scatter per target.
 eoloc accuracy CONFIG.toml            the config's [accuracy] section (pose, stop rule, budget)
 eoloc accuracy --scenario s13         built-in: s13 (Sun et al. 2013, Table 1), q-ellipsoid, q-dem
                                       (Qiao et al., Table 1)
+  --range R, --target-height H or --dem F replace the scenario's stop rule; the config's DEM
+  files are relative to it, read with its dem_vertical and dem_crs (or --dem-crs).
   Prints per target: sigma of lat/lon/h, bias and sigma east/north/up (m), CEP50 (empirical and
   parametric bivariate normal), CE90, LE90, DRMS (a radial RMS, not a CEP); then the sensitivity
   of each source alone (mu = sigma_out / sigma_in, as Sun et al. define it). Writes accuracy.csv,
@@ -87,7 +90,11 @@ def accuracy(inputs, config_path, range_opt, target_height, dem_paths, vertical,
     if len(inputs) > 2 or config_path is not None:
         raise click.UsageError("give CONFIG.toml (a scenario), or TELEMETRY DETECTIONS --config CAMERA.toml (a flight)")
     config_path = inputs[0] if inputs else None
-    scn, n, seed = scenario_from(config_path, scenario, samples, seed)
+    given = any(x is not None for x in (range_opt, target_height)) or bool(dem_paths)
+    rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs)) if given else None
+    if rule == RANGE_FROM_FILES:
+        raise click.UsageError("--range needs a value (metres) for a scenario: there are no files to take it from")
+    scn, n, seed = scenario_from(config_path, scenario, samples, seed, rule=rule, dem_crs=dem_crs)
     total = n + (len(scn.budget) * sensitivity_samples if sensitivity else 0)
     with mapper(dask_address) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)

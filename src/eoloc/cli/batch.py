@@ -39,7 +39,7 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
 
 @click.command(help=BATCH_HELP)
 @click.argument("patterns", nargs=-1, required=True)
-@out_option("the datasets", default="eoloc-batch")
+@out_option("the datasets")
 @dem_options("Terrain for every file: DEM file(s); repeat for several tiles.")
 @config_option(required=False, help_text="TOML: the camera (needed for telemetry CSVs), [installation] and "
                                          "[accuracy.budget] (uncertainty columns).")

@@ -68,7 +68,7 @@ def compensate() -> None:
 @click.option("--looks", type=click.IntRange(10, 100_000), default=400, show_default=True,
               help="Observations per flight.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the flights and their errors.")
-@out_option("train.csv, test.csv and dem.tif", default="eoloc-cal")
+@out_option("train.csv, test.csv and dem.tif")
 def simulate(config_path, flights, test_flights, looks, seed, out_dir) -> None:
     from ..accuracy.calflight import InstallationErrors, calibration_flights
     from ..io.raster import write_dem

@@ -8,14 +8,14 @@ from pathlib import Path
 import click
 
 from .main import console
+from .options import out_option
 
 
 @click.command(help="Run the bundled example: a short flight over static targets, located by laser range "
                     "and on the ellipsoid, compared with the known truth; a mountain flight on a real DEM; the "
                     "same flight as a MISB KLV stream; learned compensation; an orthorectified frame; and the "
                     "Sun et al. (2013) reference case.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="eoloc-demo", show_default=True,
-              help="Folder for the outputs (CSV, GeoJSON, KML, CoT, the map, GeoTIFF).")
+@out_option("the outputs (CSV, GeoJSON, KML, CoT, the map, GeoTIFF)")
 def demo(out_dir) -> None:
     from .walkthrough import run_demo
 

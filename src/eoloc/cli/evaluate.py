@@ -75,7 +75,7 @@ def _columns(text: str | None, option: str) -> tuple[str, ...] | None:
 @evaluation_options
 @click.option("--plots/--no-plots", default=True, show_default=True, help="Write the PNGs.")
 @json_option("Print the evaluation as one JSON document on stdout (tables and notes go to stderr).")
-@out_option("evaluation_points.csv, evaluation_summary.csv, evaluation.json and the PNGs", default="eoloc-evaluate")
+@out_option("evaluation_points.csv, evaluation_summary.csv, evaluation.json and the PNGs")
 def evaluate(fixes, truth_path, match, max_distance, fix_columns, truth_columns, fix_id, truth_id, group, factors,
              config_path, n_boot, level, seed, cooks_threshold, plots, as_json, out_dir) -> None:
     from ..io.export import json_safe

@@ -10,16 +10,19 @@ import click
 from ..errors import InputError
 from .common import open_dem
 from .main import err_console
+from .options import dem_options, out_option
 
 MAP_HELP = """Write a self-contained HTML map (works offline) from eoloc outputs.
 
 \b
 eoloc map [--telemetry T.csv] [--fixes F.geojson ...] [--footprints P.geojson] [--tracks K.geojson]
-          [--dem D.tif] [-o map.html]
+          [--dem D.tif ...] [--out DIR | -o FILE.html]
   --telemetry draws the aircraft path (an eoloc telemetry CSV: lat_deg, lon_deg, h_m);
   --fixes draws targets, with their CEP50 as a circle in metres where the file has cep50_m;
   --footprints draws frame outlines; --tracks draws track LineStrings (eoloc track);
-  --dem lays a hillshade of the terrain underneath; --tiles adds web tiles (needs a network).
+  --dem lays a hillshade of the terrain underneath (tiles, --vertical, --geoid, --dem-crs as on
+  every command); --tiles adds web tiles (needs a network).
+  Writes DIR/map.html (--out, as every command: default eoloc-out/map), or the file -o names.
 """
 
 
@@ -28,12 +31,14 @@ eoloc map [--telemetry T.csv] [--fixes F.geojson ...] [--footprints P.geojson] [
 @click.option("--fixes", multiple=True, type=click.Path(dir_okay=False), help="Fixes GeoJSON (repeatable).")
 @click.option("--footprints", multiple=True, type=click.Path(dir_okay=False), help="Footprints GeoJSON.")
 @click.option("--tracks", multiple=True, type=click.Path(dir_okay=False), help="Tracks GeoJSON.")
-@click.option("--dem", "dem_paths", multiple=True, type=click.Path(dir_okay=False), help="DEM for a hillshade.")
+@dem_options("DEM file(s) for a hillshade; repeat for tiles.")
 @click.option("--tiles", default=None, help="Web map tiles (e.g. OpenStreetMap; needs a network).")
-@click.option("-o", "--output", default="map.html", show_default=True, type=click.Path(dir_okay=False),
-              help="The HTML file to write.")
+@out_option("map.html")
+@click.option("-o", "--output", default=None, type=click.Path(dir_okay=False),
+              help="The HTML file to write, instead of DIR/map.html.")
 @click.option("--title", default="eoloc", show_default=True, help="Title of the page.")
-def map_command(telemetry, fixes, footprints, tracks, dem_paths, tiles, output, title) -> None:
+def map_command(telemetry, fixes, footprints, tracks, dem_paths, vertical, geoid, dem_crs, tiles, out_dir, output,
+                title) -> None:
     from ..io.mapview import drawable, write_map
 
     aircraft = None
@@ -42,7 +47,10 @@ def map_command(telemetry, fixes, footprints, tracks, dem_paths, tiles, output, 
         from ..jobs.klvframes import aircraft_feature
 
         aircraft = [aircraft_feature(read_telemetry(telemetry))]
-    dem = open_dem(dem_paths, "egm96", None, None)
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    if output is None:
+        output = Path(out_dir) / "map.html"
+        output.parent.mkdir(parents=True, exist_ok=True)
     layers = dict(targets=_features(fixes), footprints=_features(footprints), tracks=_features(tracks))
     if not drawable(aircraft, *layers.values()):
         raise InputError("nothing to draw: give --telemetry, --fixes, --footprints or --tracks files that have located "

@@ -174,8 +174,36 @@ def with_flight_log(telemetry, flight_log):
     return WithFlightLog(str(telemetry), str(flight_log))
 
 
-def out_option(what: str, default: str = "eoloc-out"):
-    return click.option("--out", "out_dir", type=click.Path(file_okay=False), default=default, show_default=True,
+#: Where a command writes when --out is not given: one folder per command under this one, so
+#: that `eoloc locate` and `eoloc klv` (both write fixes.csv) never overwrite each other.
+OUT_ROOT = "eoloc-out"
+
+
+def default_out(ctx: click.Context) -> str:
+    """The default --out of the command ``ctx`` runs: eoloc-out/COMMAND (eoloc-out/compensate-train
+    for a subcommand)."""
+    return f"{OUT_ROOT}/" + "-".join(ctx.command_path.split()[1:] or [ctx.info_name or "eoloc"])
+
+
+def _out_default(ctx: click.Context, param: click.Parameter, value):
+    return default_out(ctx) if value is None else value
+
+
+class OutOption(click.Option):
+    """--out: its help shows the command's own default folder (eoloc-out/locate, ...)."""
+
+    def get_help_record(self, ctx: click.Context):
+        self.default = default_out(ctx)  # for the help only: the value still comes from the callback
+        try:
+            return super().get_help_record(ctx)
+        finally:
+            self.default = None
+
+
+def out_option(what: str):
+    """--out DIR, the same on every command: a folder (created if needed), by default eoloc-out/COMMAND."""
+    return click.option("--out", "out_dir", cls=OutOption, type=click.Path(file_okay=False), default=None,
+                        callback=_out_default, show_default=True, metavar="DIR",
                         help=f"Folder for {what} (created if needed).")
 
 

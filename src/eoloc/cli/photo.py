@@ -57,7 +57,7 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
 @config_option(required=False, help_text="TOML with [accuracy.budget]: each fix's uncertainty (the camera comes "
                                          "from the photos).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
-@out_option("photo_fixes.*", default=None)
+@out_option("photo_fixes.*")
 @formats_option()
 @tak_options
 def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, config_path, as_json, out_dir, formats,
@@ -105,11 +105,10 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
             table.add_row(click.format_filename(r["file"], shorten=True), f"{r['u']:g}, {r['v']:g}", where,
                           f"{r['h']:.2f}" if r["h"] is not None else "", r["source"], r["status"], vs)
         console.print(table)
-    if out_dir is not None:
-        from ..io.writers import write_layer
+    from ..io.writers import write_layer
 
-        written = write_layer(out_dir, "photo_fixes", [r for r in job.rows if "lat" in r], formats)
-        err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
+    written = write_layer(out_dir, "photo_fixes", [r for r in job.rows if "lat" in r], formats)
+    err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
     if cot_urls:
         send_photo_fixes(job.rows, cot_urls, tak_tls, tak_protocol, pixels_given=bool(pixels))
     if not any(r.get("status") == "OK" for r in job.rows):

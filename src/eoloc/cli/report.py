@@ -44,7 +44,7 @@ eoloc report OBSERVATIONS.csv --config CAMERA.toml [--dem F | --target-height H]
                    "skip the calibration.")
 @click.option("--compensation", is_flag=True, help="Also cross-validate the learned compensation by flight.")
 @evaluation_options
-@out_option("report.html, report_points.csv and report_summary.csv", default="eoloc-report")
+@out_option("report.html, report_points.csv and report_summary.csv")
 def report(observations, config_path, dem_paths, vertical, geoid, dem_crs, target_height, estimate, compensation,
            n_boot, level, seed, cooks_threshold, out_dir) -> None:
     from ..errors import InputError

@@ -33,8 +33,9 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
   once decompressed: 413 (checked before decoding); a request that has not arrived whole after
   --request-timeout: 408 and cut; an answer left unread for --send-timeout: cut; Host headers
   other than this server's names (loopback, --host, --allow-host): 400.
-  --dem NAME=PATH (repeatable) makes the DEM usable as {"dem": NAME}; --dem PATH names it by its
-  file name without the extension; the same NAME repeated joins tiles into one DEM.
+  --dem PATH (repeatable) as on every command: the tiles of one DEM, named by the first file's
+  name without the extension; --dem NAME=PATH names the DEM, so that several can be served (the
+  same NAME repeated joins tiles into one DEM); requests ask for it as {"dem": NAME}.
   --player DIR     serves `eoloc video`'s output folder DIR at /video/ (/ leads to its
                    player.html): the page then locates a click in the video through /v1/locate,
                    exactly. `eoloc video` prints the serve line that matches its own DEM and config.
@@ -45,7 +46,7 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on (0.0.0.0: every one).")
 @click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True, help="TCP port (0: any free).")
 @config_option(required=False, help_text="TOML: the default camera, gimbal, installation and [accuracy.budget].")
-@dem_options("A DEM the requests can name: NAME=PATH or PATH; repeat for several.")
+@dem_options("DEM tiles the requests can stop on: PATH (repeat for tiles of one DEM) or NAME=PATH (several DEMs).")
 @click.option("--max-body-mb", type=click.FloatRange(0.001), default=8.0, show_default=True,
               help="Largest request body accepted, MB.")
 @click.option("--player", "player_dir", type=click.Path(file_okay=False, exists=True), default=None,
@@ -64,8 +65,9 @@ def serve(host, port, config_path, dem_paths, vertical, geoid, dem_crs, max_body
     from ..terrain import open_dem
 
     tiles: dict[str, list[str]] = {}
+    plain = [item for item in dem_paths if "=" not in item]  # as everywhere: tiles of one DEM
     for item in dem_paths:
-        name, _, path = item.rpartition("=") if "=" in item else (Path(item).stem, "", item)
+        name, _, path = item.rpartition("=") if "=" in item else (Path(plain[0]).stem, "", item)
         if not name:
             fail(f"--dem {item!r}: give the DEM a name (NAME=PATH)")
         tiles.setdefault(name, []).append(path)

@@ -194,6 +194,7 @@ class AccuracyConfig(_Strict):
     height_m: float | None = None
     dem: tuple[str, ...] | None = None
     dem_vertical: Literal["egm96", "egm2008", "ellipsoid"] = "egm96"
+    dem_crs: str | None = None  # the CRS of a DEM file that carries none (ESRI ASCII), as --dem-crs
     pixels: tuple[tuple[float, float], ...] | None = None
     velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     samples: int = Field(100_000, ge=2)

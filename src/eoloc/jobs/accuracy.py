@@ -4,7 +4,7 @@ Monte Carlo here or on Dask; and the accuracy of a flight flown (telemetry + det
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -21,8 +21,10 @@ class AccuracyJob:
     sensitivity: list = field(default_factory=list)
 
 
-def scenario_from(config_path, scenario, samples, seed, default_n=None):
-    """(scenario, samples, seed) from a config's [accuracy] section or a built-in scenario."""
+def scenario_from(config_path, scenario, samples, seed, default_n=None, *, rule=None, dem_crs=None):
+    """(scenario, samples, seed) from a config's [accuracy] section or a built-in scenario;
+    ``rule`` replaces the scenario's stop rule, ``dem_crs`` is the CRS of the config's DEM files
+    that carry none (:func:`eoloc.jobs.setup.accuracy_scenario`)."""
     from ..accuracy import SCENARIOS
     from ..io.config import load_config
     from .setup import accuracy_scenario
@@ -31,9 +33,10 @@ def scenario_from(config_path, scenario, samples, seed, default_n=None):
         raise InputError("give a CONFIG file with an [accuracy] section, or --scenario s13|q-ellipsoid|q-dem")
     if scenario is not None:
         n = samples or default_n or (1_000_000 if scenario == "s13" else 5000)
-        return SCENARIOS[scenario](), n, (0 if seed is None else seed)
+        scn = SCENARIOS[scenario]()
+        return (scn if rule is None else replace(scn, rule=rule)), n, (0 if seed is None else seed)
     cfg = load_config(config_path)
-    scn = accuracy_scenario(cfg, config_path)
+    scn = accuracy_scenario(cfg, config_path, rule=rule, dem_crs=dem_crs)
     return scn, samples or default_n or cfg.accuracy.samples, (cfg.accuracy.seed if seed is None else seed)
 
 

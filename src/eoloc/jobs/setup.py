@@ -10,8 +10,10 @@ from ..errors import ConfigError, ModelFileError
 from ..io.config import Config
 
 
-def accuracy_scenario(cfg: Config, path: str | Path):
-    """The Monte Carlo scenario of a config's [accuracy] section (DEM paths relative to the file)."""
+def accuracy_scenario(cfg: Config, path: str | Path, *, rule=None, dem_crs: str | None = None):
+    """The Monte Carlo scenario of a config's [accuracy] section (DEM paths relative to the file);
+    ``rule``: a stop rule replacing the config's (the command line's); ``dem_crs``: the CRS of
+    the config's DEM files that carry none, replacing its ``dem_crs``."""
     from ..accuracy.budget import ErrorBudget
     from ..accuracy.montecarlo import Scenario
     from ..rules import AtHeight, AtRange, OnDEM
@@ -22,14 +24,16 @@ def accuracy_scenario(cfg: Config, path: str | Path):
     if a is None:
         raise ConfigError(f"config file {str(path)!r} has no [accuracy] section (pose, stop rule, budget); "
                           "see the README, or use --scenario for a built-in one")
-    missing = [k for k in ("pose", "stop") if getattr(a, k) is None]
+    missing = [k for k in ("pose", "stop") if getattr(a, k) is None and not (k == "stop" and rule is not None)]
     if missing:
         raise ConfigError(f"config file {str(path)!r}: [accuracy] needs {' and '.join(missing)} for a Monte Carlo "
                           "run (the nominal observation); see the README")
     p = a.pose
     # the config's `stop` key names the rule; its value comes from the key of the same meaning
-    rule = {"range": lambda: AtRange(a.range_m), "height": lambda: AtHeight(a.height_m),
-            "dem": lambda: OnDEM(open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical))}[a.stop]()
+    if rule is None:
+        rule = {"range": lambda: AtRange(a.range_m), "height": lambda: AtHeight(a.height_m),
+                "dem": lambda: OnDEM(open_dem([Path(path).parent / d for d in a.dem], vertical=a.dem_vertical,
+                                              assume_crs=dem_crs or a.dem_crs))}[a.stop]()
     return Scenario(Path(path).stem, cfg.sensor(),
                     Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
                     ErrorBudget.from_mapping(a.budget), rule,

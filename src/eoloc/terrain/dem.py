@@ -164,7 +164,8 @@ def open_dem(paths: str | Path | Sequence[str | Path], *, vertical: str = "egm96
                 if assume_crs is None:
                     raise DEMError(f"DEM file {str(p)!r} has no coordinate reference system (an ESRI ASCII grid "
                                    "without .prj?); if it is lon/lat, say so with --dem-crs EPSG:4326 "
-                                   "(Python: open_dem(..., assume_crs='EPSG:4326'))")
+                                   "(a config's [accuracy]: dem_crs = \"EPSG:4326\"; Python: "
+                                   "open_dem(..., assume_crs='EPSG:4326'))")
         crs = datasets[0].crs or CRS.from_user_input(assume_crs)
         nodata = datasets[0].nodata
         if len(datasets) == 1:
