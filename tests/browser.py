@@ -10,7 +10,12 @@ CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-qui
                "--disable-dev-shm-usage")
 
 
-def chromium():
+#: No network but this machine: every host other than loopback goes to a proxy that is not there
+#: (Chromium reaches loopback directly whatever the proxy), as on a ground station offline.
+OFFLINE_ARGS = ("--proxy-server=http://127.0.0.1:9",)
+
+
+def chromium(offline: bool = False):
     from selenium import webdriver
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
@@ -18,7 +23,7 @@ def chromium():
     browser, driver = shutil.which("chromium"), shutil.which("chromedriver")
     assert browser and driver, "the map test needs Debian's chromium and chromium-driver: `make test` installs them"
     opts = Options()
-    for a in CHROME_ARGS:
+    for a in CHROME_ARGS + (OFFLINE_ARGS if offline else ()):
         opts.add_argument(a)
     opts.binary_location = browser
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})

@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import eoloc
 
 DEMO = Path(eoloc.__file__).parent / "data" / "demo"
@@ -331,3 +333,43 @@ def test_50_5_a_repeated_dem_is_tiles_of_one_dem_in_serve_too(tmp_path):
     assert fix["status"] == "OK" and int(ref.status) == 0
     assert fix["lon_deg"] > -105.6254  # on the east tile
     assert np.hypot((fix["lat_deg"] - float(ref.lat_deg)) * 111e3, (fix["lon_deg"] - float(ref.lon_deg)) * 85e3) < 0.01
+
+
+@pytest.mark.browser
+def test_50_3_the_api_docs_render_their_operations_offline(tmp_path):
+    """/docs (Swagger UI) in headless Chromium with no network beyond loopback: every
+    operation of the API is drawn, every file the pages load comes from the eoloc server itself,
+    and the browser logs no error."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from browser import chromium
+    from served import eoloc_serve
+
+    operations = {("post", "/v1/locate"), ("post", "/v1/locate/arrow"), ("get", "/v1/health")}
+    with eoloc_serve("--config", str(MOUNTAIN / "camera.toml")) as url:
+        page = httpx_get(url + "/docs")
+        assert "cdn" not in page.lower() and "https://" not in page  # nothing to fetch from elsewhere
+        d = chromium(offline=True)
+        try:
+            d.get(url + "/docs")
+            WebDriverWait(d, 60).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, ".opblock")) >= 3)
+            drawn = {(e.find_element(By.CSS_SELECTOR, ".opblock-summary-method").text.lower(),
+                      e.find_element(By.CSS_SELECTOR, ".opblock-summary-path").get_attribute("data-path"))
+                     for e in d.find_elements(By.CSS_SELECTOR, ".opblock")}
+            assert operations <= drawn, drawn
+            loaded = d.execute_script("return performance.getEntriesByType('resource').map(e => e.name)")
+            assert loaded and all(u.startswith(url) for u in loaded), loaded
+            errors = [e for e in d.get_log("browser") if e["level"] == "SEVERE"]
+            assert not errors, errors
+            assert httpx_get(url + "/redoc", 404) is not None  # no ReDoc: its page fetches a badge from a CDN
+        finally:
+            d.quit()
+
+
+def httpx_get(url: str, status: int = 200) -> str:
+    import httpx
+
+    r = httpx.get(url)
+    assert r.status_code == status, (url, r.status_code)
+    return r.text

@@ -36,6 +36,7 @@ from starlette.requests import Request  # at module level: FastAPI resolves the 
 from ..errors import EolocError
 from ..io.config import CameraConfig
 from ..kernels.backend import load_compiled
+from .docs import add_offline_docs
 
 MAX_BODY_BYTES = 8 * 1024 * 1024
 MAX_PIXELS = 100_000  # per request, over all observations
@@ -394,9 +395,11 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
         if beat is not None:
             beat.cancel()
 
-    app = FastAPI(title="eoloc", version=__version__, lifespan=lifespan,
+    app = FastAPI(title="eoloc", version=__version__, lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Geolocation of targets seen by airborne EO/IR sensors: pose + gimbal + camera + pixel "
                               "+ a stop rule -> WGS-84 points with a status each (see the README's conventions).")
+
+    add_offline_docs(app)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
