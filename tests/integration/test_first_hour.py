@@ -373,3 +373,40 @@ def httpx_get(url: str, status: int = 200) -> str:
     r = httpx.get(url)
     assert r.status_code == status, (url, r.status_code)
     return r.text
+
+
+def test_50_8_a_bad_request_gets_one_problem_per_mistake_with_its_path():
+    """HTTP 422 bodies name what the client got wrong and where, once: a single observation
+    without its stop rule is "stop: Field required" (not the batch form's complaint about its
+    pose), invalid JSON is the body with the line and column, a batch's bad pixel its full path;
+    two mistakes, two problems; no model name of eoloc's in any of them."""
+    import httpx
+
+    from served import eoloc_serve
+
+    pose = {"lat_deg": 40.25, "lon_deg": -105.56, "h_m": 6000.0, "yaw_deg": 0.0, "pitch_deg": 0.0, "roll_deg": 0.0,
+            "gimbal_deg": [270.0, -60.0]}
+    stop = {"target_height_m": 3000.0}
+    cases = [
+        ({"pose": pose}, [("stop", "Field required")]),
+        ({"pose": {**pose, "lat_deg": "north"}, "stop": stop}, [("pose.lat_deg", "valid number")]),
+        ({"pose": {**pose, "h_m": None}, "pixels": [[1, 2, 3]]},
+         [("stop", "Field required"), ("pose.h_m", "valid number"), ("pixels.0", "")]),
+        ({"observations": [{"pose": pose, "stop": stop}, {"pose": pose, "stop": stop, "pixels": [[10, "x"]]}]},
+         [("observations.1.pixels.0.1", "valid number")]),
+        ({"pose": pose, "stop": {"target_height_m": 0, "range_m": 5}}, [("stop", "exactly one of")]),
+    ]
+    with eoloc_serve("--config", str(MOUNTAIN / "camera.toml")) as url:
+        for body, expected in cases:
+            r = httpx.post(url + "/v1/locate", json=body)
+            assert r.status_code == 422, body
+            problems = r.json()["problems"]
+            assert sorted(p["field"] for p in problems) == sorted(f for f, _ in expected), problems
+            for field, words in expected:
+                assert any(p["field"] == field and words in p["message"] for p in problems), (field, problems)
+            assert not any(name in str(problems) for name in ("BatchIn", "ObservationIn", "LocateIn")), problems
+        r = httpx.post(url + "/v1/locate", content=b'{"pose": {"lat_deg": 40,', headers={"content-type":
+                                                                                         "application/json"})
+        (p,) = r.json()["problems"]
+        assert r.status_code == 422 and p["field"] == "(body)" and "Invalid JSON" in p["message"]
+        assert "line 1 column 24" in p["message"]  # the body is 24 bytes: it ends there
