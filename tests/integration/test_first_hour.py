@@ -410,3 +410,30 @@ def test_50_8_a_bad_request_gets_one_problem_per_mistake_with_its_path():
         (p,) = r.json()["problems"]
         assert r.status_code == 422 and p["field"] == "(body)" and "Invalid JSON" in p["message"]
         assert "line 1 column 24" in p["message"]  # the body is 24 bytes: it ends there
+
+
+def test_50_6_training_on_fixes_of_one_oblique_band_trains_and_says_what_it_cannot_check(tmp_path):
+    """`compensate train` on fixes that all lie in one oblique band (here: one band 0–90°) trained
+    nothing before ("0 usable training fixes: at least 20 are needed", on 1 800 located fixes):
+    now the model is trained, the held-out-band check is skipped with the reason and what to do,
+    and the model is written into --out; the held-out-flights table is still there."""
+    from eoloc.accuracy.compensation import CompensationModel
+    from eoloc.io.telemetry import read_observations
+
+    cal = tmp_path / "cal"
+    r = eoloc_cli("compensate", "simulate", "--config", DEMO / "camera.toml", "--flights", 3, "--test-flights", 1,
+                  "--looks", 200, "--out", cal)
+    assert r.returncode == 0, r.stderr
+    n = len(read_observations(cal / "train.csv"))
+    args = ["compensate", "train", cal / "train.csv", "--config", DEMO / "camera.toml", "--dem", cal / "dem.tif",
+            "--vertical", "ellipsoid", "--out", tmp_path / "out"]
+    r = eoloc_cli(*args, "--bands", "0,90")
+    assert r.returncode == 0, r.stderr
+    err = " ".join(r.stderr.split())
+    assert "held-out oblique bands: not computed" in err and "lie in one oblique band (0–90°" in err
+    assert "wider spread of oblique angles" in err and "usable training fixes" not in err
+    assert "held-out flights" in r.stdout
+    model = CompensationModel.load(tmp_path / "out" / "compensation.json")  # into --out, not the working folder
+    assert model.info["n_samples"] <= n and model.info["cv_by_band"] == []
+    r = eoloc_cli(*args)  # the default bands: both checks
+    assert r.returncode == 0 and "held-out oblique bands (each band" in r.stdout

@@ -434,6 +434,11 @@ def fit(features: ErrorFeatures, errors_enu: ArrayLike, *, feature_set: str = "p
                              int(min_cell), meta)
 
 
+def oblique_band(oblique_deg: ArrayLike, edges=DEFAULT_BANDS) -> np.ndarray:
+    """The index of each oblique angle's band between ``edges`` (degrees)."""
+    return np.clip(np.searchsorted(edges, oblique_deg, side="right") - 1, 0, len(edges) - 2)
+
+
 def _folds(groups: np.ndarray | None, n: int, k: int = 5) -> list[np.ndarray]:
     """Boolean test masks: whole groups held out (up to k folds), else interleaved rows."""
     if groups is None or len(np.unique(groups)) < 2:
@@ -541,10 +546,19 @@ def cross_validate(features: ErrorFeatures, errors_enu: ArrayLike, groups: Array
         folds = _folds(g, e.shape[0])
     elif by == "band":
         g = None
-        bands = np.clip(np.searchsorted(oblique_edges, ob, side="right") - 1, 0, len(oblique_edges) - 2)
+        bands = oblique_band(ob, oblique_edges)
         folds = [bands == b for b in np.unique(bands)]
     else:
         raise ValueError(f"by={by!r}: use 'flight' or 'band'")
+    short = [int((~t).sum()) for t in folds if (~t).sum() < 20]
+    if short:
+        what = (f"holds out each oblique band in turn, but the {e.shape[0]} fixes lie in "
+                f"{len(folds)} band{'s' if len(folds) != 1 else ''} (oblique {np.min(ob):.1f}–{np.max(ob):.1f}°, "
+                f"band edges {', '.join(f'{x:g}' for x in oblique_edges)})" if by == "band" else
+                f"holds out whole flights, but the {e.shape[0]} fixes come from {len(np.unique(g))} flight(s)")
+        raise InputError(f"cross-validation by {by} {what}: holding one out leaves {min(short)} fixes to train on "
+                         "(at least 20 are needed); fly or simulate a wider spread of oblique angles"
+                         + (", or give finer --bands" if by == "band" else " and give each its flight id"))
     after: dict[str, np.ndarray] = {}
     for fs in feature_sets:
         out = np.full((e.shape[0], 2), np.nan)

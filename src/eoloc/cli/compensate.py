@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from .common import load_config, open_dem, progress, working
-from .main import console, err_console, fail, report_issues
+from .main import console, err_console, fail, report_issues, warn
 from .options import config_option, dem_options, json_option, out_option, target_height_option
 from .render import print_bands
 
@@ -145,9 +145,9 @@ def stop_options(fn):
 @click.option("--compare/--no-compare", default=False, show_default=True,
               help="Also cross-validate the other families (a gradient-boosted tree ensemble, the other feature "
                    "set): minutes instead of seconds.")
-@click.option("-o", "--model", "model_path", type=click.Path(dir_okay=False), default="compensation.json",
-              show_default=True, help="Model file to write.")
-@out_option("the PNG and the cross-validation CSV")
+@click.option("-o", "--model", "model_path", type=click.Path(dir_okay=False), default=None,
+              help="Model file to write (default: compensation.json in --out).")
+@out_option("compensation.json, the PNG and the cross-validation CSV")
 def train(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, feature_set, up, per_bin,
           height_bins, bands, compare, model_path, out_dir) -> None:
     from ..accuracy import compensation as C
@@ -164,28 +164,40 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
         keep = keep[sel]
     f, e, g = obs.features.take(keep), obs.errors_enu[keep], obs.groups[keep]
     sets = ("p", "p+bearing") if compare else (feature_set,)
+    bands_seen = np.unique(C.oblique_band(f.oblique_deg, edges))
     with progress() as bar:
         task = bar.add_task("cross-validating", total=3)
         cv_f = C.cross_validate(f, e, g, by="flight", feature_sets=sets, trees=compare, oblique_edges=edges)
         bar.advance(task)
-        cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
+        cv_b = None
+        if bands_seen.size > 1:
+            cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
         bar.advance(task)
         model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
                       info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
         bar.advance(task)
     n_flights = len(np.unique(g))
     print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
-    print_bands(cv_b.table(edges), "held-out oblique bands (each band predicted by a model that never saw it)")
+    band_rows = [] if cv_b is None else cv_b.table(edges)
+    if cv_b is None:
+        lo, hi = edges[bands_seen[0]], edges[bands_seen[0] + 1]
+        warn(f"held-out oblique bands: not computed: all {f.oblique_deg.size} fixes lie in one oblique band "
+             f"({lo:g}–{hi:g}°; theirs {np.min(f.oblique_deg):.1f}–{np.max(f.oblique_deg):.1f}°), so no band can be "
+             "predicted by a model that never saw it. The model is trained and used within that range only (fixes "
+             "outside it are flagged, column comp_flag); for a model that extrapolates, fly or simulate a wider "
+             "spread of oblique angles, or give finer --bands", "note")
+    else:
+        print_bands(band_rows, "held-out oblique bands (each band predicted by a model that never saw it)")
     out = Path(out_dir)
     png = plot_compensation(cv_f.oblique_deg, cv_f.before_en, {k: v for k, v in cv_f.after_en.items()
                                                                if k == feature_set},
                             cv_f.table(edges), out / "compensation_cv.png",
                             title="held-out flights: location error against oblique angle, before and after")
-    csv_path = _write_table(out / "compensation_cv.csv", cv_f.table(edges) + cv_b.table(edges),
-                            ["flight"] * len(cv_f.table(edges)) + ["band"] * len(cv_b.table(edges)))
-    info = {"cv_by_flight": _table_dict(cv_f.table(edges)), "cv_by_band": _table_dict(cv_b.table(edges))}
+    csv_path = _write_table(out / "compensation_cv.csv", cv_f.table(edges) + band_rows,
+                            ["flight"] * len(cv_f.table(edges)) + ["band"] * len(band_rows))
+    info = {"cv_by_flight": _table_dict(cv_f.table(edges)), "cv_by_band": _table_dict(band_rows)}
     model = dataclasses.replace(model, info={**model.info, **info})
-    path = model.save(model_path)
+    path = model.save(model_path if model_path is not None else out / "compensation.json")
     console.print(f"model: physical, features {feature_set}, ridge {model.ridge:g}, "
                     f"{model.info['n_samples']} samples, "
                     f"oblique {model.oblique_range[0]:.1f}–{model.oblique_range[1]:.1f}°, height "
