@@ -437,3 +437,49 @@ def test_50_6_training_on_fixes_of_one_oblique_band_trains_and_says_what_it_cann
     assert model.info["n_samples"] <= n and model.info["cv_by_band"] == []
     r = eoloc_cli(*args)  # the default bands: both checks
     assert r.returncode == 0 and "held-out oblique bands (each band" in r.stdout
+
+
+def test_50_7_telemetry_and_gcps_join_into_the_observations_report_and_compensate_take(tmp_path):
+    """The two vocabularies meet: a simulated calibration flight's observations split (here, with
+    the csv module) into what a user has for `eoloc calibrate` — a telemetry file and a GCP file
+    per flight — and joined back by `eoloc join`: every row, pose and point equal to the original
+    ones, flights named; the joined file then feeds `eoloc report`, and a sighting with no
+    telemetry record is named by file and line."""
+    cal = tmp_path / "cal"
+    r = eoloc_cli("compensate", "simulate", "--config", DEMO / "camera.toml", "--flights", 2, "--test-flights", 1,
+                  "--looks", 60, "--out", cal)
+    assert r.returncode == 0, r.stderr
+    with (cal / "train.csv").open(newline="", encoding="utf-8") as fh:
+        original = list(csv.DictReader(fh))
+    pose = ["lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "gimbal1_deg", "gimbal2_deg"]
+    args = []
+    for flight in sorted({row["flight"] for row in original}):
+        rows = [row for row in original if row["flight"] == flight]
+        tel, gcp = tmp_path / f"{flight}.csv", tmp_path / f"{flight}_gcps.csv"
+        with tel.open("w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["frame", *pose])
+            w.writerows([i, *(row[k] for k in pose)] for i, row in enumerate(rows))
+        with gcp.open("w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["frame", "gcp_id", "u_px", "v_px", "lat_deg", "lon_deg", "h_m"])
+            w.writerows([i, row["gcp_id"] or f"P{i}", row["u_px"], row["v_px"], row["gcp_lat_deg"],
+                         row["gcp_lon_deg"], row["gcp_h_m"]] for i, row in enumerate(rows))
+            w.writerow([len(rows) + 5, "LOST", 1, 1, 0, 0, 0])  # a sighting no record belongs to
+        args += [tel, gcp]
+    r = eoloc_cli("join", *args, "--out", tmp_path / "joined")
+    assert r.returncode == 0, r.stderr
+    assert "no telemetry record for frame" in r.stderr and "_gcps.csv:" in r.stderr
+    with (tmp_path / "joined" / "observations.csv").open(newline="", encoding="utf-8") as fh:
+        joined = list(csv.DictReader(fh))
+    assert len(joined) == len(original)
+    for a, b in zip(original, joined, strict=True):
+        assert a["flight"] == b["flight"]
+        for k in pose:
+            assert abs(float(a[k]) - float(b[k])) < 1e-6, (k, a[k], b[k])
+        for k in ("u_px", "v_px", "gcp_lat_deg", "gcp_lon_deg", "gcp_h_m"):
+            assert abs(float(a[k]) - float(b[k])) < 1e-6, (k, a[k], b[k])
+    r = eoloc_cli("report", tmp_path / "joined" / "observations.csv", "--config", DEMO / "camera.toml",
+                  "--dem", cal / "dem.tif", "--vertical", "ellipsoid", "--out", tmp_path / "report")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "report" / "report.html").is_file()
