@@ -483,3 +483,179 @@ def test_50_7_telemetry_and_gcps_join_into_the_observations_report_and_compensat
                   "--dem", cal / "dem.tif", "--vertical", "ellipsoid", "--out", tmp_path / "report")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "report" / "report.html").is_file()
+
+
+def _tile_colour(x: int, y: int) -> tuple[int, int, int]:
+    """The test basemap's colour of tile (x, y): neighbours differ by far more than any blending."""
+    return (40 + (x * 67) % 180, 40 + (y * 97) % 180, 200 - (x + y) % 2 * 120)
+
+
+def _write_tiles(folder: Path, bounds, zooms) -> None:
+    """A tile folder {z}/{x}/{y}.png over ``bounds`` (west, south, east, north): each tile one
+    flat colour of its own, drawn with Pillow (nothing of eoloc's)."""
+    import mercantile
+    from PIL import Image
+
+    for t in mercantile.tiles(*bounds, zooms=zooms):
+        p = folder / str(t.z) / str(t.x) / f"{t.y}.png"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (256, 256), _tile_colour(t.x, t.y)).save(p)
+
+
+def _mbtiles(folder: Path, path: Path) -> Path:
+    """The same tiles as an MBTiles file (TMS rows, as the format says), written with sqlite3."""
+    import sqlite3
+
+    db = sqlite3.connect(path)
+    db.executescript("CREATE TABLE metadata (name text, value text);"
+                     "CREATE TABLE tiles (zoom_level integer, tile_column integer, tile_row integer, tile_data blob);")
+    db.executemany("INSERT INTO metadata VALUES (?, ?)", [("name", "test"), ("format", "png"),
+                                                          ("attribution", "<b onmouseover=alert(1)>test tiles</b>")])
+    for p in folder.glob("*/*/*.png"):
+        z, x, y = int(p.parent.parent.name), int(p.parent.name), int(p.stem)
+        db.execute("INSERT INTO tiles VALUES (?, ?, ?, ?)", (z, x, (1 << z) - 1 - y, p.read_bytes()))
+    db.commit()
+    db.close()
+    return path
+
+
+def _screen(page: Path, wait_tiles: bool):
+    """The page in headless Chromium with no network: (screenshot as an RGB array, the map's zoom,
+    a function giving the container pixel of a lat/lon, the driver)."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from browser import chromium
+
+    d = chromium(offline=True)
+    d.set_window_size(1200, 900)
+    d.get(page.as_uri())
+    find = "var m = Object.values(window).find(v => v instanceof L.Map);"
+    WebDriverWait(d, 60).until(lambda d: d.execute_script(find + "return !!m;"))
+    if wait_tiles:
+        WebDriverWait(d, 60).until(lambda d: d.execute_script(
+            "var t = document.querySelectorAll('img.leaflet-tile');"
+            "return t.length > 0 && [...t].every(i => i.complete && i.classList.contains('leaflet-tile-loaded'));"))
+    d.execute_script("return new Promise(r => setTimeout(r, 500));")  # fade-in of the tiles (Leaflet: 200 ms)
+    zoom = d.execute_script(find + "return m.getZoom();")
+    img = np.asarray(Image.open(io.BytesIO(d.get_screenshot_as_png())).convert("RGB")).astype(int)
+
+    def pixel(lat: float, lon: float):
+        return d.execute_script(find + "var p = m.latLngToContainerPoint([arguments[0], arguments[1]]);"
+                                "var r = m.getContainer().getBoundingClientRect(); return [p.x + r.left, p.y + r.top];",
+                                lat, lon)
+
+    return img, zoom, pixel, d
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("kind", ["folder", "mbtiles"])
+def test_50_10_an_offline_basemap_shows_its_land_under_the_footprints(tmp_path, kind):
+    """`eoloc map --basemap TILES` (a tile folder, or the same tiles as MBTiles) opened with no
+    network: the screenshot shows, under the flight's footprints, the colour of the tile that
+    covers each place (tile by tile, as mercantile places them) wherever no footprint outline
+    passes (39 footprints: outlines, no fill hiding the land); the MBTiles attribution is shown as
+    text, not run as HTML."""
+    import json
+
+    import mercantile
+    import numpy as np
+    import shapely
+
+    r = eoloc_cli("klv", MOUNTAIN / "flight.klv", "--dem", MOUNTAIN / "longs_peak_srtmgl3.tif", "--no-map",
+                  "--out", tmp_path / "klv")
+    assert r.returncode == 0, r.stderr
+    prints = json.loads((tmp_path / "klv" / "footprints.geojson").read_text())["features"]
+    polys = [shapely.geometry.shape(f["geometry"]) for f in prints if f.get("geometry")]
+    union = shapely.union_all(polys)
+    outlines = shapely.union_all([p.boundary for p in polys])
+    w, s, e, n = union.bounds
+    tiles = tmp_path / "tiles"
+    _write_tiles(tiles, (w - 0.2, s - 0.2, e + 0.2, n + 0.2), [8, 9, 10, 11, 12])
+    basemap = tiles if kind == "folder" else _mbtiles(tiles, tmp_path / "tiles.mbtiles")
+    page = tmp_path / "map.html"
+    r = eoloc_cli("map", "--footprints", tmp_path / "klv" / "footprints.geojson", "--basemap", basemap, "-o", page)
+    assert r.returncode == 0, r.stderr
+    img, zoom, pixel, d = _screen(page, wait_tiles=True)
+    try:
+        attribution = d.execute_script("return document.querySelector('.leaflet-control-attribution').textContent")
+        alerts = d.execute_script("return document.querySelectorAll('.leaflet-control-attribution b').length")
+        if kind == "mbtiles":
+            assert "<b onmouseover=alert(1)>test tiles</b>" in attribution and alerts == 0
+        z = min(int(zoom), 12)
+        rng = np.random.default_rng(5)
+        checked = 0
+        for _ in range(400):
+            lon, lat = rng.uniform(w, e), rng.uniform(s, n)
+            point = shapely.Point(lon, lat)
+            if not union.contains(point):
+                continue
+            t = mercantile.tile(lon, lat, z)
+            b = mercantile.xy_bounds(t)
+            x, y = mercantile.xy(lon, lat)
+            fx, fy = (x - b.left) / (b.right - b.left), (b.top - y) / (b.top - b.bottom)
+            if min(fx, fy, 1 - fx, 1 - fy) < 0.03:  # on a tile's edge: either colour
+                continue
+            px_per_deg = 256 * 2 ** zoom / 360  # along a parallel; more along a meridian
+            if outlines.distance(point) * px_per_deg < 4:  # an outline passes there
+                continue
+            px, py = (round(c) for c in pixel(lat, lon))
+            if not (0 <= px < img.shape[1] and 0 <= py < img.shape[0]):
+                continue
+            expected = np.array(_tile_colour(t.x, t.y))
+            assert np.abs(img[py, px] - expected).max() <= 6, (lat, lon, img[py, px], expected)
+            checked += 1
+    finally:
+        d.quit()
+    assert checked >= 30
+
+
+@pytest.mark.browser
+def test_50_10_the_world_layer_the_time_slider_and_many_footprints(tmp_path):
+    """Without tiles the bundled world layer is under the flight (Colorado: land colour, not the
+    sea's or a grey canvas); the time slider shows the footprints up to its time, or that time
+    only; 80 footprints are drawn as unfilled outlines."""
+    import json
+
+    import numpy as np
+
+    r = eoloc_cli("klv", MOUNTAIN / "flight.klv", "--dem", MOUNTAIN / "longs_peak_srtmgl3.tif", "--out",
+                  tmp_path / "klv")
+    assert r.returncode == 0, r.stderr
+    page = tmp_path / "klv" / "map.html"
+    prints = json.loads((tmp_path / "klv" / "footprints.geojson").read_text())["features"]
+    times = sorted({f["properties"]["time_s"] for f in prints if f.get("geometry")})
+    img, zoom, pixel, d = _screen(page, wait_tiles=False)
+    try:
+        lat, lon = 40.31 + 0.02, -105.70 - 0.02  # beyond the DEM's hillshade, still in Colorado
+        px, py = (round(c) for c in pixel(lat, lon))
+        assert 0 <= px < img.shape[1] and 0 <= py < img.shape[0]
+        assert np.abs(img[py, px] - np.array([0xF2, 0xEF, 0xE6])).max() < 12, img[py, px]  # the land's colour
+        visible = ("return [...document.querySelectorAll('path.eoloc-footprint')]"
+                   ".filter(e => getComputedStyle(e).display !== 'none').length")
+        assert d.execute_script(visible) == len(times)
+        set_range = ("var r = document.getElementById('eoloc-time-range'); r.value = arguments[0];"
+                     "r.dispatchEvent(new Event('input'));")
+        d.execute_script(set_range, 9)
+        assert d.execute_script(visible) == 10
+        assert d.execute_script("return document.getElementById('eoloc-time-label').textContent").endswith("UTC")
+        d.execute_script("var c = document.getElementById('eoloc-time-only'); c.checked = true;"
+                         "c.dispatchEvent(new Event('change'));")
+        assert d.execute_script(visible) == 1
+    finally:
+        d.quit()
+    many = [dict(f, properties={**f["properties"], "time_s": f["properties"]["time_s"] + 0.5 * (i % 2)})
+            for i, f in enumerate(prints * 2) if f.get("geometry")]
+    (tmp_path / "many.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": many}))
+    r = eoloc_cli("map", "--footprints", tmp_path / "many.geojson", "-o", tmp_path / "many.html")
+    assert r.returncode == 0, r.stderr
+    img, zoom, pixel, d = _screen(tmp_path / "many.html", wait_tiles=False)
+    try:
+        fills = d.execute_script("return [...document.querySelectorAll('path.eoloc-footprint')]"
+                                 ".map(e => e.getAttribute('fill'))")
+        assert len(fills) == len(many) and set(fills) == {"none"}
+    finally:
+        d.quit()

@@ -10,13 +10,13 @@ import click
 from ..io.klv.conventions import CONVENTIONS
 from .common import load_config, open_dem, working
 from .main import NOTHING_LOCATED, console, err_console, warn
-from .options import config_option, dem_options, formats_option, grid_option, out_option
+from .options import basemap_options, config_option, dem_options, formats_option, grid_option, out_option
 
 KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV data stream), check it,
 geolocate its VMTI targets and write everything out.
 
 \b
-eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--tiles OpenStreetMap] [--klv-out OUT.klv]
+eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--basemap TILES] [--tiles OpenStreetMap] [--klv-out OUT.klv]
   Flags as elsewhere: --dem stops the VMTI rays on the terrain instead of at the frame-centre
   elevation; --format picks the fix formats (default csv, geojson, cot).
   1. Decodes every packet: MISB ST 0601 (and the older EG 0104), with ST 0903 VMTI and ST 1607
@@ -68,7 +68,7 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @formats_option(default=("csv", "geojson", "cot"))
 @grid_option()
 @click.option("--map/--no-map", "make_map", default=True, show_default=True, help="Write map.html.")
-@click.option("--tiles", default=None, help="Web map tiles under the map (e.g. OpenStreetMap; needs a network).")
+@basemap_options
 @click.option("--klv-out", "--write-klv", "write_klv", type=click.Path(dir_okay=False), default=None,
               help="Write the stream back with the fixes in tags 40-42, 45, 46 (as eoloc live --klv-out).")
 @click.option("--footprint-every", type=click.IntRange(1), default=1, show_default=True,
@@ -79,8 +79,8 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @click.option("--assume", "assume", multiple=True, type=click.Choice(list(CONVENTIONS)),
               help="Read the stream under an encoder's own convention (repeatable); the convention check prints "
                    "which one the encoder follows. See the list below.")
-def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, tiles, write_klv,
-        footprint_every, strict, assume) -> None:
+def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, basemap, world,
+        tiles, write_klv, footprint_every, strict, assume) -> None:
     from ..jobs.klv import klv_job, write_klv_products
     from .render import print_klv_job
 
@@ -93,7 +93,7 @@ def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats
                       assume=assume)
     print_klv_job(job, console, err_console)
     written, notes = write_klv_products(job, out_dir, formats=formats, grid=grid, make_map=make_map, tiles=tiles,
-                                        klv_out=write_klv)
+                                        klv_out=write_klv, basemap=basemap, world=world)
     for note in notes:
         warn(note, "note")
     for i, note in enumerate(job.notes):

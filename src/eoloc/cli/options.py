@@ -98,6 +98,19 @@ def dem_options(dem_help: str):
     ])
 
 
+def basemap_options(fn):
+    """--basemap PATH, --world/--no-world and --tiles NAME: what lies under a map, the same on
+    every command that draws one."""
+    return _apply([
+        click.option("--basemap", type=click.Path(exists=True), default=None,
+                     help="Offline basemap under the map: an MBTiles file or a folder of {z}/{x}/{y}.png XYZ tiles "
+                          "(raster; the tiles over the map's area are embedded in the page)."),
+        click.option("--world/--no-world", default=True, show_default=True,
+                     help="The bundled world layer (Natural Earth countries, public domain) at the bottom."),
+        click.option("--tiles", default=None, help="Web map tiles too (e.g. OpenStreetMap; needs a network)."),
+    ])(fn)
+
+
 def target_height_option(help_text: str = "Stop the rays on the surface of this ellipsoidal height (m)."):
     """--target-height H, the same flag on every command where a height surface stops the rays; the
     old --height (which meant the aircraft's height in one place and the target's in another) is

@@ -1,11 +1,12 @@
 """A self-contained HTML map (folium / Leaflet): aircraft track, frame footprints, targets with
-their CEP circles, tracks, and optionally a hillshade of the DEM underneath.
+their CEP circles, tracks, a time slider; underneath, offline basemaps: the bundled Natural
+Earth countries, a user's raster tiles (MBTiles or a tile folder, embedded), the DEM's hillshade.
 
 "Self-contained" means it opens from a USB stick in a ground station with no network: Leaflet
 1.9.4 (BSD-2-Clause, ``eoloc/data/leaflet``) is inlined instead of folium's CDN links, its few
-images are data URIs, targets are vector circles (no marker images), and there are no web tiles
-unless ``tiles=`` asks for them. Every layer is a GeoJSON feature list, the same that goes to
-.geojson and KML. SVG paths carry CSS classes (``eoloc-target``, ``eoloc-cep``,
+images are data URIs, targets are vector circles (no marker images), the basemap's tiles are
+data URIs, and there are no web tiles unless ``tiles=`` asks for them. Every layer is a GeoJSON
+feature list, the same that goes to .geojson and KML. SVG paths carry CSS classes (``eoloc-target``, ``eoloc-cep``,
 ``eoloc-footprint``, ``eoloc-aircraft``, ``eoloc-track``) so a browser test can count them.
 
 Data reaches the page only through serialisers: every tooltip (target ids, frames, track ids come
@@ -106,6 +107,98 @@ def _hillshade_png(dem) -> tuple[str, list[list[float]]]:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode(), bounds
 
 
+def _tile_layer(basemap):
+    """A Leaflet tile layer whose tiles are the basemap's data URLs (no network, no files)."""
+    import json
+
+    from branca.element import MacroElement
+    from folium.template import Template
+
+    class EmbeddedTiles(MacroElement):
+        _template = Template("""
+            {% macro script(this, kwargs) %}
+            (function (tiles) {
+                var Embedded = L.TileLayer.extend({getTileUrl: function (c) {
+                    return tiles[c.z + "/" + c.x + "/" + c.y] || "data:image/gif;base64,R0lGODlhAQABAAAAACw=";
+                }});
+                new Embedded("", {minNativeZoom: {{ this.min_zoom }}, maxNativeZoom: {{ this.max_zoom }},
+                                  maxZoom: 22, className: "eoloc-basemap",
+                                  attribution: {{ this.attribution }}}).addTo({{ this._parent.get_name() }});
+            })({{ this.tiles }});
+            {% endmacro %}
+            """)
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.tiles = json.dumps(basemap.tiles)
+            self.min_zoom, self.max_zoom = int(basemap.min_zoom), int(basemap.max_zoom)
+            # Leaflet writes the attribution as HTML: the file's text escaped first, then a JSON string
+            self.attribution = json.dumps(html.escape(basemap.attribution or basemap.name)).replace("</", "<\\/")
+
+    return EmbeddedTiles()
+
+
+def _world_layer():
+    """The bundled Natural Earth countries (public domain, eoloc/data/world): land and borders under
+    everything, so that a map with no tiles is not a grey canvas."""
+    import json
+
+    import folium
+
+    data = json.loads((resources.files("eoloc") / "data" / "world" / "ne_110m_countries.geojson")
+                      .read_text(encoding="utf-8"))
+    return folium.GeoJson(data, name="world (Natural Earth)", control=False, interactive=False, pane="eoloc-world",
+                          style_function=lambda f: {"color": "#a09c8c", "weight": 0.7, "fillColor": "#f2efe6",
+                                                    "fillOpacity": 1.0, "className": "eoloc-world"})
+
+
+def _time_keys(*layers: list[dict] | None) -> list:
+    """The distinct times of the features (time_s, else frame), sorted: the time slider's steps."""
+    keys = {k for layer in layers for f in layer or () if (k := _time_of(f)) is not None}
+    return sorted(keys)
+
+
+def _time_of(f: dict):
+    props = f.get("properties") or {}
+    for name in ("time_s", "frame"):
+        v = props.get(name)
+        if isinstance(v, (int, float)) and np.isfinite(v):
+            return float(v)
+    return None
+
+
+#: Above this many footprints they are drawn as thin outlines coloured by time (no fill): even
+#: forty filled polygons on top of each other are one opaque blob hiding the map.
+MANY_FOOTPRINTS = 8
+_SLIDER = """
+<div id="eoloc-time" style="position:fixed;bottom:12px;left:50%%;transform:translateX(-50%%);z-index:1000;
+     background:white;padding:6px 10px;font:13px sans-serif;border-radius:4px;box-shadow:0 1px 4px rgba(0,0,0,.3)">
+  <label>time <input id="eoloc-time-range" type="range" min="0" max="%(last)d" value="%(last)d" step="1"
+         style="width:260px;vertical-align:middle"></label>
+  <span id="eoloc-time-label"></span>
+  <label><input id="eoloc-time-only" type="checkbox"> this time only</label>
+</div>
+<style id="eoloc-time-style"></style>
+<script>
+(function (labels) {
+  var range = document.getElementById("eoloc-time-range"), only = document.getElementById("eoloc-time-only");
+  var style = document.getElementById("eoloc-time-style"), label = document.getElementById("eoloc-time-label");
+  function show() {
+    var v = +range.value, hide = [];
+    for (var k = 0; k < labels.length; k++) {
+      if (k > v || (only.checked && k !== v)) hide.push(".eoloc-t" + k);
+    }
+    style.textContent = hide.length ? hide.join(",") + "{display:none}" : "";
+    label.textContent = labels[v];
+  }
+  range.addEventListener("input", show);
+  only.addEventListener("change", show);
+  show();
+})(%(labels)s);
+</script>
+"""
+
+
 def _latlon(coords) -> list[list[float]]:
     return [[float(c[1]), float(c[0])] for c in coords]
 
@@ -118,11 +211,16 @@ def drawable(*layers: list[dict] | None) -> bool:
 def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprints: list[dict] | None = None,
               targets: list[dict] | None = None, tracks: list[dict] | None = None, truth: list[dict] | None = None,
               encoder_footprints: list[dict] | None = None, dem=None, tiles: str | None = None,
-              title: str = "eoloc") -> Path:
+              title: str = "eoloc", basemap=None, world: bool = True, notes: list[str] | None = None) -> Path:
     """Write the map. Each layer is a list of GeoJSON features: aircraft (LineString), footprints
     and encoder_footprints (Polygon), targets (Point, with optional ``cep50_m`` drawn as a circle
-    in metres), tracks (LineString/Point), truth (Point). ``tiles``: a folium tile name (e.g.
-    "OpenStreetMap") when the viewer is online; by default none, and the DEM's hillshade if given."""
+    in metres), tracks (LineString/Point), truth (Point). Underneath, from the bottom: the bundled
+    world layer (``world``), ``basemap`` (a user's tiles, embedded: an MBTiles file or XYZ tile
+    folder, read over the map's area by :func:`eoloc.io.basemap.read_basemap`, whose notes go
+    into ``notes``; or a :class:`eoloc.io.basemap.Basemap`), the DEM's hillshade, and ``tiles``
+    (a folium tile name, e.g. "OpenStreetMap", when the viewer is online). Footprints and targets
+    with a time (time_s, else frame) get a time slider; more than :data:`MANY_FOOTPRINTS`
+    footprints are thin outlines coloured by time."""
     import folium
 
     OfflineMap, js, css = _inline_leaflet()
@@ -135,13 +233,27 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
     lon = np.array([p[0] for p in points])
     m = OfflineMap(location=[float(lat.mean()), float(lon.mean())], tiles=tiles, control_scale=True,
                    prefer_canvas=False)
-    m.get_root().header.add_child(folium.Element(f"<style>{css}</style>\n<script>{js}</script>"))
+    m.get_root().header.add_child(folium.Element(f"<style>{css}</style>\n<script>{js}</script>\n"
+                                                 "<style>.leaflet-container{background:#cfe0ea}</style>"))
+    if world:  # in a pane of its own under the tiles' (z-index 200): a basemap is drawn over the land
+        folium.map.CustomPane("eoloc-world", z_index=150, pointer_events=False).add_to(m)
+        _world_layer().add_to(m)
+    if basemap is not None:
+        from .basemap import Basemap, read_basemap
+
+        if not isinstance(basemap, Basemap):
+            basemap = read_basemap(basemap, (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())))
+        if notes is not None:
+            notes.extend(basemap.notes)
+        m.add_child(_tile_layer(basemap))
     m.get_root().html.add_child(folium.Element(
         f'<div id="eoloc-title" style="position:fixed;top:8px;left:50px;z-index:1000;background:white;'
         f'padding:4px 8px;font:14px sans-serif;border-radius:4px">{html.escape(title)}</div>'))
     if dem is not None:
         url, bounds = _hillshade_png(dem)
-        folium.raster_layers.ImageOverlay(url, bounds=bounds, name="terrain (hillshade)", opacity=0.9).add_to(m)
+        under = basemap is not None or tiles is not None  # then the shading lets the map under it show
+        folium.raster_layers.ImageOverlay(url, bounds=bounds, name="terrain (hillshade)",
+                                          opacity=0.4 if under else 0.9).add_to(m)
 
     def group(name: str):  # the encoder's outlines start hidden: a layer to compare with, not to read first
         return folium.FeatureGroup(name=name, show=name != "encoder footprints").add_to(m)
@@ -152,19 +264,32 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
             if f.get("geometry"):
                 folium.PolyLine(_latlon(f["geometry"]["coordinates"]), color=_COLOURS["aircraft"], weight=3,
                                 class_name="eoloc-aircraft", tooltip=tip("aircraft")).add_to(g)
+    keys = _time_keys(footprints, targets)
+    step = {k: i for i, k in enumerate(keys)}
+
+    def timed(cls: str, f: dict) -> str:  # the slider hides what comes after its time by these classes
+        k = _time_of(f)
+        return cls if k is None or len(keys) < 2 else f"{cls} eoloc-t{step[k]}"
+
     for name, layer, cls in (("footprints", footprints, "eoloc-footprint"),
                              ("encoder footprints", encoder_footprints, "eoloc-encoder-footprint")):
         if layer:
             g = group(name)
+            many = len(layer) > MANY_FOOTPRINTS
             for f in layer:
                 geom = f.get("geometry")
                 if geom and geom["type"] in ("Polygon", "MultiPolygon"):
                     props = f.get("properties") or {}
                     rings = [geom["coordinates"][0]] if geom["type"] == "Polygon" else [p[0] for p in
                                                                                        geom["coordinates"]]
+                    colour = _COLOURS[name]
+                    if many and name == "footprints":
+                        k = _time_of(f)
+                        colour = _ramp(step[k] / max(len(keys) - 1, 1)) if k is not None else colour
                     for ring in rings:  # a footprint cut at the antimeridian: each part
-                        folium.Polygon(_latlon(ring), color=_COLOURS[name], weight=1, fill=True, fill_opacity=0.08,
-                                       class_name=cls, tooltip=tip(f"{name}: frame {props.get('frame', '')}")).add_to(g)
+                        folium.Polygon(_latlon(ring), color=colour, weight=1, opacity=0.7 if many else 1.0,
+                                       fill=not many, fill_opacity=0.08, class_name=timed(cls, f),
+                                       tooltip=tip(f"{name}: frame {props.get('frame', '')}")).add_to(g)
     if tracks:
         g = group("tracks")
         for f in tracks:
@@ -186,17 +311,45 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
             cep = props.get("cep50_m")
             if isinstance(cep, (int, float)) and np.isfinite(cep) and cep > 0:
                 folium.Circle([lat_t, lon_t], radius=float(cep), color=_COLOURS[name], weight=1, fill=True,
-                              fill_opacity=0.1, class_name="eoloc-cep", tooltip=tip(f"CEP50 {cep:.1f} m")).add_to(g)
+                              fill_opacity=0.1, class_name=timed("eoloc-cep", f),
+                              tooltip=tip(f"CEP50 {cep:.1f} m")).add_to(g)
             label = " ".join(f"{k}={_short(v)}" for k, v in props.items() if v is not None and k in
                              ("target_id", "frame", "time_s", "h_m", "status", "cep50_m", "ce90_m", "le90_m"))
             folium.CircleMarker([lat_t, lon_t], radius=4, color=_COLOURS[name], weight=2, fill=True, fill_opacity=0.9,
-                                class_name=cls, tooltip=tip(label or name)).add_to(g)
+                                class_name=timed(cls, f) if name == "targets" else cls,
+                                tooltip=tip(label or name)).add_to(g)
+    if len(keys) > 1:
+        import json
+
+        unit = "s" if any(_time_of(f) is not None and "time_s" in (f.get("properties") or {})
+                          for layer in (footprints, targets) for f in layer or ()) else "frame"
+        labels = [_time_label(k) if unit == "s" else f"frame {k:g}" for k in keys]
+        m.get_root().html.add_child(folium.Element(_SLIDER % {
+            "last": len(keys) - 1, "labels": json.dumps(labels).replace("</", "<\\/")}))
     folium.LayerControl(collapsed=False).add_to(m)
     m.fit_bounds([[float(lat.min()), float(lon.min())], [float(lat.max()), float(lon.max())]])
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     m.save(str(path))
     return path
+
+
+def _time_label(t: float) -> str:
+    """A time for the slider: UTC when it is a UNIX time (KLV, drone logs), else seconds."""
+    if t > 1e9:
+        from datetime import UTC, datetime
+
+        return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-4] + " UTC"
+    return f"{t:.2f} s"
+
+
+def _ramp(x: float) -> str:
+    """A colour from blue (early) through green to orange (late), for x in [0, 1] (matplotlib's
+    viridis is hard to see on a light map; this keeps every step dark enough)."""
+    import matplotlib
+
+    r, g, b, _ = matplotlib.colormaps["plasma"](0.05 + 0.8 * float(x))
+    return f"#{int(r * 255):02x}{int(g * 255):02x}{int(b * 255):02x}"
 
 
 def _coords(geom: dict):

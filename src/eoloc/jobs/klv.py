@@ -135,7 +135,8 @@ def frame_records(tel, check) -> Records:
 
 def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
                       grid=(), make_map: bool = True, tiles: str | None = None,
-                      klv_out: str | Path | None = None) -> tuple[list[Path], list[str]]:
+                      klv_out: str | Path | None = None, basemap=None, world: bool = True
+                      ) -> tuple[list[Path], list[str]]:
     """telemetry.csv, frames.csv, conventions.csv, footprints, fixes (in ``formats``), eoloc.kml
     with every layer, map.html and, with ``klv_out``, the stream re-encoded with its fixes.
     Returns (paths, notes: no map drawn, packets written back without their fix)."""
@@ -170,7 +171,8 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     elif make_map:
         written.append(write_map(out / "map.html", aircraft=lay["aircraft"], footprints=prints,
                                  encoder_footprints=lay["encoder footprints"], targets=lay.get("fixes"), dem=job.dem,
-                                 tiles=tiles, title=f"eoloc: {job.path.name}"))
+                                 tiles=tiles, title=f"eoloc: {job.path.name}", basemap=basemap, world=world,
+                                 notes=notes))
     return written, notes
 
 
