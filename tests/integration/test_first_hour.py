@@ -659,3 +659,69 @@ def test_50_10_the_world_layer_the_time_slider_and_many_footprints(tmp_path):
         assert len(fills) == len(many) and set(fills) == {"none"}
     finally:
         d.quit()
+
+
+def test_50_11_the_gis_layers_an_analyst_expects(tmp_path):
+    """`eoloc klv --format gpkg --format geoparquet`: the frame centres (points) and the sensor track
+    (a line) as layers in each format, read back by GDAL (pyogrio) at frames.csv's coordinates and
+    telemetry.csv's path; eoloc.kml (valid OGC KML 2.2) has one shared style per layer and none per
+    placemark, a TimeStamp on every fix, footprint and frame centre (Google Earth animates them),
+    its data fields declared once per layer (a Schema; heights with their datum); `eoloc report` hashes the DEM it was given."""
+    import hashlib
+    import xml.etree.ElementTree as ET
+    from importlib.resources import files
+
+    import geopandas
+    import numpy as np
+    import pyogrio
+    import shapely
+    import xmlschema
+
+    out = tmp_path / "klv"
+    r = eoloc_cli("klv", MOUNTAIN / "flight.klv", "--dem", MOUNTAIN / "longs_peak_srtmgl3.tif", "--out", out,
+                  "--format", "csv", "--format", "geojson", "--format", "gpkg", "--format", "geoparquet")
+    assert r.returncode == 0, r.stderr
+    with (out / "frames.csv").open(newline="", encoding="utf-8") as fh:
+        frames = list(csv.DictReader(fh))
+    with (out / "telemetry.csv").open(newline="", encoding="utf-8") as fh:
+        telemetry = list(csv.DictReader(fh))
+    def geometries(path: Path):  # GDAL for GeoJSON and GeoPackage, geopandas for GeoParquet
+        if path.suffix == ".parquet":
+            return np.asarray(geopandas.read_parquet(path).geometry)
+        return shapely.from_wkb(pyogrio.raw.read(path, return_fids=False)[2])
+
+    for ext in ("geojson", "gpkg", "parquet"):
+        pts = geometries(out / f"frame_centres.{ext}")
+        assert len(pts) == len(frames) and set(shapely.get_type_id(pts)) == {0}  # points
+        assert np.allclose(shapely.get_x(pts), [float(f["eoloc_lon_deg"]) for f in frames], atol=1e-7)
+        assert np.allclose(shapely.get_y(pts), [float(f["eoloc_lat_deg"]) for f in frames], atol=1e-7)
+        (line,) = geometries(out / f"sensor_track.{ext}")
+        assert line.geom_type == "LineString" and len(line.coords) == len(telemetry)
+        assert np.allclose([c[1] for c in line.coords], [float(t["lat_deg"]) for t in telemetry], atol=1e-7)
+
+    kml = out / "eoloc.kml"
+    schema = xmlschema.XMLSchema(str(files("pykml") / "schemas" / "ogckml22.xsd"))
+    assert not list(schema.iter_errors(str(kml)))
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    doc = ET.parse(kml).getroot().find("k:Document", ns)
+    styles = {s.get("id") for s in doc.findall("k:Style", ns)}
+    folders = {f.find("k:name", ns).text: f for f in doc.findall("k:Folder", ns)}
+    assert len(styles) == len(folders) and not doc.findall(".//k:Placemark/k:Style", ns)
+    for name in ("fixes", "footprints", "frame centres"):
+        marks = folders[name].findall("k:Placemark", ns)
+        assert marks and all(m.find("k:styleUrl", ns).text[1:] in styles for m in marks)
+        whens = [m.find("k:TimeStamp/k:when", ns) for m in marks]
+        assert all(w is not None and w.text.startswith("2026-07-14T16:00") for w in whens), name
+    h = [f for f in doc.iter("{http://www.opengis.net/kml/2.2}SimpleField") if f.get("name") == "h_m"]
+    assert h and all("ellipsoid" in f.find("k:displayName", ns).text for f in h)  # declared once per layer
+    assert not list(doc.iter("{http://www.opengis.net/kml/2.2}Data"))  # no field name repeated per placemark
+
+    cal = tmp_path / "cal"
+    r = eoloc_cli("compensate", "simulate", "--config", DEMO / "camera.toml", "--flights", 2, "--test-flights", 1,
+                  "--looks", 40, "--out", cal)
+    assert r.returncode == 0, r.stderr
+    r = eoloc_cli("report", cal / "train.csv", "--config", DEMO / "camera.toml", "--dem", cal / "dem.tif",
+                  "--vertical", "ellipsoid", "--out", tmp_path / "report")
+    assert r.returncode == 0, r.stderr
+    page = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+    assert hashlib.sha256((cal / "dem.tif").read_bytes()).hexdigest() in page

@@ -12,6 +12,7 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
@@ -34,7 +35,9 @@ EOLOC = str(Path(sys.executable).parent / "eoloc")
 
 
 def _photo(*args, check=True):
-    r = subprocess.run([EOLOC, "photo", *map(str, args), "--json"], capture_output=True, text=True, timeout=120)
+    out = tempfile.mkdtemp(prefix="eoloc-photo-")  # its photo_fixes.csv (not into the working folder)
+    r = subprocess.run([EOLOC, "photo", *map(str, args), "--json", "--out", out], capture_output=True, text=True,
+                       timeout=120)
     assert "Traceback" not in r.stderr, r.stderr
     if check:
         assert r.returncode == 0, r.stderr

@@ -38,11 +38,50 @@ def _coordinates(points: np.ndarray) -> str:
     return " ".join(f"{lon:.9f},{lat:.9f},{h:.3f}" for lon, lat, h in points)
 
 
-def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None, name: str = "eoloc") -> Path:
-    """One KML document, one folder per layer ({name: GeoJSON features}). Points, LineStrings and
-    Polygons are supported; properties become ExtendedData; a feature with a ``time_utc`` property
-    (ISO 8601, known when the inputs give their clock's origin) gets a TimeStamp so Google Earth's
-    time slider plays the flight."""
+def _style_id(layer: str) -> str:
+    return "eoloc-" + "".join(ch if ch.isalnum() else "-" for ch in layer)
+
+
+def _when(props: Mapping, unix_time: bool) -> str | None:
+    """A feature's time as KML wants it: its ``time_utc``, else (``unix_time``: the inputs' clock is
+    UNIX, as ST 0601's) its ``time_s`` as UTC."""
+    t = props.get("time_utc")
+    if isinstance(t, str) and t:
+        return t
+    ts = props.get("time_s")
+    if unix_time and isinstance(ts, (int, float)) and np.isfinite(ts):
+        from datetime import UTC, datetime
+
+        return datetime.fromtimestamp(float(ts), UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return None
+
+
+#: What each height field in ExtendedData is (the placemarks' own altitudes are MSL).
+HEIGHT_NOTE = "metres above the WGS-84 ellipsoid (the placemark's altitude is above MSL, EGM96)"
+
+
+def _fields(features: list[dict]) -> dict[str, str]:
+    """The data fields of a layer's features (scalar properties, in order of first appearance)
+    with their KML type: double when every value is a number, else string."""
+    kinds: dict[str, str] = {}
+    for f in features:
+        for key, val in (f.get("properties") or {}).items():
+            if val is None or isinstance(val, (list, dict)):
+                continue
+            number = isinstance(val, (int, float, np.integer, np.floating)) and not isinstance(val, bool)
+            kinds[key] = "double" if number and kinds.get(key, "double") == "double" else "string"
+    return kinds
+
+
+def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None, name: str = "eoloc",
+              unix_time: bool = False) -> Path:
+    """One KML document, one folder per layer ({name: GeoJSON features}), one shared style per
+    layer (placemarks refer to it: no style repeated per placemark). Points, LineStrings and
+    Polygons are supported; properties become ExtendedData as SchemaData of a Schema declared once
+    per layer, each height field (``h_m``, ``*_h_m``) named there with its datum; a feature with
+    a ``time_utc`` property (ISO 8601, known when the inputs
+    give their clock's origin) — or, with ``unix_time``, a ``time_s`` on the UNIX clock — gets a
+    TimeStamp so Google Earth's time slider plays the flight."""
     from ..terrain.geoid import default_geoid
 
     geoid = geoid or default_geoid()
@@ -56,10 +95,34 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = sub(root, "Document")
     sub(doc, "name", name)
+    sub(doc, "description", "Written by eoloc. Placemark altitudes: metres above mean sea level (EGM96), "
+                            "altitudeMode absolute. Height fields in the data (h_m, ...): " + HEIGHT_NOTE + ".")
+    for layer in layers:  # one style per layer, shared by its placemarks
+        colour, width = _STYLE.get(layer, ("ffffffff", 2))
+        style = sub(doc, "Style")
+        style.set("id", _style_id(layer))
+        icon = sub(style, "IconStyle")
+        sub(icon, "color", colour)
+        sub(icon, "scale", "0.8")
+        line = sub(style, "LineStyle")
+        sub(line, "color", colour)
+        sub(line, "width", str(width))
+        sub(sub(style, "PolyStyle"), "color", "40" + colour[2:])
+    fields = {layer: _fields(features) for layer, features in layers.items()}
+    for layer, names in fields.items():  # each layer's data fields declared once, with their meaning
+        if not names:
+            continue
+        schema = sub(doc, "Schema")
+        schema.set("name", xml_text(layer))
+        schema.set("id", _style_id(layer) + "-fields")
+        for key, kind in names.items():
+            field = sub(schema, "SimpleField")
+            field.set("type", kind)
+            field.set("name", xml_text(key))
+            sub(field, "displayName", f"{key} ({HEIGHT_NOTE})" if key == "h_m" or key.endswith("_h_m") else key)
     for layer, features in layers.items():
         folder = sub(doc, "Folder")
         sub(folder, "name", layer)
-        colour, width = _STYLE.get(layer, ("ffffffff", 2))
         for k, feat in enumerate(features):
             geom = feat.get("geometry")
             if not geom:
@@ -70,27 +133,17 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
             props = feat.get("properties") or {}
             mark = sub(folder, "Placemark")
             sub(mark, "name", props.get("target_id", props.get("track_id", props.get("frame", k))))
-            t = props.get("time_utc")
-            if isinstance(t, str) and t:
+            t = _when(props, unix_time)
+            if t is not None:
                 sub(sub(mark, "TimeStamp"), "when", t)
-            style = sub(mark, "Style")
-            if kind == "Point":
-                icon = sub(style, "IconStyle")
-                sub(icon, "color", colour)
-                sub(icon, "scale", "0.8")
-            else:
-                line = sub(style, "LineStyle")
-                sub(line, "color", colour)
-                sub(line, "width", str(width))
-                if kind in ("Polygon", "MultiPolygon"):
-                    sub(sub(style, "PolyStyle"), "color", "40" + colour[2:])
-            data = [(key, val) for key, val in props.items() if val is not None and not isinstance(val, (list, dict))]
+            sub(mark, "styleUrl", "#" + _style_id(layer))
+            data = [(key, val) for key, val in props.items() if key in fields[layer] and val is not None]
             if data:
-                extended = sub(mark, "ExtendedData")
+                values = sub(sub(mark, "ExtendedData"), "SchemaData")
+                values.set("schemaUrl", "#" + _style_id(layer) + "-fields")
                 for key, val in data:
-                    item = sub(extended, "Data")
+                    item = sub(values, "SimpleData", val)
                     item.set("name", xml_text(key))
-                    sub(item, "value", val)
             if kind == "MultiPolygon":  # (a footprint cut at the antimeridian)
                 multi = sub(mark, "MultiGeometry")
                 for part in geom["coordinates"]:
@@ -109,7 +162,7 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
                 ring = sub(sub(shape, "outerBoundaryIs"), "LinearRing")
                 sub(ring, "coordinates", _coordinates(_msl(geom["coordinates"][0], geoid)))
     ET.register_namespace("", KML_NS)
-    ET.indent(root)
+    ET.indent(root, space=" ")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import KLVError
-from ..io.export import fix_features, fix_records, utc_times, with_utc
+from ..io.export import STATUS_NAMES, fix_features, fix_records, utc_times, with_utc
 from ..io.records import Records
 
 
@@ -133,6 +133,18 @@ def frame_records(tel, check) -> Records:
                     **{f"corner{k + 1}_distance_m": check.corners_m[:, k] for k in range(4)}})
 
 
+def frame_centre_records(tel, check, time_origin="unix") -> Records:
+    """frame_centres: eoloc's frame centre of every packet as a point layer (lat_deg, lon_deg,
+    h_m ellipsoidal), with the packet, its time and the distance to the encoder's centre."""
+    g, c = check.geometry, tel.columns
+    utc = utc_times(c["time_s"], time_origin)
+    return Records({"packet": np.asarray(tel.line), "stream": c["stream"], "time_s": c["time_s"],
+                    **({} if utc is None else {"time_utc": utc}),
+                    "lat_deg": np.asarray(g.centre.lat_deg), "lon_deg": np.asarray(g.centre.lon_deg),
+                    "h_m": np.asarray(g.centre.h_m), "status": STATUS_NAMES[np.asarray(g.centre.status, dtype=np.intp)],
+                    "centre_distance_m": check.centre_m})
+
+
 def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson", "kml", "cot"),
                       grid=(), make_map: bool = True, tiles: str | None = None,
                       klv_out: str | Path | None = None, basemap=None, world: bool = True
@@ -155,6 +167,13 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     tables = [f for f in formats if f in ("geoparquet", "gpkg")]
     written += write_layer(out, "footprints", [f["properties"] for f in prints], ["geojson", *tables],
                            features=prints)
+    from .klvframes import aircraft_features
+
+    centres = frame_centre_records(job.telemetry, job.check)
+    track = job.layers.get("aircraft") or aircraft_features(job.telemetry)
+    written += write_layer(out, "frame_centres", centres, ["geojson", *tables])
+    written += write_layer(out, "sensor_track", [f["properties"] for f in track], ["geojson", *tables],
+                           features=track)
     if len(job.records):
         written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"], grid=grid)
     notes = []
@@ -164,7 +183,8 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
         if unchanged:
             notes.append(f"--klv-out: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
                          "they were written as they came, without their fix")
-    written.append(write_kml(out / "eoloc.kml", job.layers, name=job.path.name))
+    kml_layers = {**job.layers, "frame centres": fix_features(centres)}
+    written.append(write_kml(out / "eoloc.kml", kml_layers, name=job.path.name, unix_time=True))
     lay = job.layers
     if make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
         notes.append("no map: the stream has no aircraft position, footprint or fix to draw")

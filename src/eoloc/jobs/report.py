@@ -270,8 +270,8 @@ def _page(observations, config_path, table, stages, cal, estimate, comp_rows, co
                                           "compensation, and CEP by oblique band", "compensation")
 
     page.heading("Inputs and versions")
-    files = [[str(observations), f"{Path(observations).stat().st_size:,} bytes", _sha256(observations)],
-             [str(config_path), f"{Path(config_path).stat().st_size:,} bytes", _sha256(config_path)]]
+    paths = [observations, config_path, *(getattr(dem, "files", ()) if dem is not None else ())]
+    files = [[str(p), f"{Path(p).stat().st_size:,} bytes", _sha256(p)] for p in paths]  # the DEM tiles too
     page.table(["file", "size", "SHA-256"], files, align="lrl")
     if command:
         page.pre(command)

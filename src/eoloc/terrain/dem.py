@@ -35,6 +35,7 @@ class DEM:
     grid: LatLonGrid
     source: str = ""
     vertical: str = "ellipsoid"
+    files: tuple[str, ...] = ()  # the files it was read from (open_dem), for reports to name and hash
 
     # -- constructors -------------------------------------------------------------------------
 
@@ -194,7 +195,7 @@ def open_dem(paths: str | Path | Sequence[str | Path], *, vertical: str = "egm96
         n = g.undulation(lats[:, None], lons[None, :])
         grid = LatLonGrid(z + n, lat0, lon0, transform.e, transform.a)
         vertical = f"ellipsoidal ({vertical.upper()} heights + {g.name} geoid)"
-    return DEM(grid, label, vertical)
+    return DEM(grid, label, vertical, tuple(str(p) for p in paths))
 
 
 def _to_geographic(z: np.ndarray, transform, crs):
