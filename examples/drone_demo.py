@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # 1. the real photo
     if H20N.exists():
-        r = eoloc("photo", str(H20N), "--json")
+        r = eoloc("photo", str(H20N), "--json", "--out", str(out / "h20n"))
         row = json.loads(r.stdout.splitlines()[0])
         print(f"  {H20N.name}: the centre by its laser range {row['range_m']:.3f} m at {row['lat']:.7f}, "
               f"{row['lon']:.7f}, h {row['h']:.2f} m; DJI's own target {row['vendor_offset_h_m']:.2f} m away "
@@ -195,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     ks = list(range(0, t.size, 20))
     for k in ks:
         write_dji_photo(photos / f"DJI_{k:04d}.JPG", frames[k], f, k)
-    r = eoloc("photo", str(photos), *dem_args, "--json")
+    r = eoloc("photo", str(photos), *dem_args, "--json", "--out", str(out / "photo_fixes"))
     rows = [json.loads(x) for x in r.stdout.splitlines() if x.strip()]
     truth = centre_truth(dem, sensor, f, ks)
     got = np.array([[row["lat"], row["lon"]] for row in rows])

@@ -107,7 +107,11 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
         console.print(table)
     from ..io.writers import write_layer
 
-    written = write_layer(out_dir, "photo_fixes", [r for r in job.rows if "lat" in r], formats)
+    # the files in eoloc's column vocabulary (lat_deg, lon_deg, h_m: every format, KML and CoT too);
+    # --json keeps its documented short keys
+    names = {"lat": "lat_deg", "lon": "lon_deg", "h": "h_m", "u": "u_px", "v": "v_px"}
+    rows = [{names.get(k, k): v for k, v in r.items()} for r in job.rows if "lat" in r]
+    written = write_layer(out_dir, "photo_fixes", rows, formats)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
     if cot_urls:
         send_photo_fixes(job.rows, cot_urls, tak_tls, tak_protocol, pixels_given=bool(pixels))
