@@ -1,9 +1,9 @@
 """Regenerate the mountain part of the demo in src/eoloc/data/demo/mountain/ (deterministic, seeded).
 
 1. Terrain: a crop of the real SRTMGL3 grid of the Colorado Front Range around Longs Peak
-   (../shared/data/dem/SRTMGL3_boulder_front_range.asc, NASA SRTM v3, public domain; see
-   mountain/README.md), written as a compressed GeoTIFF with its CRS (EPSG:4326) and the source's
-   no-data value. Heights stay EGM96 (as SRTM); eoloc converts them with the bundled geoid.
+   (tests/data/dem/SRTMGL3_boulder_front_range.asc, NASA SRTM v3, public domain, as landlab's
+   example data ships it; see mountain/README.md), written as a compressed GeoTIFF with its CRS
+   (EPSG:4326) and the source's no-data value. Heights stay EGM96 (as SRTM); eoloc converts them with the bundled geoid.
 2. Flight: a UAV at 6 000 m ellipsoidal passes east of the peak heading north while its az-el
    turret tracks the summit; four more surveyed points on the slopes are detected when in view
    (visibility checked against the terrain with the true pose: a target behind a ridge is not
@@ -29,7 +29,6 @@ from eoloc import geodesy
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "src" / "eoloc" / "data" / "demo" / "mountain"
-SOURCE = ROOT.parent / "shared" / "data" / "dem" / "SRTMGL3_boulder_front_range.asc"
 CROP = (-105.70, 40.20, -105.55, 40.31)  # west, south, east, north (degrees)
 TARGETS = {  # surveyed points (lat, lon); heights come from the terrain
     "LONGS_PEAK": (40.2549, -105.6160),
@@ -123,5 +122,6 @@ def main(source: Path) -> None:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--source", type=Path, default=SOURCE)
+    ap.add_argument("--source", type=Path, default=ROOT / "tests" / "data" / "dem" / "SRTMGL3_boulder_front_range.asc",
+                    help="the SRTMGL3 ESRI ASCII grid of the Front Range (landlab's, as the tests keep it)")
     main(ap.parse_args().source)

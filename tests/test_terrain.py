@@ -31,7 +31,7 @@ def _raw(path, **kw):
 
 def test_geoid_against_sources_and_scipy():
     g = default_geoid()
-    # ../shared/data/SOURCES.md: about -15.9 m at Cheyenne, -13.4 m in the Front Range, +18.6 m at Sao Tome
+    # EGM96's published undulations: about -15.9 m at Cheyenne, -13.4 m in the Front Range, +18.6 m at Sao Tome
     assert g.undulation(41.09, -104.85) == pytest.approx(-15.9, abs=0.4)
     assert g.undulation(40.15, -105.5) == pytest.approx(-13.4, abs=0.4)
     assert g.undulation(0.27, 6.54) == pytest.approx(18.6, abs=0.4)
