@@ -247,7 +247,7 @@ def test_46_5_every_writer_keeps_hostile_text_as_text(tmp_path):
     ns = {"k": "http://www.opengis.net/kml/2.2"}
     marks = ET.parse(paths[".kml"]).getroot().findall(".//k:Placemark", ns)
     assert [m.find("k:name", ns).text for m in marks] == as_xml
-    assert [m.find(".//k:Data[@name='target_id']/k:value", ns).text for m in marks] == as_xml
+    assert [m.find(".//k:SimpleData[@name='target_id']", ns).text for m in marks] == as_xml
     assert list(geopandas.read_file(paths[".kml"], layer="fixes")["target_id"]) == as_xml
     # CoT: every event of the data package a well-formed document with the id as its callsign
     with zipfile.ZipFile(paths[".cot"]) as zf:
