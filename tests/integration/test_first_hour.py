@@ -783,3 +783,24 @@ def test_50_readme_walkthrough_runs_as_written(tmp_path):
     assert (walk / "report" / "report.html").stat().st_size > 10_000
     assert (walk / "map" / "map.html").is_file() and (walk / "klv" / "eoloc.kml").is_file()
     assert (walk / "model" / "compensation.json").is_file() and (walk / "flight_with_fixes.klv").stat().st_size
+
+
+def test_50_1_nothing_a_user_reads_or_runs_points_outside_the_repository():
+    """A user's clone has no ../shared: the README, the docs, the code, the examples, the benches
+    and the Makefile name no path outside the repository, and every relative link of the README
+    and the docs leads to a file of the repository."""
+    import re
+
+    root = Path(__file__).resolve().parents[2]
+    texts = [root / "README.md", root / "Makefile", *(root / "docs").glob("*.md"),
+             *(root / "src").rglob("*.py"), *(root / "examples").glob("*.py"), *(root / "bench").glob("*.py"),
+             *(root / "bench").glob("*.md")]
+    outside = [str(p.relative_to(root)) for p in texts if re.search(r"\.\./shared|/shared/data", p.read_text(
+        encoding="utf-8", errors="replace"))]
+    assert not outside, outside
+    for doc in [root / "README.md", *(root / "docs").glob("*.md")]:
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text(encoding="utf-8")):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            assert (doc.parent / target).resolve().is_relative_to(root), (doc.name, target)
+            assert (doc.parent / target).exists(), (doc.name, target)
