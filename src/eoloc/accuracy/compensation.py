@@ -379,7 +379,7 @@ def _cells(f: ErrorFeatures, bearing: bool, edges, sector_deg: float) -> tuple[n
     uses it (the errors it learns turn with the airframe), else the azimuth."""
     ob = np.ravel(f.oblique_deg)
     d = np.ravel(f.bearing_deg if bearing else f.azimuth_deg)
-    i = np.clip(np.searchsorted(edges, ob, side="right") - 1, 0, len(edges) - 2)
+    i = oblique_band(ob, edges)
     j = np.clip((np.nan_to_num(d) // sector_deg).astype(int), 0, round(360.0 / sector_deg) - 1)
     return i, j
 
@@ -553,7 +553,8 @@ def cross_validate(features: ErrorFeatures, errors_enu: ArrayLike, groups: Array
     short = [int((~t).sum()) for t in folds if (~t).sum() < 20]
     if short:
         what = (f"holds out each oblique band in turn, but the {e.shape[0]} fixes lie in "
-                f"{len(folds)} band{'s' if len(folds) != 1 else ''} (oblique {np.min(ob):.1f}–{np.max(ob):.1f}°, "
+                f"{'one band' if len(folds) == 1 else f'{len(folds)} bands'} "
+                f"(oblique {np.min(ob):.1f}–{np.max(ob):.1f}°, "
                 f"band edges {', '.join(f'{x:g}' for x in oblique_edges)})" if by == "band" else
                 f"holds out whole flights, but the {e.shape[0]} fixes come from {len(np.unique(g))} flight(s)")
         raise InputError(f"cross-validation by {by} {what}: holding one out leaves {min(short)} fixes to train on "

@@ -92,11 +92,9 @@ class LineProgress:
 
     def update(self, task: int, completed=None, total=None, description: str | None = None, **_) -> None:
         t = self.tasks[task]
-        if total is not None and not t["announced"]:
-            t["total"] = total
-        self._announce(t)
         if total is not None:
             t["total"] = total
+        self._announce(t)
         if completed is not None:
             t["done"] = completed
         if description is not None and description != t["description"]:  # a new step: said at once

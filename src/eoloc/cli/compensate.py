@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from ..errors import InputError
 from .common import load_config, open_dem, progress, working
 from .main import console, err_console, fail, report_issues, warn
 from .options import config_option, dem_options, json_option, out_option, target_height_option
@@ -164,14 +165,15 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
         keep = keep[sel]
     f, e, g = obs.features.take(keep), obs.errors_enu[keep], obs.groups[keep]
     sets = ("p", "p+bearing") if compare else (feature_set,)
-    bands_seen = np.unique(C.oblique_band(f.oblique_deg, edges))
     with progress() as bar:
         task = bar.add_task("cross-validating", total=3)
         cv_f = C.cross_validate(f, e, g, by="flight", feature_sets=sets, trees=compare, oblique_edges=edges)
         bar.advance(task)
-        cv_b = None
-        if bands_seen.size > 1:
-            cv_b = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare, oblique_edges=edges)
+        try:  # a check of the model, not the model: without it the model is still trained
+            cv_b, why_no_bands = C.cross_validate(f, e, g, by="band", feature_sets=sets, trees=compare,
+                                                  oblique_edges=edges), ""
+        except InputError as exc:
+            cv_b, why_no_bands = None, str(exc)
         bar.advance(task)
         model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
                       info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
@@ -180,12 +182,8 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
     print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
     band_rows = [] if cv_b is None else cv_b.table(edges)
     if cv_b is None:
-        lo, hi = edges[bands_seen[0]], edges[bands_seen[0] + 1]
-        warn(f"held-out oblique bands: not computed: all {f.oblique_deg.size} fixes lie in one oblique band "
-             f"({lo:g}–{hi:g}°; theirs {np.min(f.oblique_deg):.1f}–{np.max(f.oblique_deg):.1f}°), so no band can be "
-             "predicted by a model that never saw it. The model is trained and used within that range only (fixes "
-             "outside it are flagged, column comp_flag); for a model that extrapolates, fly or simulate a wider "
-             "spread of oblique angles, or give finer --bands", "note")
+        warn(f"held-out oblique bands: not computed: {why_no_bands}. The model is trained and used within the "
+             "oblique range it saw only (fixes outside it are flagged, column comp_flag)", "note")
     else:
         print_bands(band_rows, "held-out oblique bands (each band predicted by a model that never saw it)")
     out = Path(out_dir)

@@ -42,20 +42,6 @@ def _style_id(layer: str) -> str:
     return "eoloc-" + "".join(ch if ch.isalnum() else "-" for ch in layer)
 
 
-def _when(props: Mapping, unix_time: bool) -> str | None:
-    """A feature's time as KML wants it: its ``time_utc``, else (``unix_time``: the inputs' clock is
-    UNIX, as ST 0601's) its ``time_s`` as UTC."""
-    t = props.get("time_utc")
-    if isinstance(t, str) and t:
-        return t
-    ts = props.get("time_s")
-    if unix_time and isinstance(ts, (int, float)) and np.isfinite(ts):
-        from datetime import UTC, datetime
-
-        return datetime.fromtimestamp(float(ts), UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-    return None
-
-
 #: What each height field in ExtendedData is (the placemarks' own altitudes are MSL).
 HEIGHT_NOTE = "metres above the WGS-84 ellipsoid (the placemark's altitude is above MSL, EGM96)"
 
@@ -73,14 +59,12 @@ def _fields(features: list[dict]) -> dict[str, str]:
     return kinds
 
 
-def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None, name: str = "eoloc",
-              unix_time: bool = False) -> Path:
+def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None, name: str = "eoloc") -> Path:
     """One KML document, one folder per layer ({name: GeoJSON features}), one shared style per
     layer (placemarks refer to it: no style repeated per placemark). Points, LineStrings and
     Polygons are supported; properties become ExtendedData as SchemaData of a Schema declared once
     per layer, each height field (``h_m``, ``*_h_m``) named there with its datum; a feature with
-    a ``time_utc`` property (ISO 8601, known when the inputs
-    give their clock's origin) — or, with ``unix_time``, a ``time_s`` on the UNIX clock — gets a
+    a ``time_utc`` property (ISO 8601, known when the inputs give their clock's origin) gets a
     TimeStamp so Google Earth's time slider plays the flight."""
     from ..terrain.geoid import default_geoid
 
@@ -133,8 +117,8 @@ def write_kml(path: str | Path, layers: Mapping[str, list[dict]], *, geoid=None,
             props = feat.get("properties") or {}
             mark = sub(folder, "Placemark")
             sub(mark, "name", props.get("target_id", props.get("track_id", props.get("frame", k))))
-            t = _when(props, unix_time)
-            if t is not None:
+            t = props.get("time_utc")
+            if isinstance(t, str) and t:
                 sub(sub(mark, "TimeStamp"), "when", t)
             sub(mark, "styleUrl", "#" + _style_id(layer))
             data = [(key, val) for key, val in props.items() if key in fields[layer] and val is not None]

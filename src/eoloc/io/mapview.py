@@ -6,8 +6,9 @@ Earth countries, a user's raster tiles (MBTiles or a tile folder, embedded), the
 1.9.4 (BSD-2-Clause, ``eoloc/data/leaflet``) is inlined instead of folium's CDN links, its few
 images are data URIs, targets are vector circles (no marker images), the basemap's tiles are
 data URIs, and there are no web tiles unless ``tiles=`` asks for them. Every layer is a GeoJSON
-feature list, the same that goes to .geojson and KML. SVG paths carry CSS classes (``eoloc-target``, ``eoloc-cep``,
-``eoloc-footprint``, ``eoloc-aircraft``, ``eoloc-track``) so a browser test can count them.
+feature list, the same that goes to .geojson and KML. SVG paths carry CSS classes
+(``eoloc-target``, ``eoloc-cep``, ``eoloc-footprint``, ``eoloc-aircraft``, ``eoloc-track``, and
+``eoloc-tK`` for the K-th time step of the slider) so a browser test can count them.
 
 Data reaches the page only through serialisers: every tooltip (target ids, frames, track ids come
 from the user's files) is a JSON string (Jinja's ``tojson``, which also escapes ``<``, ``>``, ``&``
@@ -323,7 +324,12 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
 
         unit = "s" if any(_time_of(f) is not None and "time_s" in (f.get("properties") or {})
                           for layer in (footprints, targets) for f in layer or ()) else "frame"
-        labels = [_time_label(k) if unit == "s" else f"frame {k:g}" for k in keys]
+        if unit == "s" and keys[0] > 1e9:  # UNIX times (KLV, drone logs): as UTC
+            from .export import utc_times
+
+            labels = [f"{t[:-1].replace('T', ' ')} UTC" for t in utc_times(keys, "unix")]
+        else:
+            labels = [f"{k:.2f} s" if unit == "s" else f"frame {k:g}" for k in keys]
         m.get_root().html.add_child(folium.Element(_SLIDER % {
             "last": len(keys) - 1, "labels": json.dumps(labels).replace("</", "<\\/")}))
     folium.LayerControl(collapsed=False).add_to(m)
@@ -334,18 +340,9 @@ def write_map(path: str | Path, *, aircraft: list[dict] | None = None, footprint
     return path
 
 
-def _time_label(t: float) -> str:
-    """A time for the slider: UTC when it is a UNIX time (KLV, drone logs), else seconds."""
-    if t > 1e9:
-        from datetime import UTC, datetime
-
-        return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-4] + " UTC"
-    return f"{t:.2f} s"
-
-
 def _ramp(x: float) -> str:
-    """A colour from blue (early) through green to orange (late), for x in [0, 1] (matplotlib's
-    viridis is hard to see on a light map; this keeps every step dark enough)."""
+    """A colour from dark blue (early) through purple to yellow-orange (late), for x in [0, 1]:
+    matplotlib's plasma without its palest end, so every step shows on a light map."""
     import matplotlib
 
     r, g, b, _ = matplotlib.colormaps["plasma"](0.05 + 0.8 * float(x))

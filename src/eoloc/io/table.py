@@ -463,7 +463,7 @@ def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 #: Abbreviations expanded before a header name is compared with the declared ones.
 _SPELLED_OUT = {"az": "azimuth", "el": "elevation", "elev": "elevation", "hdg": "heading", "lng": "lon",
-                "long": "lon", "t": "time", "ts": "time", "timestamp": "time", "alt": "height", "hfov": "hfov"}
+                "long": "lon", "t": "time", "ts": "time", "timestamp": "time", "alt": "height"}
 _UNITS = {"deg", "m", "s", "px", "mm", "rad", "ms"}
 
 

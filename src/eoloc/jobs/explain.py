@@ -47,7 +47,7 @@ def commonest_failure(fixes: Fixes) -> tuple[Status, int] | None:
 
 
 def nothing_located(fixes: Fixes) -> bool:
-    """Whether there were targets and not one of them was located (the commands then exit 1)."""
+    """Whether there were targets and not one of them was located (the commands then exit 3)."""
     return bool(np.size(fixes.status)) and not bool(np.any(np.asarray(fixes.status) == Status.OK))
 
 
@@ -96,9 +96,9 @@ def explain_failures(fixes: Fixes, *, pose: Pose | None = None, pixels=None, rul
                      more: Mapping[str, np.ndarray | tuple[np.ndarray, str]] | None = None) -> str | None:
     """One line when at least half of the ``what`` failed for one reason (or the one target failed):
     the status, what it means, the inputs at fault (INVALID_INPUT: which field, in how many) and
-    what to do. ``pose``,
-    ``pixels`` and ``rule``: each target's inputs as located (broadcast to the fixes); ``more``: the
-    caller's other inputs (:func:`invalid_fields`)."""
+    what to do. ``pose``, ``pixels`` and ``rule``: each target's inputs as located (broadcast to
+    the fixes); ``more``: the caller's other inputs (:func:`invalid_fields`). Callers whose inputs
+    cost work to gather ask :func:`commonest_failure` first: most runs have nothing to explain."""
     common = commonest_failure(fixes)
     if common is None:
         return None

@@ -184,7 +184,13 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
             notes.append(f"--klv-out: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
                          "they were written as they came, without their fix")
     kml_layers = {**job.layers, "frame centres": fix_features(centres)}
-    written.append(write_kml(out / "eoloc.kml", kml_layers, name=job.path.name, unix_time=True))
+    for name in ("footprints", "encoder footprints"):  # ST 0601 times are UNIX: each outline its instant
+        if name in kml_layers:
+            feats = kml_layers[name]
+            utc = utc_times([(f.get("properties") or {}).get("time_s", np.nan) for f in feats], "unix")
+            kml_layers[name] = [{**f, "properties": {**(f.get("properties") or {}), "time_utc": t}}
+                                for f, t in zip(feats, utc, strict=True)]
+    written.append(write_kml(out / "eoloc.kml", kml_layers, name=job.path.name))
     lay = job.layers
     if make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
         notes.append("no map: the stream has no aircraft position, footprint or fix to draw")

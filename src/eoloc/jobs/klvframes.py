@@ -304,9 +304,9 @@ def explain_vmti(tel: Table, det: Table, fixes: Fixes, surface=None) -> str | No
     """One line when most VMTI detections failed for one reason, naming the KLV items at fault: a
     stream without a frame-centre elevation (tags 78, 25) located without --dem, no field of view,
     no frame size, no matching packet (:func:`eoloc.jobs.explain.explain_failures`)."""
-    from .explain import explain_failures
+    from .explain import commonest_failure, explain_failures
 
-    if not len(det):
+    if not len(det) or commonest_failure(fixes) is None:  # nothing to explain: no inputs gathered (batch)
         return None
     row, found, hfov, vfov, _ = vmti_frames(tel, det)
     d = det.columns

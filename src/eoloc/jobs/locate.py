@@ -13,7 +13,7 @@ from ..io.export import fix_records, with_utc
 from ..io.records import Records
 from ..io.table import Issue, Table
 from ..rules import StopRule
-from .explain import explain_failures, nothing_located, telemetry_names
+from .explain import commonest_failure, explain_failures, nothing_located, telemetry_names
 from .inputs import Prefetch, job_inputs
 from .tables import Located, locate_tables
 
@@ -74,10 +74,11 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
                    + (f" (median shift {np.median(shift):.1f} m, max {shift.max():.1f} m)" if shift.size else "")
                    + f"; {int(flagged.sum())} outside the model's trained range left as located (column comp_flag "
                      "says why)")
-    stop = rule.describe() if isinstance(rule, StopRule) else "range from the files"
-    why = explain_failures(located.fixes, pose=located.target_pose(), pixels=located.pixels, rule=located.rule,
-                           names=telemetry_names(sensor.gimbal.angle_names, located.rule), what=f"targets ({stop})")
-    if why:
+    if commonest_failure(located.fixes) is not None:  # each target's pose gathered only to explain a failure
+        stop = rule.describe() if isinstance(rule, StopRule) else "range from the files"
+        why = explain_failures(located.fixes, pose=located.target_pose(), pixels=located.pixels, rule=located.rule,
+                               names=telemetry_names(sensor.gimbal.angle_names, located.rule),
+                               what=f"targets ({stop})")
         notes.append(("nothing was located: " if nothing_located(located.fixes) else "") + why)
     extra = with_utc(located.extra, cfg.telemetry.time_origin)
     return LocateJob(fix_records(located.fixes, extra, after, coded=located.coded), located, extra,
