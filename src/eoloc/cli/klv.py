@@ -37,7 +37,7 @@ eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--basemap TILES] [--
      fixes.geojson, eoloc.kml (all layers), fixes.cot.zip (Cursor-on-Target: a TAK data
      package, one event per fix), map.html
      (self-contained, works offline). --klv-out re-encodes the stream with each packet's first
-     fix in the target location tags 40-42, 45, 46.
+     fix in the target location tags 40-42, 45, 46 (only those items and the checksum change).
   5. Convention check: when eoloc's frame centres or VMTI locations disagree with the
      encoder's, tries the alternative readings below and says which one the encoder follows,
      with the agreement under each (also in conventions.csv); --assume NAME applies one.

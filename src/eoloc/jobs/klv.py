@@ -177,12 +177,16 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     if len(job.records):
         written += write_layer(out, "fixes", job.records, [f for f in formats if f != "kml"], grid=grid)
     notes = []
-    if len(job.records) and klv_out:
+    if klv_out and job.vmti is not None and job.vmti.fixes.ok.any():
         path, unchanged = write_klv_stream(Path(klv_out), job)
         written.append(path)
         if unchanged:
-            notes.append(f"--klv-out: {unchanged} packet(s) break ST 0601 in ways stanag4609 cannot re-encode; "
-                         "they were written as they came, without their fix")
+            notes.append(f"--klv-out: {unchanged} packet(s) could not take their fix (a height outside tag 42's "
+                         "range, -900 to 19 000 m, or a packet that cannot be read item by item): written as they "
+                         "came, without it")
+    elif klv_out:
+        why = "no VMTI target was located" if len(job.records) else "the stream has no VMTI targets (ST 0903, tag 74)"
+        notes.append(f"--klv-out: {why}, so there is no fix to write into tags 40-42: {klv_out} not written")
     kml_layers = {**job.layers, "frame centres": fix_features(centres)}
     for name in ("footprints", "encoder footprints"):  # ST 0601 times are UNIX: each outline its instant
         if name in kml_layers:
@@ -204,7 +208,7 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
 
 def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
     """The stream with each packet's first OK fix (lowest target id) in tags 40-42, 45, 46; and how
-    many packets had to be passed on without theirs (stanag4609 cannot re-encode them)."""
+    many packets had to be passed on without theirs (:func:`eoloc.io.klv.encode.with_fix`: None)."""
     from ..io.klv.encode import with_fix
 
     v, tel = job.vmti, job.telemetry
@@ -226,7 +230,7 @@ def write_klv_stream(path: Path, job: KLVJob) -> tuple[Path, int]:
         if j is not None:
             new = with_fix(raw, f.lat_deg[j], f.lon_deg[j], f.h_m[j], ce90_m=ce[j], le90_m=le[j],
                            tag42_hae=bool(hae[row_of[p.index]]))
-            unchanged += new is None  # a packet stanag4609 cannot re-encode (non-standard): passed on as it came
+            unchanged += new is None  # a fix no tag can hold (height out of tag 42's range): passed on as it came
             raw = raw if new is None else new
         out += raw
     path.parent.mkdir(parents=True, exist_ok=True)

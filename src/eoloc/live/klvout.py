@@ -2,8 +2,10 @@
 first located target (the lowest VMTI target id with status OK, as `eoloc klv --klv-out`) in the
 target location tags 40-42 (tag 42 in the datum the stream uses: HAE when it sends tag 78, else
 MSL through the geoid) with CE90 and LE90 in tags 45 and 46; every other item is kept byte for
-byte and the checksum recomputed. A packet without a located target, or one stanag4609 cannot
-re-encode (non-standard), goes on as it came.
+byte and the checksum recomputed (:func:`eoloc.io.klv.encode.with_target_location`, item by
+item: a packet that departs from the standard elsewhere takes its fix all the same). A packet
+without a located target, or whose fix no tag can hold (a height outside tag 42's range), goes on
+as it came.
 
 The output keeps the input's form. Raw KLV in: each datagram out carries the same packets.
 MPEG-TS in: every transport packet that is not metadata (video, audio, PAT, PMT, PCR) is passed

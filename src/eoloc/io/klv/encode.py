@@ -1,5 +1,7 @@
-"""KLV out: ST 0601 packets for synthetic streams and re-encoded fixes (stanag4609's encoder, which
-writes the standard strictly), and a raw builder for test streams that break it on purpose."""
+"""KLV out: ST 0601 packets for synthetic streams (stanag4609's encoder, which writes the standard
+strictly), fixes written into real packets item by item (stanag4609's item encoder for the
+values, everything else kept as it came), and a raw builder for test streams that break the
+standard on purpose."""
 
 from __future__ import annotations
 
@@ -74,30 +76,65 @@ def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height:
     return encode_vmti_local_set(values, targets=packs)
 
 
+TARGET_TAGS = (40, 41, 42, 45, 46)  # target latitude, longitude, elevation, CE90, LE90
+
+
 def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: float, *, ce90_m: float | None = None,
                          le90_m: float | None = None) -> bytes:
-    """The packet re-encoded with a fix in the target location tags: 40 lat, 41 lon, 42 elevation
-    (``h_m`` must be in tag 42's datum: HAE when the packet stream sends tag 78, else MSL), 45
-    CE90 and 46 LE90 (m). Every other item is kept byte for byte; the checksum is recomputed."""
-    from stanag4609.st0601 import update_uas_local_set
+    """The packet with a fix in the target location tags: 40 lat, 41 lon, 42 elevation (``h_m``
+    must be in tag 42's datum: HAE when the packet stream sends tag 78, else MSL), 45 CE90 and 46
+    LE90 (m, at most 4095). Re-encoded item by item, as eoloc reads: only those items and the
+    checksum change. Every other item stays byte for byte in its place (a set that departs from
+    the standard, such as an ST 0102 set missing a required item, stays as it came); a target tag
+    the packet already sends is replaced where it stood (a repeated one once, where its last copy
+    stood, which is the one receivers keep); one it lacks goes before the checksum; a CE90 or
+    LE90 the packet sends and the fix has none for is left out (it was another fix's); the packet's
+    length keeps its BER form. Each value is encoded by stanag4609's ST 0601 item encoder.
+    ValueError when a value lies outside its tag's range (tag 42: -900 to 19 000 m) or the
+    packet cannot be read item by item."""
+    from stanag4609.st0601 import encode_field_value
 
-    upd: dict[int, Any] = {40: float(lat_deg), 41: float(lon_deg), 42: float(h_m)}
-    if ce90_m is not None and np.isfinite(ce90_m):
-        upd[45] = float(min(ce90_m, 4095.0))
-    if le90_m is not None and np.isfinite(le90_m):
-        upd[46] = float(min(le90_m, 4095.0))
-    return update_uas_local_set(packet, upd)
+    from .localset import parse_items
+    from .reader import packet_end
+
+    values: dict[int, float] = {40: float(lat_deg), 41: float(lon_deg), 42: float(h_m)}
+    for tag, v in ((45, ce90_m), (46, le90_m)):
+        if v is not None and np.isfinite(v):
+            values[tag] = float(min(v, 4095.0))
+    if not all(np.isfinite(v) for v in values.values()):
+        raise ValueError("the fix has a NaN or infinite coordinate")
+    new = {tag: encode_items([(tag, encode_field_value(tag, v))]) for tag, v in values.items()}
+    end, start, why = packet_end(packet, 0)
+    if end is None:
+        raise ValueError(why)
+    items, notes = parse_items(packet, start, end, whole=True)
+    if any(n.kind == "truncated item" for n in notes):
+        raise ValueError(next(n.message for n in notes if n.kind == "truncated item"))
+    last = {tag: i for i, (tag, _) in enumerate(items)}
+    body = bytearray()
+    for i, (tag, raw) in enumerate(items):
+        if tag == 1:
+            continue  # the checksum: computed again, last
+        body += (new.pop(tag, b"") if last[tag] == i else b"") if tag in TARGET_TAGS else raw
+    body += b"".join(new.values())
+    width = start - 16  # the packet length's bytes as sent: long form kept where it fits
+    length = len(body) + 4
+    if width > 1 and length < 1 << 8 * (width - 1):
+        head = UAS_KEY + bytes((0x80 | (width - 1),)) + length.to_bytes(width - 1, "big")
+    else:
+        head = UAS_KEY + encode_length(length)
+    pkt = head + bytes(body) + b"\x01\x02"
+    return pkt + bcc16(pkt).to_bytes(2, "big")
 
 
 def with_fix(packet: bytes, lat_deg: float, lon_deg: float, h_hae_m: float, *, ce90_m: float | None = None,
              le90_m: float | None = None, tag42_hae: bool) -> bytes | None:
     """The packet with a fix (ellipsoidal height) in its target location tags, tag 42 in the
     datum the stream gives it: HAE when ``tag42_hae`` (the stream sends tag 78), else MSL through
-    the geoid. None when stanag4609 cannot re-encode the packet (it breaks ST 0601 in a way its
-    encoder refuses); the caller passes such a packet on as it came. Used by `eoloc klv --klv-out`
+    the geoid. None when the fix cannot be written (a height outside tag 42's range, -900 to
+    19 000 m) or the packet cannot be read item by item (:func:`with_target_location`); the
+    caller passes such a packet on as it came and says how many. Used by `eoloc klv --klv-out`
     and `eoloc live --klv-out`."""
-    from stanag4609.errors import Stanag4609Error
-
     h = float(h_hae_m)
     if not tag42_hae:
         from ...terrain.geoid import default_geoid
@@ -105,5 +142,5 @@ def with_fix(packet: bytes, lat_deg: float, lon_deg: float, h_hae_m: float, *, c
         h -= float(default_geoid().undulation(lat_deg, lon_deg))
     try:
         return with_target_location(packet, float(lat_deg), float(lon_deg), h, ce90_m=ce90_m, le90_m=le90_m)
-    except Stanag4609Error:
+    except ValueError:  # a value outside its tag's range, or a packet that cannot be read item by item
         return None

@@ -111,12 +111,14 @@ def encode_items(items, *, long_form: bool = False) -> bytes:
     return bytes(out)
 
 
-def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: str = ""
+def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: str = "", whole: bool = False
                 ) -> tuple[list[tuple[int, bytes]], list[Note]]:
     """Every readable (tag, value) item of the set data[start:end], in order, and the notes.
 
     Duplicates are returned as sent (the caller keeps the last); a long-form length is noted once
     per tag; an item running past the end stops the parse with a "truncated item" note.
+    ``whole``: (tag, the item's bytes as sent: tag, length and value) instead, for re-encoding a
+    set item by item.
     """
     end = len(data) if end is None else end
     items: list[tuple[int, bytes]] = []
@@ -138,7 +140,7 @@ def parse_items(data: bytes, start: int = 0, end: int | None = None, *, prefix: 
         if needless:
             notes.append(Note("long-form length", f"{prefix}{tag}", "length in BER long form where the short form "
                               "would do (read as is)"))
-        items.append((tag, data[p:p + length]))
+        items.append((tag, data[pos if whole else p:p + length]))
         pos = p + length
     return items, notes
 
