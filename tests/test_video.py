@@ -27,7 +27,7 @@ from eoloc.ground.frame import misb_sensor
 from eoloc.ground.mosaic import Mosaic, ground_sample_m
 from eoloc.ground.rectify import FramePixels, OutputGrid, frame_pixels, output_grid
 from eoloc.io.klv.encode import encode_uas_packet
-from eoloc.io.klv.mux import add_sync_klv, write_klv_ts
+from eoloc.io.klv.mux import add_klv, write_klv_ts
 from eoloc.io.videofile import iter_frames, probe_video
 from eoloc.jobs.video import FrameSelection, frame_visibility, round_gsd, video_job
 from eoloc.rules import AtHeight
@@ -65,18 +65,20 @@ def carriages(tmp_path_factory):
     """Four seconds of 25 fps video with the same flight's metadata carried three ways."""
     d = tmp_path_factory.mktemp("video")
     plain = write_klv_ts(d / "plain.ts", [], video_fps=FPS, video_size=SIZE, duration_s=4.0)
-    sync = add_sync_klv(plain, d / "sync.ts", lambda n, t: packet(n / FPS, jumpy_az(n)))
+    sync = add_klv(plain, d / "sync.ts", lambda n, t: packet(n / FPS, jumpy_az(n)), carriage="sync")
+    # ST 1402 asynchronous: a packet per frame, no PTS, right after the frame's video (timed by arrival)
+    arrival = add_klv(plain, d / "arrival.ts", lambda n, t: packet(n / FPS, jumpy_az(n)), carriage="async")
     ten_hz = [(packet(k / 10, 10 * k / 10), k / 10) for k in range(41)]  # azimuth 10°/s, linear
     asyn = write_klv_ts(d / "async.ts", [ten_hz], video_fps=FPS, video_size=SIZE)
     side = d / "side.klv"
     side.write_bytes(b"".join(p for p, _ in ten_hz))
-    return d, plain, sync, asyn, side
+    return d, plain, sync, asyn, side, arrival
 
 
 def test_synchronous_klv_is_in_its_own_pid_with_stream_type_0x15(carriages):
     from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
 
-    _, _, sync, _, _ = carriages
+    _, _, sync, _, _, _ = carriages
     demux = TransportDemuxer()
     events = demux.feed(sync.read_bytes()) + demux.finish()
     klv = [e for e in events if isinstance(e, PESStreamEvent) and e.kind is StreamKind.KLV]
@@ -87,14 +89,16 @@ def test_synchronous_klv_is_in_its_own_pid_with_stream_type_0x15(carriages):
     assert sorted(e.pes.pts for e in klv) == sorted(e.pes.pts for e in video)
 
 
-@pytest.mark.parametrize("carriage", ["sync", "async", "sidecar"])
+@pytest.mark.parametrize("carriage", ["sync", "arrival", "async", "sidecar"])
 def test_every_frame_gets_its_own_metadata(carriages, carriage, tmp_path):
     """The frame the job calls n shows n in its pixels, and its pose is the metadata of time n / 25 s:
-    exactly the frame's own packet with synchronous carriage (an azimuth that jumps frame to frame),
-    the 10 Hz packets interpolated with asynchronous carriage and beside the video (tag 18's
-    resolution is 8e-8°; one frame off would be 0.4°)."""
-    _, plain, sync, asyn, side = carriages
-    video, kw = {"sync": (sync, {}), "async": (asyn, {}), "sidecar": (plain, {"klv": side})}[carriage]
+    exactly the frame's own packet with synchronous carriage and with ST 1402 asynchronous carriage
+    (no PTS: each packet timed by the frame it follows) — an azimuth that jumps frame to frame —,
+    the 10 Hz packets interpolated with asynchronous carriage with PTS (as FFmpeg writes) and beside
+    the video (tag 18's resolution is 8e-8°; one frame off would be 0.4°)."""
+    _, plain, sync, asyn, side, arrival = carriages
+    video, kw = {"sync": (sync, {}), "arrival": (arrival, {}), "async": (asyn, {}),
+                 "sidecar": (plain, {"klv": side})}[carriage]
     shown = {f.index: shown_index(f.image) for f in iter_frames(video)}
     # 4 s of frames (the async stream's video reaches its last packet at 4.0 s: one more)
     assert len(shown) == 4 * FPS + (carriage == "async") and all(shown[i] == i for i in shown)
@@ -103,14 +107,14 @@ def test_every_frame_gets_its_own_metadata(carriages, carriage, tmp_path):
     for r in job.rows:
         n = shown[r["frame"]]
         assert r["video_time_s"] == pytest.approx(n / FPS, abs=1e-6)
-        expected = jumpy_az(n) if carriage == "sync" else 10.0 * n / FPS
+        expected = jumpy_az(n) if carriage in ("sync", "arrival") else 10.0 * n / FPS
         assert r["status"] == "OK", r
         assert r["gimbal1_deg"] == pytest.approx(expected, abs=1e-5)
         assert r["time_s"] == pytest.approx(UNIX0 + n / FPS, abs=1e-5)
 
 
 def test_frames_outside_the_metadata_have_no_pose_and_say_why(carriages, tmp_path):
-    _, plain, _, _, side = carriages
+    _, plain, _, _, side, _ = carriages
     job = video_job(plain, out=tmp_path, klv=side, surface=0.0, time_offset_s=UNIX0 + 2.0, write_frames=False,
                     mosaic=False)  # the first frame is at 2 s into the KLV: the last 2 s of video have none
     late = [r for r in job.rows if r["video_time_s"] > 2.0 + 1e-6]
@@ -121,7 +125,7 @@ def test_frames_outside_the_metadata_have_no_pose_and_say_why(carriages, tmp_pat
 
 
 def test_frame_cogs_validate_and_mask_what_is_seen(carriages, tmp_path):
-    _, _, sync, _, _ = carriages
+    _, _, sync, _, _, _ = carriages
     job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=20), tiles=False)
     assert [r["frame"] for r in job.rows] == [0, 20, 40, 60, 80]
     files = sorted((tmp_path / "frames").glob("*.tif"))
@@ -156,7 +160,7 @@ def test_a_large_cog_has_overviews_its_mask_and_band_names(tmp_path):
 def test_mosaic_keeps_the_finest_frame_and_names_it(carriages, tmp_path):
     """Every mosaic cell equals its source frame's own COG at that cell, and that frame had the
     finest GSD there of all the frames that saw it."""
-    _, _, sync, _, _ = carriages
+    _, _, sync, _, _, _ = carriages
     job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=25), tiles=False)
     m = job.mosaic
     with rasterio.open(tmp_path / "mosaic_source.tif") as ds:
@@ -237,7 +241,7 @@ def test_round_gsd():
 
 
 def test_xyz_tiles_show_the_mosaic_where_it_is(carriages, tmp_path):
-    _, _, sync, _, _ = carriages
+    _, _, sync, _, _, _ = carriages
     job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=50), write_frames=False)
     ts, m = job.tiles, job.mosaic
     assert ts.count > 0 and ts.min_zoom <= ts.max_zoom
@@ -271,7 +275,7 @@ def test_xyz_tiles_show_the_mosaic_where_it_is(carriages, tmp_path):
 
 
 def test_cli_video_writes_everything_and_refuses_bad_input(carriages, tmp_path):
-    d, _, sync, _, _ = carriages
+    d, _, sync, *_ = carriages
     r = CliRunner().invoke(main, ["video", str(sync), "--every", "25", "--end", "3", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     rep = json.loads((tmp_path / "video.json").read_text())

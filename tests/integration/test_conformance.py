@@ -389,3 +389,74 @@ def test_49_4_klv_out_without_a_fix_says_so(tmp_path):
     assert r.exit_code == 0, r.output
     assert not dest.exists()
     assert "--klv-out: the stream has no VMTI targets" in " ".join(r.output.split()), r.output
+
+
+def _strict_st1402(path: Path) -> tuple[list, list]:
+    """stanag4609's own demultiplexer and ST 1402 metadata decoder (strict: an asynchronous PES
+    must have stream_id 0xBD, no PTS or DTS, a length; a synchronous one the metadata AU cells of
+    a declared service) over the whole file: (the PMT's KLV stream declarations, the KLV events,
+    the byte offsets of the video PES packets)."""
+    from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind, TransportDemuxer
+    from stanag4609.transport.metadata_stream import MetadataStreamDecoder
+
+    demux, decoder = TransportDemuxer(), MetadataStreamDecoder()
+    data = path.read_bytes()
+    events = list(demux.feed(data)) + list(demux.finish())
+    streams = list({s.elementary_pid: s for e in events if isinstance(e, PMTEvent) for s in e.table.streams
+                    if s.stream_type in (0x06, 0x15)}.values())
+    klv = [k for e in events if isinstance(e, PESStreamEvent) and e.kind is StreamKind.KLV for k in decoder.feed(e)]
+    decoder.finish()
+    video = [e.pes.offset for e in events if isinstance(e, PESStreamEvent) and e.kind is StreamKind.VIDEO]
+    return streams, klv, video
+
+
+@pytest.mark.parametrize("carriage", ["async", "sync"])
+def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
+    """`eoloc mux --carriage async|sync`, checked by stanag4609's strict ST 1402 decoder and by
+    FFmpeg (PyAV's demultiplexer). async: stream_type 0x06 with the 'KLVA' registration
+    descriptor, every PES stream_id 0xBD without PTS (before: 0xFC with a PTS, as FFmpeg writes);
+    sync: stream_type 0x15 with the metadata (0x26) and metadata STD (0x27) descriptors, every
+    access unit with its frame's PTS. Both: one packet per frame, each right after its frame's
+    video (sync's last: just before it); FFmpeg demultiplexes the same bytes; eoloc reads each
+    back at its frame's time exactly (async: by arrival, said in a note)."""
+    import av
+    from click.testing import CliRunner
+
+    from eoloc.cli.main import main
+    from eoloc.io.klv import read_klv
+    from eoloc.io.klv.mux import write_klv_ts
+    from eoloc.io.videofile import frame_times
+
+    video = write_klv_ts(tmp_path / "video.ts", [], video_fps=10, duration_s=2.0)
+    times = frame_times(video)
+    t = np.arange(times[0] - 1, times[-1] + 1.01, 0.5)
+    tel = tmp_path / "telemetry.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n" + "".join(
+        f"{x:.3f},{40 + 1e-5 * k:.6f},-105.0,3000,0,0,0,0,-60\n" for k, x in enumerate(t)), encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text("[camera]\nwidth = 160\nheight = 96\nfx = 140.0\n", encoding="utf-8")
+    out = tmp_path / "out.ts"
+    r = CliRunner().invoke(main, ["mux", str(video), "--telemetry", str(tel), "--config", str(cfg), "-o", str(out),
+                                  "--carriage", carriage, "--start-utc", "2026-01-01T00:00:00Z"])
+    assert r.exit_code == 0, r.output
+    streams, klv, video_at = _strict_st1402(out)
+    (decl,) = streams
+    tags = {d.tag for d in decl.descriptors}
+    if carriage == "async":
+        assert decl.stream_type == 0x06 and any(d.tag == 0x05 and d.data == b"KLVA" for d in decl.descriptors)
+        assert all(k.source.pes.stream_id == 0xBD and k.pts is None for k in klv)
+    else:
+        assert decl.stream_type == 0x15 and {0x26, 0x27} <= tags
+        assert all(k.source.pes.stream_id == 0xFC for k in klv)
+        np.testing.assert_allclose([k.pts / 90_000 for k in klv], times, atol=1.2e-5)
+    assert len(klv) == times.size == len(video_at) == 20
+    after = np.searchsorted(video_at, [k.source.pes.offset for k in klv])  # how many frames began before each packet
+    # each right after its frame's video; sync's last just before it (its PTS says which frame it is)
+    np.testing.assert_array_equal(after, np.r_[np.arange(1, 20), 20 if carriage == "async" else 19])
+    with av.open(str(out)) as c:  # FFmpeg's reading: the same packets, in the same order
+        ff = [bytes(p) for p in c.demux(c.streams.data[0]) if p.size]
+    assert ff == [bytes(k.packet.raw) for k in klv] if carriage == "async" else len(ff) == len(klv)
+    back = read_klv(out)
+    np.testing.assert_allclose([p.pts_s for p in back.packets], times, atol=1.2e-5)
+    assert [p.raw for p in back.packets] == [bytes(k.packet.raw) for k in klv]
+    assert any(n.kind == "timed by arrival" and n.count == 20 for n in back.notes) == (carriage == "async")

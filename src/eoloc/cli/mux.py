@@ -22,8 +22,11 @@ eoloc mux VIDEO --telemetry FILE [--flight-log LOG.csv] --config CAMERA.toml -o 
   camera's attitude as platform heading + sensor relative elevation/roll (ST 0601 has no other
   way to say "the camera's own attitude"), heights MSL (tag 15, EGM96) and ellipsoidal (tag 75),
   the fields of view of the config's camera; with --dem/--target-height also the frame centre.
-  --carriage async (default): a KLVA data stream (stream_type 0x06) with PTS = the frame's;
-  sync: ST 1402 synchronous metadata (stream_type 0x15), one access unit per frame.
+  --carriage (MISB ST 1402; each packet right after its frame's video):
+    async (default): asynchronous, a 'KLVA' data stream (stream_type 0x06), PES stream_id 0xBD
+      without PTS: a receiver times each packet by the frame before it (eoloc does, and says so);
+    sync: synchronous metadata (stream_type 0x15 with the metadata descriptors), one access unit
+      per frame with the frame's PTS.
   --start-utc: the UTC time of the first frame (tag 2); default: the SRT's dates, taken as UTC.
   Frames outside the telemetry get no packet (said). Read it back with eoloc klv / eoloc video.
 """
@@ -38,7 +41,7 @@ eoloc mux VIDEO --telemetry FILE [--flight-log LOG.csv] --config CAMERA.toml -o 
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False), metavar="OUT.ts",
               help="The MPEG-TS to write.")
 @click.option("--carriage", type=click.Choice(["async", "sync"]), default="async", show_default=True,
-              help="KLV carriage: asynchronous (KLVA, PTS per packet) or synchronous (ST 1402).")
+              help="KLV carriage (ST 1402): asynchronous (KLVA, no PTS) or synchronous (access units with PTS).")
 @click.option("--start-utc", "start_utc", default=None, metavar="ISO",
               help="UTC time of the first frame, ISO 8601 (e.g. 2024-01-04T22:23:10.5Z); default: the SRT's dates.")
 @dem_options("Ground for the frame centre (tags 21, 23-25): a DEM; repeat for tiles.")

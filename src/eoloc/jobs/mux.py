@@ -2,9 +2,10 @@
 into an MPEG-TS with a MISB ST 0601 KLV stream, so that drone footage enters `eoloc video`, the
 player, `eoloc live` and other tools (QGIS FMV, Esri, jMISB).
 
-One ST 0601 packet per video frame, carried with the frame's own presentation time:
-asynchronously (stream_type 0x06, 'KLVA', the packet's PTS = the frame's) or synchronously (ST
-1402: stream_type 0x15, one metadata access unit per video access unit). The frame's pose is the
+One ST 0601 packet per video frame, carried as MISB ST 1402 says (:func:`eoloc.io.klv.mux.add_klv`),
+right after its frame's video data: asynchronously (stream_type 0x06, 'KLVA', PES stream_id 0xBD
+without PTS: timed by the frame before it) or synchronously (stream_type 0x15 with the metadata
+descriptors, one metadata access unit per video access unit with the frame's PTS). The frame's pose is the
 telemetry interpolated at its time (:func:`eoloc.sequence.interp.interpolate_poses`; the records'
 time_s are the video's clock, a DJI SRT's subtitle times). An aircraft's telemetry with an az-el
 turret is written as it is (platform attitude 5-7, turret angles 18-20). Drone telemetry gives the
@@ -64,7 +65,7 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
             surface=None, max_gap_s: float = 1.5) -> MuxJob:
     """Write ``dest`` (see the module)."""
     from ..io.klv.encode import encode_uas_packet
-    from ..io.klv.mux import add_sync_klv, remux_with_klv
+    from ..io.klv.mux import add_klv, remux_video
     from ..io.telemetry import telemetry_pose
     from ..io.videofile import frame_times
     from ..rules import AtHeight, OnDEM
@@ -113,7 +114,6 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
         rule = OnDEM(surface) if hasattr(surface, "height") else AtHeight(float(surface))
         centre = rule.locate(sensor, p, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
         n_centre = default_geoid().undulation(centre.lat_deg, centre.lon_deg)
-    packets: list[tuple[bytes, float]] = []
     by_frame: dict[int, bytes] = {}
     for i in np.flatnonzero(got.ok):
         values = {2: datetime.fromtimestamp(unix0 + float(times[i] - times[0]), UTC), 13: float(p.lat_deg[i]),
@@ -122,27 +122,21 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
         if centre is not None and centre.ok[i]:
             values.update({21: float(centre.range_m[i]), 23: float(centre.lat_deg[i]), 24: float(centre.lon_deg[i]),
                            25: float(centre.h_m[i] - n_centre[i])})
-        raw = encode_uas_packet(values)
-        packets.append((raw, float(times[i])))
-        by_frame[int(i)] = raw
+        by_frame[int(i)] = encode_uas_packet(values)
     missing = int((~got.ok).sum())
     if missing:
         notes.append(f"{missing} of {times.size} frames lie outside the telemetry or in a gap of it (> {max_gap_s:g} "
                      "s): no packet for them")
+
+    def packet_for(n: int, pts_s: float) -> bytes | None:
+        """The packet of the frame shown at pts_s (frame_times are sorted)."""
+        j = int(np.clip(np.searchsorted(times, pts_s), 1, max(times.size - 1, 1)))
+        j = j - 1 if j > 0 and abs(times[j - 1] - pts_s) <= abs(times[j] - pts_s) else j
+        return by_frame.get(j) if abs(times[j] - pts_s) < 1e-3 else None
+
+    import tempfile
+
     dest = Path(dest)
-    if carriage == "async":
-        remux_with_klv(video, dest, packets)
-    else:
-        import tempfile
-
-        with tempfile.TemporaryDirectory() as tmp:
-            plain = remux_with_klv(video, Path(tmp) / "video.ts", [])
-
-            def packet_for(n: int, pts_s: float) -> bytes | None:
-                """The packet of the frame shown at pts_s (frame_times are sorted)."""
-                j = int(np.clip(np.searchsorted(times, pts_s), 1, max(times.size - 1, 1)))
-                j = j - 1 if j > 0 and abs(times[j - 1] - pts_s) <= abs(times[j] - pts_s) else j
-                return by_frame.get(j) if abs(times[j] - pts_s) < 1e-3 else None
-
-            add_sync_klv(plain, dest, packet_for)
-    return MuxJob(dest, int(times.size), len(packets), carriage, list(inputs.issues), notes)
+    with tempfile.TemporaryDirectory() as tmp:
+        add_klv(remux_video(video, Path(tmp) / "video.ts"), dest, packet_for, carriage=carriage)
+    return MuxJob(dest, int(times.size), len(by_frame), carriage, list(inputs.issues), notes)

@@ -19,7 +19,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 METADATA_STREAM_TYPES = (0x06, 0x15)  # asynchronous (private data, "KLVA") and synchronous metadata (ST 1402)
+# MPEG-1/2 video, MPEG-4 part 2, AVC (with SVC, MVC), HEVC, AVS
+VIDEO_STREAM_TYPES = frozenset({0x01, 0x02, 0x10, 0x1B, 0x20, 0x21, 0x24, 0x42})
 TS_PACKET = 188
+PTS_HZ = 90_000  # the MPEG system clock's PTS ticks per second
 MAX_PES_BYTES = 4 * 1024 * 1024  # a KLV PES is kilobytes: a PID that never ends one costs at most this
 
 
@@ -38,7 +41,7 @@ class KLVDemux:
     :meth:`feed_stream` for a file's bytes); each call returns stanag4609's events (PAT, PMT, and a
     ``PESStreamEvent`` per complete PES packet on a metadata PID) and the :class:`Damage` met."""
 
-    def __init__(self, *, max_pes_bytes: int = MAX_PES_BYTES) -> None:
+    def __init__(self, *, max_pes_bytes: int = MAX_PES_BYTES, arrival: bool = False) -> None:
         from stanag4609.transport.demux import TransportDemuxer
         from stanag4609.transport.mpegts import TransportStreamParser
 
@@ -49,6 +52,12 @@ class KLVDemux:
         self.programs: dict[int, object] = {}  # program number -> its PMT (stanag4609's ProgramMapTable)
         self.streams: dict[int, tuple] = {}  # metadata PID -> (program number, stream info, kind, KLV carriage)
         self.assemblers: dict[int, object] = {}
+        self.video_pids: set[int] = set()  # what the tables name as video
+        # arrival: each metadata PES's place in the stream, as the PTS of the video PES begun before
+        # it (:attr:`arrival_pts`, by the PES's byte offset), for asynchronous KLV sent without PTS
+        self.arrival = arrival
+        self.video_pts: int | None = None
+        self.arrival_pts: dict[int, int | None] = {}
 
     def feed_cells(self, data: bytes, offset: int = 0) -> tuple[list, list[Damage]]:
         """Whole transport packets, each read on its own (a bad one costs itself only)."""
@@ -85,7 +94,11 @@ class KLVDemux:
         for packet in packets:
             pid = packet.pid
             if pid == 0 or pid in self.pmt_pids or pid in self.streams:
+                if self.arrival and packet.payload_unit_start and pid in self.streams:
+                    self.arrival_pts[packet.offset] = self.video_pts
                 self._packet(packet, events, damage)
+            elif self.arrival and packet.payload_unit_start and pid in self.video_pids:
+                self.video_pts = pes_start_pts(packet.payload)
 
     def finish(self, events: list, damage: list[Damage]) -> None:
         """Complete the PES packets still open (a stream that ends)."""
@@ -154,6 +167,7 @@ class KLVDemux:
         now = {s.elementary_pid: (pmt.program_number, s, StreamKind.KLV if s.elementary_pid in klv else StreamKind.DATA,
                                   klv.get(s.elementary_pid))
                for s in pmt.streams if s.stream_type in METADATA_STREAM_TYPES or s.elementary_pid in klv}
+        self.video_pids |= {s.elementary_pid for s in pmt.streams if s.stream_type in VIDEO_STREAM_TYPES}
         for pid in [p for p, s in self.streams.items() if s[0] == pmt.program_number and p not in now]:
             del self.streams[pid]
             self.assemblers.pop(pid, None)
@@ -162,3 +176,23 @@ class KLVDemux:
                 self.streams[pid] = stream
                 self._restart(pid)
         self.programs[pmt.program_number] = pmt
+
+
+def pes_start_pts(payload: bytes) -> int | None:
+    """The PTS (90 kHz ticks) in the PES header at the start of ``payload`` (the payload of a
+    transport packet that begins a PES packet), or None: no PTS, or a header too damaged to say."""
+    from stanag4609.transport.pes import decode_timestamp
+
+    if len(payload) < 14 or payload[:3] != b"\x00\x00\x01" or payload[6] & 0xC0 != 0x80 or not payload[7] & 0x80:
+        return None
+    try:
+        return decode_timestamp(payload[9:14], expected_prefix=payload[7] >> 6)
+    except ValueError:  # stanag4609's DecodeError: a marker bit or prefix wrong
+        return None
+
+
+def cell_pes_pts(cell: bytes) -> int | None:
+    """:func:`pes_start_pts` of a whole 188-byte transport packet (its adaptation field skipped)."""
+    control = cell[3] >> 4 & 0x3
+    start = 4 + (1 + cell[4] if control == 0x3 else 0)
+    return pes_start_pts(cell[start:]) if control & 0x1 and start < TS_PACKET else None

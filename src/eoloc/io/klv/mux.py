@@ -1,6 +1,9 @@
-"""KLV into MPEG-TS with libavformat (PyAV): one asynchronous KLV data stream (stream_type 0x06,
-'KLVA') per list of packets, each packet a PES with its presentation time. For demos, tests and
-benchmarks that need a transport stream as an encoder would send it."""
+"""KLV into MPEG-TS. :func:`add_klv` adds a KLV stream to a video's transport stream (one that
+:func:`remux_video` brought into MPEG-TS) the way MISB ST 1402 specifies, asynchronous or
+synchronous carriage (`eoloc mux`). :func:`write_klv_ts` writes what FFmpeg's muxer (libavformat,
+through PyAV) writes, as most encoders in the field do: a 'KLVA' data stream (stream_type 0x06)
+whose PES packets have stream_id 0xFC and a PTS each; for demos, tests and benchmarks that need a
+stream as such an encoder sends it. eoloc reads all three (:func:`eoloc.io.klv.reader.read_ts_bytes`)."""
 
 from __future__ import annotations
 
@@ -10,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-PTS_HZ = 90_000
-TS_BYTES = 188
+from .demux import PTS_HZ, TS_PACKET
 
 
 def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float]]], *, video_fps: float = 0.0,
@@ -63,57 +65,89 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
     return path
 
 
-def add_sync_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, float], bytes | None], *,
-                 pid: int = 0x1F1) -> Path:
-    """Copy the transport stream ``video_ts`` to ``dest`` with a synchronous KLV metadata stream
-    (ST 1402: stream_type 0x15, metadata access units) on ``pid``: after each video access unit,
-    ``packet_for(n, pts_s)`` (n counts the video PES from 0, pts_s its presentation time) gives the
-    ST 0601 packet carried with the same PTS, or None for none. Video passes through byte for
-    byte (stanag4609's transformer re-packetises around the new PID)."""
-    from stanag4609.transport.demux import PESStreamEvent, StreamKind, TransportDemuxer
-    from stanag4609.transport.metadata import synchronous_klv_stream
+def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, float], bytes | None], *,
+            carriage: str = "async", pid: int = 0x1F1) -> Path:
+    """Copy the transport stream ``video_ts`` to ``dest`` with a KLV metadata stream on ``pid``
+    carried as MISB ST 1402 says: for each video access unit (n counts the video PES from 0,
+    pts_s is its presentation time), ``packet_for(n, pts_s)`` gives the ST 0601 packet that goes
+    with it, or None for none. Each packet is placed right after its frame's video data, before
+    the next frame's begins.
+
+    carriage "async": asynchronous carriage, stream_type 0x06 with the 'KLVA' registration
+    descriptor, each packet a PES of stream_id 0xBD (private_stream_1) without PTS (a receiver
+    times it by where it arrives: the video frame before it). "sync": synchronous carriage,
+    stream_type 0x15 with the metadata and metadata STD descriptors, metadata access units of
+    stream_id 0xFC with the frame's PTS. Video passes through byte for byte (stanag4609's
+    transformer writes the new PMT and re-packetises around the new PID)."""
+    from stanag4609.transport.metadata import asynchronous_klv_stream, synchronous_klv_stream
     from stanag4609.transport.processor import TimedKLVPacket
     from stanag4609.transport.psi import KLVCarriage
     from stanag4609.transport.transformer import LiveTransportTransformer
 
-    info = synchronous_klv_stream(pid, metadata_input_leak_rate=1_000, metadata_buffer_size=200_000)
+    from .demux import KLVDemux, cell_pes_pts
+
+    if carriage == "async":
+        info, kind = asynchronous_klv_stream(pid), KLVCarriage.ASYNCHRONOUS
+    elif carriage == "sync":
+        info = synchronous_klv_stream(pid, metadata_input_leak_rate=1_000, metadata_buffer_size=200_000)
+        kind = KLVCarriage.SYNCHRONOUS
+    else:
+        raise ValueError(f"carriage {carriage!r}: async or sync")
     transformer = LiveTransportTransformer(additional_metadata_stream=info)
-    observer = TransportDemuxer(max_programs=1)
+    tables = KLVDemux()  # only to learn the video PIDs from the program tables
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     data = Path(video_ts).read_bytes()
+    frame: tuple[int, int] | None = None  # (n, PTS) of the video PES being copied
     n = 0
+    next_cc = 0  # the KLV PID's next continuity counter
     with dest.open("wb") as out:
-        def emit(events) -> None:
-            nonlocal n
-            for ev in events:
-                if not (isinstance(ev, PESStreamEvent) and ev.kind is StreamKind.VIDEO and ev.pes.pts is not None):
-                    continue
-                raw = packet_for(n, ev.pes.pts / PTS_HZ)
-                n += 1
-                if raw is None:
-                    continue
-                pkt = TimedKLVPacket.from_bytes(raw, program_number=transformer.program.program_number, pid=pid,
-                                                carriage=KLVCarriage.SYNCHRONOUS, pts=ev.pes.pts,
-                                                metadata_service_id=0, random_access=True)
-                out.write(transformer.emit_metadata(pkt).transport)
+        def packet() -> object | None:
+            raw = packet_for(frame[0], frame[1] / PTS_HZ) if frame is not None else None
+            if raw is None:
+                return None
+            sync = kind is KLVCarriage.SYNCHRONOUS
+            return TimedKLVPacket.from_bytes(raw, program_number=transformer.program.program_number, pid=pid,
+                                             carriage=kind, pts=frame[1] if sync else None,
+                                             metadata_service_id=0 if sync else None, random_access=True)
 
-        for k in range(0, len(data), 64 * TS_BYTES):
-            chunk = data[k:k + 64 * TS_BYTES]
-            events = observer.feed(chunk)
-            out.write(transformer.feed(chunk).transport)
-            emit(events)
-        emit(observer.finish())
-        out.write(transformer.finish().transport)
+        def emit() -> None:
+            nonlocal next_cc
+            pkt = packet()
+            if pkt is not None:
+                cells = transformer.emit_metadata(pkt).transport
+                out.write(cells)
+                next_cc = (cells[-TS_PACKET + 3] + 1) & 0x0F if cells else next_cc
+
+        for k in range(0, len(data) - TS_PACKET + 1, TS_PACKET):
+            cell = data[k:k + TS_PACKET]
+            # the transformer hands a PES on once it is complete: when the next one begins
+            out.write(transformer.feed(cell).transport)
+            if cell[1] & 0x40 and ((cell[1] & 0x1F) << 8 | cell[2]) in tables.video_pids:  # a frame begins
+                emit()  # the previous frame's packet, after its video and before this frame's
+                pts = cell_pes_pts(cell)
+                frame = (n, pts) if pts is not None else None
+                n += 1
+            tables.feed_cells(cell)
+        if kind is KLVCarriage.SYNCHRONOUS:  # timed by its PTS: before the last frame's video will do
+            emit()
+            out.write(transformer.finish().transport)
+        else:  # after the last frame's video, which only finishing hands on: the PES written here
+            from stanag4609.transport.mux import encode_pes_packet, packetize_pes
+
+            out.write(transformer.finish().transport)
+            last = packet()
+            if last is not None:
+                pes = encode_pes_packet(bytes(last.packet), stream_id=0xBD, data_alignment_indicator=True)
+                out.write(b"".join(packetize_pes(pes, pid=pid, continuity_counter=next_cc)[0]))
     return dest
 
 
-def remux_with_klv(video_in: str | Path, dest: str | Path, packets: Sequence[tuple[bytes, float]]) -> Path:
+def remux_video(video_in: str | Path, dest: str | Path) -> Path:
     """The video of ``video_in`` (any container PyAV reads: MP4, MOV, TS) copied packet for packet
-    into the MPEG-TS ``dest`` with one asynchronous KLV data stream (stream_type 0x06, 'KLVA'):
-    each (raw ST 0601 packet, time s) at that presentation time on the video's own clock (the
-    video's PTS, in seconds). H.264/HEVC from MP4/MOV is turned to Annex B on the way (the
-    ``h264_mp4toannexb`` / ``hevc_mp4toannexb`` bitstream filters); nothing is decoded."""
+    into the MPEG-TS ``dest``, its presentation times kept, for :func:`add_klv`. H.264/HEVC from
+    MP4/MOV is turned to Annex B on the way (the ``h264_mp4toannexb`` / ``hevc_mp4toannexb``
+    bitstream filters); nothing is decoded."""
     import av
     from av.bitstream import BitStreamFilterContext
 
@@ -126,25 +160,9 @@ def remux_with_klv(video_in: str | Path, dest: str | Path, packets: Sequence[tup
         bsf = None
         if codec in ("h264", "hevc") and (vin.codec_context.extradata or b"")[:1] == b"\x01":  # avcC/hvcC: MP4 style
             bsf = BitStreamFilterContext(f"{codec}_mp4toannexb", vin, vout)
-        data = out.add_data_stream(codec_name="klv")
-        tb = vin.time_base
-        queue = sorted(((round(t / tb), raw) for raw, t in packets), key=lambda x: x[0])
-        q = 0
-
-        def klv_until(pts: int | None) -> None:
-            nonlocal q
-            while q < len(queue) and (pts is None or queue[q][0] <= pts):
-                pkt = av.Packet(queue[q][1])
-                pkt.stream = data
-                pkt.pts = pkt.dts = queue[q][0]
-                pkt.time_base = tb
-                out.mux(pkt)
-                q += 1
-
         for pkt in src.demux(vin):
             if pkt.dts is None and pkt.pts is None:
                 continue
-            klv_until(pkt.dts if pkt.dts is not None else pkt.pts)
             for p2 in (bsf.filter(pkt) if bsf is not None else [pkt]):
                 p2.stream = vout
                 out.mux(p2)
@@ -152,7 +170,6 @@ def remux_with_klv(video_in: str | Path, dest: str | Path, packets: Sequence[tup
             for p2 in bsf.filter(None):
                 p2.stream = vout
                 out.mux(p2)
-        klv_until(None)
     return dest
 
 

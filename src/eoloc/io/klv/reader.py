@@ -363,17 +363,20 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
     PID is its own stream ("PID n").
 
     Asynchronous carriage (stream_type 0x06, 'KLVA') and synchronous carriage (0x15, metadata
-    access units) both end up as one byte stream per PID, framed like a raw KLV file. Transport
+    access units) both end up as one byte stream per PID, framed like a raw KLV file. A packet's
+    time is its PES's PTS; asynchronous KLV sent as ST 1402 says (stream_id 0xBD, no PTS) is timed
+    by where it arrives: the PTS of the video PES begun before it (said in a note). Transport
     errors (lost sync, a damaged packet, a PES packet that does not add up) cost the packets they
     touch, and are reported with their byte offsets in the file (:class:`.demux.KLVDemux`).
     """
     from stanag4609.transport.demux import PESStreamEvent, StreamKind
     from stanag4609.transport.metadata import parse_metadata_au_cells
 
-    from .demux import KLVDemux
+    from .demux import PTS_HZ, KLVDemux
 
-    demux = KLVDemux()
+    demux = KLVDemux(arrival=True)
     issues: list[KLVIssue] = []
+    by_arrival: dict[int, int] = {}  # PID -> packets timed by the video frame before them
     per_pid: dict[int, tuple[bytearray, list]] = {}
     torn = len(data) % TS_PACKET
     if torn:  # a recording cut off mid-packet: the whole packets before it are kept
@@ -394,7 +397,11 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
                 issues.append(KLVIssue(path, None, int(ev.pes.offset or 0), "malformed",
                                        f"PID {ev.pid}: metadata access unit cannot be read: {one_line(exc)}"))
                 continue
-        marks.append((len(buf), ev.pes.pts_seconds))
+        t = ev.pes.pts_seconds
+        if t is None and demux.arrival_pts.get(ev.pes.offset) is not None:
+            t = demux.arrival_pts[ev.pes.offset] / PTS_HZ
+            by_arrival[ev.pid] = by_arrival.get(ev.pid, 0) + 1
+        marks.append((len(buf), t))
         buf.extend(payload)
     if not per_pid:
         raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
@@ -404,6 +411,10 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
     for pid, (buf, marks) in sorted(per_pid.items()):
         s = decode_klv_bytes(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
                              first_index=n, strict=strict)
+        if by_arrival.get(pid):
+            notes.append(StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
+                                    "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
+                                    "before it in the stream", by_arrival[pid], n))
         n += len(s.packets) + s.n_bad
         packets += s.packets
         issues += s.issues
