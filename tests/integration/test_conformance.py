@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
@@ -460,3 +462,77 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     np.testing.assert_allclose([p.pts_s for p in back.packets], times, atol=1.2e-5)
     assert [p.raw for p in back.packets] == [bytes(k.packet.raw) for k in klv]
     assert any(n.kind == "timed by arrival" and n.count == 20 for n in back.notes) == (carriage == "async")
+
+
+def _cot_schema():
+    import xmlschema
+
+    return xmlschema.XMLSchema(str(DATA / "conformance" / "cot_event_2_0.xsd"))
+
+
+def test_49_cot_every_event_eoloc_sends_is_valid_against_the_cot_schema(tmp_path):
+    """MITRE's CoT Event 2.0 schema (tests/data/conformance/cot_event_2_0.xsd) on every kind of
+    event eoloc makes: the TAK data package of `eoloc klv` (each fix), and a whole live flight's
+    feed over its DEM (aircraft with its sensor, sensor point of interest, footprint shape, each
+    target, each refined estimate), the silence event and the presence event."""
+    import zipfile
+    from datetime import UTC, datetime
+
+    from click.testing import CliRunner
+
+    import eoloc
+    from eoloc.cli.main import main
+    from eoloc.io.config import load_config
+    from eoloc.io.klv.reader import split_klv
+    from eoloc.jobs.setup import misb_setup
+    from eoloc.live.cotfeed import CotFeed
+    from eoloc.live.refine import TargetFilters
+    from eoloc.live.session import LiveSession
+    from eoloc.terrain import open_dem
+
+    schema = _cot_schema()
+    mountain = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+    flight, dem, config = mountain / "flight.klv", mountain / "longs_peak_srtmgl3.tif", mountain / "klv.toml"
+    r = CliRunner().invoke(main, ["klv", str(flight), "--dem", str(dem), "--config", str(config), "--out",
+                                  str(tmp_path / "klv"), "--no-map"])
+    assert r.exit_code == 0, r.output
+    with zipfile.ZipFile(tmp_path / "klv" / "fixes.cot.zip") as zf:
+        packaged = [zf.read(n) for n in zf.namelist() if n.endswith(".cot")]
+    session = LiveSession("test", dem=open_dem([dem]), budget=misb_setup(load_config(config))[1],
+                          refine=TargetFilters("static"))
+    feed = CotFeed(targets="both")
+    now = datetime(2026, 11, 27, 12, tzinfo=UTC)
+    live = [e for raw, _ in split_klv(flight.read_bytes()) for u in session.feed(raw) for e in feed.events(u, now=now)]
+    live += [*feed.silence(7.0, now=now), feed.presence(now=now)]
+    kinds = {schema.to_dict(e.decode()).get("@type") for e in live}
+    assert {"a-f-A-M-F-Q", "b-m-p-s-p-i", "u-d-f", "a-u-G", "a-f-G-E-S"} <= kinds
+    assert len(packaged) == 103 and len(live) > 250
+    for event in [*packaged, *live]:
+        errors = [str(e)[:300] for e in schema.iter_errors(event.decode())]
+        assert not errors, (event[:400], errors[:2])
+
+
+_COT_SCHEMA = None
+
+
+@settings(max_examples=300, deadline=None)
+@given(lat=st.floats(-90, 90), lon=st.floats(-180, 180), h=st.floats(-1e5, 1e5),
+       errors=st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(0, 1e12)), min_size=5,
+                       max_size=5),
+       tid=st.one_of(st.integers(), st.text(max_size=40)))
+def test_49_cot_a_fix_with_any_values_makes_a_valid_event(lat, lon, h, errors, tid):
+    """Whatever a fix row holds (an uncertainty NaN, infinite, negative or past 10^7 m; a target
+    name with markup, control characters or other scripts), its CoT event is valid against the
+    CoT schema: ce/le decimals within the schema (9999999, CoT's 'unknown', for what is not a
+    usable error), the name escaped."""
+    global _COT_SCHEMA
+    from eoloc.io.cot import UNKNOWN, cot_event_bytes
+
+    _COT_SCHEMA = _COT_SCHEMA or _cot_schema()
+    row = {"status": "OK", "lat_deg": lat, "lon_deg": lon, "h_m": h, "target_id": tid,
+           **dict(zip(("ce90_m", "le90_m", "sigma_e_m", "sigma_n_m", "sigma_u_m"), errors, strict=True))}
+    event = cot_event_bytes(row).decode()
+    problems = [str(e)[:200] for e in _COT_SCHEMA.iter_errors(event)]
+    assert not problems, (event, problems)
+    point = _COT_SCHEMA.to_dict(event)["point"]
+    assert all(0 <= float(point[f"@{k}"]) <= UNKNOWN for k in ("ce", "le"))

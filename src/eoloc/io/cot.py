@@ -56,7 +56,8 @@ LE90_PER_SIGMA = 1.6448536269514722  # two-sided 90 % of a normal, in sigmas
 def ce_le(row: dict) -> tuple[float, float]:
     """CoT's 1-sigma circular (ce) and vertical (le) errors (see the module notes) of a fix row or
     an estimate's properties from their ce90_m / le90_m (else sigma_e/n/u_m) columns;
-    :data:`UNKNOWN` for what the row does not know."""
+    :data:`UNKNOWN` for what the row does not know, or knows only as no usable error (not finite,
+    negative, or as large as UNKNOWN itself)."""
     ce90, le90 = _num(row, "ce90_m"), _num(row, "le90_m")
     se, sn, su = _num(row, "sigma_e_m"), _num(row, "sigma_n_m"), _num(row, "sigma_u_m")
     if math.isfinite(ce90):
@@ -64,7 +65,7 @@ def ce_le(row: dict) -> tuple[float, float]:
     else:
         ce = math.sqrt((se * se + sn * sn) / 2.0) if math.isfinite(se + sn) else UNKNOWN
     le = le90 / LE90_PER_SIGMA if math.isfinite(le90) else (su if math.isfinite(su) else UNKNOWN)
-    return ce, le
+    return (ce if 0.0 <= ce < UNKNOWN else UNKNOWN), (le if 0.0 <= le < UNKNOWN else UNKNOWN)
 
 
 _PLAIN = re.compile("[^&<>\"'\x00-\x1f\ufffe\uffff\ud800-\udfff]*\\Z")  # an attribute value as it is
