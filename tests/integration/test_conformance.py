@@ -536,3 +536,103 @@ def test_49_cot_a_fix_with_any_values_makes_a_valid_event(lat, lon, h, errors, t
     assert not problems, (event, problems)
     point = _COT_SCHEMA.to_dict(event)["point"]
     assert all(0 <= float(point[f"@{k}"]) <= UNKNOWN for k in ("ce", "le"))
+
+
+def _rfc7946_problems(obj: dict) -> list[str]:
+    """What RFC 7946 asks beyond the objects' shapes (which geojson-pydantic checks): no "crs"
+    member (§4), positions in range (§3.1.1, §4), polygon rings by the right-hand rule: exterior
+    counter-clockwise, holes clockwise (§3.1.6; shapely decides the turn)."""
+    from shapely.geometry import LinearRing
+
+    out = [] if "crs" not in obj else ["a 'crs' member (RFC 7946 §4 removed it)"]
+
+    def polygons(g: dict | None):
+        if g is None:
+            return
+        if g["type"] == "Polygon":
+            yield g["coordinates"]
+        elif g["type"] == "MultiPolygon":
+            yield from g["coordinates"]
+        elif g["type"] == "GeometryCollection":
+            for part in g["geometries"]:
+                yield from polygons(part)
+
+    def positions(c):
+        if c and isinstance(c[0], (int, float)):
+            yield c
+        else:
+            for x in c:
+                yield from positions(x)
+
+    for f in obj.get("features", [obj]):
+        g = f.get("geometry")
+        if g is None:
+            continue
+        coords = g.get("coordinates", [p for part in g.get("geometries", []) for p in part["coordinates"]])
+        out += [f"position {p} out of range" for p in positions(coords)
+                if not (-180 <= p[0] <= 180 and -90 <= p[1] <= 90)]
+        for rings in polygons(g):
+            out += ["exterior ring clockwise"] if not LinearRing(rings[0]).is_ccw else []
+            out += ["a hole counter-clockwise" for r in rings[1:] if LinearRing(r).is_ccw]
+    return out
+
+
+def test_49_every_geojson_eoloc_writes_is_valid_rfc_7946(tmp_path):
+    """Every GeoJSON file of `eoloc klv` (footprints, frame centres, sensor track, fixes), `eoloc
+    locate`, `eoloc track`, `eoloc footprint` across the antimeridian, and every line of `eoloc
+    live --ndjson`: strict JSON (no NaN or Infinity), each object valid for geojson-pydantic's
+    RFC 7946 models, and RFC 7946's own rules (no crs, positions in range, right-hand rings)."""
+    import json
+    import subprocess
+    import sys
+
+    from click.testing import CliRunner
+    from geojson_pydantic import Feature, FeatureCollection
+
+    import eoloc
+    from eoloc.cli.main import main
+
+    def strict(text: str):
+        def refuse(name: str):
+            raise AssertionError(f"{name} in JSON")
+        return json.loads(text, parse_constant=refuse)
+
+    demo = Path(eoloc.__file__).parent / "data" / "demo"
+    mountain = demo / "mountain"
+    runner = CliRunner()
+    runs = [["klv", str(mountain / "flight.klv"), "--dem", str(mountain / "longs_peak_srtmgl3.tif"), "--config",
+             str(mountain / "klv.toml"), "--no-map"],
+            ["locate", str(demo / "telemetry.csv"), str(demo / "detections.csv"), "--config", str(demo / "camera.toml"),
+             "--target-height", "600", "--format", "geojson"],
+            ["track", str(demo / "telemetry.csv"), str(demo / "detections.csv"), "--config", str(demo / "camera.toml"),
+             "--target-height", "600", "--format", "geojson"]]
+    tel = tmp_path / "telemetry.csv"
+    tel.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
+                   "0,10.0,179.999,3000,0,0,0,0,-90\n1,10.001,-179.999,3000,0,0,0,0,-60\n", encoding="utf-8")
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text("[camera]\nwidth = 1280\nheight = 960\nfx = 1000.0\n", encoding="utf-8")
+    runs.append(["footprint", str(tel), "--config", str(cfg), "--target-height", "0", "--format", "geojson"])
+    files = []
+    for k, args in enumerate(runs):
+        r = runner.invoke(main, [*args, "--out", str(tmp_path / f"run{k}")])
+        assert r.exit_code == 0, (args[0], r.output)
+        files += sorted((tmp_path / f"run{k}").glob("*.geojson"))
+    assert len(files) >= 7, files
+    n = 0
+    for path in files:
+        obj = strict(path.read_text(encoding="utf-8"))
+        FeatureCollection.model_validate(obj)
+        assert not _rfc7946_problems(obj), (path.name, _rfc7946_problems(obj)[:3])
+        n += len(obj["features"])
+    lines = tmp_path / "live.ndjson"
+    r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", str(mountain / "flight.klv"), "--dem",
+                        str(mountain / "longs_peak_srtmgl3.tif"), "--config", str(mountain / "klv.toml"), "--ndjson",
+                        str(lines)], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stderr
+    for line in lines.read_text(encoding="utf-8").splitlines():
+        obj = strict(line)
+        Feature.model_validate(obj)
+        assert not _rfc7946_problems(obj), (line[:300], _rfc7946_problems(obj))
+        n += 1
+    print(f"GeoJSON: {len(files)} files + live, {n} objects valid")
+    assert n > 500
