@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench bytecode clean browser tak streams mutants geoconvert
+.PHONY: demo test lint bench bytecode clean browser tak streams mutants geoconvert ffmpeg
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,6 +15,9 @@ $(STAMP): pyproject.toml
 	# orthority, the peer of the ortho test and bench: without its deps (it asks for opencv-python,
 	# which clashes with our opencv-python-headless; its other deps are in the test extra)
 	$(BIN)/python -m pip install --quiet --no-deps "orthority==0.7.0"
+	# GDAL's GeoPackage validator (validate_gpkg.py), for the conformance test: without its deps (it asks
+	# for GDAL's Python bindings, which need libgdal to build; the validator runs on sqlite3 alone)
+	$(BIN)/python -m pip install --quiet --no-deps "gdal-utils==3.13.3.0"
 	$(MAKE) --no-print-directory bytecode
 	touch $(STAMP)
 
@@ -42,6 +45,12 @@ geoconvert:
 	@command -v GeoConvert >/dev/null || { apt-get install -y -q geographiclib-tools >/dev/null 2>&1 || \
 	  { apt-get update -q >/dev/null && apt-get install -y -q geographiclib-tools >/dev/null; }; } || \
 	  { echo "install Debian's geographiclib-tools (as root) for the MGRS test"; exit 1; }
+
+# FFmpeg's own ffprobe (Debian's ffmpeg): a second reader of the MPEG-TS eoloc writes, installed here when missing.
+ffmpeg:
+	@command -v ffprobe >/dev/null || { apt-get install -y -q --no-install-recommends ffmpeg >/dev/null 2>&1 || \
+	  { apt-get update -q >/dev/null && apt-get install -y -q --no-install-recommends ffmpeg >/dev/null; }; } || \
+	  { echo "install Debian's ffmpeg (as root) for the MPEG-TS conformance test"; exit 1; }
 
 # Real network senders for the live-source test: an RTSP server (GStreamer's gst-rtsp-server,
 # through Debian's python3-gi) and SRT's own tools (srt-live-transmit), installed here when missing.
@@ -72,7 +81,7 @@ $(TAK_STAMP):
 
 tak: $(TAK_STAMP)
 
-test: $(STAMP) lint browser tak streams geoconvert
+test: $(STAMP) lint browser tak streams geoconvert ffmpeg
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP) bytecode

@@ -6,6 +6,7 @@ GeoConvert (Debian's geographiclib-tools) for MGRS.
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 from pathlib import Path
@@ -112,8 +113,6 @@ def test_49_9_mgrs_truncates_to_the_metre_as_geoconvert_does():
 
 
 def _vectors():
-    import json
-
     return json.loads((DATA / "conformance" / "jmisb_st0903_vectors.json").read_text())["vectors"]
 
 
@@ -419,8 +418,9 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     descriptor, every PES stream_id 0xBD without PTS (before: 0xFC with a PTS, as FFmpeg writes);
     sync: stream_type 0x15 with the metadata (0x26) and metadata STD (0x27) descriptors, every
     access unit with its frame's PTS. Both: one packet per frame, each right after its frame's
-    video (sync's last: just before it); FFmpeg demultiplexes the same bytes; eoloc reads each
-    back at its frame's time exactly (async: by arrival, said in a note)."""
+    video (sync's last: just before it); FFmpeg (PyAV's, and Debian's ffprobe) demultiplexes the
+    same bytes with that stream id and timing; eoloc reads each back at its frame's time exactly
+    (async: by arrival, said in a note)."""
     import av
     from click.testing import CliRunner
 
@@ -457,7 +457,21 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     np.testing.assert_array_equal(after, np.r_[np.arange(1, 20), 20 if carriage == "async" else 19])
     with av.open(str(out)) as c:  # FFmpeg's reading: the same packets, in the same order
         ff = [bytes(p) for p in c.demux(c.streams.data[0]) if p.size]
-    assert ff == [bytes(k.packet.raw) for k in klv] if carriage == "async" else len(ff) == len(klv)
+    assert ff == [bytes(k.packet.raw) for k in klv]
+    # Debian's ffprobe (FFmpeg 5.1, another build than PyAV's): one KLV data stream, its packets with
+    # the PES stream id and timing of the carriage
+    exe = shutil.which("ffprobe")
+    assert exe, "ffprobe (Debian's ffmpeg) is installed by `make test` (target ffmpeg)"
+    probe = json.loads(subprocess.run([exe, "-v", "error", "-select_streams", "d", "-show_streams", "-show_packets",
+                                       "-of", "json", str(out)], capture_output=True, text=True, check=True).stdout)
+    (stream,) = probe["streams"]
+    assert stream["codec_name"] == "klv" and stream["codec_tag_string"] == "KLVA"
+    assert [int(p["size"]) for p in probe["packets"]] == [len(k.packet.raw) for k in klv]
+    assert {p["side_data_list"][0]["id"] for p in probe["packets"]} == {0xBD if carriage == "async" else 0xFC}
+    if carriage == "async":
+        assert all("pts" not in p for p in probe["packets"])
+    else:
+        np.testing.assert_allclose([float(p["pts_time"]) for p in probe["packets"]], times, atol=1.2e-5)
     back = read_klv(out)
     np.testing.assert_allclose([p.pts_s for p in back.packets], times, atol=1.2e-5)
     assert [p.raw for p in back.packets] == [bytes(k.packet.raw) for k in klv]
@@ -582,8 +596,6 @@ def test_49_every_geojson_eoloc_writes_is_valid_rfc_7946(tmp_path):
     locate`, `eoloc track`, `eoloc footprint` across the antimeridian, and every line of `eoloc
     live --ndjson`: strict JSON (no NaN or Infinity), each object valid for geojson-pydantic's
     RFC 7946 models, and RFC 7946's own rules (no crs, positions in range, right-hand rings)."""
-    import json
-    import subprocess
     import sys
 
     from click.testing import CliRunner
@@ -636,3 +648,45 @@ def test_49_every_geojson_eoloc_writes_is_valid_rfc_7946(tmp_path):
         n += 1
     print(f"GeoJSON: {len(files)} files + live, {n} objects valid")
     assert n > 500
+
+
+def _validate_gpkg(path: Path) -> subprocess.CompletedProcess:
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "osgeo_utils.samples.validate_gpkg", "--extra", str(path)],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_49_every_geopackage_eoloc_writes_passes_gdals_validator(tmp_path):
+    """GDAL's own GeoPackage validator (validate_gpkg.py of gdal-utils, with its extra checks) on
+    every GeoPackage of `eoloc klv --format gpkg` (footprints, frame centres, sensor track, fixes)
+    and `eoloc locate --format gpkg`: exit 0 and nothing said. The validator is seen to refuse a
+    file whose geometry-columns table lost its row (so a pass means something)."""
+    import sqlite3
+
+    from click.testing import CliRunner
+
+    import eoloc
+    from eoloc.cli.main import main
+
+    demo = Path(eoloc.__file__).parent / "data" / "demo"
+    mountain = demo / "mountain"
+    runner = CliRunner()
+    for k, args in enumerate([
+            ["klv", str(mountain / "flight.klv"), "--dem", str(mountain / "longs_peak_srtmgl3.tif"), "--config",
+             str(mountain / "klv.toml"), "--no-map", "--format", "gpkg"],
+            ["locate", str(demo / "telemetry.csv"), str(demo / "detections.csv"), "--config",
+             str(demo / "camera.toml"), "--target-height", "600", "--format", "gpkg"]]):
+        r = runner.invoke(main, [*args, "--out", str(tmp_path / f"run{k}")])
+        assert r.exit_code == 0, r.output
+    files = sorted(tmp_path.glob("run*/*.gpkg"))
+    assert len(files) == 5, files
+    for path in files:
+        v = _validate_gpkg(path)
+        assert v.returncode == 0 and not (v.stdout + v.stderr).strip(), (path.name, v.stdout, v.stderr)
+    broken = tmp_path / "broken.gpkg"
+    broken.write_bytes(files[0].read_bytes())
+    with sqlite3.connect(broken) as db:
+        db.execute("DELETE FROM gpkg_geometry_columns")
+    v = _validate_gpkg(broken)
+    assert v.returncode != 0 and "Req" in v.stdout + v.stderr, (v.stdout, v.stderr)
