@@ -766,3 +766,34 @@ def test_49_kwivers_full_st0601_set_reads_as_kwiver_reads_it():
             assert got == v["expect"], (v["name"], got)
         else:
             assert float(got) == pytest.approx(v["expect"], rel=1e-9, abs=1e-12), (v["name"], got, v["expect"])
+
+
+def test_49_kwivers_st0903_set_reads_as_kwiver_reads_it():
+    """KWIVER's ST 0903 test set (tests/data/conformance/kwiver_st0903_set.json, BSD-3): a VMTI set
+    with two VTargets (one with every item, its location, history, colour, FPA index, empty nested
+    series), the algorithm and ontology series. eoloc reads every value KWIVER states (time stamp
+    to the microsecond, fields of view, offsets and target height exactly), and KWIVER's target
+    location pack (latitude, longitude, height, the three sigmas) in a target of its own."""
+    from datetime import UTC, datetime, timedelta
+
+    from eoloc.io.klv.st0903 import decode_vmti
+
+    kw = json.loads((DATA / "conformance" / "kwiver_st0903_set.json").read_text())
+    vmti, _ = decode_vmti(bytes.fromhex(kw["set_hex"]))
+    for tag, want in kw["expected_set"].items():
+        got = vmti.values[int(tag)]
+        if tag == "2":
+            got = (got - datetime(1970, 1, 1, tzinfo=UTC)) // timedelta(microseconds=1)
+        assert got == want, (tag, got, want)
+    targets = {t.target_id: t.values for t in vmti.targets}
+    assert sorted(targets) == [1, 1234]
+    for tid, items in kw["expected_targets"].items():
+        for tag, want in items.items():
+            assert targets[int(tid)][int(tag)] == want, (tid, tag, targets[int(tid)][int(tag)], want)
+    pack = bytes.fromhex(kw["location_pack_hex"])  # a VMTI set of version 5 with one target: its location, tag 17
+    target = bytes([1, 17, len(pack)]) + pack
+    series = bytes([len(target)]) + target
+    vmti, _ = decode_vmti(bytes([4, 1, 5, 101, len(series)]) + series)
+    location = vmti.targets[0].values[17]
+    for name, want in kw["expected_location"].items():
+        assert getattr(location, name) == pytest.approx(want, abs=1e-12), name
