@@ -29,12 +29,12 @@ def xmp_packet(tags: dict, ns: tuple[str, str] = ("drone-dji", "http://www.dji.c
 
 
 def _jpeg(width: int, height: int, *, make: str, model: str, focal_mm: float | None, f35_mm: float | None,
-          gps: tuple[float, float, float] | None = None) -> bytes:
-    """A grey JPEG with EXIF Make/Model, the focal lengths and (``gps``) latitude, longitude and
-    altitude to 1e-6 arc-second and 1 mm."""
+          gps: tuple[float, float, float] | None = None, picture=None) -> bytes:
+    """A grey JPEG (or ``picture``, an (height, width, 3) uint8 array) with EXIF Make/Model, the
+    focal lengths and (``gps``) latitude, longitude and altitude to 1e-6 arc-second and 1 mm."""
     from PIL.TiffImagePlugin import IFDRational
 
-    im = Image.new("RGB", (width, height), (90, 90, 90))
+    im = Image.new("RGB", (width, height), (90, 90, 90)) if picture is None else Image.fromarray(picture, "RGB")
     exif = Image.Exif()
     exif[271], exif[272] = make, model
     sub = exif.get_ifd(0x8769)
@@ -60,10 +60,10 @@ def _with_xmp(data: bytes, xmp: bytes) -> bytes:
 
 
 def write_photo(path: Path, width: int, height: int, tags: dict | None, *, make: str = "DJI", model: str = "FC330",
-                focal_mm: float | None = None, f35_mm: float | None = None) -> Path:
-    """A grey JPEG of width x height with EXIF (make, model, focal length) and, unless ``tags`` is
-    None, the drone-dji XMP ``tags``."""
-    data = _jpeg(width, height, make=make, model=model, focal_mm=focal_mm, f35_mm=f35_mm)
+                focal_mm: float | None = None, f35_mm: float | None = None, picture=None) -> Path:
+    """A grey JPEG of width x height (or ``picture``) with EXIF (make, model, focal length) and,
+    unless ``tags`` is None, the drone-dji XMP ``tags``."""
+    data = _jpeg(width, height, make=make, model=model, focal_mm=focal_mm, f35_mm=f35_mm, picture=picture)
     path.write_bytes(data if tags is None else _with_xmp(data, xmp_packet(tags)))
     return path
 

@@ -424,3 +424,66 @@ def test_51_photo_fixes_sent_to_tak_with_coverage_tested_uncertainty(tmp_path):
     parsed = C.coverage("photo CoT as parsed", err, np.full(n, np.inf), 2.1460 * ce, 1.6449 * le, keep)
     assert all(stated.within().values()), stated.row()
     assert parsed.within()["CE90"] and parsed.within()["LE90"], parsed.row()
+
+
+def _oracle_ground(cam, pose, u, v, target_h):
+    """The oracle's point where pixel (u, v)'s ray meets the ellipsoidal height target_h."""
+    o, d, _ = O.rays(cam, "az-el", *pose, 0.0, 0.0, 0.0, np.array(u, float), np.array(v, float))
+    return np.array(O.geodetic(_ray_to_height(o, d, target_h))).ravel()
+
+
+def test_48_a_folder_of_photos_gives_footprints_and_orthos(tmp_path):
+    """`eoloc photo FOLDER --target-height H --ortho`: for every photo of the folder its footprint
+    (photo_footprints.geojson: the image's four outer corners on the ground where the oracle's rays
+    meet H, to 2 cm) and an orthorectified COG (ortho/<photo>.tif, valid for rio-cogeo), in which
+    the bright square the test painted at a chosen pixel lies where the oracle's ray of that pixel
+    meets H (its centroid within one cell). A photo that cannot be read is named, the others done."""
+    import pyproj
+    import rasterio
+    from rio_cogeo.cogeo import cog_validate
+
+    rng = np.random.default_rng(4848)
+    w, h = 640, 480
+    cam = O.Camera(w, h, 700.0, 700.0, 319.5, 239.5)
+    folder = tmp_path / "flight"
+    folder.mkdir()
+    cases = []
+    for k in range(3):
+        lat, lon, h_cam = 40.0 + 0.002 * k, -105.0 + 0.003 * k, 2000.0
+        yaw, pitch, roll = rng.uniform(-180, 180), rng.uniform(-80, -55), rng.uniform(-2, 2)
+        u0, v0 = int(rng.integers(80, w - 80)), int(rng.integers(80, h - 80))
+        picture = np.full((h, w, 3), 40, np.uint8)
+        picture[v0 - 6:v0 + 7, u0 - 6:u0 + 7] = 255  # 13 x 13 pixels centred on (u0, v0)
+        tags = _dji_tags(lat, lon, h_cam, yaw, pitch, roll, CalibratedFocalLength="700.0",
+                         CalibratedOpticalCenterX="319.5", CalibratedOpticalCenterY="239.5")
+        write_photo(folder / f"DJI_{k:04d}.JPG", w, h, tags, model="FC230", focal_mm=4.49, picture=picture)
+        cases.append(((lat, lon, h_cam, yaw, pitch, roll), (u0, v0)))
+    (folder / "DJI_9999.JPG").write_bytes(b"not a photo")
+    target_h = 1700.0
+    out = tmp_path / "out"
+    r = subprocess.run([EOLOC, "photo", str(folder), "--target-height", str(target_h), "--ortho", "--gsd", "0.5",
+                        "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert "DJI_9999.JPG" in r.stderr
+    prints = json.loads((out / "photo_footprints.geojson").read_text())["features"]
+    assert [Path(f["properties"]["file"]).name for f in prints] == [f"DJI_{k:04d}.JPG" for k in range(3)]
+    for (pose, (u0, v0)), feature in zip(cases, prints, strict=True):
+        ring = np.array(feature["geometry"]["coordinates"][0])
+        for u, v in [(-0.5, -0.5), (w - 0.5, -0.5), (w - 0.5, h - 0.5), (-0.5, h - 0.5)]:
+            corner = _oracle_ground(cam, pose, u, v, target_h)
+            gaps = [np.linalg.norm(C.enu_error(lat_, lon_, target_h, corner)[:2]) for lon_, lat_ in ring[:, :2]]
+            assert min(gaps) < 0.02, (u, v, min(gaps))
+    for k, (pose, (u0, v0)) in enumerate(cases):
+        tif = out / "ortho" / f"DJI_{k:04d}.tif"
+        valid, errors, _ = cog_validate(str(tif))
+        assert valid and not errors, errors
+        with rasterio.open(tif) as ds:
+            band = ds.read(1).astype(float)
+            rows, cols = np.nonzero(band > 150)
+            x, y = ds.xy(rows, cols)
+            to_geo = pyproj.Transformer.from_crs(ds.crs, "EPSG:4326", always_xy=True)
+            lon_c, lat_c = to_geo.transform(np.mean(x), np.mean(y))
+            cell = abs(ds.res[0])
+        truth = _oracle_ground(cam, pose, u0, v0, target_h)
+        gap = np.linalg.norm(C.enu_error(lat_c, lon_c, target_h, truth)[:2])
+        assert cell == pytest.approx(0.5) and gap < cell, (k, gap)

@@ -11,20 +11,21 @@ from .main import NOTHING_LOCATED, console, err_console, warn
 from .options import (
     CONVENTIONS,
     config_option,
-    dem_options,
     formats_option,
+    ortho_options,
     out_option,
     tak_connection,
     tak_options,
-    target_height_option,
 )
 from .render import titled_table
 
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
 \b
-eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [--json] [--out DIR]
+eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [--ortho] [--json] [--out DIR]
   A FOLDER stands for every photo in it (JPEG/TIFF by content, sorted by name).
+  Writes photo_fixes.* and, with a ground (--dem or --target-height), photo_footprints.* (each
+  photo's footprint); --ortho: every photo orthorectified onto that ground, ortho/<photo>.tif.
   Each photo's position, camera attitude (earth-referenced: DJI's gimbal angles are the camera's,
   not relative to the aircraft) and intrinsics (its own calibration, else the bundled drone camera
   database, else EXIF's 35 mm focal length) are read and shown. Without --pixel the image centre
@@ -52,19 +53,24 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
 @click.argument("photos", nargs=-1, required=True, type=click.Path())
 @click.option("--pixel", "pixels", type=(float, float), multiple=True, metavar="U V",
               help="A pixel to locate (column, row; 0,0 the centre of the top-left pixel); repeat for several.")
-@dem_options("Stop the rays on this DEM (GeoTIFF, DTED, SRTM, ESRI ASCII); repeat for tiles.")
-@target_height_option("Stop the rays on this ellipsoidal height (m).")
+@ortho_options(gsd_default="each photo's native GSD at its centre")
+@click.option("--ortho", "write_orthos", is_flag=True,
+              help="Also orthorectify every photo onto the ground (--dem or --target-height): ortho/<photo>.tif, "
+                   "Cloud-Optimised GeoTIFFs (--crs, --gsd, --resampling, --nodata, --occlusion as eoloc rectify).")
 @config_option(required=False, help_text="TOML with [accuracy.budget]: each fix's uncertainty (the camera comes "
                                          "from the photos).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
 @out_option("photo_fixes.*")
 @formats_option()
 @tak_options
-def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, config_path, as_json, out_dir, formats,
-          cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package, tak_protocol) -> None:
+def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion,
+          write_orthos, config_path, as_json, out_dir, formats, cot_urls, tak_cert, tak_cert_password, tak_ca,
+          tak_package, tak_protocol) -> None:
+    from pathlib import Path
+
     import orjson
 
-    from ..jobs.photo import photo_job
+    from ..jobs.photo import OrthoSettings, photo_job
 
     cot_urls, tak_tls = tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package)
     budget = None
@@ -76,8 +82,12 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is not None and target_height is not None:
         raise click.UsageError("give --dem or --target-height, not both")
-    with working("reading the photos..."):
-        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget)
+    if write_orthos and dem is None and target_height is None:
+        raise click.UsageError("--ortho needs the ground to rectify onto: give --dem FILE or --target-height H")
+    settings = OrthoSettings(crs, gsd, resampling, nodata, occlusion)
+    with working("orthorectifying the photos..." if write_orthos else "reading the photos..."):
+        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget,
+                        ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings)
     for msg in job.failed:
         warn(msg)
     if as_json:
@@ -112,6 +122,10 @@ def photo(photos, pixels, dem_paths, vertical, geoid, dem_crs, target_height, co
     names = {"lat": "lat_deg", "lon": "lon_deg", "h": "h_m", "u": "u_px", "v": "v_px"}
     rows = [{names.get(k, k): v for k, v in r.items()} for r in job.rows if "lat" in r]
     written = write_layer(out_dir, "photo_fixes", rows, formats)
+    if job.footprints:  # each photo's footprint on the ground given (formats without polygons skip it)
+        written += write_layer(out_dir, "photo_footprints", [f["properties"] for f in job.footprints],
+                               [f for f in formats if f not in ("csv", "cot")] or ["geojson"], features=job.footprints)
+    written += job.orthos
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
     if cot_urls:
         send_photo_fixes(job.rows, cot_urls, tak_tls, tak_protocol, pixels_given=bool(pixels))

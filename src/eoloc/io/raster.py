@@ -1,4 +1,5 @@
-"""Raster writers (rasterio): a DEM's posts and an orthorectified frame as GeoTIFFs."""
+"""Rasters through rasterio: a frame's bands read; a DEM's posts and an orthorectified frame written as
+GeoTIFFs."""
 
 from __future__ import annotations
 
@@ -7,11 +8,29 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import InputError
+
 if TYPE_CHECKING:
     from ..ground.rectify import Ortho
     from ..terrain.dem import DEM
 
 DEM_NODATA = -32768.0
+
+
+def read_image(path) -> np.ndarray:
+    """The frame's bands (GDAL reads PNG, JPEG, TIFF, ...), as (bands, rows, cols)."""
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as ds:
+                return ds.read()
+    except RasterioIOError as exc:
+        raise InputError(f"image {str(path)!r} cannot be read (GDAL reads PNG, JPEG, TIFF, ...): {exc}") from None
 
 
 def write_dem(dem: DEM, path: str | Path) -> Path:

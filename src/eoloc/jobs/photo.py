@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -22,12 +23,28 @@ from ..errors import InputError
 from ..io.photo import PhotoPose, read_photo
 from ..result import Status
 
+PHOTO_SUFFIXES = (".jpg", ".jpeg", ".tif", ".tiff", ".dng")
+
 
 @dataclass
 class PhotoJob:
     rows: list[dict]
     photos: list[PhotoPose] = field(default_factory=list)
     failed: list[str] = field(default_factory=list)  # one line per photo that could not be located
+    footprints: list[dict] = field(default_factory=list)  # GeoJSON features, one per photo (with a ground)
+    orthos: list[Path] = field(default_factory=list)  # the orthorectified photos written (ortho_dir)
+
+
+@dataclass(frozen=True)
+class OrthoSettings:
+    """How each photo is orthorectified (`eoloc rectify`'s options): output CRS, cell size (m;
+    None: the native GSD at the centre), resampling, nodata value, terrain occlusion."""
+
+    crs: str = "utm"
+    gsd_m: float | None = None
+    resampling: str = "bilinear"
+    nodata: float = 0
+    occlusion: bool = True
 
 
 def photo_sensor_pose(p: PhotoPose):
@@ -39,15 +56,14 @@ def photo_sensor_pose(p: PhotoPose):
 
 
 def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None,
-              budget=None) -> PhotoJob:
-    """Every photo of ``paths`` located at ``pixels`` ((u, v) pairs; none: the image centre);
-    ``budget`` (an ErrorBudget): each fix's covariance columns (sigma_e_m ... ce90_m, le90_m)."""
-    from pathlib import Path
-
-    from .. import geodesy
+              budget=None, ortho_dir: Path | None = None, ortho: OrthoSettings = OrthoSettings()) -> PhotoJob:
+    """Every photo of ``paths`` (files, or folders standing for the photos in them) located at
+    ``pixels`` ((u, v) pairs; none: the image centre); ``budget`` (an ErrorBudget): each fix's
+    covariance columns (sigma_e_m ... ce90_m, le90_m). With a ground (``dem`` or
+    ``target_height_m``) each photo's footprint too; with ``ortho_dir`` each photo orthorectified
+    onto that ground as ``<ortho_dir>/<photo name>.tif`` (a Cloud-Optimised GeoTIFF), written as
+    it is made (one photo's pixels in memory at a time)."""
     from ..io.sources.photos import photo_files
-    from ..rules import AtHeight, AtRange, OnDEM
-    from ..sensor import dronemodels
 
     job = PhotoJob([])
     expanded = []
@@ -57,9 +73,17 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
             if not found:
                 job.failed.append(f"{path}: a folder with no photo in it")
                 job.rows.append({"file": str(path), "status": "UNREADABLE", "reason": "a folder with no photo in it"})
+            # named like a photo but not one inside (photos are told by content): said, not skipped in silence
+            for odd in sorted(set(Path(path).glob("*")) - set(found)):
+                if odd.is_file() and odd.suffix.lower() in PHOTO_SUFFIXES:
+                    msg = f"{odd}: named like a photo but its bytes are not a JPEG or TIFF (damaged, or not a photo)"
+                    job.failed.append(msg)
+                    job.rows.append({"file": str(odd), "status": "UNREADABLE", "reason": msg})
             expanded += found
         else:
             expanded.append(path)
+    surface = dem if dem is not None else target_height_m
+    used: set[str] = set()
     for path in expanded:
         try:
             p = read_photo(path, geoid=geoid)
@@ -68,61 +92,103 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
             job.rows.append({"file": str(path), "status": "UNREADABLE", "reason": str(exc)})
             continue
         job.photos.append(p)
-        sensor, pose = photo_sensor_pose(p)
-        camera = {"camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m, "camera_yaw": p.yaw_deg,
-                  "camera_pitch": p.pitch_deg, "camera_roll": p.roll_deg}
-        if dem is not None:  # the camera must be above the ground it flies over: else its height tag is wrong
-            ground = float(dem.height(p.lat_deg, p.lon_deg))
-            if math.isfinite(ground) and p.h_m < ground - 2.0:
-                msg = (f"{path}: the camera would be {ground - p.h_m:.1f} m below the terrain under it "
-                       f"({p.height_rule}; the DEM says {ground:.1f} m): the altitude tag is suspect (RelativeAltitude "
-                       f"{p.relative_altitude_m} m above take-off)")
-                job.failed.append(msg)
-                job.rows.append({"file": str(path), "status": "SUSPECT_ALTITUDE", "reason": msg, **camera})
-                continue
-        todo = list(pixels) or [(p.camera.cx, p.camera.cy)]
-        tle = dronemodels.tle_model(p.make, p.model, p.width, p.height, thermal=p.thermal)
-        for u, v in todo:
-            centre = not pixels
-            if centre and p.lrf_range_m is not None:
-                rule, source = AtRange(p.lrf_range_m), "laser"
-            elif dem is not None:
-                rule, source = OnDEM(dem), "dem"
-            elif target_height_m is not None:
-                rule, source = AtHeight(target_height_m), "height"
-            else:
-                msg = (f"{path}: pixel ({u:g}, {v:g}) has no laser range: give --dem FILE or --target-height H to "
-                       "stop its ray")
-                job.failed.append(msg)
-                job.rows.append({"file": str(path), "u": u, "v": v, "status": "NO_SURFACE", "reason": msg, **camera})
-                continue
-            uv = (np.array([u], float), np.array([v], float))
-            if budget is not None:
-                from ..accuracy.covariance import covariance_columns, locate_with_covariance
+        rows = locate_photo(p, pixels=pixels, dem=dem, target_height_m=target_height_m, budget=budget)
+        job.rows += rows
+        job.failed += [r["reason"] for r in rows if r["status"] in ("SUSPECT_ALTITUDE", "NO_SURFACE")]
+        if surface is None or any(r["status"] == "SUSPECT_ALTITUDE" for r in rows):
+            continue
+        from ..ground.footprint import footprint_features, footprints
 
-                f, cov = locate_with_covariance(sensor, pose, budget, uv, rule)
-                uncertainty = {k: _f(c[0]) for k, c in covariance_columns(cov, f.ok).items()}
-            else:
-                f, uncertainty = rule.locate(sensor, pose, uv), {}
-            st = Status(int(f.status[0]))
-            row = {"file": str(path), "u": float(u), "v": float(v), "lat": _f(f.lat_deg[0]), "lon": _f(f.lon_deg[0]),
-                   "h": _f(f.h_m[0]), "range_m": _f(f.range_m[0]), "status": st.name, "source": source, **camera,
-                   "camera_model": f"{p.make} {p.model}", "intrinsics": p.camera_source, "height_rule": p.height_rule}
-            if st != Status.OK:
-                row["reason"] = st.explanation
-            else:
-                row |= {k: x for k, x in uncertainty.items() if x is not None}
-                if tle is not None:  # the database's flight-test figure for this camera: a + b x slant range
-                    row["tle_m"] = tle[0] + tle[1] * float(f.range_m[0])
-            if source == "laser" and p.lrf_target is not None:
-                t = p.lrf_target
-                row |= {"vendor_lat": t[0], "vendor_lon": t[1], "vendor_h": t[2]}
-                if st == Status.OK:
-                    e, n, up = geodesy.ecef_to_enu(np.stack(geodesy.geodetic_to_ecef(*t), -1)[None],
-                                                   f.lat_deg[0], f.lon_deg[0], f.h_m[0])[0]
-                    row |= {"vendor_offset_h_m": float(math.hypot(e, n)), "vendor_offset_v_m": float(up)}
-            job.rows.append(row)
+        sensor, pose = photo_sensor_pose(p)
+        job.footprints += footprint_features(footprints(sensor, pose, surface), [{"file": str(path)}])
+        if ortho_dir is not None:
+            job.orthos.append(_write_ortho(p, sensor, pose, surface, ortho, Path(ortho_dir), used))
     return job
+
+
+def _write_ortho(p: PhotoPose, sensor, pose, surface, settings: OrthoSettings, folder: Path, used: set[str]) -> Path:
+    """One photo orthorectified (:func:`eoloc.ground.rectify.orthorectify`) and written as a COG
+    named after it (two photos of one name, from two folders, get -2, -3, ...)."""
+    from ..ground import rectify
+    from ..io.raster import read_image, write_ortho
+
+    result = rectify.orthorectify(read_image(p.path), sensor, pose, surface, crs=settings.crs, gsd_m=settings.gsd_m,
+                                  resampling=settings.resampling, nodata=settings.nodata,
+                                  occlusion=settings.occlusion)
+    stem, k = Path(p.path).stem, 1
+    while (stem if k == 1 else f"{stem}-{k}") in used:
+        k += 1
+    name = stem if k == 1 else f"{stem}-{k}"
+    used.add(name)
+    return write_ortho(result, folder / f"{name}.tif", tags={"EOLOC_SOURCE": Path(p.path).name,
+                                                           "EOLOC_SURFACE": "DEM" if hasattr(surface, "height")
+                                                           else f"{float(surface):g} m"})
+
+
+def locate_photo(p: PhotoPose, *, pixels=(), dem=None, target_height_m: float | None = None, budget=None
+                 ) -> list[dict]:
+    """The rows of one photo read by :func:`eoloc.io.photo.read_photo`: one per pixel (none: the
+    image centre, by its laser range when it has one), each with its status, the camera's pose and,
+    with ``budget``, its uncertainty; a single SUSPECT_ALTITUDE row when the camera would be under
+    the DEM, a NO_SURFACE row for a pixel with nothing to stop its ray."""
+    from .. import geodesy
+    from ..rules import AtHeight, AtRange, OnDEM
+    from ..sensor import dronemodels
+
+    path = p.path
+    sensor, pose = photo_sensor_pose(p)
+    camera = {"camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m, "camera_yaw": p.yaw_deg,
+              "camera_pitch": p.pitch_deg, "camera_roll": p.roll_deg}
+    if dem is not None:  # the camera must be above the ground it flies over: else its height tag is wrong
+        ground = float(dem.height(p.lat_deg, p.lon_deg))
+        if math.isfinite(ground) and p.h_m < ground - 2.0:
+            msg = (f"{path}: the camera would be {ground - p.h_m:.1f} m below the terrain under it "
+                   f"({p.height_rule}; the DEM says {ground:.1f} m): the altitude tag is suspect (RelativeAltitude "
+                   f"{p.relative_altitude_m} m above take-off)")
+            return [{"file": str(path), "status": "SUSPECT_ALTITUDE", "reason": msg, **camera}]
+    rows = []
+    todo = list(pixels) or [(p.camera.cx, p.camera.cy)]
+    tle = dronemodels.tle_model(p.make, p.model, p.width, p.height, thermal=p.thermal)
+    for u, v in todo:
+        centre = not pixels
+        if centre and p.lrf_range_m is not None:
+            rule, source = AtRange(p.lrf_range_m), "laser"
+        elif dem is not None:
+            rule, source = OnDEM(dem), "dem"
+        elif target_height_m is not None:
+            rule, source = AtHeight(target_height_m), "height"
+        else:
+            msg = (f"{path}: pixel ({u:g}, {v:g}) has no laser range: give --dem FILE or --target-height H to "
+                   "stop its ray")
+            rows.append({"file": str(path), "u": u, "v": v, "status": "NO_SURFACE", "reason": msg, **camera})
+            continue
+        uv = (np.array([u], float), np.array([v], float))
+        if budget is not None:
+            from ..accuracy.covariance import covariance_columns, locate_with_covariance
+
+            f, cov = locate_with_covariance(sensor, pose, budget, uv, rule)
+            uncertainty = {k: _f(c[0]) for k, c in covariance_columns(cov, f.ok).items()}
+        else:
+            f, uncertainty = rule.locate(sensor, pose, uv), {}
+        st = Status(int(f.status[0]))
+        row = {"file": str(path), "u": float(u), "v": float(v), "lat": _f(f.lat_deg[0]), "lon": _f(f.lon_deg[0]),
+               "h": _f(f.h_m[0]), "range_m": _f(f.range_m[0]), "status": st.name, "source": source, **camera,
+               "camera_model": f"{p.make} {p.model}", "intrinsics": p.camera_source, "height_rule": p.height_rule}
+        if st != Status.OK:
+            row["reason"] = st.explanation
+        else:
+            row |= {k: x for k, x in uncertainty.items() if x is not None}
+            if tle is not None:  # the database's flight-test figure for this camera: a + b x slant range
+                row["tle_m"] = tle[0] + tle[1] * float(f.range_m[0])
+        if source == "laser" and p.lrf_target is not None:
+            t = p.lrf_target
+            row |= {"vendor_lat": t[0], "vendor_lon": t[1], "vendor_h": t[2]}
+            if st == Status.OK:
+                e, n, up = geodesy.ecef_to_enu(np.stack(geodesy.geodetic_to_ecef(*t), -1)[None],
+                                               f.lat_deg[0], f.lon_deg[0], f.h_m[0])[0]
+                row |= {"vendor_offset_h_m": float(math.hypot(e, n)), "vendor_offset_v_m": float(up)}
+        rows.append(row)
+    return rows
 
 
 def _f(x) -> float | None:

@@ -3,7 +3,6 @@ error of the bounds shortcut."""
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,20 +21,6 @@ class RectifyJob:
     telemetry_line: int
     grid_pixels: int
     issues: list[Issue] = field(default_factory=list)
-
-
-def read_image(path) -> np.ndarray:
-    """The frame's bands (GDAL reads PNG, JPEG, TIFF, ...), as (bands, rows, cols)."""
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as ds:
-                return ds.read()
-    except RasterioIOError as exc:
-        raise InputError(f"image {str(path)!r} cannot be read (GDAL reads PNG, JPEG, TIFF, ...): {exc}") from None
 
 
 def record_of(tel, telemetry, frame: int | None, time_s: float | None) -> int:
@@ -65,6 +50,7 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
                 occlusion: bool = True, grid_step_px: float = 32) -> RectifyJob:
     from ..ground import rectify
     from ..ground.footprint import footprints
+    from ..io.raster import read_image
     from ..io.telemetry import telemetry_pose
 
     inputs = job_inputs(cfg, telemetry, dem=surface)
