@@ -467,7 +467,7 @@ def test_48_a_folder_of_photos_gives_footprints_and_orthos(tmp_path):
     assert "DJI_9999.JPG" in r.stderr
     prints = json.loads((out / "photo_footprints.geojson").read_text())["features"]
     assert [Path(f["properties"]["file"]).name for f in prints] == [f"DJI_{k:04d}.JPG" for k in range(3)]
-    for (pose, (u0, v0)), feature in zip(cases, prints, strict=True):
+    for (pose, _), feature in zip(cases, prints, strict=True):
         ring = np.array(feature["geometry"]["coordinates"][0])
         for u, v in [(-0.5, -0.5), (w - 0.5, -0.5), (w - 0.5, h - 0.5), (-0.5, h - 0.5)]:
             corner = _oracle_ground(cam, pose, u, v, target_h)
