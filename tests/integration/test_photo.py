@@ -487,3 +487,59 @@ def test_48_a_folder_of_photos_gives_footprints_and_orthos(tmp_path):
         truth = _oracle_ground(cam, pose, u0, v0, target_h)
         gap = np.linalg.norm(C.enu_error(lat_c, lon_c, target_h, truth)[:2])
         assert cell == pytest.approx(0.5) and gap < cell, (k, gap)
+
+
+def test_48_the_http_api_locates_a_photo_as_eoloc_photo_does(tmp_path):
+    """`POST /v1/photo` on a real `eoloc serve` (its DEM by name): the H20N photo's centre by its
+    laser range lands on DJI's own target (0.3 m) and equals `eoloc photo --json`'s row; a
+    synthetic DJI photo's pixel at a target height lands within 1 cm of the oracle's point; on the
+    served DEM the same row as `eoloc photo --dem`. Bad requests answer 415/422 naming what is
+    wrong (a non-image, both grounds, a malformed pixel, an unknown DEM, covariance without a
+    budget), never a traceback."""
+    import httpx
+
+    from served import eoloc_serve, stop_and_log
+
+    rng = np.random.default_rng(4849)
+    w, h = 1280, 960
+    cam = O.Camera(w, h, 1100.0, 1100.0, 650.25, 470.75)
+    lat, lon, h_cam, yaw, pitch, roll = 40.25, -105.6, 5200.0, 30.0, -60.0, 1.0
+    path = write_photo(tmp_path / "dji.jpg", w, h, _dji_tags(lat, lon, h_cam, yaw, pitch, roll,
+                                                            CalibratedFocalLength="1100.0",
+                                                            CalibratedOpticalCenterX="650.25",
+                                                            CalibratedOpticalCenterY="470.75"),
+                       model="FC230", focal_mm=4.49)
+    jpeg = {"content-type": "image/jpeg"}
+    with eoloc_serve("--dem", f"peak={TILE}", "--vertical", "ellipsoid", "--max-body-mb", "32") as url:
+        r = httpx.post(url + "/v1/photo", content=H20N.read_bytes(), headers=jpeg, params={"name": H20N.name})
+        assert r.status_code == 200, r.text
+        (row,) = r.json()["fixes"]
+        _, (cli,) = _photo(H20N)
+        assert row["source"] == "laser"  # the server's kernels are compiled: equal to a few ulps
+        assert [row[k] for k in ("lat", "lon", "h")] == pytest.approx([cli[k] for k in ("lat", "lon", "h")], rel=1e-13)
+        d = C.enu_error(row["lat"], row["lon"], row["h"], np.array([22.5960255, 114.0066452, 47.000]))
+        assert math.hypot(d[0], d[1]) < 0.3 and abs(d[2]) < 0.3, d
+        u, v = rng.uniform(100, w - 100), rng.uniform(100, h - 100)
+        truth = _oracle_ground(cam, (lat, lon, h_cam, yaw, pitch, roll), u, v, 3000.0)
+        r = httpx.post(url + "/v1/photo", content=path.read_bytes(), headers=jpeg,
+                       params={"pixel": f"{u!r},{v!r}", "target_height_m": 3000.0})
+        (row,) = r.json()["fixes"]
+        assert row["status"] == "OK" and np.linalg.norm(C.enu_error(row["lat"], row["lon"], row["h"], truth)) < 0.01
+        r = httpx.post(url + "/v1/photo", content=path.read_bytes(), headers=jpeg,
+                       params=[("pixel", "640,480"), ("pixel", "100,900"), ("dem", "peak")])
+        _, cli = _photo(path, "--pixel", 640, 480, "--pixel", 100, 900, "--dem", TILE, "--vertical", "ellipsoid")
+        got = r.json()["fixes"]
+        assert [x["status"] for x in got] == [x["status"] for x in cli] == ["OK", "OK"]
+        np.testing.assert_allclose([[x[k] for k in ("lat", "lon", "h")] for x in got],
+                                   [[x[k] for k in ("lat", "lon", "h")] for x in cli], rtol=1e-12)
+        bad = [(b"not a photo", jpeg, {}, 422, "not an image"),
+               (path.read_bytes(), {"content-type": "text/plain"}, {}, 415, "image/jpeg"),
+               (path.read_bytes(), jpeg, {"dem": "peak", "target_height_m": 1.0}, 422, "not both"),
+               (path.read_bytes(), jpeg, {"pixel": "1;2"}, 422, "U,V"),
+               (path.read_bytes(), jpeg, {"dem": "moon"}, 422, "peak"),
+               (path.read_bytes(), jpeg, {"covariance": "true"}, 422, "accuracy.budget")]
+        for body, headers, params, status, words in bad:
+            r = httpx.post(url + "/v1/photo", content=body, headers=headers, params=params)
+            assert r.status_code == status and words in r.text, (params, r.status_code, r.text)
+        log = stop_and_log(url)
+    assert "Traceback" not in log

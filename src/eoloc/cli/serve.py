@@ -28,6 +28,11 @@ eoloc serve [--host 127.0.0.1] [--port 8000] [--config C] [--dem NAME=PATH ...]
     stream (content-type application/vnd.apache.arrow.stream) of u_px, v_px whose schema
     metadata 'eoloc' holds the observation's JSON without pixels -> an Arrow IPC stream of the
     fixes (null coordinates where a fix failed): big batches with no JSON to parse.
+  POST /v1/photo?pixel=U,V&target_height_m=H&dem=NAME&covariance=true  a drone photo as it was
+    taken (content-type image/jpeg or image/tiff; its pose from its own EXIF/XMP, as eoloc photo
+    reads it) -> {"photo": {...}, "fixes": [rows as eoloc photo --json]}: the image centre (by
+    its laser range when it has one) or each pixel=U,V (repeatable). Full-size photos can exceed
+    the 8 MB default: start with --max-body-mb 32.
   GET /v1/health   alive, uptime, requests served, the config and DEM names.
   Limits: bodies over --max-body-mb: 413; Arrow streams declaring more than 10^5 rows or 64 MB
   once decompressed: 413 (checked before decoding); a request that has not arrived whole after

@@ -198,14 +198,17 @@ def _exif_gps_3d(exif) -> tuple[float | None, float | None, float | None]:
     return deg(gps.get(2), gps.get(1), ("S",)), deg(gps.get(4), gps.get(3), ("W",)), alt
 
 
-def read_photo(path: str | Path, *, geoid=None) -> PhotoPose:
+def read_photo(path: str | Path, *, geoid=None, data: bytes | None = None) -> PhotoPose:
     """The :class:`PhotoPose` of a drone photo; a :class:`PhotoError` naming the file, the tag and
-    the fix when it cannot be read."""
+    the fix when it cannot be read. ``data``: the photo's bytes (as an HTTP request brings them),
+    ``path`` then only its name in messages and rows. Only the metadata is read, not the pixels."""
+    import io
+
     from PIL import Image, UnidentifiedImageError
 
     path = str(path)
     try:
-        with Image.open(path) as im:
+        with Image.open(path if data is None else io.BytesIO(data)) as im:
             width, height = im.size
             exif = im.getexif()
             raw = im.info.get("xmp") or (im.tag_v2.get(700) if hasattr(im, "tag_v2") else None)

@@ -12,6 +12,11 @@ first-order uncertainty from the start-up config's ``[accuracy.budget]``.
 Bad requests are answered as JSON naming the field (``observations.0.pose.lat_deg``) with HTTP
 422; bodies over the size limit with 413; too many pixels or observations with 422.
 
+``POST /v1/photo`` takes a drone photo as it was taken (``image/jpeg`` or ``image/tiff``: its pose,
+camera and laser range from its own EXIF/XMP, as ``eoloc photo`` reads them) and answers the rows
+``eoloc photo --json`` prints: the image centre, or each ``pixel=U,V`` query parameter, on the DEM
+``dem=NAME`` or at ``target_height_m``.
+
 ``POST /v1/locate/arrow`` takes the same observation with its pixels as columns: an Apache Arrow
 IPC stream (``application/vnd.apache.arrow.stream``) of ``u_px`` and ``v_px`` whose schema
 metadata ``eoloc`` holds the observation's JSON without ``pixels``, and answers an Arrow stream of
@@ -30,8 +35,9 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
+from fastapi import Query  # these two at module level: FastAPI resolves the routes' annotations here
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from starlette.requests import Request  # at module level: FastAPI resolves the routes' annotations here
+from starlette.requests import Request
 
 from ..errors import EolocError
 from ..io.config import CameraConfig
@@ -356,6 +362,56 @@ def computing(body_bytes: int):
                 give_back_memory_soon()
 
 
+PHOTO_TYPES = ("image/jpeg", "image/tiff")
+
+
+def locate_photo_request(data: bytes, state: ServiceState, *, pixels: list[str], target_height_m: float | None,
+                         dem: str | None, covariance: bool, name: str) -> dict:
+    """``POST /v1/photo``: the photo's pose and its rows (:func:`eoloc.jobs.photo.locate_photo`);
+    RequestError naming the parameter for what cannot be served."""
+    import math
+
+    from ..io.photo import read_photo
+    from ..jobs.photo import locate_photo
+
+    if target_height_m is not None and dem is not None:
+        raise RequestError("target_height_m", "give dem or target_height_m, not both")
+    if target_height_m is not None and not (math.isfinite(target_height_m) and -12_000 <= target_height_m <= 1e5):
+        raise RequestError("target_height_m", f"{target_height_m!r} is not an ellipsoidal height in metres")
+    uv = []
+    for i, text in enumerate(pixels):
+        try:
+            u, v = (float(x) for x in text.split(","))
+        except ValueError:
+            raise RequestError(f"pixel.{i}", f"{text!r}: give a pixel as U,V (column,row)") from None
+        if not (math.isfinite(u) and math.isfinite(v)):
+            raise RequestError(f"pixel.{i}", f"{text!r} is not a pixel")
+        uv.append((u, v))
+    if len(uv) > MAX_PIXELS:
+        raise RequestError("pixel", f"{len(uv)} pixels; at most {MAX_PIXELS}")
+    surface = None
+    if dem is not None:
+        surface = state.dems.get(dem)
+        if surface is None:
+            known = ", ".join(sorted(state.dems)) or "none (start the server with --dem NAME=PATH)"
+            raise RequestError("dem", f"no DEM named {dem!r}; this server has: {known}")
+    budget = None
+    if covariance:
+        cfg = state.config
+        if cfg is None or cfg.accuracy is None or not cfg.accuracy.budget:
+            raise RequestError("covariance", "covariance needs the server started with a --config that has an "
+                                             "[accuracy.budget]")
+        from ..accuracy.budget import ErrorBudget
+
+        budget = ErrorBudget.from_mapping(cfg.accuracy.budget)
+    p = read_photo(name, data=data)  # a PhotoError (an EolocError: 422) names the tag and the fix
+    rows = locate_photo(p, pixels=uv, dem=surface, target_height_m=target_height_m, budget=budget)
+    return {"photo": {"name": name, "make": p.make, "model": p.model, "width": p.width, "height": p.height,
+                      "thermal": p.thermal, "intrinsics": p.camera_source, "height_rule": p.height_rule,
+                      "laser_range_m": p.lrf_range_m, "notes": list(p.notes)},
+            "fixes": rows}
+
+
 def _pixel_count(obs: list[ObservationIn]) -> int:
     return sum(1 if o.pixels is None else len(o.pixels) for o in obs)
 
@@ -482,6 +538,32 @@ def create_app(state: ServiceState | None = None, *, max_body_bytes: int = MAX_B
                 return arrow_fixes(*solve_observation(obs, state, "eoloc", pixels=(u, v)))
 
         return Response(await run_in_threadpool(serve, await request.body()), media_type=ARROW_STREAM)
+
+    @app.post("/v1/photo", openapi_extra={
+        "requestBody": {"required": True, "content": {t: {"schema": {"type": "string", "format": "binary"}}
+                                                      for t in PHOTO_TYPES},
+                        "description": "A drone photo as it was taken (JPEG or TIFF with its EXIF and XMP)."}})
+    async def photo(request: Request, pixel: Annotated[list[str] | None, Query()] = None,
+                    target_height_m: float | None = None,
+                    dem: str | None = None, covariance: bool = False, name: str = "photo"):
+        """Locate in a drone photo, its pose read from its own EXIF/XMP (as `eoloc photo` does): the
+        image centre (by its laser range when it has one), or each ``pixel=U,V`` given, on the DEM
+        named ``dem`` or at ``target_height_m``. The rows are `eoloc photo --json`'s; ``covariance``
+        adds each fix's uncertainty from the server config's [accuracy.budget]."""
+        from starlette.concurrency import run_in_threadpool
+
+        if media_type(request) not in PHOTO_TYPES:
+            return _unsupported(request, " or ".join(PHOTO_TYPES))
+        body = await request.body()
+
+        def serve() -> Response:
+            with computing(len(body)):
+                out = locate_photo_request(body, state, pixels=pixel or [], target_height_m=target_height_m,
+                                           dem=dem, covariance=covariance, name=name)
+                state.served += 1
+                return Response(orjson.dumps(out, option=orjson.OPT_SERIALIZE_NUMPY), media_type="application/json")
+
+        return await run_in_threadpool(serve)
 
     def _unsupported(request: Request, wanted: str) -> JSONResponse:
         got = request.headers.get("content-type") or "none"
