@@ -13,8 +13,8 @@ through eoloc, with known truth.
    - `eoloc video clip.ts --dem`: every frame rectified, the mosaic, the tiles and the player;
      accuracy from the board's corners found by OpenCV in the mosaic.
 3. Six DJI photos of the same flight (JPEG with drone-dji XMP and their calibration):
-   `eoloc photo FOLDER --dem` and `eoloc footprint FOLDER --dem` (no --config: the photos carry
-   their camera), the centres against the truth.
+   `eoloc photo FOLDER --dem --ortho` (fixes, footprints, each photo orthorectified) and `eoloc
+   footprint FOLDER --dem` (no --config: the photos carry their camera), the centres against the truth.
 
     python examples/drone_demo.py [--out out/demo/drone]
 """
@@ -195,15 +195,17 @@ def main(argv: list[str] | None = None) -> int:
     ks = list(range(0, t.size, 20))
     for k in ks:
         write_dji_photo(photos / f"DJI_{k:04d}.JPG", frames[k], f, k)
-    r = eoloc("photo", str(photos), *dem_args, "--json", "--out", str(out / "photo_fixes"))
+    r = eoloc("photo", str(photos), *dem_args, "--ortho", "--json", "--out", str(out / "photo_fixes"))
     rows = [json.loads(x) for x in r.stdout.splitlines() if x.strip()]
     truth = centre_truth(dem, sensor, f, ks)
     got = np.array([[row["lat"], row["lon"]] for row in rows])
     err = horizontal_distance_m(got[:, 0], got[:, 1], truth[:, 0], truth[:, 1])
     print(f"  {len(rows)} photos located from their own XMP (no --config): centres within {np.max(err) * 100:.2f} cm "
           "of the truth")
+    orthos = sorted((out / "photo_fixes" / "ortho").glob("*.tif"))
+    print(f"  their footprints: {out / 'photo_fixes' / 'photo_footprints.geojson'}; each orthorectified on the DEM: "
+          f"{len(orthos)} COGs in {out / 'photo_fixes' / 'ortho'}")
     eoloc("footprint", str(photos), *dem_args, "--out", str(out / "photo_footprints"))
-    print(f"  their footprints: {out / 'photo_footprints' / 'footprints.geojson'}")
     print(f"drone demo done in {time.perf_counter() - t0:.1f} s")
     return 0
 
