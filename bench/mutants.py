@@ -167,6 +167,22 @@ MUTANTS = [
     Mutant("mgrs-round", "io/gridref.py", "ei = np.floor(e[ok]).astype(np.int64)",
            "ei = np.round(e[ok]).astype(np.int64)", ("tests/integration/test_conformance.py",),
            "MGRS easting rounded instead of truncated"),
+    # --- session 49: ortho against an independent projection, conformance items 4 and 8, CoT
+    Mutant("ortho-half-pixel", "kernels/ortho.py", "ur[c] = fx * xs[c] + cx", "ur[c] = fx * xs[c] + cx + 0.5",
+           ("tests/test_ortho_kernel.py::test_every_cell_holds_the_value_an_independent_projection_reads",),
+           "orthorectified cells read half a pixel off (issue 55: passed every ortho test before)"),
+    Mutant("klv-out-missing-tags", "io/klv/encode.py", 'body += b"".join(new.values())', 'body += b""',
+           ("tests/integration/test_conformance.py::test_49_4_klv_out_writes_a_fix_into_every_real_packet",),
+           "--klv-out drops the target tags a packet did not send before"),
+    Mutant("ts-arrival", "io/klv/reader.py", "t = demux.arrival_pts[ev.pes.offset] / PTS_HZ",
+           "t = 0.0 * demux.arrival_pts[ev.pes.offset] / PTS_HZ",
+           ("tests/integration/test_conformance.py::test_49_8_mux_writes_st1402_carriage_and_reads_it_back",),
+           "asynchronous KLV without PTS not timed by the frame it follows"),
+    Mutant("cot-unknown", "io/cot.py",
+           "return (ce if 0.0 <= ce < UNKNOWN else UNKNOWN), (le if 0.0 <= le < UNKNOWN else UNKNOWN)",
+           "return ce, le",
+           ("tests/integration/test_conformance.py::test_49_cot_a_fix_with_any_values_makes_a_valid_event",),
+           "CoT ce/le past 'unknown' (or infinite) sent as they are"),
 ]
 
 

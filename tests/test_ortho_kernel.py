@@ -186,3 +186,49 @@ def test_orthority_agrees_where_both_see_the_ground():
     d = B.agreement_px(px, uo, vo)
     assert d.size > 500_000
     assert np.percentile(d, 99) < 0.5 and np.median(d) < 0.1
+
+
+@pytest.mark.parametrize("surface", ["height", "hills"])
+def test_every_cell_holds_the_value_an_independent_projection_reads(surface):
+    """The orthorectified frame against a reference that shares nothing with eoloc's ortho path:
+    each output cell's centre taken to WGS-84 by pyproj, its height the target height or scipy's
+    bilinear interpolation of the DEM's posts, projected into the image by the oracle's rotations
+    (scipy, pyproj ECEF) and a pinhole, and read off a ramp image (value 3 u + 7 v at pixel centre
+    (u, v), so that bilinear resampling is exact). Every cell whose reference pixel lies inside the
+    image is valid and within 0.02 of the reference (a 0.5 px shift of the pixel convention would
+    be 1.5 to 3.5 off); no cell is valid whose reference pixel lies outside. Occlusion off: the
+    terrain is gentle, nothing hides."""
+    import pyproj
+    from scipy.interpolate import RegularGridInterpolator
+
+    import coverage_lib as C
+    import oracle_lib as O
+
+    sensor = SensorModel(CAM, AzElGimbal())
+    ground = 300.0 if surface == "height" else _hills()
+    w, h = CAM.width, CAM.height
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+    ramp = (3.0 * uu + 7.0 * vv).astype(np.float32)
+    ortho = rectify.orthorectify(ramp, sensor, POSE, ground, crs="utm", gsd_m=3.0, nodata=-1.0, occlusion=False)
+    rows, cols = np.mgrid[0:ortho.shape[0], 0:ortho.shape[1]]
+    x, y = ortho.transform @ (cols + 0.5, rows + 0.5)
+    lon, lat = pyproj.Transformer.from_crs(ortho.crs, "EPSG:4326", always_xy=True).transform(x, y)
+    if surface == "height":
+        hgt = np.full(lat.shape, 300.0)
+    else:
+        g = _hills().grid
+        lats = g.lat0 + g.dlat * np.arange(g.z.shape[0])
+        lons = g.lon0 + g.dlon * np.arange(g.z.shape[1])
+        order = np.argsort(lats)
+        posts = RegularGridInterpolator((lats[order], lons), g.z[order], bounds_error=False)
+        hgt = posts(np.stack([lat, lon], -1))
+    cam = O.Camera(w, h, CAM.fx, CAM.fy, CAM.cx, CAM.cy)
+    az, el = POSE.gimbal_deg
+    u, v = C.project(cam, POSE.lat_deg, POSE.lon_deg, POSE.h_m, POSE.yaw_deg, POSE.pitch_deg, POSE.roll_deg, az, el,
+                     O.to_ecef(lat, lon, hgt))
+    inside = np.isfinite(hgt) & (u >= 0.05) & (u <= w - 1.05) & (v >= 0.05) & (v <= h - 1.05)
+    outside = ~np.isfinite(hgt) | (u < -0.55) | (u > w - 0.45) | (v < -0.55) | (v > h - 0.45)
+    assert inside.sum() > 10_000
+    assert ortho.valid[inside].all() and not ortho.valid[outside].any()
+    err = np.abs(ortho.data[0][inside] - (3.0 * u + 7.0 * v)[inside])
+    assert err.max() < 0.02, err.max()
