@@ -1,4 +1,8 @@
-"""M4 ray ∩ DEM: synthetic scenes checked both ways, first hit, ridges, statuses, [Q]'s descent."""
+"""M4 ray ∩ DEM: synthetic scenes checked both ways, first hit, ridges, statuses, [Q]'s descent.
+
+The scenes' truths are made without eoloc (issue 55): the aircraft placed and the gimbal aimed by
+the oracle's geometry (pyproj ECEF, its own NED frame, the conventions of SPEC §2), the terrain's
+heights and the dense first-hit scan by the oracle's bilinear grid over the DEM's posts (scipy)."""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import eoloc
+import oracle_lib as O
 from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy, open_dem
 
 DATA = Path(__file__).parent / "data" / "dem"
@@ -35,29 +40,41 @@ def analytic():
     return DEM.from_function(f, (10.0, 45.0, 10.2, 45.2), 1.0 / 3600.0, source="analytic hills")
 
 
+def ground(dem, lat, lon) -> np.ndarray:
+    """The terrain's height under (lat, lon) by the oracle's bilinear grid over the DEM's posts."""
+    g = dem.grid
+    lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
+    return O.Grid(g.z, g.lat0, g.lon0, g.dlat, g.dlon).sample(lat.ravel(), lon.ravel())[0].reshape(lat.shape)
+
+
 def aim(target_lat, target_lon, target_h, off_nadir_deg, azimuth_deg, height_above_m):
     """Aircraft pose (level, heading north) that looks at the target with the given off-nadir
-    angle from the given direction, and the az-el gimbal angles that put it on the boresight."""
+    angle from the given direction, and the az-el gimbal angles that put it on the boresight: the
+    aircraft set back along the line of sight in the target's NED frame, the angles the line of
+    sight's azimuth from north and elevation from the horizontal in the aircraft's own NED frame (a
+    level aircraft heading north has its body axes along NED; SPEC §2). The oracle's geometry only."""
     off = np.radians(off_nadir_deg)
     horiz = height_above_m * np.tan(off)
     az = np.radians(azimuth_deg)
-    # the aircraft sits back along the line of sight: -horiz in the look direction, +height up
     ned = np.stack([-horiz * np.cos(az), -horiz * np.sin(az), -np.full_like(horiz, height_above_m)], -1)
-    p = geodesy.ned_to_ecef(ned, target_lat, target_lon, target_h)
-    lat, lon, h = eoloc.ecef_to_geodetic(p[..., 0], p[..., 1], p[..., 2])
-    t = np.stack(eoloc.geodetic_to_ecef(target_lat, target_lon, target_h), -1)
-    gaz, gel, _ = eoloc.AzElGimbal.pointing(lat, lon, h, 0.0, 0.0, 0.0, t)
+    t = O.to_ecef(target_lat, target_lon, target_h)
+    p = t + np.einsum("...ij,...j->...i", O.r_ecef_ned(target_lat, target_lon), ned)
+    lat, lon, h = O.geodetic(p)
+    los = np.einsum("...ji,...j->...i", O.r_ecef_ned(lat, lon), t - p)  # north, east, down at the aircraft
+    gaz = np.degrees(np.arctan2(los[..., 1], los[..., 0]))
+    gel = np.degrees(np.arctan2(-los[..., 2], np.hypot(los[..., 0], los[..., 1])))
     return Pose(lat, lon, h, 0.0, 0.0, 0.0, (gaz, gel)), t
 
 
 def first_crossing_brute_force(rays, dem, t_max, step=0.25):
-    """Smallest t (to ``step``) where the ray is at or below the DEM, by dense sampling."""
+    """Smallest t (to ``step``) where the ray is at or below the terrain, by dense sampling with
+    the oracle's geodetic conversion and bilinear grid."""
     out = np.full(rays.shape, np.nan)
     for i in range(rays.shape[0]):
         t = np.arange(0.0, t_max[i] + step, step)
         p = rays.origin_ecef[i] + t[:, None] * rays.dir_ecef[i]
-        lat, lon, h = eoloc.ecef_to_geodetic(p[:, 0], p[:, 1], p[:, 2])
-        below = h - dem.height(lat, lon) <= 0.0
+        lat, lon, h = O.geodetic(p)
+        below = h - ground(dem, lat, lon) <= 0.0
         if below.any():
             out[i] = t[np.argmax(below)]
     return out
@@ -71,7 +88,7 @@ def test_synthetic_scene_both_ways_0_to_80_deg(backend, terrain, request):
     k = 400
     lat = rng.uniform(s + 0.3 * (n - s), n - 0.3 * (n - s), k)
     lon = rng.uniform(w + 0.3 * (e - w), e - 0.3 * (e - w), k)
-    h = dem.height(lat, lon)
+    h = ground(dem, lat, lon)
     off = np.linspace(0.0, 80.0, k)
     pose, t_ecef = aim(lat, lon, h, off, rng.uniform(0, 360, k), rng.uniform(800.0, 2500.0, k))
     u, v = SENSOR.ground_to_image(pose, t_ecef)
@@ -86,7 +103,7 @@ def test_synthetic_scene_both_ways_0_to_80_deg(backend, terrain, request):
     assert visible.mean() > 0.6
     # where it is not, something is in front: the march stopped earlier, on the terrain surface
     assert (f.range_m[~visible] < true_range[~visible]).all()
-    np.testing.assert_array_less(np.abs(f.h_m - dem.height(f.lat_deg, f.lon_deg)), 0.01)
+    np.testing.assert_array_less(np.abs(f.h_m - ground(dem, f.lat_deg, f.lon_deg)), 0.01)
     # and it is the FIRST hit: a dense scan finds nothing before it
     pick = np.flatnonzero(~visible)[:20].tolist() + np.flatnonzero(visible)[-10:].tolist()
     sub = eoloc.Rays(*(np.asarray(x)[pick] for x in (rays.ox, rays.oy, rays.oz, rays.dx, rays.dy, rays.dz)))
@@ -110,7 +127,7 @@ def test_ridge_in_front_of_the_target_is_found(backend):
     f = eoloc.locate_dem(SENSOR, pose, dem)
     assert f.status == Status.OK
     assert 10.0494 < f.lon_deg < 10.0500 and f.h_m > 300.0  # on the wall's west face, not on the target
-    assert abs(f.h_m - dem.height(f.lat_deg, f.lon_deg)) < 0.01
+    assert abs(f.h_m - ground(dem, f.lat_deg, f.lon_deg)) < 0.01
     # [Q]'s descent samples the ray where it is at 400, 300, 200, 100, 0 m: both samples near the
     # wall fall beside its thin crest, so it lands on a LATER crossing, behind the wall
     desc = eoloc.locate_dem(SENSOR, pose, dem, method="descent", eps_h=100.0)
@@ -123,7 +140,7 @@ def test_one_post_spike_is_not_tunnelled(backend):
     dem = DEM.from_array(z, lat0=1.0, lon0=2.0, dlat=-0.001, dlon=0.001)
     # aim a nearly horizontal ray (88 deg off nadir) from the west at a point on the spike's EAST
     # flank: it has to stop on the west flank first
-    pose, _ = aim(0.95, 2.0502, float(dem.height(0.95, 2.0502)), 88.0, 90.0, 100.0)
+    pose, _ = aim(0.95, 2.0502, float(ground(dem, 0.95, 2.0502)), 88.0, 90.0, 100.0)
     f = eoloc.locate_dem(SENSOR, pose, dem)
     assert f.status == Status.OK and f.lon_deg < 2.05 and f.h_m > 200.0
 
@@ -134,7 +151,7 @@ def test_descent_agrees_with_march_within_its_step(backend, srtm):
     w, s, e, n = srtm.bounds
     lat = rng.uniform(s + 0.3, n - 0.3, k)
     lon = rng.uniform(w + 0.3, e - 0.3, k)
-    pose, _ = aim(lat, lon, srtm.height(lat, lon), rng.uniform(0, 30, k), rng.uniform(0, 360, k), 3000.0)
+    pose, _ = aim(lat, lon, ground(srtm, lat, lon), rng.uniform(0, 30, k), rng.uniform(0, 360, k), 3000.0)
     march = eoloc.locate_dem(SENSOR, pose, srtm)
     for eps in (1.0, 5.0):
         desc = eoloc.locate_dem(SENSOR, pose, srtm, method="descent", eps_h=eps)

@@ -164,11 +164,16 @@ def test_cli_interpolate_reports_the_gap_left_by_a_malformed_record(tmp_path):
     rows = list(csv.DictReader((tmp_path / "b" / "fixes.csv").open()))
     truth = {row["target_id"]: row for row in csv.DictReader((demo / "truth.csv").open())}
     geod = Geod(ellps="WGS84")
-    for row in rows:
-        if row["time_s"] and float(row["time_s"]) == 12.0:
-            t = truth[row["target_id"]]
-            err = geod.inv(float(row["lon_deg"]), float(row["lat_deg"]), float(t["lon_deg"]), float(t["lat_deg"]))[2]
-            assert row["status"] == "OK" and err < 150.0  # the flight's single-frame scatter: CEP ~30 m
+
+    def err(row):
+        t = truth[row["target_id"]]
+        return geod.inv(float(row["lon_deg"]), float(row["lat_deg"]), float(t["lon_deg"]), float(t["lat_deg"]))[2]
+
+    # the tolerance is the flight's own single-frame scatter: the largest error of the fixes at its
+    # recorded poses (CEP ~30 m); interpolated across the gap, the 12 s fixes are no worse
+    scatter = max(err(row) for row in rows if row["status"] == "OK" and float(row["time_s"]) != 12.0)
+    at12 = [row for row in rows if row["time_s"] and float(row["time_s"]) == 12.0]
+    assert len(at12) == 3 and all(row["status"] == "OK" and err(row) <= scatter for row in at12), scatter
     r = CliRunner().invoke(main, ["locate", str(demo / "telemetry.csv"), "--config", str(demo / "camera.toml"),
                                   "--target-height", "600", "--interpolate"])
     assert r.exit_code == 2 and "needs a DETECTIONS file" in r.output
