@@ -89,8 +89,10 @@ def test_cot_events_carry_the_fix_and_its_one_sigma_errors(run):
         p = ev.find("point")
         assert float(p.get("lat")) == pytest.approx(float(r["lat_deg"]), abs=1e-8)
         assert float(p.get("hae")) == pytest.approx(float(r["h_m"]), abs=0.01)
-        # ce: the sigma of the circular normal with the fix's CE90 (io.cot's convention); the CE90
-        # of the row's sigmas and correlation, from 2 x 10^5 draws of that normal (1 % tolerance)
+        # ce: what MITRE's CoT Event 2.0 schema says it is where it is an error, "the one sigma point
+        # for a zero mean normal (Gaussian) distribution" (point/@ce; tests/data/conformance/SOURCES.md):
+        # the sigma of the circular normal with the fix's CE90; the CE90 of the row's sigmas and
+        # correlation from 2 x 10^5 draws of that normal (1 % tolerance); le likewise the vertical sigma
         se, sn, rho = float(r["sigma_e_m"]), float(r["sigma_n_m"]), float(r["rho_en"])
         cov = np.array([[se * se, rho * se * sn], [rho * se * sn, sn * sn]])
         draws = np.random.default_rng(0).multivariate_normal([0.0, 0.0], cov, 200_000)
