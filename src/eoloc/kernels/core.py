@@ -22,15 +22,17 @@ from enum import IntEnum
 
 import numpy as np
 
-# Status codes (mirrors eoloc.result.Status; kept here as ints so kernels stay free of Python
-# objects that numba cannot compile).
-OK = 0
-NO_INTERSECTION = 1
-OUT_OF_COVERAGE = 2
-DEM_VOID = 3
-INVALID_INPUT = 4
-BELOW_SURFACE = 6
-OUT_OF_IMAGE = 7
+from ..result import Status
+
+# Status codes: eoloc.result.Status's, defined there once; here as plain ints, which numba compiles
+# to constants (an IntEnum member is a Python object it cannot).
+OK = int(Status.OK)
+NO_INTERSECTION = int(Status.NO_INTERSECTION)
+OUT_OF_COVERAGE = int(Status.OUT_OF_COVERAGE)
+DEM_VOID = int(Status.DEM_VOID)
+INVALID_INPUT = int(Status.INVALID_INPUT)
+BELOW_SURFACE = int(Status.BELOW_SURFACE)
+OUT_OF_IMAGE = int(Status.OUT_OF_IMAGE)
 UNDECIDED = -1  # internal: the fast M3 path could not certify its answer; the exact path decides
 
 
