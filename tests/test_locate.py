@@ -370,3 +370,30 @@ def test_azel_pointing_inverts_the_turret_S13():
     az, el, rng = eoloc.AzElGimbal.pointing(42.0, 125.0, 10_000.0, 10.0, 5.0, -2.0, target)
     assert az == pytest.approx(45.0, abs=6e-5) and el == pytest.approx(-75.0, abs=6e-5)
     assert rng == pytest.approx(10_200.0, abs=0.01)
+
+
+def test_the_range_from_the_records_is_a_rule_value_that_needs_the_records():
+    """`--range` without a value is a rule like the others (RangeFromRecords, not a string):
+    locate_tables gives it each target's range_m column, and the fixes equal AtRange with that
+    column; used on its own, it refuses, naming the column."""
+    from eoloc.errors import InputError
+    from eoloc.io.table import Table
+    from eoloc.jobs.tables import locate_tables
+    from eoloc.rules import AtRange, RangeFromRecords
+
+    sensor = SensorModel(Camera.from_hfov(30.0, 640, 480))
+    n = 4
+    cols = {"time_s": np.arange(n, dtype=float), "frame": np.full(n, np.nan), "lat_deg": np.full(n, 40.0),
+            "lon_deg": np.full(n, -105.0), "h_m": np.full(n, 3000.0), "yaw_deg": np.zeros(n),
+            "pitch_deg": np.zeros(n), "roll_deg": np.zeros(n), "gimbal1_deg": np.zeros(n),
+            "gimbal2_deg": np.full(n, -60.0), "sensor_roll_deg": np.zeros(n),
+            "range_m": np.array([1000.0, 1500.0, np.nan, 2500.0])}
+    tel = Table("t.csv", cols, np.arange(2, n + 2))
+    assert RangeFromRecords() == RangeFromRecords()
+    got = locate_tables(sensor, tel, None, RangeFromRecords())
+    want = AtRange(cols["range_m"]).locate(sensor, Pose(40.0, -105.0, 3000.0, 0.0, 0.0, 0.0, (0.0, -60.0)))
+    np.testing.assert_array_equal(got.fixes.status, want.status)
+    np.testing.assert_allclose(got.fixes.lat_deg, want.lat_deg, rtol=0, atol=1e-12)
+    assert [i.line for i in got.issues] == [4] and "range_m" in got.issues[0].message
+    with pytest.raises(InputError, match="range_m"):
+        RangeFromRecords().locate(sensor, Pose(40.0, -105.0, 3000.0, 0.0, 0.0, 0.0, (0.0, -60.0)))

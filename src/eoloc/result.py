@@ -7,8 +7,6 @@ from enum import IntEnum
 
 import numpy as np
 
-RANGE_FROM_FILES = "files"  # the stop rule "M1 at each target's own range_m from the input files"
-
 
 class Status(IntEnum):
     """Per-target outcome. Coordinates are NaN wherever the status is not OK."""

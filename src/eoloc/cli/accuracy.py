@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import click
 
-from ..result import RANGE_FROM_FILES
 from .common import load_config, open_dem, progress, stop_rule, working
 from .main import console, err_console, report_issues
 from .options import (
@@ -92,7 +91,9 @@ def accuracy(inputs, config_path, range_opt, target_height, dem_paths, vertical,
     config_path = inputs[0] if inputs else None
     given = any(x is not None for x in (range_opt, target_height)) or bool(dem_paths)
     rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs)) if given else None
-    if rule == RANGE_FROM_FILES:
+    from ..rules import RangeFromRecords
+
+    if isinstance(rule, RangeFromRecords):
         raise click.UsageError("--range needs a value (metres) for a scenario: there are no files to take it from")
     scn, n, seed = scenario_from(config_path, scenario, samples, seed, rule=rule, dem_crs=dem_crs)
     total = n + (len(scn.budget) * sensitivity_samples if sensitivity else 0)

@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..result import RANGE_FROM_FILES
 from .main import err_console
 
 if TYPE_CHECKING:  # the rules load the sensor model and the kernels: imported when a command runs
@@ -33,15 +32,17 @@ def open_dem(paths, vertical, geoid, dem_crs):
         return open_(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
 
 
-def stop_rule(range_opt, target_height, dem=None) -> StopRule | str:
-    """The command line's stop rule, parsed once into a rule object (or RANGE_FROM_FILES: M1 with
-    each target's range_m column)."""
+def stop_rule(range_opt, target_height, dem=None) -> StopRule:
+    """The command line's stop rule, parsed once into a rule object (``--range`` without a value:
+    :class:`eoloc.rules.RangeFromRecords`, M1 with each target's range_m column)."""
     if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
         raise click.UsageError("choose one stop rule: --range [R] (laser slant range), --target-height H "
                                "(ellipsoidal metres) or --dem FILE (terrain)")
-    if range_opt == RANGE_FROM_FILES:
-        return RANGE_FROM_FILES
-    from ..rules import rule_from_options
+    from ..rules import RangeFromRecords, rule_from_options
+    from .options import FROM_RECORDS
+
+    if range_opt == FROM_RECORDS:
+        return RangeFromRecords()
 
     return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
 

@@ -7,7 +7,7 @@ import json
 import click
 import numpy as np
 
-from ..result import RANGE_FROM_FILES, Status
+from ..result import Status
 from .common import load_config, open_dem, stop_rule, working
 from .main import console, err_console, exit_if_nothing_located, fail, report_issues, warn
 from .options import (
@@ -162,7 +162,9 @@ def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pi
     if lat is None or lon is None or height is None:
         fail("one observation needs --lat, --lon and --aircraft-height (ellipsoidal m), or give a TELEMETRY file")
     rule = stop_rule(range_opt, target_height, dem)
-    if rule == RANGE_FROM_FILES:
+    from ..rules import RangeFromRecords
+
+    if isinstance(rule, RangeFromRecords):
         fail("--range needs a value (metres) for one observation")
     if config_path is not None:
         sensor = load_config(config_path).sensor()

@@ -8,8 +8,6 @@ import math
 
 import click
 
-from ..result import RANGE_FROM_FILES
-
 CONVENTIONS = """
 \b
 Units and conventions (the same everywhere in eoloc):
@@ -53,13 +51,16 @@ def _is_number(text: str) -> bool:
     return text.startswith("-")
 
 
+FROM_RECORDS = "from records"  # --range without a value: each target's range_m column (RangeFromRecords)
+
+
 class RangeMetres(click.ParamType):
     """--range: a slant range in metres (> 0, finite), or no value (each target's range_m column)."""
 
     name = "metres"
 
     def convert(self, value, param, ctx):
-        if value == RANGE_FROM_FILES or isinstance(value, float):
+        if value == FROM_RECORDS or isinstance(value, float):
             return value
         try:
             r = float(str(value).replace(MINUS, "-"))
@@ -82,7 +83,7 @@ def _apply(opts):
 
 def range_option(help_text: str = "Stop rule M1 (laser range): R metres along every ray, or --range alone to take "
                                   "each target's range_m column from the files."):
-    return click.option("--range", "range_opt", type=RangeMetres(), is_flag=False, flag_value=RANGE_FROM_FILES,
+    return click.option("--range", "range_opt", type=RangeMetres(), is_flag=False, flag_value=FROM_RECORDS,
                         default=None, metavar="[R]", help=help_text)
 
 

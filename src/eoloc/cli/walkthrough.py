@@ -17,8 +17,8 @@ from ..io.export import fix_records
 from ..io.telemetry import read_detections, read_telemetry
 from ..io.writers import write_layer
 from ..jobs.setup import error_budget
-from ..jobs.tables import RANGE_FROM_FILES, locate_tables
-from ..rules import AtHeight, OnDEM, locate_range
+from ..jobs.tables import locate_tables
+from ..rules import AtHeight, OnDEM, RangeFromRecords, locate_range
 from ..sensor import AzElGimbal, Camera, Pose, SensorModel
 from .render import titled_table
 
@@ -73,7 +73,7 @@ def run_demo(out_dir: Path, *, console: Console, data) -> None:
     # M1: the turret tracks T1, so the image centre + laser range is T1
     # with each fix's first-order uncertainty from the config's [accuracy.budget]
     budget = error_budget(load_config(data / "camera.toml"), data / "camera.toml")
-    m1 = locate_tables(sensor, tel, None, RANGE_FROM_FILES, budget=budget)
+    m1 = locate_tables(sensor, tel, None, RangeFromRecords(), budget=budget)
     t1 = truth["T1"]
     err1 = horizontal_distance_m(m1.fixes.lat_deg, m1.fixes.lon_deg, t1[0], t1[1])
     err1 = np.where(m1.fixes.ok, err1, np.nan)

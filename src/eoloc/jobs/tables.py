@@ -13,8 +13,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.records import Coded
 from ..io.table import Issue, Table
-from ..result import RANGE_FROM_FILES, Fixes, Status, with_status
-from ..rules import AtRange, StopRule, rule_from_options
+from ..result import Fixes, Status, with_status
+from ..rules import RangeFromRecords, StopRule, rule_from_options
 from ..sensor import Pose, SensorModel
 
 if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only when a budget is given
@@ -43,16 +43,16 @@ class Located:
         return self.pose if self.pose is None or self.pose_index is None else self.pose.take(self.pose_index)
 
 
-def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | str | None = None, *,
-                  range_m: float | str | None = None, height_m: float | None = None, dem=None,
+def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | None = None, *,
+                  range_m: float | None = None, height_m: float | None = None, dem=None,
                   time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None, interpolate: bool = False,
                   max_gap_s: float = 0.5, time_offset_s: float = 0.0, compensation=None) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
 
-    Stop ``rule``: a :class:`eoloc.StopRule`, or ``"files"`` for M1 with each detection's
-    ``range_m`` column (without detections: the telemetry's boresight range; a telemetry range is
-    never applied along another pixel's ray). The keywords ``height_m``, ``dem``, ``range_m``
-    (a number, or ``"files"``) name the rule instead. With an error ``budget`` every
+    Stop ``rule``: a :class:`eoloc.StopRule`; :class:`eoloc.rules.RangeFromRecords` for M1 with
+    each detection's ``range_m`` column (without detections: the telemetry's boresight range; a
+    telemetry range is never applied along another pixel's ray). The keywords ``height_m``,
+    ``dem``, ``range_m`` name the rule instead. With an error ``budget`` every
     fix also gets its first-order covariance (:func:`eoloc.accuracy.locate_with_covariance`).
     ``interpolate``: each detection's pose is interpolated to its time (+ ``time_offset_s``,
     telemetry minus video clock) instead of taken from the nearest record; detections in a gap
@@ -64,10 +64,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
     from ..io.telemetry import match_detections, telemetry_pose
 
     if rule is None:
-        rule = RANGE_FROM_FILES if isinstance(range_m, str) and range_m == RANGE_FROM_FILES else \
-            rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
-    if not (isinstance(rule, StopRule) or rule == RANGE_FROM_FILES):
-        raise TypeError(f"rule must be a stop rule or {RANGE_FROM_FILES!r}, got {rule!r}")
+        rule = rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
+    if not isinstance(rule, StopRule):
+        raise TypeError(f"rule must be a stop rule, got {rule!r}")
     issues: list[Issue] = []
     cx, cy = sensor.camera.centre_px
     if det is None:
@@ -100,8 +99,8 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
             pose, pose_index = telemetry_pose(tel, camera=sensor.camera), index
         else:
             pose = telemetry_pose(tel, index, sensor.camera)
-    if isinstance(rule, str):  # RANGE_FROM_FILES: M1 with each target's own range
-        rule = AtRange(np.asarray(file_range))
+    if isinstance(rule, RangeFromRecords):  # M1 with each target's own range
+        rule = rule.with_ranges(np.asarray(file_range))
         path, lines = range_source
         for j in np.flatnonzero(~np.isfinite(rule.range_m) & has_pose):
             issues.append(Issue(path, int(lines[j]), "no range_m for this target: give one in the file, "

@@ -25,7 +25,7 @@ from ..result import Fixes
 from ..sensor.model import Pose, SensorModel
 from ..terrain.dem import DEM
 from .at_height import AtHeight, locate_ellipsoid, stop_at_ellipsoid
-from .at_range import AtRange, locate_range, stop_at_range
+from .at_range import AtRange, RangeFromRecords, locate_range, stop_at_range
 from .base import StopRule
 from .flat import FlatGround, locate_flat
 from .multiview import MultiView
@@ -70,6 +70,7 @@ __all__ = [
     "FlatGround",
     "MultiView",
     "OnDEM",
+    "RangeFromRecords",
     "StopRule",
     "locate",
     "locate_dem",

@@ -6,10 +6,11 @@ from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
 
+from ..errors import InputError
 from ..geodesy import WGS84
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
-from .base import KernelRule
+from .base import KernelRule, StopRule
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,34 @@ class AtRange(KernelRule):
     error_sources = ("range_m",)
     kernel = "stop_at_range"
     value_field = "range_m"
+
+
+class RangeFromRecords(StopRule):
+    """M1 with each target's own slant range, taken from its record (the ``range_m`` column of
+    the telemetry or detections; ``--range`` given without a value). A value like the other rules,
+    but one that needs the records: :func:`eoloc.jobs.tables.locate_tables` turns it into
+    :class:`AtRange` with the column (:meth:`with_ranges`); used on its own it refuses."""
+
+    name = "range"
+    error_sources = AtRange.error_sources
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, RangeFromRecords)
+
+    def __hash__(self) -> int:
+        return hash(RangeFromRecords)
+
+    def __repr__(self) -> str:
+        return "RangeFromRecords()"
+
+    @staticmethod
+    def with_ranges(range_m: ArrayLike) -> AtRange:
+        """The rule with the records' ranges in hand."""
+        return AtRange(range_m)
+
+    def stop(self, rays: Rays, ell=WGS84, errors=None) -> Fixes:
+        raise InputError("the range comes from each target's record (range_m): locate the records with "
+                         "eoloc.jobs.tables.locate_tables, or give the ranges as AtRange(range_m)")
 
 
 def stop_at_range(rays: Rays, range_m: ArrayLike, *, sensor: SensorModel | None = None) -> Fixes:
