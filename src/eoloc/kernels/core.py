@@ -22,9 +22,9 @@ from enum import IntEnum
 
 import numpy as np
 
-from ..result import Status
+from ..status import Status
 
-# Status codes: eoloc.result.Status's, defined there once; here as plain ints, which numba compiles
+# Status codes: eoloc.status.Status's, defined there once; here as plain ints, which numba compiles
 # to constants (an IntEnum member is a Python object it cannot).
 OK = int(Status.OK)
 NO_INTERSECTION = int(Status.NO_INTERSECTION)
