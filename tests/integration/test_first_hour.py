@@ -805,3 +805,22 @@ def test_50_1_nothing_a_user_reads_or_runs_points_outside_the_repository():
                 continue
             assert (doc.parent / target).resolve().is_relative_to(root), (doc.name, target)
             assert (doc.parent / target).exists(), (doc.name, target)
+
+
+def test_50_2_a_cameras_attitude_column_is_not_taken_for_the_aircrafts():
+    """A header a drone user writes, gimbal_pitch_deg (or camera_yaw, gimbal_hdg): eoloc does not
+    suggest the aircraft's pitch_deg, whose name is close but whose meaning is not; it says where
+    a gimbal's angles go (relative: gimbal1_deg, gimbal2_deg) and where a camera attitude in the
+    earth frame goes (yaw/pitch/roll with the gimbal angles 0, as the README's drone rule says).
+    gimbal_az keeps its plain suggestion."""
+    from eoloc.io.table import unknown_columns
+    from eoloc.io.telemetry import TELEMETRY_COLUMNS
+
+    header = ["time_s", "lat_deg", "lon_deg", "h_m", "gimbal_pitch_deg", "camera_yaw", "gimbal_hdg", "gimbal_az"]
+    said = unknown_columns(header, TELEMETRY_COLUMNS, {"time_s": 0, "lat_deg": 1, "lon_deg": 2, "h_m": 3},
+                           "telemetry")
+    assert len(said) == 4
+    for msg in said[:3]:
+        assert "'gimbal1_deg' (azimuth)" in msg and "'yaw_deg', 'pitch_deg', 'roll_deg'" in msg, msg
+        assert "did you mean" not in msg
+    assert "did you mean 'azimuth_deg', i.e. 'gimbal1_deg'?" in said[3]

@@ -465,6 +465,7 @@ def _numbers(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 _SPELLED_OUT = {"az": "azimuth", "el": "elevation", "elev": "elevation", "hdg": "heading", "lng": "lon",
                 "long": "lon", "t": "time", "ts": "time", "timestamp": "time", "alt": "height"}
 _UNITS = {"deg", "m", "s", "px", "mm", "rad", "ms"}
+_ATTITUDE_WORDS = {"yaw", "pitch", "roll", "heading", "tilt", "pan"}  # (after _SPELLED_OUT: "hdg" is heading)
 
 
 def _words(name: str) -> list[str]:
@@ -501,7 +502,14 @@ def unknown_columns(header: list[str], columns: list[Column], index: dict[str, i
             continue
         near = closest_column(h, columns)
         hint = ""
-        if near is not None:
+        words = set(_words(h))
+        if words & {"gimbal", "camera", "cam"} and words & _ATTITUDE_WORDS and {"gimbal1_deg", "gimbal2_deg"} & {
+                c.name for c in columns}:
+            # a camera's yaw/pitch/roll is not the aircraft's (the spelling is close, the meaning is not)
+            hint = (" (a gimbal's angles relative to the aircraft go in 'gimbal1_deg' (azimuth) and 'gimbal2_deg' "
+                    "(elevation); a camera attitude given in the earth frame, as drones give their gimbal's "
+                    "yaw/pitch/roll, goes in 'yaw_deg', 'pitch_deg', 'roll_deg' with both gimbal angles 0)")
+        elif near is not None:
             known, canonical = near
             hint = f" (did you mean {known!r}" + (f", i.e. {canonical!r}" if known != canonical else "") + "?)"
         messages.append(f"column {h!r} is not one eoloc reads in a {what} file; ignored{hint}. "
