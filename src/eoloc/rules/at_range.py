@@ -32,6 +32,7 @@ class AtRange(KernelRule):
     value_field = "range_m"
 
 
+@dataclass(frozen=True)
 class RangeFromRecords(StopRule):
     """M1 with each target's own slant range, taken from its record (the ``range_m`` column of
     the telemetry or detections; ``--range`` given without a value). A value like the other rules,
@@ -40,15 +41,6 @@ class RangeFromRecords(StopRule):
 
     name = "range"
     error_sources = AtRange.error_sources
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, RangeFromRecords)
-
-    def __hash__(self) -> int:
-        return hash(RangeFromRecords)
-
-    def __repr__(self) -> str:
-        return "RangeFromRecords()"
 
     @staticmethod
     def with_ranges(range_m: ArrayLike) -> AtRange:

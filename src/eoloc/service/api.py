@@ -146,6 +146,28 @@ class ServiceState:
     started: float = 0.0
     served: int = 0
 
+    def dem(self, name: str | None, where: str):
+        """The DEM served as ``name`` (None for None); RequestError at ``where`` for an unknown name."""
+        if name is None:
+            return None
+        if name not in self.dems:
+            known = ", ".join(sorted(self.dems)) or "none (start the server with --dem NAME=PATH)"
+            raise RequestError(where, f"no DEM named {name!r}; this server has: {known}")
+        return self.dems[name]
+
+    def budget(self, wanted: bool, where: str):
+        """The config's error budget when ``wanted`` (else None); RequestError at ``where`` when the
+        server was started without one."""
+        if not wanted:
+            return None
+        cfg = self.config
+        if cfg is None or cfg.accuracy is None or not cfg.accuracy.budget:
+            raise RequestError(where, "covariance needs the server started with a --config that has an "
+                                      "[accuracy.budget]")
+        from ..accuracy.budget import ErrorBudget
+
+        return ErrorBudget.from_mapping(cfg.accuracy.budget)
+
 
 def locate_observation(obs: ObservationIn, state: ServiceState, where: str) -> dict:
     """One observation through eoloc's chain, as the API's rows; RequestError naming the field for
@@ -183,21 +205,9 @@ def solve_observation(obs: ObservationIn, state: ServiceState, where: str, pixel
     angles = tuple(g) if sensor.gimbal.name == "fixed" else (*g, *([0.0] if len(g) == need else []))
     p = obs.pose
     pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, angles)
-    dem = None
-    if obs.stop.dem is not None:
-        dem = state.dems.get(obs.stop.dem)
-        if dem is None:
-            known = ", ".join(sorted(state.dems)) or "none (start the server with --dem NAME=PATH)"
-            raise RequestError(f"{where}.stop.dem", f"no DEM named {obs.stop.dem!r}; this server has: {known}")
+    dem = state.dem(obs.stop.dem, f"{where}.stop.dem")
     rule = rule_from_options(range_m=obs.stop.range_m, height_m=obs.stop.target_height_m, dem=dem)
-    budget = None
-    if obs.covariance:
-        if cfg is None or cfg.accuracy is None or not cfg.accuracy.budget:
-            raise RequestError(f"{where}.covariance", "covariance needs the server started with a --config that "
-                                                        "has an [accuracy.budget]")
-        from ..accuracy.budget import ErrorBudget
-
-        budget = ErrorBudget.from_mapping(cfg.accuracy.budget)
+    budget = state.budget(obs.covariance, f"{where}.covariance")
     if pixels is not None:
         u, v = pixels
     elif obs.pixels is None:
@@ -389,21 +399,8 @@ def locate_photo_request(data: bytes, state: ServiceState, *, pixels: list[str],
         uv.append((u, v))
     if len(uv) > MAX_PIXELS:
         raise RequestError("pixel", f"{len(uv)} pixels; at most {MAX_PIXELS}")
-    surface = None
-    if dem is not None:
-        surface = state.dems.get(dem)
-        if surface is None:
-            known = ", ".join(sorted(state.dems)) or "none (start the server with --dem NAME=PATH)"
-            raise RequestError("dem", f"no DEM named {dem!r}; this server has: {known}")
-    budget = None
-    if covariance:
-        cfg = state.config
-        if cfg is None or cfg.accuracy is None or not cfg.accuracy.budget:
-            raise RequestError("covariance", "covariance needs the server started with a --config that has an "
-                                             "[accuracy.budget]")
-        from ..accuracy.budget import ErrorBudget
-
-        budget = ErrorBudget.from_mapping(cfg.accuracy.budget)
+    surface = state.dem(dem, "dem")
+    budget = state.budget(covariance, "covariance")
     p = read_photo(name, data=data)  # a PhotoError (an EolocError: 422) names the tag and the fix
     rows = locate_photo(p, pixels=uv, dem=surface, target_height_m=target_height_m, budget=budget)
     return {"photo": {"name": name, "make": p.make, "model": p.model, "width": p.width, "height": p.height,

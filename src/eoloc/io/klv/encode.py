@@ -40,9 +40,16 @@ def build_uas_packet(items: Iterable[tuple[int, bytes]], *, long_form: bool = Fa
     return frame_uas_packet(encode_items(items, long_form=long_form))
 
 
-def frame_uas_packet(body: bytes) -> bytes:
-    """Key, length, the given item bytes and a checksum item with a valid bcc-16."""
-    pkt = UAS_KEY + encode_length(len(body) + 4) + body + b"\x01\x02"
+def frame_uas_packet(body: bytes, *, length_bytes: int = 0) -> bytes:
+    """Key, length, the given item bytes and a checksum item with a valid bcc-16. ``length_bytes``
+    > 0: the packet length in BER long form with that many bytes where it fits (as a packet being
+    rewritten had it), else the shortest form."""
+    n = len(body) + 4
+    if 0 < length_bytes <= 8 and n < 1 << 8 * length_bytes:
+        length = bytes((0x80 | length_bytes,)) + n.to_bytes(length_bytes, "big")
+    else:
+        length = encode_length(n)
+    pkt = UAS_KEY + length + body + b"\x01\x02"
     return pkt + bcc16(pkt).to_bytes(2, "big")
 
 
@@ -117,14 +124,7 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
             continue  # the checksum: computed again, last
         body += (new.pop(tag, b"") if last[tag] == i else b"") if tag in TARGET_TAGS else raw
     body += b"".join(new.values())
-    width = start - 16  # the packet length's bytes as sent: long form kept where it fits
-    length = len(body) + 4
-    if width > 1 and length < 1 << 8 * (width - 1):
-        head = UAS_KEY + bytes((0x80 | (width - 1),)) + length.to_bytes(width - 1, "big")
-    else:
-        head = UAS_KEY + encode_length(length)
-    pkt = head + bytes(body) + b"\x01\x02"
-    return pkt + bcc16(pkt).to_bytes(2, "big")
+    return frame_uas_packet(bytes(body), length_bytes=start - 17)  # the length's form as sent (0: short)
 
 
 def with_fix(packet: bytes, lat_deg: float, lon_deg: float, h_hae_m: float, *, ce90_m: float | None = None,

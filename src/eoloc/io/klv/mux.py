@@ -94,10 +94,17 @@ def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, f
     else:
         raise ValueError(f"carriage {carriage!r}: async or sync")
     transformer = LiveTransportTransformer(additional_metadata_stream=info)
-    tables = KLVDemux()  # only to learn the video PIDs from the program tables
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     data = Path(video_ts).read_bytes()
+    # where each frame begins (a cell starting a PES on a video PID), found over all cells at once:
+    # the transformer is then fed a frame at a time, not a cell at a time
+    cells = np.frombuffer(data, np.uint8)[:len(data) // TS_PACKET * TS_PACKET].reshape(-1, TS_PACKET)
+    pids = (cells[:, 1].astype(np.int32) & 0x1F) << 8 | cells[:, 2]
+    tables = KLVDemux()  # only to learn the video PIDs from the program tables (PAT, then the PMTs)
+    tables.feed_cells(cells[pids == 0].tobytes())
+    tables.feed_cells(cells[np.isin(pids, list(tables.pmt_pids))].tobytes())
+    starts = np.flatnonzero((cells[:, 1] & 0x40).astype(bool) & np.isin(pids, list(tables.video_pids)))
     frame: tuple[int, int] | None = None  # (n, PTS) of the video PES being copied
     n = 0
     next_cc = 0  # the KLV PID's next continuity counter
@@ -119,16 +126,17 @@ def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, f
                 out.write(cells)
                 next_cc = (cells[-TS_PACKET + 3] + 1) & 0x0F if cells else next_cc
 
-        for k in range(0, len(data) - TS_PACKET + 1, TS_PACKET):
-            cell = data[k:k + TS_PACKET]
+        ends = [*starts[1:].tolist(), len(cells)]
+        out.write(transformer.feed(data[:int(starts[0]) * TS_PACKET if starts.size else len(data)]).transport)
+        for s, e in zip(starts.tolist(), ends, strict=True):
+            cell = data[s * TS_PACKET:(s + 1) * TS_PACKET]
             # the transformer hands a PES on once it is complete: when the next one begins
             out.write(transformer.feed(cell).transport)
-            if cell[1] & 0x40 and ((cell[1] & 0x1F) << 8 | cell[2]) in tables.video_pids:  # a frame begins
-                emit()  # the previous frame's packet, after its video and before this frame's
-                pts = cell_pes_pts(cell)
-                frame = (n, pts) if pts is not None else None
-                n += 1
-            tables.feed_cells(cell)
+            emit()  # the previous frame's packet, after its video and before this frame's
+            pts = cell_pes_pts(cell)
+            frame = (n, pts) if pts is not None else None
+            n += 1
+            out.write(transformer.feed(data[(s + 1) * TS_PACKET:e * TS_PACKET]).transport)
         if kind is KLVCarriage.SYNCHRONOUS:  # timed by its PTS: before the last frame's video will do
             emit()
             out.write(transformer.finish().transport)
