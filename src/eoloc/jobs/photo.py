@@ -63,6 +63,7 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
     ``target_height_m``) each photo's footprint too; with ``ortho_dir`` each photo orthorectified
     onto that ground as ``<ortho_dir>/<photo name>.tif`` (a Cloud-Optimised GeoTIFF), written as
     it is made (one photo's pixels in memory at a time)."""
+    from ..ground.footprint import footprint_features, footprints
     from ..io.sources.photos import photo_files
 
     job = PhotoJob([])
@@ -97,8 +98,6 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
         job.failed += [r["reason"] for r in rows if r["status"] in ("SUSPECT_ALTITUDE", "NO_SURFACE")]
         if surface is None or any(r["status"] == "SUSPECT_ALTITUDE" for r in rows):
             continue
-        from ..ground.footprint import footprint_features, footprints
-
         sensor, pose = photo_sensor_pose(p)
         job.footprints += footprint_features(footprints(sensor, pose, surface), [{"file": str(path)}])
         if ortho_dir is not None:
