@@ -3,17 +3,20 @@
 1. A 10 s pass north at 6 000 m, 3.5 km east of the summit, the turret sweeping 40° across the
    mountain, 35° below the horizon. Its metadata is an ST 0601 KLV stream at 5 Hz (platform
    pose, turret angles, fields of view, HAE altitude), with ST 0903 VMTI: three "vehicles"
-   (20 m red squares on the ground, each in the middle of a board square) boxed wherever the
+   (20 x 10 m red rectangles driving over the terrain at 10, 14 and 18 m/s) boxed wherever the
    frame sees them.
-2. The video (480 x 270, 10 frames/s, H.264) is rendered through eoloc's sensor model, one ray per pixel
+2. The video (640 x 360, 10 frames/s, H.264) is rendered through eoloc's sensor model, one ray per pixel
    onto the bundled SRTM DEM: every pixel shows the ground texture where its ray lands. The
    texture is a hillshade of the DEM under a checkerboard of 60 m squares in UTM 13N (light
    squares warm, dark squares cool, so the board survives the shading).
 3. PyAV muxes the video and the KLV (asynchronous carriage) into one MPEG-TS.
-4. `eoloc video` rectifies every frame onto the DEM, builds the mosaic, the XYZ tiles and the
-   player (player.html: the video beside the map), and locates the VMTI targets.
+4. `eoloc video --detect motion` rectifies every frame onto the DEM, builds the mosaic, the XYZ
+   tiles and the player (player.html: the video beside the map), locates the VMTI targets, and
+   finds the vehicles itself in the pixels (what moves on the ground), tracks and locates them.
 5. Accuracy against the texture's known geometry: each board corner inside the mosaic is found
-   by OpenCV's cornerSubPix in the mosaic and compared with where the corner truly is.
+   by OpenCV's cornerSubPix in the mosaic and compared with where the corner truly is; the
+   movers eoloc found against the vehicles' true tracks (frames found in, distance from the
+   true centre, speed, false tracks).
 
     python examples/video_demo.py [--out out/demo/video]
 """
@@ -25,6 +28,7 @@ import json
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -41,15 +45,17 @@ from eoloc.rules import locate_dem
 from eoloc.terrain import DEM
 
 DEM_PATH = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"
-WIDTH, HEIGHT, HFOV_DEG, FPS, SECONDS, KLV_HZ = 480, 270, 20.0, 10, 10.0, 5
+WIDTH, HEIGHT, HFOV_DEG, FPS, SECONDS, KLV_HZ = 640, 360, 20.0, 10, 10.0, 5
 AZ_RATE_DEG_S = 4.0  # the turret's sweep
 SQUARE_M = 60.0
 CELL_M = 3.0  # the mosaic's cell
 UTM = pyproj.CRS.from_epsg(32613)
 START_UNIX_S = datetime(2026, 7, 14, 16, 0, 0, tzinfo=UTC).timestamp()
 LIGHT, DARK = np.array([215.0, 190.0, 150.0]), np.array([95.0, 115.0, 150.0])
-VEHICLE, VEHICLE_M = np.array([235.0, 30.0, 30.0]), 20.0
-VEHICLE_AT_S = (2.0, 5.0, 8.0)  # each vehicle lies near the frame centre of this moment of the pass
+VEHICLE, VEHICLE_L_M, VEHICLE_W_M = np.array([235.0, 30.0, 30.0]), 20.0, 10.0
+VEHICLE_AT_S = (2.0, 5.0, 8.0)  # each vehicle passes the frame centre of this moment of the pass
+VEHICLE_SPEED_MPS = (10.0, 14.0, 18.0)
+VEHICLE_HEADING_DEG = (40.0, 160.0, 285.0)  # clockwise from grid north (UTM 13N)
 
 
 def truth_pose(t_s: np.ndarray) -> Pose:
@@ -65,27 +71,66 @@ def vfov_deg() -> float:
     return float(np.degrees(2 * np.arctan(np.tan(np.radians(HFOV_DEG) / 2) * HEIGHT / WIDTH)))
 
 
-def vehicles(dem: DEM, sensor: SensorModel) -> np.ndarray:
-    """(3, 2) UTM centres of the vehicles: the middle of the board square under the frame
-    centre at each time of VEHICLE_AT_S."""
+@dataclass(frozen=True)
+class Vehicles:
+    """The vehicles' tracks: straight, at constant speed, in UTM 13N: ``start`` (K, 2) at t = 0 s,
+    ``velocity`` (K, 2) m/s east and north."""
+
+    start: np.ndarray
+    velocity: np.ndarray
+
+    def at(self, t_s: float) -> np.ndarray:
+        """(K, 2) UTM centres at time t_s (s since the start of the pass)."""
+        return self.start + self.velocity * t_s
+
+    @property
+    def heading_rad(self) -> np.ndarray:
+        return np.arctan2(self.velocity[:, 0], self.velocity[:, 1])
+
+    @property
+    def speed_mps(self) -> np.ndarray:
+        return np.hypot(self.velocity[:, 0], self.velocity[:, 1])
+
+    def corners(self, k: int, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """UTM x, y of vehicle k's centre and four corners at t_s."""
+        (x, y), h = self.at(t_s)[k], self.heading_rad[k]
+        fwd, right = np.array([np.sin(h), np.cos(h)]), np.array([np.cos(h), -np.sin(h)])
+        pts = [np.array([x, y])] + [np.array([x, y]) + a * VEHICLE_L_M / 2 * fwd + b * VEHICLE_W_M / 2 * right
+                                    for a, b in ((1, 1), (1, -1), (-1, -1), (-1, 1))]
+        p = np.array(pts)
+        return p[:, 0], p[:, 1]
+
+    def on(self, x: np.ndarray, y: np.ndarray, t_s: float) -> list[np.ndarray]:
+        """Per vehicle: where (x, y) lies on it at t_s."""
+        out = []
+        for (cx, cy), h in zip(self.at(t_s), self.heading_rad, strict=True):
+            dx, dy = x - cx, y - cy
+            along, across = dx * np.sin(h) + dy * np.cos(h), dx * np.cos(h) - dy * np.sin(h)
+            out.append((np.abs(along) <= VEHICLE_L_M / 2) & (np.abs(across) <= VEHICLE_W_M / 2))
+        return out
+
+
+def vehicles(dem: DEM, sensor: SensorModel) -> Vehicles:
+    """The vehicles: each passes the middle of the board square under the frame centre at its
+    time of VEHICLE_AT_S, at its speed and heading."""
     t = np.array(VEHICLE_AT_S)
     c = sensor.camera
     f = locate_dem(sensor, truth_pose(t), dem, (np.full(t.shape, c.cx), np.full(t.shape, c.cy)))
     x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(f.lon_deg, f.lat_deg)
-    return np.stack([(np.floor(x / SQUARE_M) + 0.5) * SQUARE_M, (np.floor(y / SQUARE_M) + 0.5) * SQUARE_M], -1)
+    mid = np.stack([(np.floor(x / SQUARE_M) + 0.5) * SQUARE_M, (np.floor(y / SQUARE_M) + 0.5) * SQUARE_M], -1)
+    h = np.radians(VEHICLE_HEADING_DEG)
+    vel = np.array(VEHICLE_SPEED_MPS)[:, None] * np.stack([np.sin(h), np.cos(h)], -1)
+    return Vehicles(mid - vel * t[:, None], vel)
 
 
-def vehicle_boxes(dem: DEM, sensor: SensorModel, cars: np.ndarray, t_s: float) -> tuple[list, dict]:
+def vehicle_boxes(dem: DEM, sensor: SensorModel, cars: Vehicles, t_s: float) -> tuple[list, dict]:
     """The VMTI of time ``t_s``: (id, u, v) of each vehicle the frame sees (in the image, not
-    hidden by terrain) and its box (the image of its square's corners)."""
+    hidden by terrain) and its box (the image of its corners)."""
     to_ll = pyproj.Transformer.from_crs(UTM, 4326, always_xy=True)
     p = truth_pose(np.array(t_s))
-    half = VEHICLE_M / 2
     targets, boxes = [], {}
-    for k, (x, y) in enumerate(cars):
-        xs = np.array([x, x - half, x + half, x + half, x - half])
-        ys = np.array([y, y - half, y - half, y + half, y + half])
-        lon, lat = to_ll.transform(xs, ys)
+    for k in range(len(cars.start)):
+        lon, lat = to_ll.transform(*cars.corners(k, t_s))
         h = dem.height(lat, lon)
         u, v = sensor.ground_to_image(p, np.stack(geodetic_to_ecef(lat, lon, h), -1))
         c = sensor.camera
@@ -145,9 +190,9 @@ def square_wave(x: np.ndarray, width: np.ndarray | float = 0.0) -> np.ndarray:
 
 
 def texture(shade: DEM, lat: np.ndarray, lon: np.ndarray, pixel_extent: bool = False,
-            cars: np.ndarray | None = None) -> np.ndarray:
+            cars: Vehicles | None = None, t_s: float = 0.0) -> np.ndarray:
     """The ground's colour (…, 3) float at (lat, lon): the board in UTM 13N times the hillshade,
-    and the vehicles (``cars``: UTM centres). ``pixel_extent``: (lat, lon) are an image's pixels,
+    and the vehicles where they are at ``t_s``. ``pixel_extent``: (lat, lon) are an image's pixels,
     and the board is averaged over each pixel's footprint (from the neighbouring pixels' ground
     points)."""
     x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(lon, lat)
@@ -157,8 +202,7 @@ def texture(shade: DEM, lat: np.ndarray, lon: np.ndarray, pixel_extent: bool = F
         wx, wy = np.nan_to_num(np.abs(dx_du) + np.abs(dx_dv)), np.nan_to_num(np.abs(dy_du) + np.abs(dy_dv))
     light = (0.5 + 0.5 * square_wave(x, wx) * square_wave(y, wy))[..., None]
     colour = light * LIGHT + (1.0 - light) * DARK
-    for cx, cy in cars if cars is not None else ():
-        on = (np.abs(x - cx) <= VEHICLE_M / 2) & (np.abs(y - cy) <= VEHICLE_M / 2)
+    for on in cars.on(x, y, t_s) if cars is not None else ():
         colour = np.where(on[..., None], VEHICLE, colour)
     s = shade.height(lat, lon)[..., None]
     return colour * np.nan_to_num(s, nan=0.0)
@@ -172,13 +216,14 @@ def board_contrast(rgb: np.ndarray, shade: np.ndarray) -> np.ndarray:
         return np.nan_to_num(y / shade, nan=0.0, posinf=0.0).astype(np.float32)
 
 
-def render(dem: DEM, shade: DEM, sensor: SensorModel, i: int, cars: np.ndarray | None = None) -> np.ndarray:
+def render(dem: DEM, shade: DEM, sensor: SensorModel, i: int, cars: Vehicles | None = None) -> np.ndarray:
     """Frame i (RGB uint8): every pixel's ray onto the DEM, coloured by the texture over the
     pixel's footprint there (sky and ground off the DEM grey)."""
     p = truth_pose(np.array(i / FPS))
     u, v = np.meshgrid(np.arange(WIDTH, dtype=float), np.arange(HEIGHT, dtype=float))
     f = locate_dem(sensor, p, dem, (u, v))
-    rgb = np.where(f.ok[..., None], texture(shade, f.lat_deg, f.lon_deg, pixel_extent=True, cars=cars), 40.0)
+    rgb = np.where(f.ok[..., None], texture(shade, f.lat_deg, f.lon_deg, pixel_extent=True, cars=cars,
+                                                 t_s=i / FPS), 40.0)
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
 
 
@@ -218,19 +263,62 @@ def corner_errors(folder: Path, shade: DEM) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.norm(got.reshape(-1, 2) - truth, axis=1), gsd[at[:, 1], at[:, 0]]
 
 
-def vmti_errors(path: Path, cars: np.ndarray) -> np.ndarray:
-    """Horizontal distance (m) of each located VMTI detection (vmti.csv) from its vehicle's centre."""
+def read_rows(path: Path) -> list[dict]:
     import csv
 
-    if not path.exists():
-        return np.zeros(0)
-    rows = [r for r in csv.DictReader(path.open()) if r["status"] == "OK"]
-    if not rows:
-        return np.zeros(0)
+    return list(csv.DictReader(path.open())) if path.exists() else []
+
+
+def utm_of(rows: list[dict]) -> np.ndarray:
     x, y = pyproj.Transformer.from_crs(4326, UTM, always_xy=True).transform(
         np.array([float(r["lon_deg"]) for r in rows]), np.array([float(r["lat_deg"]) for r in rows]))
-    k = np.array([int(r["target_id"]) - 1 for r in rows])
-    return np.hypot(x - cars[k, 0], y - cars[k, 1])
+    return np.stack([x, y], -1).reshape(-1, 2)
+
+
+def vmti_errors(path: Path, cars: Vehicles) -> np.ndarray:
+    """Horizontal distance (m) of each located VMTI detection (vmti.csv) from its vehicle's centre
+    at the detection's time."""
+    rows = [r for r in read_rows(path) if r["status"] == "OK"]
+    if not rows:
+        return np.zeros(0)
+    xy = utm_of(rows)
+    truth = np.array([cars.at(float(r["video_time_s"]))[int(r["target_id"]) - 1] for r in rows])
+    return np.hypot(*(xy - truth).T)
+
+
+def mover_scores(path: Path, cars: Vehicles, visible: dict[int, set[int]], match_m: float = 25.0) -> dict:
+    """The movers eoloc found (detections.csv) against the vehicles: each track is the vehicle its
+    detections lie nearest to (median within ``match_m``, else a false track); per vehicle the
+    fraction of the frames it is visible in (``visible``: frame -> vehicle indices) where its
+    track has a detection, the detections' distance from its true centre, and the track's
+    filtered speed against the true one."""
+    rows = [r for r in read_rows(path) if r["status"] == "OK"]
+    out = {"tracks": 0, "false_tracks": 0, "vehicles": []}
+    if not rows:
+        return out
+    xy = utm_of(rows)
+    tid = np.array([int(r["track_id"]) for r in rows])
+    frame = np.array([int(r["frame"]) for r in rows])
+    t = np.array([float(r["time_s"]) for r in rows])
+    dist = np.stack([np.hypot(*(xy - np.array([cars.at(ti)[k] for ti in t])).T) for k in range(len(cars.start))])
+    owner = {}
+    for n in np.unique(tid):
+        d = np.median(dist[:, tid == n], axis=1)
+        owner[int(n)] = int(np.argmin(d)) if d.min() <= match_m else -1
+    out["tracks"] = len(owner)
+    out["false_tracks"] = sum(v < 0 for v in owner.values())
+    for k in range(len(cars.start)):
+        mine = np.array([owner[int(n)] == k for n in tid])
+        seen = {f for f, ks in visible.items() if k in ks}
+        found = set(frame[mine].tolist()) & seen
+        speed = np.array([float(r["speed_mps"]) for r, m, ti in zip(rows, mine, t, strict=True)
+                          if m and r["speed_mps"] not in ("", "nan")])
+        out["vehicles"].append({"vehicle": k + 1, "visible_frames": len(seen), "found_frames": len(found),
+                                "recall": len(found) / len(seen) if seen else float("nan"),
+                                "median_error_m": float(np.median(dist[k, mine])) if mine.any() else float("nan"),
+                                "speed_mps": float(np.median(speed[len(speed) // 3:])) if speed.size else float("nan"),
+                                "true_speed_mps": float(cars.speed_mps[k])})
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -251,8 +339,8 @@ def main(argv: list[str] | None = None) -> int:
                       frame_source=lambda i: render(dem, shade, sensor, i, cars))
     print(f"rendered {n} frames of {WIDTH} x {HEIGHT} through the sensor model onto the DEM and muxed them with "
           f"{int(seconds * KLV_HZ) + 1} ST 0601 packets into {ts} ({time.perf_counter() - t0:.1f} s)", flush=True)
-    cmd = [sys.executable, "-m", "eoloc", "video", str(ts), "--dem", str(DEM_PATH), "--gsd", f"{CELL_M:g}", "--out",
-           str(out / "eoloc")]
+    cmd = [sys.executable, "-m", "eoloc", "video", str(ts), "--dem", str(DEM_PATH), "--gsd", f"{CELL_M:g}",
+           "--detect", "motion", "--out", str(out / "eoloc")]
     print("$ eoloc video " + " ".join(cmd[4:]), flush=True)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True)
@@ -262,10 +350,13 @@ def main(argv: list[str] | None = None) -> int:
         print("no board corner lies well inside the mosaic: nothing to measure")
         return 1
     vmti_m = vmti_errors(out / "eoloc" / "vmti.csv", cars)
+    visible = {i: {k - 1 for k, _, _ in vehicle_boxes(dem, sensor, cars, i / FPS)[0]} for i in range(n)}
+    movers = mover_scores(out / "eoloc" / "detections.csv", cars, visible)
     (out / "accuracy.json").write_text(json.dumps({"corners": int(err.size), "cells_m": CELL_M,
                                                    "error_cells": err.round(4).tolist(),
                                                    "frame_gsd_m": gsd.round(3).tolist(),
-                                                   "vmti_error_m": vmti_m.round(3).tolist()}) + "\n")
+                                                   "vmti_error_m": vmti_m.round(3).tolist(),
+                                                   "movers": movers}) + "\n")
     sharp = gsd <= 1.5 * CELL_M
     px = err * CELL_M / gsd
     print(f"accuracy against the texture's known geometry, {err.size} board corners inside the mosaic found by "
@@ -276,9 +367,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  all corners, in the frame's own pixels (GSD {np.median(gsd):.1f} m median, up to {gsd.max():.0f} m on "
           f"slopes seen edge-on): median {np.median(px):.2f}, p95 {np.percentile(px, 95):.2f} px")
     if vmti_m.size:
-        print(f"VMTI: {vmti_m.size} detections of the {len(cars)} vehicles located by eoloc with their packets' poses: "
+        print(f"VMTI: {vmti_m.size} detections of the {len(cars.start)} vehicles located by eoloc with their packets' poses: "
               f"median {np.median(vmti_m):.1f} m, max {vmti_m.max():.1f} m from the vehicles' true centres (the "
               "encoder's centroids are whole pixels)")
+    print(f"movers found by eoloc in the pixels (--detect motion): {movers['tracks']} tracks, "
+          f"{movers['false_tracks']} false")
+    for v in movers["vehicles"]:
+        print(f"  vehicle {v['vehicle']}: found in {v['found_frames']} of the {v['visible_frames']} frames it is "
+              f"visible in, median {v['median_error_m']:.1f} m from its true centre, speed "
+              f"{v['speed_mps']:.1f} m/s (true {v['true_speed_mps']:g})")
     print(f"the player: open {out / 'eoloc' / 'player.html'} in a browser (offline), or for exact clicks:")
     print(f"  {json.loads((out / 'eoloc' / 'video.json').read_text())['player']['serve']}")
     print(f"open {out / 'eoloc' / 'mosaic.tif'} in QGIS, or its tiles: {out / 'eoloc' / 'tiles'}/{{z}}/{{x}}/{{y}}.png")

@@ -52,8 +52,22 @@ Written into --out:
                            ground point (exact through `eoloc serve --player OUT`, offline from
                            per-frame ground grids)
   vmti.csv, vmti.geojson   the VMTI targets (ST 0903 in the KLV), each located with its packet's pose
+  detections.csv, .geojson with --detect motion: every detection of a mover (frame, time_s,
+                           track_id, u_px, v_px, box, ground area, point, sigma, speed, heading)
+  movers.geojson           with --detect motion: one LineString per mover (its Kalman track)
   frames.csv, footprints.geojson, video.json
 All frames share one grid (--crs, cell --gsd: default the first frame's native GSD, rounded).
+
+\b
+Movers (--detect motion): every frame is compared with frames up to --detect-window seconds
+before and after it, each warped onto its view through the poses and the ground (--dem: terrain
+parallax removed; --target-height: flat), the residual shift between frames measured from the
+images. What differs from a frame before AND one after it, by more than --detect-threshold
+(0-255 colour scale), covering --min-area..--max-area square metres on the ground, is a blob; its
+centroid is located and tracked on the ground (Kalman). A track is a mover when it lasts 1 s and
+moves at least --min-speed m/s. Not seen: targets standing still, or moving less than half their
+length in --detect-window (slowest: length / (2 x window)). False alarms: tall things not in the
+DEM (parallax), moving shadows, water.
 """
 
 
@@ -84,11 +98,24 @@ All frames share one grid (--crs, cell --gsd: default the first frame's native G
 @click.option("--tiles/--no-tiles", default=True, show_default=True, help="Cut the mosaic into XYZ tiles.")
 @click.option("--player/--no-player", default=True, show_default=True,
               help="Write player.html: the video beside the map (the video remuxed or transcoded to MP4).")
+@click.option("--detect", type=click.Choice(["motion"]), default=None,
+              help="Find the targets in the frames: 'motion' = what moves on the ground (see above).")
+@click.option("--detect-window", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
+              help="--detect: seconds before and after a frame to compare it with.")
+@click.option("--detect-threshold", type=click.FloatRange(1.0, 255.0), default=40.0, show_default=True,
+              help="--detect: colour difference (0-255) that counts as a change.")
+@click.option("--min-area", type=click.FloatRange(0.0, min_open=True), default=20.0, show_default=True,
+              help="--detect: smallest target, square metres on the ground.")
+@click.option("--max-area", type=click.FloatRange(0.0, min_open=True), default=5000.0, show_default=True,
+              help="--detect: largest target, square metres on the ground.")
+@click.option("--min-speed", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
+              help="--detect: slowest mover kept, m/s over the ground.")
 @out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
 @flight_log_option
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
-          mosaic, tiles, player, out_dir, flight_log) -> None:
+          mosaic, tiles, player, detect, detect_window, detect_threshold, min_area, max_area, min_speed, out_dir,
+          flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
@@ -101,6 +128,18 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         raise click.UsageError("choose the ground: --target-height H or --dem FILE, not both")
     if end_s is not None and end_s < start_s:
         raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
+    if detect and not (dem_paths or target_height is not None):
+        raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
+    if min_area >= max_area:
+        raise click.UsageError(f"--min-area {min_area:g} must be below --max-area {max_area:g}")
+    motion = movers = None
+    if detect:
+        from ..detect.motion import MotionSettings
+        from ..detect.movers import MoverSettings
+
+        motion = MotionSettings(window_s=detect_window, threshold=detect_threshold, min_area_m2=min_area,
+                                max_area_m2=max_area)
+        movers = MoverSettings(min_speed_mps=min_speed)
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     dem_name = Path(dem_paths[0]).stem if dem_paths else "dem"
     serve_line = serve_command(Path(out_dir), dem_name, dem_paths, vertical, geoid, dem_crs, config_path)
@@ -110,12 +149,18 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     select = FrameSelection(every, start_s, math.inf if end_s is None else end_s)
     with progress() as bar:
         task = bar.add_task("rectifying frames", total=None)
+        searching = bar.add_task("finding movers", total=None, visible=False)
+
+        def searched(done: int, total: int) -> None:
+            bar.update(searching, completed=done, total=total, visible=True)
+
         job = video_job(video, out=out, klv=klv_path, telemetry=telemetry, cfg=cfg, surface=surface, crs=crs,
                         gsd_m=gsd, resampling=resampling, nodata=nodata, occlusion=occlusion, select=select,
                         klv_stream=klv_stream, time_offset_s=time_offset, max_gap_s=max_gap,
                         write_frames=write_frames, mosaic=mosaic, tiles=tiles, player=player,
-                        dem_name=dem_name, serve_command=serve_line,
-                        progress=lambda done, total: bar.update(task, completed=done, total=total))
+                        dem_name=dem_name, serve_command=serve_line, detect=motion, movers=movers,
+                        progress=lambda done, total: bar.update(task, completed=done, total=total),
+                        detect_progress=searched)
     report_issues(job.issues)
     for line in job.decode_errors:
         warn(line)
@@ -123,6 +168,12 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     written += write_layer(out, "frames", job.rows, ["csv"])
     if job.vmti:
         written += write_layer(out, "vmti", job.vmti, ["csv", "geojson"])
+    if job.movers is not None:
+        from ..sequence.track import track_features
+
+        written += write_layer(out, "detections", job.movers.rows, ["csv", "geojson"])
+        feats = track_features(job.movers.track_set())
+        written += write_layer(out, "movers", [f["properties"] for f in feats], ["geojson"], features=feats)
     if job.footprints:
         written += write_layer(out, "footprints", [f["properties"] for f in job.footprints], ["geojson"],
                                features=job.footprints)
@@ -141,6 +192,11 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         report["player"] = {"page": str(job.player), "video": job.video_for_browser, "serve": serve_line}
     if job.vmti:
         report["vmti"] = {"detections": len(job.vmti), "located": sum(r["status"] == "OK" for r in job.vmti)}
+    if job.movers is not None:
+        m = job.movers
+        report["movers"] = {"tracks": len(m.tracks), "detections": len(m.rows), "blobs": m.blobs,
+                            "blobs_not_located": m.not_located, "tracks_dropped": m.dropped_tracks,
+                            "blobs_dropped": m.dropped_blobs}
     if job.tiles is not None:
         report["tiles"] = {"url": job.tiles.url, "min_zoom": job.tiles.min_zoom, "max_zoom": job.tiles.max_zoom,
                            "count": job.tiles.count}
@@ -159,6 +215,10 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if job.vmti:
         n_ok = sum(r["status"] == "OK" for r in job.vmti)
         t.add_row("VMTI", f"{len(job.vmti)} detections, {n_ok} located")
+    if job.movers is not None:
+        m = job.movers
+        t.add_row("movers", f"{len(m.tracks)} tracks, {len(m.rows)} detections ({m.blobs} blobs; "
+                            f"{m.dropped_tracks} tracks that did not move as a target dropped)")
     if job.player is not None:
         t.add_row("player", f"{job.player} (the video {job.video_for_browser} to MP4)")
     if job.tiles is not None:

@@ -18,6 +18,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,10 @@ from ..ground.frame import misb_frame_sensor
 from ..io.videofile import VideoInfo, iter_frames, probe_video
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
+
+if TYPE_CHECKING:
+    from ..detect.motion import MotionSettings
+    from ..detect.movers import Movers, MoverSettings
 from ..terrain import DEM
 
 VISIBILITY = {"unseen": 0, "hidden": 1, "seen": 2}
@@ -60,6 +65,7 @@ class VideoJob:
     issues: list = field(default_factory=list)
     decode_errors: list[str] = field(default_factory=list)
     vmti: list[dict] = field(default_factory=list)
+    movers: Movers | None = None
     player: Path | None = None
     video_for_browser: str = ""
 
@@ -203,15 +209,19 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
               select: FrameSelection = FrameSelection(), klv_stream: str | None = None,
               time_offset_s: float | None = None, max_gap_s: float = 0.5, write_frames: bool = True,
               mosaic: bool = True, tiles: bool = True, player: bool = True, dem_name: str = "dem",
-              serve_command: str = "", strict: bool = False,
-              progress: Callable[[int, int], None] | None = None) -> VideoJob:
+              serve_command: str = "", strict: bool = False, detect: MotionSettings | None = None,
+              movers: MoverSettings | None = None, progress: Callable[[int, int], None] | None = None,
+              detect_progress: Callable[[int, int], None] | None = None) -> VideoJob:
     """Rectify the selected frames of ``video`` (see the module notes for the metadata) onto
     ``surface`` (a DEM or an ellipsoidal height; None: each packet's frame-centre elevation, KLV
     only), each onto the pass's grid (``crs``; cell ``gsd_m``, default the first rectified frame's
     native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles, and with
     ``player`` the player page (its clicks ask `eoloc serve` for the DEM named ``dem_name``;
     ``serve_command`` is what the page tells its user to run for that). The VMTI detections of
-    the KLV are located with their own packets' poses. ``progress(done, total)`` after each frame."""
+    the KLV are located with their own packets' poses. ``detect``: find the movers in every
+    frame with a pose (:mod:`eoloc.detect`; needs a DEM or a height), tracked by ``movers``.
+    ``progress(done, total)`` after each rectified frame, ``detect_progress`` after each frame
+    searched."""
     from ..ground import rectify
     from ..ground.footprint import footprint_features, footprints
     from ..ground.mosaic import Mosaic, ground_sample_m
@@ -233,6 +243,8 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         meta, issues, vmti_source = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,
                                                  time_offset_s=time_offset_s, strict=strict)
         base_sensor = None
+    if detect is not None and surface is None:
+        raise InputError("finding movers needs the ground as one surface: --dem FILE or --target-height H")
     if surface is None and "fc_h_m" not in meta.values:
         raise InputError("choose the ground: --target-height H or --dem FILE (a telemetry CSV has no frame-centre "
                          "elevation)")
@@ -349,12 +361,21 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                                       cell_m=math.sqrt(cx * cy))
     vmti_rows = locate_video_vmti(vmti_source, surface, t0) if vmti_source is not None else []
     job = VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors, vmti_rows)
+    if detect is not None:
+        from ..rules import surface_rule
+        from .detect import detect_movers
+
+        frames = posed_frames(video, times, poses, meta, base_sensor, max_gap_s, decode_errors)
+        job.movers = detect_movers(frames, surface_rule(surface), detect, movers, total=int(times.size),
+                                   progress=detect_progress)
     if page_data is not None:
         from ..io.player import write_player
         from ..io.videofile import browser_video
 
         mp4, job.video_for_browser = browser_video(video, out / "player" / "video.mp4", first_pts_s=t0)
         page_data["vmti"] = vmti_rows
+        if job.movers is not None:
+            page_data["movers"] = job.movers.rows
         page_data["vmti_hold_s"] = max_gap_s
         if tileset is not None:
             page_data["mosaic"] = {"url": tileset.url, "min_zoom": tileset.min_zoom, "max_zoom": tileset.max_zoom,
@@ -364,6 +385,29 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         job.player = pages[0]
         written += [*pages, mp4]
     return job
+
+
+def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, base_sensor: SensorModel | None,
+                 max_gap_s: float, errors: list[str]):
+    """Every frame of ``video`` that has a pose: (index, seconds since the first frame, image,
+    sensor, pose), in order (the input of :func:`eoloc.jobs.detect.detect_movers`)."""
+    t0 = float(times[0])
+    by_pts = {round(float(t) * 90_000): i for i, t in enumerate(times)}
+    sensors: dict[tuple, SensorModel | None] = {}
+    for fr in iter_frames(video, errors=errors):
+        if fr.image is None:
+            continue
+        j = by_pts.get(round(fr.pts_s * 90_000), -1)
+        pose, vals, ok, _ = _frame_pose(poses, meta, j, fr.pts_s, max_gap_s)
+        sensor = base_sensor
+        if ok and sensor is None:
+            h, w = fr.image.shape[:2]
+            key = (w, h, vals["hfov_deg"], vals["vfov_deg"])
+            if key not in sensors:
+                sensors[key] = misb_frame_sensor(*key)
+            sensor = sensors[key]
+        if ok and sensor is not None:
+            yield fr.index, fr.pts_s - t0, fr.image, sensor, pose
 
 
 def _player_data(out: Path, info: VideoInfo, times: np.ndarray, poses: FramePoses, base_sensor, surface,

@@ -297,6 +297,23 @@ class Tracker:
         return self.done + [lv.track for lv in self.live.values()]
 
 
+def smooth_track(track: Track, accel_psd: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Rauch–Tung–Striebel fixed-interval smoother over a finished track of the plain
+    (not consider) filter: every update's state (n, 4) and covariance (n, 4, 4) given all of the
+    track's fixes, before and after it (batch work: a track's first speeds are no longer guesses
+    from two fixes)."""
+    x, P = np.asarray(track.state, dtype=float), np.asarray(track.cov, dtype=float)
+    xs, Ps = x.copy(), P.copy()
+    for k in range(len(x) - 2, -1, -1):
+        F, Q = cv_model(track.time_s[k + 1] - track.time_s[k], accel_psd)
+        x_pred, P_pred = F @ x[k], F @ P[k] @ F.T + Q
+        C = np.linalg.solve(P_pred, F @ P[k]).T  # P F^T P_pred^-1 (both symmetric)
+        xs[k] = x[k] + C @ (xs[k + 1] - x_pred)
+        Ps[k] = P[k] + C @ (Ps[k + 1] - P_pred) @ C.T
+        Ps[k] = 0.5 * (Ps[k] + Ps[k].T)
+    return xs, Ps
+
+
 def _record(lv: _Live, j: int, z: np.ndarray) -> None:
     tr = lv.track
     tr.time_s.append(float(lv.t))

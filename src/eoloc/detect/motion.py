@@ -1,0 +1,503 @@
+"""Moving-target indication in airborne video with the camera's own motion removed.
+
+Each frame is compared with reference frames up to ``window_s`` before and after it, each
+warped onto the frame's view through the two poses and the ground (a DEM or a height): a coarse
+grid of the frame's pixels is located on the ground (the same rays and stop rules as every fix),
+the ground points are projected into the reference frame, and the map is interpolated to every
+pixel (:func:`cv2.remap`). What the poses get wrong, a shift of a few pixels, is measured by phase
+correlation of the warped reference against the frame and taken out. Ground the reference sees
+from behind a ridge (the round trip through its own ground grid lands elsewhere), or at less than
+half the frame's resolution (a slope it sees edge-on), is not compared.
+
+A pixel has *changed* against a reference where its colour differs by more than ``threshold``
+(the largest of the channel differences, 0-255 scale). A mover is where the frame differs from
+a reference before it **and** from one after it: the places it has just left (its ghost in the
+past references) and is about to reach (in the future ones) differ from one side only, so a
+target of length L at speed v is found whole once v * window_s >= L, and its middle from
+v * window_s > L / 2 (the smallest speed the detector sees is L / (2 window_s)). Where only one
+side sees the ground (the first and last ``window_s`` of a video, ground just entering or
+leaving the view), a change is kept where the frame stands out from its surroundings (the
+median over ``surround_px``) by more than ``threshold``, and by half of it more than each reference it
+differs from does there: the references show
+the target's ghosts, where the frame shows plain ground.
+
+Changed pixels are joined (morphological closing, 3 x 3), grouped (connected components,
+8-connected) and kept as blobs whose ground area lies within [min_area_m2, max_area_m2] (each
+pixel's ground footprint from the grid). Its reference pixel is the blob's centroid: the middle
+of a target lying on the ground.
+
+What it cannot see, by construction: targets that stand still or move less than half their
+length in ``window_s``, targets the colour of the ground under them. What it reports that does
+not move (false-alarm sources): tall objects not in the DEM (buildings, trees, masts: their tops
+are displaced by parallax as the aircraft moves, about aircraft speed x height / altitude;
+the tracks' minimum speed in :class:`eoloc.detect.MotionSettings` removes most), DEM errors on
+steep slopes, moving shadows and water, lighting changes between frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..geodesy import ecef_to_enu, geodetic_to_ecef
+from ..rules import StopRule
+from ..sensor.model import Pose, SensorModel
+
+RESOLUTION_RATIO = 2.0  # a reference coarser than this (per axis) where it sees the frame's ground is not used
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """How the motion detector works (see the module notes).
+
+    window_s: references reach this far before and after a frame (s); refs_per_side: how many
+    on each side, spread evenly over the window; threshold: the colour difference (0-255) that
+    counts as a change; min_area_m2 / max_area_m2: a blob's ground area; grid_px: spacing of
+    the grid of pixels located on the ground for the warp; align: take out the residual shift
+    of each warp (phase correlation against the frame) when it is at most ``max_shift_px``; occlusion_m: a ground
+    point the reference sees elsewhere by more than this (or 3 ground samples) is hidden there;
+    scale: work on the frames shrunk by this factor (1: full size; 0.5 halves the work four
+    times over, for targets many pixels long); tolerance_px: compare each pixel with the range of
+    the reference's neighbourhood this many pixels around (1: edges misregistered by a fraction
+    of a pixel are no change, but targets 2-3 pixels wide are lost; 0: the pixel itself);
+    surround_px: the box whose median is a pixel's surroundings in the one-sided test."""
+
+    window_s: float = 2.0
+    refs_per_side: int = 3
+    threshold: float = 40.0
+    min_area_m2: float = 20.0
+    max_area_m2: float = 5000.0
+    grid_px: int = 8
+    align: bool = True
+    max_shift_px: float = 20.0
+    occlusion_m: float = 10.0
+    scale: float = 1.0
+    tolerance_px: int = 0
+    surround_px: int = 15
+
+    def __post_init__(self) -> None:
+        for name in ("window_s", "threshold", "min_area_m2", "max_area_m2", "max_shift_px", "occlusion_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"MotionSettings.{name} must be > 0, got {getattr(self, name)!r}")
+        if self.refs_per_side < 1 or self.grid_px < 2:
+            raise ValueError("MotionSettings: refs_per_side >= 1 and grid_px >= 2")
+        if not 0 < self.scale <= 1:
+            raise ValueError(f"MotionSettings.scale must be in (0, 1], got {self.scale!r}")
+        if self.min_area_m2 >= self.max_area_m2:
+            raise ValueError("MotionSettings: min_area_m2 must be below max_area_m2")
+
+
+@dataclass(frozen=True)
+class Blobs:
+    """The movers found in one frame: per blob the reference pixel (u_px, v_px; full-size
+    image pixels), the box (u0, v0, u1, v1: its first and last pixel columns and rows), its area
+    in pixels and on the ground (m^2), its mean colour difference, and which references found it
+    (``side``: 0 before and after, -1 only before, +1 only after). ``shifts_px``: per
+    reference, the shift (du, dv, working pixels) the poses left and the images measured (NaN:
+    none measured); ``compared``: the fraction of the frame's pixels compared on both sides."""
+
+    index: int
+    time_s: float
+    u_px: np.ndarray
+    v_px: np.ndarray
+    box: np.ndarray
+    area_px: np.ndarray
+    area_m2: np.ndarray
+    contrast: np.ndarray
+    side: np.ndarray
+    shifts_px: np.ndarray
+    compared: float
+
+    def __len__(self) -> int:
+        return int(self.u_px.size)
+
+
+@dataclass
+class _Frame:
+    index: int
+    time_s: float
+    image: np.ndarray  # working size, uint8 (H, W, C + 1): the colours and an opaque alpha
+    sensor: SensorModel
+    pose: Pose
+    ground: np.ndarray  # (gh, gw, 3) ENU m of the grid's ground points, NaN where none
+    pixel_m2: np.ndarray  # (gh, gw) ground area of one working pixel around each grid point
+    luma: np.ndarray  # (H', W') float32, shrunk for the residual's phase correlation
+
+
+class MotionDetector:
+    """Feed frames in order (:meth:`push`); each frame's blobs come out once the frames
+    ``window_s`` after it have arrived (:meth:`push` returns them), the last ones from
+    :meth:`flush`. ``rule``: the stop rule that puts a pixel on the ground (a DEM: occlusion and
+    parallax of the terrain taken out). Frames may come with different sensors (zoom)."""
+
+    def __init__(self, rule: StopRule, settings: MotionSettings | None = None) -> None:
+        self.rule = rule
+        self.s = settings or MotionSettings()
+        self.frames: deque[_Frame] = deque()
+        self.pending: deque[_Frame] = deque()  # frames still waiting for their future references
+        self.origin: tuple[float, float, float] | None = None
+        self._cache: dict = {}
+        self._scale8: float | None = None
+
+    # -- the frames ---------------------------------------------------------------------------
+
+    def push(self, index: int, time_s: float, image: np.ndarray, sensor: SensorModel, pose: Pose) -> list[Blobs]:
+        """Add frame ``index`` (image (H, W) or (H, W, C) uint8 at full size, its sensor and
+        pose, its time in seconds); the blobs of every frame now complete."""
+        import cv2
+
+        img = np.asarray(image)
+        if img.ndim not in (2, 3) or not np.issubdtype(img.dtype, np.integer):
+            raise InputError(f"frame {index}: the motion detector takes integer images (H, W) or (H, W, C), got "
+                             f"{img.dtype} {img.shape}")
+        if img.dtype != np.uint8:  # e.g. 16-bit thermal: one fixed scale for the whole video (no AGC)
+            if self._scale8 is None:
+                self._scale8 = 255.0 / max(float(np.percentile(img, 99.9)), 1.0)
+            img = np.clip(img * self._scale8, 0, 255).astype(np.uint8)
+        if self.s.scale < 1:
+            h, w = img.shape[:2]
+            img = cv2.resize(img, (max(2, round(w * self.s.scale)), max(2, round(h * self.s.scale))),
+                             interpolation=cv2.INTER_AREA)
+        if img.ndim == 2:
+            img = img[..., None]
+        img = np.ascontiguousarray(np.concatenate([img, np.full((*img.shape[:2], 1), 255, np.uint8)], -1))
+        h, w = img.shape[:2]
+        ground, pixel_m2 = self._ground_grid(sensor, pose, w, h)
+        fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, self._small_luma(img[..., :-1]))
+        self.frames.append(fr)
+        self.pending.append(fr)
+        out = []
+        while self.pending and self.pending[0].time_s + self.s.window_s <= fr.time_s + 1e-9:
+            out.append(self._detect(self.pending.popleft()))
+        self._forget()
+        return out
+
+    def flush(self) -> list[Blobs]:
+        """The blobs of the frames still waiting (the end of the video: past references only)."""
+        out = [self._detect(f) for f in self.pending]
+        self.pending.clear()
+        return out
+
+    def _forget(self) -> None:
+        oldest = self.pending[0].time_s if self.pending else self.frames[-1].time_s
+        while len(self.frames) > 1 and self.frames[0].time_s < oldest - self.s.window_s - 1e-9:
+            self.frames.popleft()
+
+    # -- geometry -----------------------------------------------------------------------------
+
+    def _grid(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """The grid's working pixels (gh, gw) and its spacing: the centre of every block of
+        step x step pixels, and a ring of blocks around the image (so that every pixel lies
+        between grid points and cv2.resize interpolates the map exactly)."""
+        step = max(2, round(self.s.grid_px * self.s.scale))
+        bw, bh = math.ceil(width / step), math.ceil(height / step)
+        u, v = np.meshgrid((np.arange(-1, bw + 1) + 0.5) * step - 0.5, (np.arange(-1, bh + 1) + 0.5) * step - 0.5)
+        return u, v, step
+
+    def _ground_grid(self, sensor: SensorModel, pose: Pose, width: int, height: int):
+        u, v, step = self._grid(width, height)
+        k = self._to_full(width, sensor)
+        # the grid's outer ring lies past the image: its rays are taken as they are (a locate
+        # would call those pixels OUT_OF_IMAGE)
+        xn, yn = sensor.normalized((u * k + (k - 1) / 2, v * k + (k - 1) / 2), focal_scale=pose.focal_scale)
+        fixes = self.rule.stop(sensor.rays_from(sensor.camera_frame(pose), xn, yn), sensor.ellipsoid)
+        ok = np.asarray(fixes.ok)
+        if self.origin is None and ok.any():
+            i = np.flatnonzero(ok.ravel())[0]
+            self.origin = (float(np.ravel(fixes.lat_deg)[i]), float(np.ravel(fixes.lon_deg)[i]),
+                           float(np.ravel(fixes.h_m)[i]))
+        if self.origin is None:
+            g = np.full((*u.shape, 3), np.nan)
+        else:
+            p = np.stack(geodetic_to_ecef(fixes.lat_deg, fixes.lon_deg, fixes.h_m), -1)
+            g = ecef_to_enu(p.reshape(-1, 3), *self.origin).reshape((*u.shape, 3))
+            g[~ok] = np.nan
+        # a working pixel's ground area: the grid cell's (cross product of its sides) / step^2
+        area = np.linalg.norm(np.cross(np.gradient(g, axis=1), np.gradient(g, axis=0)), axis=-1) / float(step) ** 2
+        return g, area
+
+    def _to_full(self, width: int, sensor: SensorModel) -> float:
+        return sensor.camera.width / width
+
+    def _small_luma(self, img: np.ndarray) -> np.ndarray:
+        import cv2
+
+        y = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.shape[2] == 3 else img[..., 0]
+        f = self._shrink(y.shape[1])
+        if f > 1:
+            y = cv2.resize(y, (y.shape[1] // f, y.shape[0] // f), interpolation=cv2.INTER_AREA)
+        return y.astype(np.float32)
+
+    @staticmethod
+    def _shrink(width: int) -> int:
+        """The residual is measured on frames at most 320 pixels wide."""
+        return max(1, math.ceil(width / 320))
+
+    def _maps(self, cur: _Frame, ref: _Frame):
+        """For each working pixel of ``cur``: where ``ref`` saw its ground (map_x, map_y,
+        float32 ref pixels) and whether the grid could tell (uint8 0/1: both frames see the ground
+        there, and ref not from behind a ridge)."""
+        import cv2
+
+        from ..geodesy import enu_to_ecef
+
+        h, w = cur.image.shape[:2]
+        _, _, step = self._grid(w, h)
+        p = enu_to_ecef(cur.ground.reshape(-1, 3), *self.origin).reshape(cur.ground.shape)
+        ur, vr = ref.sensor.ground_to_image(ref.pose, p)
+        k = self._to_full(ref.image.shape[1], ref.sensor)
+        ur, vr = (ur - (k - 1) / 2) / k, (vr - (k - 1) / 2) / k
+        # hidden in ref: ref's own ray through (ur, vr) lands elsewhere (bilinear in ref's grid)
+        seen = _sample(ref.ground, (ur + 0.5) / step + 0.5, (vr + 0.5) / step + 0.5)
+        tol = np.maximum(self.s.occlusion_m, 3.0 * np.sqrt(cur.pixel_m2))
+        # and a reference that saw the ground much coarser than this frame cannot tell (a slope
+        # seen edge-on there): its pixel's ground area at most RESOLUTION_RATIO^2 times this one's
+        ref_m2 = _sample(ref.pixel_m2[..., None], (ur + 0.5) / step + 0.5, (vr + 0.5) / step + 0.5)[..., 0]
+        with np.errstate(invalid="ignore"):
+            ok = ((np.linalg.norm(seen - cur.ground, axis=-1) <= tol) & np.isfinite(ur) & np.isfinite(vr)
+                  & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2))
+        coarse = np.dstack([np.where(ok, ur, 0.0), np.where(ok, vr, 0.0), ok]).astype(np.float32)
+        gh, gw = coarse.shape[:2]
+        full = cv2.resize(coarse, (gw * step, gh * step), interpolation=cv2.INTER_LINEAR)[step:step + h, step:step + w]
+        valid = (full[..., 2] > 0.9999).astype(np.uint8)
+        return np.ascontiguousarray(full[..., 0]), np.ascontiguousarray(full[..., 1]), valid
+
+    def _residual(self, cur: _Frame, prev: _Frame, mx, my, valid) -> tuple[float, float]:
+        """The shift (du, dv) in ``prev``'s working pixels to add to the poses' map (mx, my, valid)
+        from ``cur`` to ``prev`` (phase correlation of the shrunk lumas over their overlap); NaN
+        when it is not clear or larger than max_shift_px."""
+        import cv2
+
+        f = self._shrink(cur.image.shape[1])
+        hs, ws = cur.luma.shape
+        mxs = cv2.resize(mx, (ws, hs), interpolation=cv2.INTER_LINEAR)
+        mys = cv2.resize(my, (ws, hs), interpolation=cv2.INTER_LINEAR)
+        ok = cv2.resize(valid, (ws, hs), interpolation=cv2.INTER_NEAREST).astype(bool)
+        # cv2.phaseCorrelate is off by half a pixel on sizes its DFT pads (e.g. 135 rows): a
+        # centred crop to sizes it takes as they are
+        (r0, r1), (c0, c1) = (_dft_span(n) for n in (hs, ws))
+        a, mxs, mys, ok = (x[r0:r1, c0:c1] for x in (cur.luma, mxs, mys, ok))
+        hs, ws = a.shape
+        if ok.mean() < 0.25:
+            return math.nan, math.nan
+        b = cv2.remap(prev.luma, (mxs + 0.5) / f - 0.5, (mys + 0.5) / f - 0.5, cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE)
+        m = ok.astype(np.float32)
+        a = (a - float(a[ok].mean())) * m
+        b = (b - float(b[ok].mean())) * m
+        key = ("hann", hs, ws)
+        if key not in self._cache:
+            self._cache[key] = cv2.createHanningWindow((ws, hs), cv2.CV_32F)
+        (dx, dy), response = cv2.phaseCorrelate(b, a, self._cache[key])
+        dx, dy = dx * f, dy * f
+        if not (response > 0.05 and math.hypot(dx, dy) <= self.s.max_shift_px * self.s.scale):
+            return math.nan, math.nan
+        # the warp shifted by (dx, dy) is the frame: the frame's pixel x shows what the warp shows
+        # at x - d, i.e. prev's pixel map(x - d) ~ map(x) - d (the map is locally a translation)
+        return -float(dx), -float(dy)
+
+    # -- the decision ---------------------------------------------------------------------------
+
+    def _refs(self, cur: _Frame) -> tuple[list[_Frame | None], list[_Frame | None]]:
+        """The references of each side, k = 1..refs_per_side: the frame nearest to
+        k * window_s / refs_per_side before (after) this one, None where there is none within
+        half a step of it."""
+        n, w = self.s.refs_per_side, self.s.window_s
+        pick = []
+        for sign in (-1.0, 1.0):
+            side = [f for f in self.frames if sign * (f.time_s - cur.time_s) > 1e-9]
+            chosen: list[_Frame | None] = []
+            for k in range(1, n + 1):
+                want = cur.time_s + sign * w * k / n
+                best = min(side, key=lambda f, want=want: abs(f.time_s - want)) if side else None
+                ok = best is not None and abs(best.time_s - want) <= w / n / 2 + 1e-6 and best not in chosen
+                chosen.append(best if ok else None)
+            pick.append(chosen)
+        return pick[0], pick[1]
+
+    def _detect(self, cur: _Frame) -> Blobs:
+        import cv2
+
+        if self.origin is None:
+            return _no_blobs(cur)
+        past, future = self._refs(cur)
+        h, w = cur.image.shape[:2]
+        thr = float(self.s.threshold)
+        dmax = np.zeros((h, w), np.uint8)
+        box = np.ones((2 * self.s.tolerance_px + 1,) * 2, np.uint8)
+        shifts: list[tuple[float, float]] = []
+        sides = []
+        for refs in (past, future):
+            per_ref = []  # (lit, valid, warped) at each offset k; None where no reference
+            for ref in refs:
+                if ref is None:
+                    per_ref.append(None)
+                    continue
+                mx, my, valid = self._maps(cur, ref)
+                if self.s.align:
+                    shift = self._residual(cur, ref, mx, my, valid)
+                    shifts.append(shift)
+                    if math.isfinite(shift[0]):
+                        mx, my = mx + np.float32(shift[0]), my + np.float32(shift[1])
+                warped = cv2.remap(ref.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                   borderValue=0)
+                valid &= warped[..., -1] == 255
+                # tolerance_px: the difference from the reference's neighbourhood (its range per
+                # channel), so that a fraction of a pixel of misregistration on an edge is no change
+                hi, lo = (cv2.dilate(warped, box), cv2.erode(warped, box)) if self.s.tolerance_px else (warped, warped)
+                d = _channel_max(cv2.max(cv2.subtract(cur.image, hi), cv2.subtract(lo, cur.image))) * valid
+                np.maximum(dmax, d, out=dmax)
+                per_ref.append(((d > thr).astype(np.uint8), valid, warped))
+            sides.append(per_ref)
+        zero = np.zeros((h, w), np.uint8)
+        # two-sided, by offsets valid on both sides only (a side whose far references do not see
+        # the ground would cut the target's far end off and bias its centroid)
+        lit_p, lit_f, paired = zero.copy(), zero.copy(), zero.copy()
+        unpaired = [zero.copy(), zero.copy()]
+        for a, b in zip(*sides, strict=True):
+            va = a[1] if a is not None else zero
+            vb = b[1] if b is not None else zero
+            both_k = va & vb
+            paired |= both_k
+            if a is not None:
+                lit_p |= a[0] & vb
+                unpaired[0] += va & (1 - vb)
+            if b is not None:
+                lit_f |= b[0] & va
+                unpaired[1] += vb & (1 - va)
+        mask = (lit_p & lit_f).astype(bool)
+        # which references found it: 0 both sides, -1 the past only, +1 the future only
+        side = np.zeros((h, w), np.int8)
+        for sign, mine, other, per_ref in ((-1, unpaired[0], unpaired[1], sides[0]), (1, unpaired[1], unpaired[0],
+                                                                                       sides[1])):
+            one = (mine > 0) & (mine >= other)
+            if not one.any():
+                continue
+            seen = [(r[2], r[0]) for r in per_ref if r is not None]
+            any_lit = np.zeros((h, w), np.uint8)
+            for _, lit in seen:
+                any_lit |= lit
+            one &= any_lit.astype(bool) & ~mask
+            if one.any():
+                one = self._stands_out(cur.image, seen, one)
+                mask |= one
+                side[one] = sign
+        both = paired.astype(bool)
+        mask = mask.astype(np.uint8)
+        kernel = np.ones((3, 3), np.uint8)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel)  # no opening: it erases targets 2-3 px wide
+        n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        k = self._to_full(w, cur.sensor)
+        _, _, step = self._grid(w, h)
+        keep_u, keep_v, boxes, apx, am2, con, sides = [], [], [], [], [], [], []
+        for i in range(1, n):
+            x0, y0, bw, bh, area = (int(a) for a in stats[i])
+            cu, cv_ = float(cents[i][0]), float(cents[i][1])
+            pm2 = float(_sample(cur.pixel_m2[..., None], np.array((cu + 0.5) / step + 0.5),
+                                np.array((cv_ + 0.5) / step + 0.5))[0])
+            a_m2 = area * pm2
+            if not (self.s.min_area_m2 <= a_m2 <= self.s.max_area_m2):
+                continue
+            keep_u.append(cu * k + (k - 1) / 2)
+            keep_v.append(cv_ * k + (k - 1) / 2)
+            boxes.append((x0 * k, y0 * k, (x0 + bw) * k - 1, (y0 + bh) * k - 1))
+            apx.append(area * k * k)
+            am2.append(a_m2)
+            inside = labels[y0:y0 + bh, x0:x0 + bw] == i
+            con.append(float(dmax[y0:y0 + bh, x0:x0 + bw][inside].mean()))
+            sides.append(int(np.sign(side[y0:y0 + bh, x0:x0 + bw][inside].sum())))
+        return Blobs(cur.index, cur.time_s, np.array(keep_u), np.array(keep_v), np.array(boxes).reshape(-1, 4),
+                     np.array(apx), np.array(am2), np.array(con), np.array(sides, dtype=np.int8),
+                     np.array(shifts).reshape(-1, 2), float(both.mean()))
+
+
+    def _stands_out(self, image: np.ndarray, seen: list, candidates: np.ndarray) -> np.ndarray:
+        """Where only one side's references see the ground, a change is the target where it
+        stands out from its surroundings in this frame (by more than ``threshold``) and by half
+        the threshold more than in every reference it differs from: the references show the
+        target elsewhere too (its ghosts), and there the frame shows plain ground. The
+        surroundings: the median over ``surround_px`` (on the frame shrunk to a fifth of it: a
+        background estimate, not a filter); only around the ``candidates``."""
+        import cv2
+
+        out = np.zeros(image.shape[:2], bool)
+        x, y, bw, bh = cv2.boundingRect(candidates.astype(np.uint8))
+        if bw == 0:
+            return out
+        m = self.s.surround_px
+        x0, y0 = max(x - m, 0), max(y - m, 0)
+        x1, y1 = min(x + bw + m, image.shape[1]), min(y + bh + m, image.shape[0])
+        f = max(1, self.s.surround_px // 5)  # the median is taken on the crop shrunk f times
+        k = max(3, (self.s.surround_px // f) | 1)
+
+        def standing_out(img: np.ndarray) -> np.ndarray:  # the median: the target does not shift it
+            crop = np.ascontiguousarray(img[y0:y1, x0:x1])
+            size = (crop.shape[1], crop.shape[0])
+            small = cv2.resize(crop, (max(1, size[0] // f), max(1, size[1] // f)), interpolation=cv2.INTER_AREA)
+            around = cv2.resize(cv2.medianBlur(small, k), size, interpolation=cv2.INTER_LINEAR)
+            return _channel_max(cv2.absdiff(crop, around))
+
+        mine = standing_out(image).astype(np.float32)
+        theirs = np.zeros_like(mine)
+        for warped, lit in seen:
+            np.maximum(theirs, standing_out(warped) * lit[y0:y1, x0:x1], out=theirs)
+        out[y0:y1, x0:x1] = (mine > self.s.threshold) & (mine > theirs + self.s.threshold / 2)
+        return out & candidates
+
+
+def _channel_max(img: np.ndarray) -> np.ndarray:
+    """The largest of the colour channels (the last, alpha, left out) per pixel."""
+    import cv2
+
+    chans = cv2.split(img)[:-1]
+    d = chans[0]
+    for c in chans[1:]:
+        d = cv2.max(d, c)
+    return d
+
+
+def _no_blobs(fr: _Frame) -> Blobs:
+    e = np.zeros(0)
+    return Blobs(fr.index, fr.time_s, e, e, np.zeros((0, 4)), e, e, e, np.zeros(0, np.int8), np.zeros((0, 2)), 0.0)
+
+
+def _dft_span(n: int) -> tuple[int, int]:
+    """The centred span of ``n`` samples whose length is even and a size OpenCV's DFT takes as it
+    is (2^a 3^b 5^c)."""
+    import cv2
+
+    m = n - n % 2
+    while m > 2 and (m % 2 or cv2.getOptimalDFTSize(m) != m):
+        m -= 1
+    start = (n - m) // 2
+    return start, start + m
+
+
+def _luma(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 3 and img.shape[2] == 3:
+        return (img[..., 0] * 0.299 + img[..., 1] * 0.587 + img[..., 2] * 0.114).astype(np.float32)
+    return img.reshape(img.shape[:2]).astype(np.float32)
+
+
+def _sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``grid`` (gh, gw, C) at fractional (x col, y row); NaN outside."""
+    gh, gw = grid.shape[:2]
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        inside = (x >= 0) & (x <= gw - 1) & (y >= 0) & (y <= gh - 1)
+    xc = np.clip(np.nan_to_num(x), 0, gw - 1)
+    yc = np.clip(np.nan_to_num(y), 0, gh - 1)
+    x0 = np.minimum(np.floor(xc).astype(np.intp), gw - 2) if gw > 1 else np.zeros(xc.shape, np.intp)
+    y0 = np.minimum(np.floor(yc).astype(np.intp), gh - 2) if gh > 1 else np.zeros(yc.shape, np.intp)
+    fx = (xc - x0)[..., None]
+    fy = (yc - y0)[..., None]
+    x1 = np.minimum(x0 + 1, gw - 1)
+    y1 = np.minimum(y0 + 1, gh - 1)
+    out = (grid[y0, x0] * (1 - fx) * (1 - fy) + grid[y0, x1] * fx * (1 - fy) + grid[y1, x0] * (1 - fx) * fy
+           + grid[y1, x1] * fx * fy)
+    return np.where(inside[..., None], out, np.nan)

@@ -1,0 +1,163 @@
+"""Movers: the motion detector's blobs located on the ground and tracked there.
+
+Each blob's reference pixel is located with its frame's pose by the job's stop rule (the same
+rays and kernels as every fix). The fixes go to constant-velocity Kalman tracks in local ENU
+(:class:`eoloc.sequence.track.Tracker`, gated global nearest neighbour on the ground: the
+camera's motion plays no part in the association). A fix's sigma per axis is the telemetry's
+frame-to-frame error (``meas_sigma_m``) and a quarter of the blob's size on the ground, together
+(half of it for a blob found from one side only, at the ends of a target's time in view). The
+tracks of the movers are smoothed at the end (Rauch–Tung–Striebel: each position, speed and
+heading given all of the track's fixes).
+
+A track is a mover when it was updated at least ``confirm_hits`` times over at least
+``min_track_s`` seconds, in at least ``min_hit_ratio`` of the frames it spans (a target is seen
+in most frames; stray false blobs strung together are not), and its median smoothed speed is
+at least ``min_speed_mps``; a track that goes ``max_coast_s`` without a blob ends
+(shorter occlusions keep its id). Blobs of tracks that are not movers (parallax, noise) are
+dropped, and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import geodesy
+from ..result import Status
+from ..rules import StopRule, locate
+from ..sensor.model import Pose, SensorModel
+from ..sequence.track import Track, Tracker, TrackerConfig, TrackSet, smooth_track
+from .motion import Blobs
+
+SIDES = {0: "both", -1: "before", 1: "after"}  # which reference frames a detection differs from
+
+
+@dataclass(frozen=True)
+class MoverSettings:
+    """What makes a track a mover (see the module notes): min_speed_mps (m/s), min_track_s (s),
+    min_hit_ratio (its detections / the frames it spans), confirm_hits; the tracker's
+    meas_sigma_m (m per axis), accel_psd (m^2/s^3), max_coast_s (s)."""
+
+    min_speed_mps: float = 2.0
+    min_track_s: float = 1.0
+    min_hit_ratio: float = 0.5
+    confirm_hits: int = 5
+    meas_sigma_m: float = 3.0
+    accel_psd: float = 1.0
+    max_coast_s: float = 1.5
+
+    def __post_init__(self) -> None:
+        for name in ("min_speed_mps", "min_track_s", "meas_sigma_m", "accel_psd", "max_coast_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"MoverSettings.{name} must be > 0, got {getattr(self, name)!r}")
+        if not 0 < self.min_hit_ratio <= 1:
+            raise ValueError(f"MoverSettings.min_hit_ratio must be in (0, 1], got {self.min_hit_ratio!r}")
+        if self.confirm_hits < 1:
+            raise ValueError("MoverSettings.confirm_hits must be >= 1")
+
+
+@dataclass
+class Movers:
+    """The result: one row per detection of a mover (frame, time, track id, pixel, box, area,
+    ground point, filtered speed and heading), the tracks (confirmed movers, ids 1..n in order of
+    appearance), their ENU origin, and what was dropped."""
+
+    rows: list[dict]
+    tracks: list[Track]
+    origin: tuple[float, float, float] | None
+    blobs: int = 0
+    not_located: int = 0
+    dropped_tracks: int = 0
+    dropped_blobs: int = 0
+
+    def track_set(self) -> TrackSet:
+        return TrackSet(self.tracks, np.zeros(0, dtype=object), self.origin or (0.0, 0.0, 0.0))
+
+
+@dataclass
+class MoverTracker:
+    """Blobs of each frame in time order (:meth:`add`), the movers at the end (:meth:`result`)."""
+
+    rule: StopRule
+    settings: MoverSettings = field(default_factory=MoverSettings)
+
+    def __post_init__(self) -> None:
+        s = self.settings
+        self.tracker = Tracker(TrackerConfig(accel_psd=s.accel_psd, meas_sigma_m=s.meas_sigma_m,
+                                             confirm_hits=s.confirm_hits, max_coast_s=s.max_coast_s,
+                                             init_speed_sigma_mps=40.0), associate=True)
+        self.origin: tuple[float, float, float] | None = None
+        self.rows: list[dict] = []
+        self.by_track: dict[str, list[int]] = {}
+        self.n_blobs = 0
+        self.not_located = 0
+        self.frame_times: list[float] = []
+
+    def add(self, blobs: Blobs, sensor: SensorModel, pose: Pose) -> None:
+        """Locate the blobs of one frame with its sensor and pose, and update the tracks."""
+        self.n_blobs += len(blobs)
+        self.frame_times.append(blobs.time_s)
+        if not len(blobs):
+            self.tracker.frame(blobs.time_s, np.zeros(0, np.intp), np.zeros((0, 3)), np.zeros((0, 2, 2)), None)
+            return
+        f = locate(sensor, pose, self.rule, (blobs.u_px, blobs.v_px))
+        ok = np.asarray(f.ok)
+        if self.origin is None and ok.any():
+            i = int(np.flatnonzero(ok)[0])
+            self.origin = (float(f.lat_deg[i]), float(f.lon_deg[i]), float(f.h_m[i]))
+        self.not_located += int((~ok).sum())
+        if self.origin is None:
+            return
+        z = geodesy.ecef_to_enu(f.p_ecef(), *self.origin)
+        # a blob's centroid: within about a quarter of its size; found from one side only
+        # (the ends of a target's time in view), half of it
+        sig2 = self.settings.meas_sigma_m**2 + np.where(blobs.side == 0, 1 / 16, 1 / 4) * blobs.area_m2
+        R = sig2[:, None, None] * np.eye(2)
+        here = np.flatnonzero(ok)
+        for key, j in self.tracker.frame(blobs.time_s, here, z, R, None):
+            row = {"frame": blobs.index, "time_s": round(blobs.time_s, 6), "track": key,
+                   "u_px": round(float(blobs.u_px[j]), 2), "v_px": round(float(blobs.v_px[j]), 2),
+                   **{k: int(b) for k, b in zip(("bbox_u0", "bbox_v0", "bbox_u1", "bbox_v1"), blobs.box[j],
+                                                  strict=True)},
+                   "area_m2": round(float(blobs.area_m2[j]), 1), "contrast": round(float(blobs.contrast[j]), 1),
+                   "compared": SIDES[int(blobs.side[j])],
+                   "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
+                   "sigma_m": round(math.sqrt(sig2[j]), 2), "status": Status(int(f.status[j])).name}
+            self.by_track.setdefault(key, []).append(len(self.rows))
+            self.rows.append(row)
+
+    def result(self) -> Movers:
+        s = self.settings
+        movers, dropped = [], 0
+        times = np.sort(np.asarray(self.frame_times))
+        for tr in self.tracker.tracks():
+            t0, t1 = tr.time_s[0], tr.time_s[-1]
+            spanned = int(np.searchsorted(times, t1 + 1e-9) - np.searchsorted(times, t0 - 1e-9))
+            if not (tr.confirmed and t1 - t0 >= s.min_track_s - 1e-9 and len(tr.time_s) >= s.min_hit_ratio * spanned):
+                dropped += 1
+                continue
+            states, covs = smooth_track(tr, s.accel_psd)
+            if np.median(np.hypot(states[:, 2], states[:, 3])) < s.min_speed_mps:
+                dropped += 1
+                continue
+            tr.state, tr.cov = list(states), list(covs)
+            movers.append(tr)
+        movers.sort(key=lambda tr: tr.time_s[0])
+        rows, kept = [], 0
+        for n, tr in enumerate(movers, start=1):
+            old = tr.track_id
+            tr.track_id = str(n)
+            speed, hdg, sig = tr.speed_mps, tr.heading_deg, tr.speed_sigma_mps
+            for k, i in enumerate(self.by_track[old]):
+                r = dict(self.rows[i])
+                r.pop("track")
+                r = {"frame": r.pop("frame"), "time_s": r.pop("time_s"), "track_id": n, **r,
+                     "speed_mps": round(float(speed[k]), 2), "speed_sigma_mps": round(float(sig[k]), 2),
+                     "heading_deg": round(float(hdg[k]), 1)}
+                rows.append(r)
+                kept += 1
+        rows.sort(key=lambda r: (r["frame"], r["track_id"]))
+        located = len(self.rows)
+        return Movers(rows, movers, self.origin, self.n_blobs, self.not_located, dropped, located - kept)
