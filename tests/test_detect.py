@@ -111,11 +111,12 @@ def test_movers_are_found_located_and_timed_in_an_independent_scene(images):
 
 def test_the_images_take_out_what_the_attitude_gets_wrong(images):
     """0.1 deg of attitude noise per frame (about 2 px): the residual measured from the images
-    keeps the warps aligned (no false blob, every vehicle tracked); the poses alone cannot."""
+    keeps the warps aligned (no false track, hardly a false blob, every vehicle tracked); the
+    poses alone cannot."""
     jittered = frames(images, jitter_deg=0.1)
     aligned = detect_movers(jittered, RULE)
     s = score(aligned)
-    assert s["false"] == 0 and aligned.dropped_blobs == 0
+    assert s["false"] == 0 and aligned.dropped_blobs <= 0.03 * aligned.blobs
     assert all(s["vehicles"][k]["recall"] >= 0.9 for k in range(len(CARS)))
     posed_only = detect_movers(jittered, RULE, MotionSettings(align=False))
     assert posed_only.blobs > aligned.blobs + 5
@@ -126,12 +127,12 @@ def test_the_images_take_out_what_the_attitude_gets_wrong(images):
 
 
 def test_a_vehicle_hidden_for_a_second_keeps_its_track(texture):
-    """An overpass 8 m wide (ground texture over the road, fixed in the world) hides the 6 m
-    vehicle: no detection for about a second (partly hidden, it is too small or too unlike
-    itself), shorter than max_coast_s (1.5 s), so the same track carries on after it."""
+    """An overpass 12 m wide (ground texture over the road, fixed in the world) hides the 6 m
+    vehicle wholly for 0.5 s, and partly around that: no detection for up to a second, shorter
+    than max_coast_s (1.5 s), so the same track carries on after it."""
     car = ms.Vehicle(-100, 20, 90, 12)
     e_mid = -100 + 12 * 3.0  # where the car is at t = 3 s
-    cols = slice(int((e_mid - 4 + ms.HALF_M) / ms.TEXEL_M), int((e_mid + 4 + ms.HALF_M) / ms.TEXEL_M))
+    cols = slice(int((e_mid - 6 + ms.HALF_M) / ms.TEXEL_M), int((e_mid + 6 + ms.HALF_M) / ms.TEXEL_M))
     s = sensor()
     fr = []
     for i in range(N_FRAMES):
@@ -145,6 +146,8 @@ def test_a_vehicle_hidden_for_a_second_keeps_its_track(texture):
     found = sorted(sc["vehicles"][0]["found"])
     gap_s = max(np.diff(found)) / ms.FPS
     assert 0.5 <= gap_s <= 1.3, gap_s  # it was hidden, not too long
+    wholly = {i for i in range(N_FRAMES) if abs(car.centre(i / ms.FPS)[0] - e_mid) <= 6 - car.length_m / 2}
+    assert len(wholly) >= 4 and sc["vehicles"][0]["found"].isdisjoint(wholly)
     assert len(sc["tracks"][0]) == 1, sc["tracks"]
     assert len(found) >= N_FRAMES - 12
 

@@ -104,7 +104,7 @@ DEM (parallax), moving shadows, water.
               help="--detect: seconds before and after a frame to compare it with.")
 @click.option("--detect-threshold", type=click.FloatRange(1.0, 255.0), default=40.0, show_default=True,
               help="--detect: colour difference (0-255) that counts as a change.")
-@click.option("--min-area", type=click.FloatRange(0.0, min_open=True), default=20.0, show_default=True,
+@click.option("--min-area", type=click.FloatRange(0.0, min_open=True), default=6.0, show_default=True,
               help="--detect: smallest target, square metres on the ground.")
 @click.option("--max-area", type=click.FloatRange(0.0, min_open=True), default=5000.0, show_default=True,
               help="--detect: largest target, square metres on the ground.")

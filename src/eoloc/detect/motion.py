@@ -22,8 +22,9 @@ differs from does there: the references show
 the target's ghosts, where the frame shows plain ground.
 
 Changed pixels are joined (morphological closing, 3 x 3), grouped (connected components,
-8-connected) and kept as blobs whose ground area lies within [min_area_m2, max_area_m2] (each
-pixel's ground footprint from the grid). Its reference pixel is the blob's centroid: the middle
+8-connected, pieces closer than ``join_m`` on the ground together) and kept as blobs whose ground
+area lies within [min_area_m2, max_area_m2] (each pixel's ground footprint from the grid). Its
+reference pixel is the blob's centroid: the middle
 of a target lying on the ground.
 
 What it cannot see, by construction: targets that stand still or move less than half their
@@ -47,6 +48,7 @@ from ..geodesy import ecef_to_enu, geodetic_to_ecef
 from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
 
+MIN_TARGET_PX = 6.0  # the automatic scale keeps the smallest target this many working pixels
 RESOLUTION_RATIO = 2.0  # a reference coarser than this (per axis) where it sees the frame's ground is not used
 
 
@@ -60,23 +62,27 @@ class MotionSettings:
     the grid of pixels located on the ground for the warp; align: take out the residual shift
     of each warp (phase correlation against the frame) when it is at most ``max_shift_px``; occlusion_m: a ground
     point the reference sees elsewhere by more than this (or 3 ground samples) is hidden there;
-    scale: work on the frames shrunk by this factor (1: full size; 0.5 halves the work four
-    times over, for targets many pixels long); tolerance_px: compare each pixel with the range of
+    scale: work on the frames shrunk by this factor (1: full size; 0.5 quarters the work);
+    None: chosen on the first frame, the most shrinking (1, 1/2, 1/4) that leaves the smallest
+    target (min_area_m2) MIN_TARGET_PX working pixels at the frame's median ground sample;
+    tolerance_px: compare each pixel with the range of
     the reference's neighbourhood this many pixels around (1: edges misregistered by a fraction
     of a pixel are no change, but targets 2-3 pixels wide are lost; 0: the pixel itself);
-    surround_px: the box whose median is a pixel's surroundings in the one-sided test."""
+    surround_px: the box whose median is a pixel's surroundings in the one-sided test; join_m:
+    pieces of change closer than this on the ground are one target."""
 
     window_s: float = 2.0
-    refs_per_side: int = 3
+    refs_per_side: int = 2
     threshold: float = 40.0
-    min_area_m2: float = 20.0
+    min_area_m2: float = 6.0
     max_area_m2: float = 5000.0
     grid_px: int = 8
     align: bool = True
     max_shift_px: float = 20.0
     occlusion_m: float = 10.0
-    scale: float = 1.0
+    scale: float | None = None
     tolerance_px: int = 0
+    join_m: float = 4.0
     surround_px: int = 15
 
     def __post_init__(self) -> None:
@@ -85,7 +91,7 @@ class MotionSettings:
                 raise ValueError(f"MotionSettings.{name} must be > 0, got {getattr(self, name)!r}")
         if self.refs_per_side < 1 or self.grid_px < 2:
             raise ValueError("MotionSettings: refs_per_side >= 1 and grid_px >= 2")
-        if not 0 < self.scale <= 1:
+        if self.scale is not None and not 0 < self.scale <= 1:
             raise ValueError(f"MotionSettings.scale must be in (0, 1], got {self.scale!r}")
         if self.min_area_m2 >= self.max_area_m2:
             raise ValueError("MotionSettings: min_area_m2 must be below max_area_m2")
@@ -96,7 +102,8 @@ class Blobs:
     """The movers found in one frame: per blob the reference pixel (u_px, v_px; full-size
     image pixels), the box (u0, v0, u1, v1: its first and last pixel columns and rows), its area
     in pixels and on the ground (m^2), its mean colour difference, and which references found it
-    (``side``: 0 before and after, -1 only before, +1 only after). ``shifts_px``: per
+    (``side``: 0 before and after, -1 only before, +1 only after), and whether it touches the
+    image's edge (``at_edge``: cut by it, its centroid is not the target's). ``shifts_px``: per
     reference, the shift (du, dv, working pixels) the poses left and the images measured (NaN:
     none measured); ``compared``: the fraction of the frame's pixels compared on both sides."""
 
@@ -109,6 +116,7 @@ class Blobs:
     area_m2: np.ndarray
     contrast: np.ndarray
     side: np.ndarray
+    at_edge: np.ndarray
     shifts_px: np.ndarray
     compared: float
 
@@ -126,6 +134,7 @@ class _Frame:
     ground: np.ndarray  # (gh, gw, 3) ENU m of the grid's ground points, NaN where none
     pixel_m2: np.ndarray  # (gh, gw) ground area of one working pixel around each grid point
     luma: np.ndarray  # (H', W') float32, shrunk for the residual's phase correlation
+    grid32: np.ndarray  # (gh, gw, 4) float32: ground ENU and pixel_m2, for cv2.remap
 
 
 class MotionDetector:
@@ -141,7 +150,9 @@ class MotionDetector:
         self.pending: deque[_Frame] = deque()  # frames still waiting for their future references
         self.origin: tuple[float, float, float] | None = None
         self._cache: dict = {}
+        self._pairs: dict[tuple[int, int], tuple[float, float]] = {}  # (frame, reference) -> residual
         self._scale8: float | None = None
+        self.scale: float | None = self.s.scale  # the working scale (chosen on the first frame when None)
 
     # -- the frames ---------------------------------------------------------------------------
 
@@ -158,16 +169,19 @@ class MotionDetector:
             if self._scale8 is None:
                 self._scale8 = 255.0 / max(float(np.percentile(img, 99.9)), 1.0)
             img = np.clip(img * self._scale8, 0, 255).astype(np.uint8)
-        if self.s.scale < 1:
+        if self.scale is None:
+            self.scale = self._choose_scale(sensor, pose, img.shape[1], img.shape[0])
+        if self.scale < 1:
             h, w = img.shape[:2]
-            img = cv2.resize(img, (max(2, round(w * self.s.scale)), max(2, round(h * self.s.scale))),
+            img = cv2.resize(img, (max(2, round(w * self.scale)), max(2, round(h * self.scale))),
                              interpolation=cv2.INTER_AREA)
         if img.ndim == 2:
             img = img[..., None]
         img = np.ascontiguousarray(np.concatenate([img, np.full((*img.shape[:2], 1), 255, np.uint8)], -1))
         h, w = img.shape[:2]
         ground, pixel_m2 = self._ground_grid(sensor, pose, w, h)
-        fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, self._small_luma(img[..., :-1]))
+        fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, self._small_luma(img[..., :-1]),
+                    np.dstack([ground, pixel_m2]).astype(np.float32))
         self.frames.append(fr)
         self.pending.append(fr)
         out = []
@@ -185,7 +199,8 @@ class MotionDetector:
     def _forget(self) -> None:
         oldest = self.pending[0].time_s if self.pending else self.frames[-1].time_s
         while len(self.frames) > 1 and self.frames[0].time_s < oldest - self.s.window_s - 1e-9:
-            self.frames.popleft()
+            gone = self.frames.popleft().index
+            self._pairs = {k: v for k, v in self._pairs.items() if gone not in k}
 
     # -- geometry -----------------------------------------------------------------------------
 
@@ -193,7 +208,7 @@ class MotionDetector:
         """The grid's working pixels (gh, gw) and its spacing: the centre of every block of
         step x step pixels, and a ring of blocks around the image (so that every pixel lies
         between grid points and cv2.resize interpolates the map exactly)."""
-        step = max(2, round(self.s.grid_px * self.s.scale))
+        step = max(2, round(self.s.grid_px * (self.scale or 1.0)))
         bw, bh = math.ceil(width / step), math.ceil(height / step)
         u, v = np.meshgrid((np.arange(-1, bw + 1) + 0.5) * step - 0.5, (np.arange(-1, bh + 1) + 0.5) * step - 0.5)
         return u, v, step
@@ -219,6 +234,16 @@ class MotionDetector:
         # a working pixel's ground area: the grid cell's (cross product of its sides) / step^2
         area = np.linalg.norm(np.cross(np.gradient(g, axis=1), np.gradient(g, axis=0)), axis=-1) / float(step) ** 2
         return g, area
+
+    def _choose_scale(self, sensor: SensorModel, pose: Pose, width: int, height: int) -> float:
+        self.scale = 1.0
+        _, pixel_m2 = self._ground_grid(sensor, pose, width, height)
+        self.origin = None  # set again by the first frame itself
+        m2 = float(np.nanmedian(pixel_m2)) if np.isfinite(pixel_m2).any() else math.nan
+        for scale in (0.25, 0.5):
+            if self.s.min_area_m2 / (m2 / scale**2) >= MIN_TARGET_PX:
+                return scale
+        return 1.0
 
     def _to_full(self, width: int, sensor: SensorModel) -> float:
         return sensor.camera.width / width
@@ -252,11 +277,14 @@ class MotionDetector:
         k = self._to_full(ref.image.shape[1], ref.sensor)
         ur, vr = (ur - (k - 1) / 2) / k, (vr - (k - 1) / 2) / k
         # hidden in ref: ref's own ray through (ur, vr) lands elsewhere (bilinear in ref's grid)
-        seen = _sample(ref.ground, (ur + 0.5) / step + 0.5, (vr + 0.5) / step + 0.5)
+        gx = ((ur + 0.5) / step + 0.5).astype(np.float32)
+        gy = ((vr + 0.5) / step + 0.5).astype(np.float32)
+        seen = _remap_nan(ref.grid32, gx, gy)
         tol = np.maximum(self.s.occlusion_m, 3.0 * np.sqrt(cur.pixel_m2))
         # and a reference that saw the ground much coarser than this frame cannot tell (a slope
         # seen edge-on there): its pixel's ground area at most RESOLUTION_RATIO^2 times this one's
-        ref_m2 = _sample(ref.pixel_m2[..., None], (ur + 0.5) / step + 0.5, (vr + 0.5) / step + 0.5)[..., 0]
+        ref_m2 = seen[..., 3]
+        seen = seen[..., :3].astype(np.float64)
         with np.errstate(invalid="ignore"):
             ok = ((np.linalg.norm(seen - cur.ground, axis=-1) <= tol) & np.isfinite(ur) & np.isfinite(vr)
                   & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2))
@@ -294,7 +322,7 @@ class MotionDetector:
             self._cache[key] = cv2.createHanningWindow((ws, hs), cv2.CV_32F)
         (dx, dy), response = cv2.phaseCorrelate(b, a, self._cache[key])
         dx, dy = dx * f, dy * f
-        if not (response > 0.05 and math.hypot(dx, dy) <= self.s.max_shift_px * self.s.scale):
+        if not (response > 0.05 and math.hypot(dx, dy) <= self.s.max_shift_px * self.scale):
             return math.nan, math.nan
         # the warp shifted by (dx, dy) is the frame: the frame's pixel x shows what the warp shows
         # at x - d, i.e. prev's pixel map(x - d) ~ map(x) - d (the map is locally a translation)
@@ -339,7 +367,9 @@ class MotionDetector:
                     continue
                 mx, my, valid = self._maps(cur, ref)
                 if self.s.align:
-                    shift = self._residual(cur, ref, mx, my, valid)
+                    back = self._pairs.get((ref.index, cur.index))  # measured the other way: its inverse
+                    shift = (-back[0], -back[1]) if back is not None else self._residual(cur, ref, mx, my, valid)
+                    self._pairs[(cur.index, ref.index)] = shift
                     shifts.append(shift)
                     if math.isfinite(shift[0]):
                         mx, my = mx + np.float32(shift[0]), my + np.float32(shift[1])
@@ -388,15 +418,29 @@ class MotionDetector:
                 side[one] = sign
         both = paired.astype(bool)
         mask = mask.astype(np.uint8)
-        kernel = np.ones((3, 3), np.uint8)
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel)  # no opening: it erases targets 2-3 px wide
-        n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))  # no opening: it erases
+        # targets 2-3 px wide. Pieces closer than join_m on the ground are one target (a target's
+        # front and back, found apart): grouped on the mask grown by that much, measured on the mask
+        finite = cur.pixel_m2[np.isfinite(cur.pixel_m2)]
+        gsd = math.sqrt(float(np.median(finite))) if finite.size else 1.0
+        r = int(min(max(round(self.s.join_m / max(gsd, 1e-6) / 2), 0), 8))
+        grown = cv2.dilate(mask, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) if r else mask
+        n, labels = cv2.connectedComponents(grown, connectivity=8)
         k = self._to_full(w, cur.sensor)
         _, _, step = self._grid(w, h)
-        keep_u, keep_v, boxes, apx, am2, con, sides = [], [], [], [], [], [], []
+        keep_u, keep_v, boxes, apx, am2, con, sides, edges = [], [], [], [], [], [], [], []
+        ys, xs = np.nonzero(mask)
+        lab = labels[ys, xs]
+        order = np.argsort(lab, kind="stable")
+        ys, xs, lab = ys[order], xs[order], lab[order]
+        starts = np.searchsorted(lab, np.arange(1, n + 1))
         for i in range(1, n):
-            x0, y0, bw, bh, area = (int(a) for a in stats[i])
-            cu, cv_ = float(cents[i][0]), float(cents[i][1])
+            a, b = starts[i - 1], starts[i]
+            if b <= a:
+                continue
+            py, px = ys[a:b], xs[a:b]
+            area = b - a
+            cu, cv_ = float(px.mean()), float(py.mean())
             pm2 = float(_sample(cur.pixel_m2[..., None], np.array((cu + 0.5) / step + 0.5),
                                 np.array((cv_ + 0.5) / step + 0.5))[0])
             a_m2 = area * pm2
@@ -404,15 +448,15 @@ class MotionDetector:
                 continue
             keep_u.append(cu * k + (k - 1) / 2)
             keep_v.append(cv_ * k + (k - 1) / 2)
-            boxes.append((x0 * k, y0 * k, (x0 + bw) * k - 1, (y0 + bh) * k - 1))
+            boxes.append((px.min() * k, py.min() * k, (px.max() + 1) * k - 1, (py.max() + 1) * k - 1))
             apx.append(area * k * k)
             am2.append(a_m2)
-            inside = labels[y0:y0 + bh, x0:x0 + bw] == i
-            con.append(float(dmax[y0:y0 + bh, x0:x0 + bw][inside].mean()))
-            sides.append(int(np.sign(side[y0:y0 + bh, x0:x0 + bw][inside].sum())))
+            con.append(float(dmax[py, px].mean()))
+            sides.append(int(np.sign(side[py, px].sum())))
+            edges.append(bool(px.min() == 0 or py.min() == 0 or px.max() == w - 1 or py.max() == h - 1))
         return Blobs(cur.index, cur.time_s, np.array(keep_u), np.array(keep_v), np.array(boxes).reshape(-1, 4),
                      np.array(apx), np.array(am2), np.array(con), np.array(sides, dtype=np.int8),
-                     np.array(shifts).reshape(-1, 2), float(both.mean()))
+                     np.array(edges, dtype=bool), np.array(shifts).reshape(-1, 2), float(both.mean()))
 
 
     def _stands_out(self, image: np.ndarray, seen: list, candidates: np.ndarray) -> np.ndarray:
@@ -462,7 +506,8 @@ def _channel_max(img: np.ndarray) -> np.ndarray:
 
 def _no_blobs(fr: _Frame) -> Blobs:
     e = np.zeros(0)
-    return Blobs(fr.index, fr.time_s, e, e, np.zeros((0, 4)), e, e, e, np.zeros(0, np.int8), np.zeros((0, 2)), 0.0)
+    return Blobs(fr.index, fr.time_s, e, e, np.zeros((0, 4)), e, e, e, np.zeros(0, np.int8), np.zeros(0, bool),
+                 np.zeros((0, 2)), 0.0)
 
 
 def _dft_span(n: int) -> tuple[int, int]:
@@ -481,6 +526,16 @@ def _luma(img: np.ndarray) -> np.ndarray:
     if img.ndim == 3 and img.shape[2] == 3:
         return (img[..., 0] * 0.299 + img[..., 1] * 0.587 + img[..., 2] * 0.114).astype(np.float32)
     return img.reshape(img.shape[:2]).astype(np.float32)
+
+
+def _remap_nan(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples (cv2.remap) of ``grid`` (gh, gw, C) float32 at fractional (x col, y row)
+    float32 maps; NaN outside, and wherever a NaN takes part."""
+    import cv2
+
+    out = cv2.remap(grid, np.nan_to_num(x, nan=-1e6), np.nan_to_num(y, nan=-1e6), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)
+    return out.reshape((*x.shape, grid.shape[-1]))
 
 
 def _sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -5,7 +5,8 @@ rays and kernels as every fix). The fixes go to constant-velocity Kalman tracks 
 (:class:`eoloc.sequence.track.Tracker`, gated global nearest neighbour on the ground: the
 camera's motion plays no part in the association). A fix's sigma per axis is the telemetry's
 frame-to-frame error (``meas_sigma_m``) and a quarter of the blob's size on the ground, together
-(half of it for a blob found from one side only, at the ends of a target's time in view). The
+(half of it for a blob found from one side only, at the ends of a target's time in view; a blob
+the image's edge cuts, whose centroid is not the target's, EDGE_SIGMA_M). The
 tracks of the movers are smoothed at the end (Rauch–Tung–Striebel: each position, speed and
 heading given all of the track's fixes).
 
@@ -31,6 +32,7 @@ from ..sensor.model import Pose, SensorModel
 from ..sequence.track import Track, Tracker, TrackerConfig, TrackSet, smooth_track
 from .motion import Blobs
 
+EDGE_SIGMA_M = 30.0  # the position sigma of a blob the image's edge cuts
 SIDES = {0: "both", -1: "before", 1: "after"}  # which reference frames a detection differs from
 
 
@@ -111,9 +113,11 @@ class MoverTracker:
         if self.origin is None:
             return
         z = geodesy.ecef_to_enu(f.p_ecef(), *self.origin)
-        # a blob's centroid: within about a quarter of its size; found from one side only
-        # (the ends of a target's time in view), half of it
-        sig2 = self.settings.meas_sigma_m**2 + np.where(blobs.side == 0, 1 / 16, 1 / 4) * blobs.area_m2
+        # a blob's centroid: within about a quarter of its size
+        # (half of it for a blob found from one side only, at the ends of a target's time in view);
+        # a blob the image's edge cuts tells where the target is to EDGE_SIGMA_M only
+        share = np.where(blobs.side == 0, 1 / 16, 1 / 4)
+        sig2 = self.settings.meas_sigma_m**2 + np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
         R = sig2[:, None, None] * np.eye(2)
         here = np.flatnonzero(ok)
         for key, j in self.tracker.frame(blobs.time_s, here, z, R, None):
@@ -123,6 +127,7 @@ class MoverTracker:
                                                   strict=True)},
                    "area_m2": round(float(blobs.area_m2[j]), 1), "contrast": round(float(blobs.contrast[j]), 1),
                    "compared": SIDES[int(blobs.side[j])],
+                   "at_edge": bool(blobs.at_edge[j]),
                    "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
                    "sigma_m": round(math.sqrt(sig2[j]), 2), "status": Status(int(f.status[j])).name}
             self.by_track.setdefault(key, []).append(len(self.rows))
