@@ -48,7 +48,7 @@ from ..geodesy import ecef_to_enu, geodetic_to_ecef
 from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
 
-MIN_TARGET_PX = 6.0  # the automatic scale keeps the smallest target this many working pixels
+MIN_TARGET_PX = 4.0  # the automatic scale keeps the smallest target this many working pixels
 RESOLUTION_RATIO = 2.0  # a reference coarser than this (per axis) where it sees the frame's ground is not used
 
 
@@ -175,12 +175,15 @@ class MotionDetector:
             h, w = img.shape[:2]
             img = cv2.resize(img, (max(2, round(w * self.scale)), max(2, round(h * self.scale))),
                              interpolation=cv2.INTER_AREA)
-        if img.ndim == 2:
-            img = img[..., None]
-        img = np.ascontiguousarray(np.concatenate([img, np.full((*img.shape[:2], 1), 255, np.uint8)], -1))
+        luma = self._small_luma(img)
+        if img.ndim == 3 and img.shape[2] == 3:
+            img = cv2.cvtColor(img, cv2.COLOR_RGB2RGBA)  # an opaque alpha: where a warp lands off the frame
+        else:
+            img = img if img.ndim == 3 else img[..., None]
+            img = np.ascontiguousarray(np.concatenate([img, np.full((*img.shape[:2], 1), 255, np.uint8)], -1))
         h, w = img.shape[:2]
         ground, pixel_m2 = self._ground_grid(sensor, pose, w, h)
-        fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, self._small_luma(img[..., :-1]),
+        fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, luma,
                     np.dstack([ground, pixel_m2]).astype(np.float32))
         self.frames.append(fr)
         self.pending.append(fr)
@@ -249,25 +252,24 @@ class MotionDetector:
         return sensor.camera.width / width
 
     def _small_luma(self, img: np.ndarray) -> np.ndarray:
+        """The working image's luma, shrunk for the residual (``img``: (H, W) or (H, W, C))."""
         import cv2
 
-        y = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.shape[2] == 3 else img[..., 0]
-        f = self._shrink(y.shape[1])
+        f = self._shrink(img.shape[1])
         if f > 1:
-            y = cv2.resize(y, (y.shape[1] // f, y.shape[0] // f), interpolation=cv2.INTER_AREA)
-        return y.astype(np.float32)
+            img = cv2.resize(img, (img.shape[1] // f, img.shape[0] // f), interpolation=cv2.INTER_AREA)
+        y = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 and img.shape[2] == 3 else img
+        return (y if y.ndim == 2 else y[..., 0]).astype(np.float32)
 
     @staticmethod
     def _shrink(width: int) -> int:
         """The residual is measured on frames at most 320 pixels wide."""
         return max(1, math.ceil(width / 320))
 
-    def _maps(self, cur: _Frame, ref: _Frame):
-        """For each working pixel of ``cur``: where ``ref`` saw its ground (map_x, map_y,
-        float32 ref pixels) and whether the grid could tell (uint8 0/1: both frames see the ground
-        there, and ref not from behind a ridge)."""
-        import cv2
-
+    def _coarse_map(self, cur: _Frame, ref: _Frame) -> np.ndarray:
+        """On ``cur``'s grid (gh, gw, 3) float32: where ``ref`` saw each grid point's ground (u, v
+        in ref's working pixels) and whether it could tell there (1/0: both frames see the ground,
+        ref not from behind a ridge nor much coarser)."""
         from ..geodesy import enu_to_ecef
 
         h, w = cur.image.shape[:2]
@@ -288,32 +290,44 @@ class MotionDetector:
         with np.errstate(invalid="ignore"):
             ok = ((np.linalg.norm(seen - cur.ground, axis=-1) <= tol) & np.isfinite(ur) & np.isfinite(vr)
                   & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2))
-        coarse = np.dstack([np.where(ok, ur, 0.0), np.where(ok, vr, 0.0), ok]).astype(np.float32)
-        gh, gw = coarse.shape[:2]
-        full = cv2.resize(coarse, (gw * step, gh * step), interpolation=cv2.INTER_LINEAR)[step:step + h, step:step + w]
-        valid = (full[..., 2] > 0.9999).astype(np.uint8)
-        return np.ascontiguousarray(full[..., 0]), np.ascontiguousarray(full[..., 1]), valid
+        return np.dstack([np.where(ok, ur, 0.0), np.where(ok, vr, 0.0), ok]).astype(np.float32)
 
-    def _residual(self, cur: _Frame, prev: _Frame, mx, my, valid) -> tuple[float, float]:
-        """The shift (du, dv) in ``prev``'s working pixels to add to the poses' map (mx, my, valid)
-        from ``cur`` to ``prev`` (phase correlation of the shrunk lumas over their overlap); NaN
-        when it is not clear or larger than max_shift_px."""
+    def _upsample(self, coarse: np.ndarray, width: int, height: int, shrink: int = 1):
+        """The grid's map at every pixel of the working image shrunk ``shrink`` times: (height,
+        width, 2) float32 (cv2.remap's map1) and where the grid could tell (float32, 1 inside the
+        cells whose four corners could). Exact bilinear between grid points (cv2.warpAffine)."""
+        import cv2
+
+        step = self._grid(width * shrink, height * shrink)[2]
+        a = shrink / step
+        M = np.array([[a, 0.0, 0.5 * a + 0.5], [0.0, a, 0.5 * a + 0.5]])  # output pixel -> grid index
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        uv = cv2.warpAffine(np.ascontiguousarray(coarse[..., :2]), M, (width, height), flags=flags,
+                            borderMode=cv2.BORDER_REPLICATE)
+        ok = cv2.warpAffine(np.ascontiguousarray(coarse[..., 2]), M, (width, height), flags=flags,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if shrink > 1:
+            uv = (uv + 0.5) / shrink - 0.5
+        return uv, ok
+
+    def _residual(self, cur: _Frame, ref: _Frame, coarse: np.ndarray) -> tuple[float, float]:
+        """The shift (du, dv) in ``ref``'s working pixels to add to the poses' map ``coarse`` from
+        ``cur`` to ``ref`` (phase correlation of the shrunk lumas over their overlap); NaN when it
+        is not clear or larger than max_shift_px."""
         import cv2
 
         f = self._shrink(cur.image.shape[1])
         hs, ws = cur.luma.shape
-        mxs = cv2.resize(mx, (ws, hs), interpolation=cv2.INTER_LINEAR)
-        mys = cv2.resize(my, (ws, hs), interpolation=cv2.INTER_LINEAR)
-        ok = cv2.resize(valid, (ws, hs), interpolation=cv2.INTER_NEAREST).astype(bool)
+        uv, ok = self._upsample(coarse, ws, hs, f)
+        ok = ok > 0.9999
         # cv2.phaseCorrelate is off by half a pixel on sizes its DFT pads (e.g. 135 rows): a
         # centred crop to sizes it takes as they are
         (r0, r1), (c0, c1) = (_dft_span(n) for n in (hs, ws))
-        a, mxs, mys, ok = (x[r0:r1, c0:c1] for x in (cur.luma, mxs, mys, ok))
+        a, uv, ok = cur.luma[r0:r1, c0:c1], np.ascontiguousarray(uv[r0:r1, c0:c1]), ok[r0:r1, c0:c1]
         hs, ws = a.shape
         if ok.mean() < 0.25:
             return math.nan, math.nan
-        b = cv2.remap(prev.luma, (mxs + 0.5) / f - 0.5, (mys + 0.5) / f - 0.5, cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE)
+        b = cv2.remap(ref.luma, uv, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         m = ok.astype(np.float32)
         a = (a - float(a[ok].mean())) * m
         b = (b - float(b[ok].mean())) * m
@@ -325,7 +339,7 @@ class MotionDetector:
         if not (response > 0.05 and math.hypot(dx, dy) <= self.s.max_shift_px * self.scale):
             return math.nan, math.nan
         # the warp shifted by (dx, dy) is the frame: the frame's pixel x shows what the warp shows
-        # at x - d, i.e. prev's pixel map(x - d) ~ map(x) - d (the map is locally a translation)
+        # at x - d, i.e. ref's pixel map(x - d) ~ map(x) - d (the map is locally a translation)
         return -float(dx), -float(dy)
 
     # -- the decision ---------------------------------------------------------------------------
@@ -358,6 +372,29 @@ class MotionDetector:
         dmax = np.zeros((h, w), np.uint8)
         box = np.ones((2 * self.s.tolerance_px + 1,) * 2, np.uint8)
         shifts: list[tuple[float, float]] = []
+        def compare(ref: _Frame):
+            """The frame against one reference: (lit, valid, warped), the difference, the shift."""
+            coarse = self._coarse_map(cur, ref)
+            shift = (math.nan, math.nan)
+            if self.s.align:
+                back = self._pairs.get((ref.index, cur.index))  # measured the other way: its inverse
+                shift = (-back[0], -back[1]) if back is not None else self._residual(cur, ref, coarse)
+                if math.isfinite(shift[0]):
+                    coarse[..., 0] += np.float32(shift[0])
+                    coarse[..., 1] += np.float32(shift[1])
+            uv, ok = self._upsample(coarse, w, h)
+            warped = cv2.remap(ref.image, uv, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            valid = (ok > 0.9999).astype(np.uint8)
+            valid &= warped[..., -1] == 255
+            # tolerance_px: the difference from the reference's neighbourhood (its range per
+            # channel), so that a fraction of a pixel of misregistration on an edge is no change
+            hi, lo = (cv2.dilate(warped, box), cv2.erode(warped, box)) if self.s.tolerance_px else (warped, warped)
+            d = _channel_max(cv2.max(cv2.subtract(cur.image, hi), cv2.subtract(lo, cur.image))) * valid
+            return ((d > thr).astype(np.uint8), valid, warped), d, shift
+
+        # one at a time: OpenCV spreads each operation over the cores already (measured: two
+        # references at a time on two threads is 13 % slower)
+        it = iter([compare(r) for r in (*past, *future) if r is not None])
         sides = []
         for refs in (past, future):
             per_ref = []  # (lit, valid, warped) at each offset k; None where no reference
@@ -365,23 +402,12 @@ class MotionDetector:
                 if ref is None:
                     per_ref.append(None)
                     continue
-                mx, my, valid = self._maps(cur, ref)
+                entry, d, shift = next(it)
                 if self.s.align:
-                    back = self._pairs.get((ref.index, cur.index))  # measured the other way: its inverse
-                    shift = (-back[0], -back[1]) if back is not None else self._residual(cur, ref, mx, my, valid)
                     self._pairs[(cur.index, ref.index)] = shift
                     shifts.append(shift)
-                    if math.isfinite(shift[0]):
-                        mx, my = mx + np.float32(shift[0]), my + np.float32(shift[1])
-                warped = cv2.remap(ref.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                                   borderValue=0)
-                valid &= warped[..., -1] == 255
-                # tolerance_px: the difference from the reference's neighbourhood (its range per
-                # channel), so that a fraction of a pixel of misregistration on an edge is no change
-                hi, lo = (cv2.dilate(warped, box), cv2.erode(warped, box)) if self.s.tolerance_px else (warped, warped)
-                d = _channel_max(cv2.max(cv2.subtract(cur.image, hi), cv2.subtract(lo, cur.image))) * valid
                 np.maximum(dmax, d, out=dmax)
-                per_ref.append(((d > thr).astype(np.uint8), valid, warped))
+                per_ref.append(entry)
             sides.append(per_ref)
         zero = np.zeros((h, w), np.uint8)
         # two-sided, by offsets valid on both sides only (a side whose far references do not see
