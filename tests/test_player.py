@@ -105,13 +105,17 @@ return {frame: s.frame, shown: s.shown, t: P.video.currentTime,
         drapeBounds: [[L_.drape.getBounds().getSouth(), L_.drape.getBounds().getWest()],
                       [L_.drape.getBounds().getNorth(), L_.drape.getBounds().getEast()]],
         vmti: L_.vmti.getLayers().map(m => [m.getLatLng().lat, m.getLatLng().lng]),
-        boxes: s.boxes, overlay: [document.getElementById('overlay').width,
+        movers: L_.movers.getLayers().filter(m => m.getRadius).map(m => [m.getLatLng().lat, m.getLatLng().lng]),
+        moverTracks: L_.movers.getLayers().filter(m => !m.getRadius).length,
+        boxes: s.boxes, moverBoxes: s.moverBoxes, overlay: [document.getElementById('overlay').width,
                                   document.getElementById('overlay').height]};
 """
 
 
-def _check_map(state: dict, data: dict, frames: dict, feats: dict, vmti: list[dict], W: int, H: int) -> None:
-    """The map and the video's overlay show frame ``state['frame']``'s own data."""
+def _check_map(state: dict, data: dict, frames: dict, feats: dict, vmti: list[dict], W: int, H: int,
+               movers: list[dict] = ()) -> None:
+    """The map and the video's overlay show frame ``state['frame']``'s own data (and the
+    movers of detections.csv: their boxes on the video, their points and tracks so far on the map)."""
     i = state["frame"]
     row = frames[i]
     assert state["aircraft"] == pytest.approx([float(row["lat_deg"]), float(row["lon_deg"])], abs=1e-8)
@@ -137,6 +141,18 @@ def _check_map(state: dict, data: dict, frames: dict, feats: dict, vmti: list[di
         assert [b["x0"], b["y0"], b["x1"], b["y1"]] == pytest.approx(want, abs=1e-9)
     want = sorted([float(r["lat_deg"]), float(r["lon_deg"])] for r in now if r["status"] == "OK")
     assert len(state["vmti"]) == len(want) and np.allclose(sorted(state["vmti"]), want, atol=1e-8)
+    mine = [r for r in movers if int(r["frame"]) == i]
+    assert sorted(b["track_id"] for b in state["moverBoxes"]) == sorted(int(r["track_id"]) for r in mine)
+    for b in state["moverBoxes"]:
+        r = next(r for r in mine if int(r["track_id"]) == b["track_id"])
+        want = [float(r["bbox_u0"]) * sx, float(r["bbox_v0"]) * sy, (float(r["bbox_u1"]) + 1) * sx,
+                (float(r["bbox_v1"]) + 1) * sy]
+        assert [b["x0"], b["y0"], b["x1"], b["y1"]] == pytest.approx(want, abs=1e-9)
+    want = sorted([float(r["lat_deg"]), float(r["lon_deg"])] for r in mine)
+    assert len(state["movers"]) == len(want) and np.allclose(sorted(state["movers"]), want, atol=1e-8)
+    so_far = {r["track_id"] for r in movers if int(r["frame"]) <= i}
+    assert state["moverTracks"] == sum(sum(int(r["frame"]) <= i for r in movers if r["track_id"] == k) > 1
+                                       for k in so_far)
 
 
 def _grab(d) -> np.ndarray:
@@ -161,6 +177,8 @@ def test_play_and_seek_keep_the_map_on_the_frame_shown(demo, served):
     data, frames = _data(out), _frames_csv(out)
     feats = {f["properties"]["frame"]: f for f in json.loads((out / "footprints.geojson").read_text())["features"]}
     vmti = _vmti_csv(out)
+    movers = list(csv.DictReader((out / "detections.csv").open()))
+    assert movers and data["movers"]  # the demo finds vehicle 1 in its first 2 s
     W, H = data["width"], data["height"]
     decoded = np.stack([f.image.astype(np.int16) for f in iter_frames(out / "player" / "video.mp4")])
     assert len(decoded) == len(frames) == len(data["frames"]["t"])
@@ -173,7 +191,7 @@ def test_play_and_seek_keep_the_map_on_the_frame_shown(demo, served):
         seen = set()
         for _ in range(40):
             st = d.execute_script(MAP_STATE)
-            _check_map(st, data, frames, feats, vmti, W, H)
+            _check_map(st, data, frames, feats, vmti, W, H, movers)
             seen.add(st["frame"])
             if len(seen) >= 5:
                 break
@@ -181,17 +199,19 @@ def test_play_and_seek_keep_the_map_on_the_frame_shown(demo, served):
         d.find_element("id", "play").click()
         assert len(seen) >= 4, f"the page followed only frames {sorted(seen)} while playing"
         # seek with the slider: the browser shows the frame the page names, and the map is on it
-        boxed = 0
+        boxed = moved = 0
         for k in (4, 13, len(frames) - 1, 0):
             d.execute_script("const s = document.getElementById('seek'); s.value = arguments[0];"
                              "s.dispatchEvent(new Event('input'));", k)
             _wait(d, f"const P = window.eolocPlayer; return P.state.frame === {k} && !P.video.seeking")
             st = d.execute_script(MAP_STATE)
-            _check_map(st, data, frames, feats, vmti, W, H)
+            _check_map(st, data, frames, feats, vmti, W, H, movers)
             boxed += bool(st["boxes"])
+            moved += bool(st["moverBoxes"])
             diff = np.abs(decoded - _grab(d)[None]).mean(axis=(1, 2, 3))
             assert int(np.argmin(diff)) == k and diff[k] < 3.0, (k, diff.round(2).tolist())
         assert boxed >= 2  # the vehicles are in view on most of the pass (each box checked above)
+        assert moved >= 2  # and found by eoloc itself
         # the drape's opacity follows its slider
         d.execute_script("const s = document.getElementById('opacity'); s.value = 30;"
                          "s.dispatchEvent(new Event('input'));")
@@ -386,3 +406,10 @@ def test_demo_video_rectifies_to_the_texture_s_known_geometry(demo):
     vm = np.array(acc["vmti_error_m"])
     assert vm.size >= 5 and vm.max() < 5.0
     assert rep["vmti"]["detections"] == rep["vmti"]["located"] == vm.size
+    # --detect motion: in 2 s vehicle 1 drives through the view (the others are not in it yet);
+    # eoloc finds it in the pixels, tracks it on the ground, and nothing else
+    mv = acc["movers"]
+    assert mv["tracks"] == 1 and mv["false_tracks"] == 0
+    v1 = mv["vehicles"][0]
+    assert v1["visible_frames"] == 21 and v1["recall"] >= 0.8 and v1["median_error_m"] < 3.0
+    assert v1["speed_mps"] == pytest.approx(v1["true_speed_mps"], rel=0.25)  # 2 s of track

@@ -39,6 +39,8 @@
                                             className: "eoloc-aircraft" });
   const vmtiLayer = L.layerGroup().addTo(map);
   overlays["VMTI targets"] = vmtiLayer;
+  const moverLayer = L.layerGroup().addTo(map);
+  if ((D.movers || []).length) overlays["movers (found in the video)"] = moverLayer;
   const clickMarker = L.circleMarker([0, 0], { radius: 6, color: "#d62728", weight: 3, fill: false,
                                                className: "eoloc-click" });
   L.control.layers(null, overlays, { collapsed: false }).addTo(map);
@@ -83,7 +85,17 @@
     return vmtiByTime.get(vmtiTimes[k]);
   }
 
-  const state = { frame: -1, shown: -1, boxes: [], vmti: [], lastClick: null, mode: "offline",
+  const moversByFrame = new Map(); // frame -> the movers eoloc found in it (--detect)
+  const moverTracks = new Map(); // track id -> its detections in time order
+  for (const r of D.movers || []) {
+    if (!moversByFrame.has(r.frame)) moversByFrame.set(r.frame, []);
+    moversByFrame.get(r.frame).push(r);
+    if (!moverTracks.has(r.track_id)) moverTracks.set(r.track_id, []);
+    moverTracks.get(r.track_id).push(r);
+  }
+
+  const state = { frame: -1, shown: -1, boxes: [], vmti: [], movers: [], moverBoxes: [], lastClick: null,
+                  mode: "offline",
                   reason: "", grids: {}, ready: false };
 
   function sizeOverlay() {
@@ -110,6 +122,15 @@
       ctx.fillStyle = "#ff2d2d";
       ctx.fillText(r.target_id, x0, Math.max(y0 - 3, 10));
       state.boxes.push({ target_id: r.target_id, x0: x0, y0: y0, x1: x1, y1: y1 });
+    }
+    state.moverBoxes = [];
+    for (const r of state.movers) { // the box covers pixels u0..u1, v0..v1
+      const x0 = r.bbox_u0 * sx, y0 = r.bbox_v0 * sy, x1 = (r.bbox_u1 + 1) * sx, y1 = (r.bbox_v1 + 1) * sy;
+      ctx.strokeStyle = "#00e5ff";
+      ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+      ctx.fillStyle = "#00e5ff";
+      ctx.fillText(`M${r.track_id}`, x0, Math.min(y1 + 12, overlay.height - 2));
+      state.moverBoxes.push({ track_id: r.track_id, x0: x0, y0: y0, x1: x1, y1: y1 });
     }
     if (state.lastClick && state.lastClick.frame === state.frame) {
       const x = (state.lastClick.u + 0.5) * sx, y = (state.lastClick.v + 0.5) * sy;
@@ -141,11 +162,29 @@
         .bindTooltip(textNode(`target ${v.target_id}: ${v.lat_deg.toFixed(6)}, ${v.lon_deg.toFixed(6)}, ${v.h_m.toFixed(1)} m`))
         .addTo(vmtiLayer);
     }
+    state.movers = moversByFrame.get(i) || [];
+    moverLayer.clearLayers();
+    for (const [id, rows] of moverTracks) { // each mover's ground track so far, and where it is now
+      const past = rows.filter(r => r.frame <= i && r.lat_deg !== null);
+      if (past.length > 1) {
+        L.polyline(past.map(r => [r.lat_deg, r.lon_deg]), { color: "#00e5ff", weight: 2,
+                                                            className: "eoloc-mover-track" }).addTo(moverLayer);
+      }
+    }
+    for (const r of state.movers) {
+      if (r.lat_deg === null) continue;
+      L.circleMarker([r.lat_deg, r.lon_deg], { radius: 6, color: "#00e5ff", fillOpacity: 0.6,
+                                               className: "eoloc-mover" })
+        .bindTooltip(textNode(`mover ${r.track_id}: ${r.lat_deg.toFixed(6)}, ${r.lon_deg.toFixed(6)}, ` +
+                              `${r.speed_mps.toFixed(1)} m/s to ${r.heading_deg.toFixed(0)}°`))
+        .addTo(moverLayer);
+    }
     drawBoxes();
     const note = !F.ok[i] ? " · no pose (outside the metadata or in a gap)" :
       (k === i ? "" : (k >= 0 ? ` · map shows rectified frame ${k}` : " · no rectified frame yet"));
     info.textContent = `frame ${i} / ${N - 1} · ${F.t[i].toFixed(3)} s${note}` +
-      (state.vmti.length ? ` · ${state.vmti.length} VMTI target(s)` : "");
+      (state.vmti.length ? ` · ${state.vmti.length} VMTI target(s)` : "") +
+      (state.movers.length ? ` · ${state.movers.length} mover(s)` : "");
   }
 
   function onFrame(now, meta) { // called by the browser for every frame it presents
@@ -303,5 +342,5 @@
   // for tests and scripts: the player's state and its map
   window.eolocPlayer = { state: state, map: map, video: video, goTo: goTo, frameAt: frameAt, apiRequest: apiRequest,
                          layers: { footprint: footprint, centre: centre, aircraft: aircraft, drape: drape,
-                                   vmti: vmtiLayer, click: clickMarker, track: track } };
+                                   vmti: vmtiLayer, movers: moverLayer, click: clickMarker, track: track } };
 })();
