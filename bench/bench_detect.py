@@ -29,7 +29,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 
-from _common import HEADER, machine
 
 
 def vehicles_in_view(ms, rng, n: int, seconds: float):
@@ -184,17 +183,11 @@ def parallax(n_frames: int) -> list[str]:
     return out
 
 
-def main() -> None:
-    import argparse
-
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=60, help="frames per scene (10 per second)")
-    n = ap.parse_args().frames
-    print(machine())
-    print(HEADER)
-    for line in throughput(n) + parallax(max(n, 60)):
-        print(line, flush=True)
+def main(n_frames: int = 60) -> list[str]:
+    return throughput(n_frames) + parallax(max(n_frames, 60))
 
 
 if __name__ == "__main__":
-    main()
+    from _common import script
+
+    script(main, __doc__, flag="--frames", default=60, help_text="frames per scene, 10 per second (default 60)")

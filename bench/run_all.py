@@ -11,6 +11,7 @@ import bench_accuracy
 import bench_batch
 import bench_compensation
 import bench_csv
+import bench_detect
 import bench_evaluate
 import bench_geodesy
 import bench_klv
@@ -29,5 +30,5 @@ if __name__ == "__main__":
                  + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_ortho.main(2.25)
                  + bench_startup.main(15)
                  + bench_csv.main() + bench_klv.main(3000) + bench_evaluate.main(1_000_000)
-                 + bench_batch.main(12_000) + bench_live.main(1.0) + bench_serve.main(20.0)):
+                 + bench_batch.main(12_000) + bench_live.main(1.0) + bench_serve.main(20.0) + bench_detect.main(60)):
         print(line, flush=True)
