@@ -214,6 +214,31 @@ def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
     assert len(movers) == 3 and all(f["geometry"]["type"] == "LineString" for f in movers)
     report = json.loads((out / "video.json").read_text())
     assert report["movers"]["tracks"] == 3
+    # TAK: each mover where it was last seen, valid against MITRE's CoT schema, its course and speed
+    import zipfile
+    from pathlib import Path
+
+    import xmlschema
+
+    schema = xmlschema.XMLSchema(str(Path(__file__).parent / "data" / "conformance" / "cot_event_2_0.xsd"))
+    with zipfile.ZipFile(out / "movers.cot.zip") as z:
+        events = [z.read(n) for n in z.namelist() if n.endswith(".cot")]
+    assert len(events) == 3
+    import xml.etree.ElementTree as ET
+
+    for ev in events:
+        schema.validate(ev)
+        e = ET.fromstring(ev)
+        assert e.get("uid").startswith("eoloc-mover-")
+        t = datetime.fromisoformat(e.get("time").replace("Z", "+00:00")).timestamp() - \
+            datetime(2026, 7, 14, 16, 0, 0, tzinfo=UTC).timestamp()  # the KLV's clock
+        tr, pt = e.find("detail/track"), e.find("point")
+        best = min(CARS, key=lambda c: np.hypot(*pymap3d.geodetic2enu(float(pt.get("lat")), float(pt.get("lon")),
+                                                                     ms.ORIGIN[2], *ms.truth_geodetic(c, t),
+                                                                     ms.ORIGIN[2])[:2]))
+        assert float(tr.get("speed")) == pytest.approx(best.speed_mps, rel=0.03)
+        assert abs((float(tr.get("course")) - best.heading_deg + 180) % 360 - 180) < 3
+        assert float(pt.get("ce")) == 9999999  # no error budget: unknown, not a guess
     # through H.264 and KLV the same movers, located as well (KLV quantises the angles to ~1e-7 deg)
     from types import SimpleNamespace
 

@@ -55,6 +55,8 @@ Written into --out:
   detections.csv, .geojson with --detect motion: every detection of a mover (frame, time_s,
                            track_id, u_px, v_px, box, ground area, point, sigma, speed, heading)
   movers.geojson           with --detect motion: one LineString per mover (its Kalman track)
+  movers.cot.zip           with --detect motion: a TAK data package, each mover where it was last seen
+                           (course and speed in <track>; ce/le unknown: the fixes carry no error budget)
   frames.csv, footprints.geojson, video.json
 All frames share one grid (--crs, cell --gsd: default the first frame's native GSD, rounded).
 
@@ -174,6 +176,13 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         written += write_layer(out, "detections", job.movers.rows, ["csv", "geojson"])
         feats = track_features(job.movers.track_set())
         written += write_layer(out, "movers", [f["properties"] for f in feats], ["geojson"], features=feats)
+        if job.movers.rows:  # TAK: one marker per mover where it was last seen, with its course and speed
+            from ..io.cot import write_cot
+
+            last = {r["track_id"]: r for r in job.movers.rows}
+            rows = [{k: v for k, v in r.items() if k != "frame"} | {"target_id": f"mover-{n}"}
+                    for n, r in last.items()]
+            written.append(write_cot(out / "movers.cot.zip", rows, name="eoloc movers")[0])
     if job.footprints:
         written += write_layer(out, "footprints", [f["properties"] for f in job.footprints], ["geojson"],
                                features=job.footprints)

@@ -124,6 +124,9 @@ def cot_event_bytes(row: dict, *, uid_prefix: str = "eoloc", cot_type: str = "a-
     uid = f"{uid_prefix}-{tid}" if which is None else f"{uid_prefix}-{tid}-{which}"
     ce, le = ce_le(row)
     detail = element_xml("contact", callsign=str(tid)) + element_xml("remarks", fix_remarks(row, tid))
+    course, speed = _num(row, "heading_deg"), _num(row, "speed_mps")
+    if math.isfinite(course) and math.isfinite(speed):  # a mover's course (deg from true north) and speed (m/s)
+        detail += element_xml("track", course=f"{course:.1f}", speed=f"{speed:.2f}")
     return event_xml(uid=str(uid), cot_type=cot_type, how="m-i", time=t, stale=t + timedelta(seconds=stale_s),
                      lat=float(row["lat_deg"]), lon=float(row["lon_deg"]), hae=float(row["h_m"]), ce=ce, le=le,
                      detail=detail)

@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
@@ -365,9 +366,14 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         from ..rules import surface_rule
         from .detect import detect_movers
 
-        frames = posed_frames(video, times, poses, meta, base_sensor, max_gap_s, decode_errors)
+        unix: dict[int, float] = {}
+        frames = posed_frames(video, times, poses, meta, base_sensor, max_gap_s, decode_errors, unix)
         job.movers = detect_movers(frames, surface_rule(surface), detect, movers, total=int(times.size),
                                    progress=detect_progress)
+        for r in job.movers.rows:  # the metadata's own clock (ST 0601 tag 2), where it has one
+            u = unix.get(r["frame"], math.nan)
+            r["time_utc"] = (datetime.fromtimestamp(u, UTC).isoformat(timespec="milliseconds")
+                             if math.isfinite(u) else None)
     if page_data is not None:
         from ..io.player import write_player
         from ..io.videofile import browser_video
@@ -388,9 +394,10 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
 
 
 def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, base_sensor: SensorModel | None,
-                 max_gap_s: float, errors: list[str]):
+                 max_gap_s: float, errors: list[str], unix: dict[int, float] | None = None):
     """Every frame of ``video`` that has a pose: (index, seconds since the first frame, image,
-    sensor, pose), in order (the input of :func:`eoloc.jobs.detect.detect_movers`)."""
+    sensor, pose), in order (the input of :func:`eoloc.jobs.detect.detect_movers`); ``unix``
+    gets each frame's UNIX time from its metadata (NaN where it has none)."""
     t0 = float(times[0])
     by_pts = {round(float(t) * 90_000): i for i, t in enumerate(times)}
     sensors: dict[tuple, SensorModel | None] = {}
@@ -407,6 +414,8 @@ def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, ba
                 sensors[key] = misb_frame_sensor(*key)
             sensor = sensors[key]
         if ok and sensor is not None:
+            if unix is not None:
+                unix[fr.index] = vals.get("unix_s", math.nan)
             yield fr.index, fr.pts_s - t0, fr.image, sensor, pose
 
 
