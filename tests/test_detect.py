@@ -204,7 +204,8 @@ def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
     assert bad.returncode == 2 and "--detect needs the ground" in bad.stderr and "Traceback" not in bad.stderr
     out = tmp_path / "out"
     run = subprocess.run([*eoloc, "--target-height", str(ms.ORIGIN[2]), "--detect", "motion", "--no-frames",
-                          "--no-mosaic", "--no-player", "--out", str(out)], capture_output=True, text=True)
+                          "--no-mosaic", "--no-player", "--klv-out", str(out / "movers.ts"), "--out", str(out)],
+                         capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     rows = list(csv.DictReader((out / "detections.csv").open()))
     for col in ("frame", "time_s", "track_id", "u_px", "v_px", "bbox_u0", "bbox_v0", "bbox_u1", "bbox_v1",
@@ -239,6 +240,36 @@ def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
         assert float(tr.get("speed")) == pytest.approx(best.speed_mps, rel=0.03)
         assert abs((float(tr.get("course")) - best.heading_deg + 180) % 360 - 180) < 3
         assert float(pt.get("ce")) == 9999999  # no error budget: unknown, not a guess
+    # --klv-out: the movers as ST 0903 VMTI in a KLV stream of its own, read back by PyAV (the
+    # transport stream) and stanag4609 (ST 0601 and ST 0903), neither of them eoloc
+    import av
+    from stanag4609.st0601 import decode_uas_local_set
+
+    with av.open(str(out / "movers.ts")) as c:
+        assert len(c.streams.data) == 2 and len(c.streams.video) == 1  # the flight's KLV kept, the movers'
+        mine = [decode_uas_local_set(bytes(p)) for p in c.demux(c.streams.data) if p.size]
+    mine = [p for p in mine if p.get(74) is not None]
+    by_time = {}
+    for r in rows:
+        by_time.setdefault(r["time_utc"], []).append(r)
+    assert len(mine) == len(by_time)  # one packet per frame with movers
+    for p in mine:
+        when = p.get(2).value
+        want = by_time[when.isoformat(timespec="milliseconds")]
+        got = {t.target_id: t for t in p.get(74).value.targets}
+        assert sorted(got) == sorted(int(r["track_id"]) for r in want)
+        for r in want:
+            t = {f.name: f.value for f in got[int(r["track_id"])].fields}
+            assert t["centroidPixRow"] == round(float(r["v_px"])) + 1
+            assert t["centroidPixCol"] == round(float(r["u_px"])) + 1
+            loc = t["targetLocation"]
+            # ST 0903's IMAPB(-90, 90) and (-180, 180) in 4 bytes: one LSB is 2^-23 and 2^-22 deg
+            assert loc.latitude == pytest.approx(float(r["lat_deg"]), abs=2**-23)
+            assert loc.longitude == pytest.approx(float(r["lon_deg"]), abs=2**-22)
+            assert loc.hae == pytest.approx(float(r["h_m"]), abs=0.5)
+            box0, box1 = t["boundingBoxTopLeft"], t["boundingBoxBottomRight"]
+            assert box0 == int(r["bbox_v0"]) * ms.W + int(r["bbox_u0"]) + 1
+            assert box1 == int(r["bbox_v1"]) * ms.W + int(r["bbox_u1"]) + 1
     # through H.264 and KLV the same movers, located as well (KLV quantises the angles to ~1e-7 deg)
     from types import SimpleNamespace
 

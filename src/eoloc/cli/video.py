@@ -57,6 +57,9 @@ Written into --out:
   movers.geojson           with --detect motion: one LineString per mover (its Kalman track)
   movers.cot.zip           with --detect motion: a TAK data package, each mover where it was last seen
                            (course and speed in <track>; ce/le unknown: the fixes carry no error budget)
+  --klv-out OUT.ts         with --detect motion: the video again (MPEG-TS, its metadata kept), with the
+                           movers as ST 0903 VMTI (id, centroid, box, location) in a KLV stream of its own,
+                           one packet at each frame's PTS where movers were found
   frames.csv, footprints.geojson, video.json
 All frames share one grid (--crs, cell --gsd: default the first frame's native GSD, rounded).
 
@@ -112,12 +115,15 @@ DEM (parallax), moving shadows, water.
               help="--detect: largest target, square metres on the ground.")
 @click.option("--min-speed", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
               help="--detect: slowest mover kept, m/s over the ground.")
+@click.option("--klv-out", "klv_out", type=click.Path(dir_okay=False), default=None, metavar="OUT.ts",
+              help="--detect: the video written again as MPEG-TS, its metadata kept, with the movers as ST 0903 "
+                   "VMTI in a KLV stream of its own (ids, centroid, box, location).")
 @out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
 @flight_log_option
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
-          mosaic, tiles, player, detect, detect_window, detect_threshold, min_area, max_area, min_speed, out_dir,
-          flight_log) -> None:
+          mosaic, tiles, player, detect, detect_window, detect_threshold, min_area, max_area, min_speed, klv_out,
+          out_dir, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
@@ -132,6 +138,8 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
     if detect and not (dem_paths or target_height is not None):
         raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
+    if klv_out and not detect:
+        raise click.UsageError("--klv-out writes the movers --detect finds: add --detect motion")
     if min_area >= max_area:
         raise click.UsageError(f"--min-area {min_area:g} must be below --max-area {max_area:g}")
     motion = movers = None
@@ -183,6 +191,15 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
             rows = [{k: v for k, v in r.items() if k != "frame"} | {"target_id": f"mover-{n}"}
                     for n, r in last.items()]
             written.append(write_cot(out / "movers.cot.zip", rows, name="eoloc movers")[0])
+        if klv_out:
+            from ..io.videofile import frame_times
+            from ..jobs.moversklv import write_movers_klv
+
+            if job.movers.rows:
+                written.append(write_movers_klv(video, klv_out, job.movers.rows, frame_times(video),
+                                                job.info.width, job.info.height))
+            else:
+                warn(f"no mover was found: {klv_out} not written")
     if job.footprints:
         written += write_layer(out, "footprints", [f["properties"] for f in job.footprints], ["geojson"],
                                features=job.footprints)

@@ -55,11 +55,13 @@ def frame_uas_packet(body: bytes, *, length_bytes: int = 0) -> bytes:
 
 def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height: int, *,
                 hfov_deg: float | None = None, vfov_deg: float | None = None,
-                boxes: dict[int, tuple[float, float, float, float]] | None = None) -> bytes:
+                boxes: dict[int, tuple[float, float, float, float]] | None = None,
+                locations: dict[int, tuple[float, float, float]] | None = None) -> bytes:
     """An ST 0903 VMTI local set (for ST 0601 tag 74) with one VTarget per (id, u_px, v_px)
     (eoloc pixel convention; written as 1-based centroid pixel number and row/column); ``boxes``:
-    a bounding box (u0, v0, u1, v1) per target id (tags 2 and 3, clipped to the frame)."""
-    from stanag4609.st0903 import VTargetData, encode_vmti_local_set
+    a bounding box (u0, v0, u1, v1) per target id (tags 2 and 3, clipped to the frame);
+    ``locations``: the target's (lat deg, lon deg, HAE m) per id (tag 17, the Location pack)."""
+    from stanag4609.st0903 import Location, VTargetData, encode_vmti_local_set
 
     def number(u: float, v: float) -> int:
         col, row = min(max(round(u), 0), width - 1) + 1, min(max(round(v), 0), height - 1) + 1
@@ -74,6 +76,9 @@ def encode_vmti(targets: Iterable[tuple[int, float, float]], width: int, height:
         if boxes and tid in boxes:
             u0, v0, u1, v1 = boxes[tid]
             items |= {2: number(u0, v0), 3: number(u1, v1)}
+        if locations and tid in locations:
+            lat, lon, hae = locations[tid]
+            items[17] = Location(float(lat), float(lon), float(hae))
         packs.append(VTargetData(int(tid), items))
     values: dict[int, Any] = {4: 5, 8: int(width), 9: int(height)}
     if hfov_deg is not None:
