@@ -283,3 +283,78 @@ def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
         assert s["vehicles"][k]["recall"] >= 0.95
         assert np.median(s["vehicles"][k]["err"]) < 0.6
         assert np.median(s["vehicles"][k]["speed"]) == pytest.approx(c.speed_mps, rel=0.03)
+
+
+def yellow_model(path, width: int = 640, height: int = 384) -> None:
+    """A tiny YOLOv8-style detector, built here with onnx's helpers (nothing downloaded): per 4 x 4
+    cell the yellowest pixel (R + G - 2B, a 1 x 1 convolution then max pooling) squashed into a
+    score; every cell proposes a 24 x 24 box on its centre. Output (1, 4 + 1, N), class 'vehicle'
+    in the metadata as Ultralytics writes it."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    gw, gh = width // 4, height // 4
+    cx, cy = np.meshgrid((np.arange(gw) + 0.5) * 4, (np.arange(gh) + 0.5) * 4)
+    boxes = np.stack([cx.ravel(), cy.ravel(), np.full(gw * gh, 24.0), np.full(gw * gh, 24.0)])[None]
+    inits = [numpy_helper.from_array(np.array([1.0, 1.0, -2.0], np.float32).reshape(1, 3, 1, 1), "w"),
+             numpy_helper.from_array(np.array([1.2], np.float32), "t"),
+             numpy_helper.from_array(np.array([20.0], np.float32), "k"),
+             numpy_helper.from_array(np.array([1, 1, gw * gh], np.int64), "shape"),
+             numpy_helper.from_array(boxes.astype(np.float32), "boxes")]
+    nodes = [helper.make_node("Conv", ["images", "w"], ["yellow"]),
+             helper.make_node("MaxPool", ["yellow"], ["cell"], kernel_shape=[4, 4], strides=[4, 4]),
+             helper.make_node("Sub", ["cell", "t"], ["d"]), helper.make_node("Mul", ["d", "k"], ["z"]),
+             helper.make_node("Sigmoid", ["z"], ["s"]), helper.make_node("Reshape", ["s", "shape"], ["score"]),
+             helper.make_node("Concat", ["boxes", "score"], ["output0"], axis=1)]
+    graph = helper.make_graph(nodes, "yellow", [helper.make_tensor_value_info("images", TensorProto.FLOAT,
+                                                                               [1, 3, height, width])],
+                              [helper.make_tensor_value_info("output0", TensorProto.FLOAT, [1, 5, gw * gh])], inits)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    helper.set_model_props(model, {"names": "{0: 'vehicle'}"})
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+
+
+def test_a_learned_detector_finds_what_stands_still_too(texture, tmp_path):
+    """The ONNX path: the model's boxes (letterboxed 640 x 360 -> 640 x 384: 12 rows of padding
+    above) located and tracked like the movers; a parked vehicle, which the motion detector cannot
+    see, is found and has no speed."""
+    from eoloc.detect.learned import LearnedDetector
+
+    model = tmp_path / "yellow.onnx"
+    yellow_model(model)
+    parked = ms.Vehicle(20, 60, 30, 0.0)
+    cars = [*CARS, parked]
+    imgs = [ms.render(texture, cars, i / ms.FPS) for i in range(40)]
+    fr = frames(imgs)
+    found = detect_movers(fr, RULE, learned=LearnedDetector(model, RULE, point="centre"))
+    s = score(found, n_frames=40, cars=cars)
+    assert s["false"] == 0
+    for k, c in enumerate(cars):
+        v = s["vehicles"][k]
+        assert v["recall"] >= 0.9, (k, v["recall"])
+        assert np.median(v["err"]) < 4.0  # the model's box sits on a 4-px cell (~5 m on the ground here)
+        assert np.median(v["speed"]) == pytest.approx(c.speed_mps, abs=0.8)
+    assert {r["class"] for r in found.rows} == {"vehicle"} and all(0.35 <= r["score"] <= 1 for r in found.rows)
+    moving = score(detect_movers(fr, RULE), n_frames=40, cars=cars)
+    assert moving["vehicles"][len(CARS)]["found"] == set()  # standing still: not a mover
+    # the bottom-centre point (upright objects) lies 12 px (half the box) below the centre
+    low = detect_movers(fr[:5], RULE, learned=LearnedDetector(model, RULE), movers=MoverSettings(min_track_s=0.1,
+                                                                                                  confirm_hits=1))
+    high = detect_movers(fr[:5], RULE, learned=LearnedDetector(model, RULE, point="centre"),
+                         movers=MoverSettings(min_track_s=0.1, confirm_hits=1))
+    dv = [a["v_px"] - b["v_px"] for a, b in zip(low.rows, high.rows, strict=True)]
+    assert dv and np.allclose(dv, 12.0, atol=0.01)
+
+
+def test_a_model_that_is_not_one_is_refused_by_name(tmp_path):
+    from eoloc.detect.learned import LearnedDetector
+    from eoloc.errors import InputError
+
+    bad = tmp_path / "not_a_model.onnx"
+    bad.write_bytes(b"\x08\x01garbage")
+    with pytest.raises(InputError, match=r"not_a_model\.onnx: not an ONNX model"):
+        LearnedDetector(bad, RULE)
+    with pytest.raises(InputError, match="no such model file"):
+        LearnedDetector(tmp_path / "missing.onnx", RULE)

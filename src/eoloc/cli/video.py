@@ -73,6 +73,13 @@ centroid is located and tracked on the ground (Kalman). A track is a mover when 
 moves at least --min-speed m/s. Not seen: targets standing still, or moving less than half their
 length in --detect-window (slowest: length / (2 x window)). False alarms: tall things not in the
 DEM (parallax), moving shadows, water.
+
+\b
+A learned detector (--detect MODEL.onnx): your ONNX object detector (YOLOv5/v7/v8/v11 outputs,
+class names from its metadata) run by onnxruntime on every frame (letterboxed to its input);
+boxes scoring --detect-score or more (--detect-classes: only those), overlaps reduced (NMS); each
+box's --detect-point located and tracked the same way, standing targets kept (--min-speed 0).
+Nothing is downloaded. detections.csv adds the class and score.
 """
 
 
@@ -103,8 +110,16 @@ DEM (parallax), moving shadows, water.
 @click.option("--tiles/--no-tiles", default=True, show_default=True, help="Cut the mosaic into XYZ tiles.")
 @click.option("--player/--no-player", default=True, show_default=True,
               help="Write player.html: the video beside the map (the video remuxed or transcoded to MP4).")
-@click.option("--detect", type=click.Choice(["motion"]), default=None,
-              help="Find the targets in the frames: 'motion' = what moves on the ground (see above).")
+@click.option("--detect", default=None, metavar="motion|MODEL.onnx",
+              help="Find the targets in the frames: 'motion' = what moves on the ground, or the boxes of an ONNX "
+                   "object detector (YOLO outputs) you give (see above).")
+@click.option("--detect-score", type=click.FloatRange(0.0, 1.0), default=0.35, show_default=True,
+              help="--detect MODEL.onnx: the least score of a box kept.")
+@click.option("--detect-classes", default=None, metavar="NAME,NAME",
+              help="--detect MODEL.onnx: keep only these classes (the model's names).")
+@click.option("--detect-point", type=click.Choice(["bottom", "centre"]), default="bottom", show_default=True,
+              help="--detect MODEL.onnx: a box's point on the ground: its bottom centre (upright objects) or centre "
+                   "(objects lying flat).")
 @click.option("--detect-window", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
               help="--detect: seconds before and after a frame to compare it with.")
 @click.option("--detect-threshold", type=click.FloatRange(1.0, 255.0), default=40.0, show_default=True,
@@ -113,8 +128,8 @@ DEM (parallax), moving shadows, water.
               help="--detect: smallest target, square metres on the ground.")
 @click.option("--max-area", type=click.FloatRange(0.0, min_open=True), default=5000.0, show_default=True,
               help="--detect: largest target, square metres on the ground.")
-@click.option("--min-speed", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
-              help="--detect: slowest mover kept, m/s over the ground.")
+@click.option("--min-speed", type=click.FloatRange(0.0), default=None,
+              help="--detect: slowest target kept, m/s over the ground [default: 2 for motion, 0 for a model].")
 @click.option("--klv-out", "klv_out", type=click.Path(dir_okay=False), default=None, metavar="OUT.ts",
               help="--detect: the video written again as MPEG-TS, its metadata kept, with the movers as ST 0903 "
                    "VMTI in a KLV stream of its own (ids, centroid, box, location).")
@@ -122,8 +137,8 @@ DEM (parallax), moving shadows, water.
 @flight_log_option
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
-          mosaic, tiles, player, detect, detect_window, detect_threshold, min_area, max_area, min_speed, klv_out,
-          out_dir, flight_log) -> None:
+          mosaic, tiles, player, detect, detect_score, detect_classes, detect_point, detect_window, detect_threshold,
+          min_area, max_area, min_speed, klv_out, out_dir, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
@@ -139,18 +154,29 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if detect and not (dem_paths or target_height is not None):
         raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
     if klv_out and not detect:
-        raise click.UsageError("--klv-out writes the movers --detect finds: add --detect motion")
+        raise click.UsageError("--klv-out writes the targets --detect finds: add --detect motion (or MODEL.onnx)")
     if min_area >= max_area:
         raise click.UsageError(f"--min-area {min_area:g} must be below --max-area {max_area:g}")
-    motion = movers = None
+    if detect and detect != "motion" and not detect.lower().endswith(".onnx"):
+        raise click.UsageError(f"--detect {detect!r}: 'motion', or an ONNX model file (MODEL.onnx)")
+    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    finder = movers = None
     if detect:
-        from ..detect.motion import MotionSettings
         from ..detect.movers import MoverSettings
 
-        motion = MotionSettings(window_s=detect_window, threshold=detect_threshold, min_area_m2=min_area,
-                                max_area_m2=max_area)
-        movers = MoverSettings(min_speed_mps=min_speed)
-    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+        if detect == "motion":
+            from ..detect.motion import MotionSettings
+
+            finder = MotionSettings(window_s=detect_window, threshold=detect_threshold, min_area_m2=min_area,
+                                    max_area_m2=max_area)
+        else:
+            from ..detect.learned import LearnedDetector
+            from ..rules import surface_rule
+
+            classes = {c.strip() for c in detect_classes.split(",") if c.strip()} if detect_classes else None
+            finder = LearnedDetector(detect, surface_rule(dem if dem is not None else target_height),
+                                     score=detect_score, classes=classes, point=detect_point)
+        movers = MoverSettings(min_speed_mps=(2.0 if detect == "motion" else 0.0) if min_speed is None else min_speed)
     dem_name = Path(dem_paths[0]).stem if dem_paths else "dem"
     serve_line = serve_command(Path(out_dir), dem_name, dem_paths, vertical, geoid, dem_crs, config_path)
     surface = dem if dem is not None else target_height
@@ -159,7 +185,7 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     select = FrameSelection(every, start_s, math.inf if end_s is None else end_s)
     with progress() as bar:
         task = bar.add_task("rectifying frames", total=None)
-        searching = bar.add_task("finding movers", total=None, visible=False)
+        searching = bar.add_task("finding targets", total=None, visible=False)
 
         def searched(done: int, total: int) -> None:
             bar.update(searching, completed=done, total=total, visible=True)
@@ -168,7 +194,7 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
                         gsd_m=gsd, resampling=resampling, nodata=nodata, occlusion=occlusion, select=select,
                         klv_stream=klv_stream, time_offset_s=time_offset, max_gap_s=max_gap,
                         write_frames=write_frames, mosaic=mosaic, tiles=tiles, player=player,
-                        dem_name=dem_name, serve_command=serve_line, detect=motion, movers=movers,
+                        dem_name=dem_name, serve_command=serve_line, detect=finder, movers=movers,
                         progress=lambda done, total: bar.update(task, completed=done, total=total),
                         detect_progress=searched)
     report_issues(job.issues)

@@ -105,7 +105,8 @@ class Blobs:
     (``side``: 0 before and after, -1 only before, +1 only after), and whether it touches the
     image's edge (``at_edge``: cut by it, its centroid is not the target's). ``shifts_px``: per
     reference, the shift (du, dv, working pixels) the poses left and the images measured (NaN:
-    none measured); ``compared``: the fraction of the frame's pixels compared on both sides."""
+    none measured); ``compared``: the fraction of the frame's pixels compared on both sides.
+    From a learned detector: ``label`` (class names) and ``score`` per box."""
 
     index: int
     time_s: float
@@ -119,6 +120,8 @@ class Blobs:
     at_edge: np.ndarray
     shifts_px: np.ndarray
     compared: float
+    label: np.ndarray | None = None
+    score: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.u_px.size)

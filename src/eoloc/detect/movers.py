@@ -51,7 +51,9 @@ class MoverSettings:
     max_coast_s: float = 1.5
 
     def __post_init__(self) -> None:
-        for name in ("min_speed_mps", "min_track_s", "meas_sigma_m", "accel_psd", "max_coast_s"):
+        if not self.min_speed_mps >= 0:
+            raise ValueError(f"MoverSettings.min_speed_mps must be >= 0, got {self.min_speed_mps!r}")
+        for name in ("min_track_s", "meas_sigma_m", "accel_psd", "max_coast_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"MoverSettings.{name} must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.min_hit_ratio <= 1:
@@ -128,6 +130,8 @@ class MoverTracker:
                    "area_m2": round(float(blobs.area_m2[j]), 1), "contrast": round(float(blobs.contrast[j]), 1),
                    "compared": SIDES[int(blobs.side[j])],
                    "at_edge": bool(blobs.at_edge[j]),
+                   **({} if blobs.label is None else {"class": str(blobs.label[j]),
+                                                       "score": round(float(blobs.score[j]), 3)}),
                    "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
                    "sigma_m": round(math.sqrt(sig2[j]), 2), "status": Status(int(f.status[j])).name}
             self.by_track.setdefault(key, []).append(len(self.rows))

@@ -1,5 +1,5 @@
-"""Moving targets found in a video's frames (:mod:`eoloc.detect`): the frames with their poses
-through the motion detector, its blobs located and tracked on the ground."""
+"""Targets found in a video's frames (:mod:`eoloc.detect`): the frames with their poses through
+the motion detector or a learned one, the blobs or boxes located and tracked on the ground."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
+from ..detect.learned import LearnedDetector
 from ..detect.motion import MotionDetector, MotionSettings
 from ..detect.movers import Movers, MoverSettings, MoverTracker
 from ..rules import StopRule
@@ -16,12 +17,22 @@ PosedFrame = tuple[int, float, np.ndarray, SensorModel, Pose]
 
 
 def detect_movers(frames: Iterable[PosedFrame], rule: StopRule, motion: MotionSettings | None = None,
-                  movers: MoverSettings | None = None, *, total: int | None = None,
-                  progress: Callable[[int, int], None] | None = None) -> Movers:
-    """Frames (index, time s, image uint8, sensor, pose) in time order -> the movers. A frame
-    without a pose is left out of ``frames`` (it is neither searched nor a reference)."""
+                  movers: MoverSettings | None = None, *, learned: LearnedDetector | None = None,
+                  total: int | None = None, progress: Callable[[int, int], None] | None = None) -> Movers:
+    """Frames (index, time s, image uint8, sensor, pose) in time order -> the movers found by
+    motion (``motion``'s settings) or the boxes of a ``learned`` detector, tracked. A frame
+    without a pose is left out of ``frames`` (it is neither searched nor a reference). Without
+    ``movers``: the defaults, standing targets kept for a learned detector (min_speed_mps 0)."""
+    if movers is None:
+        movers = MoverSettings(min_speed_mps=0.0) if learned is not None else MoverSettings()
+    tracker = MoverTracker(rule, movers)
+    if learned is not None:
+        for done, (index, t, image, sensor, pose) in enumerate(frames, start=1):
+            tracker.add(learned.detect(index, t, image, sensor, pose), sensor, pose)
+            if progress is not None:
+                progress(done, total or done)
+        return tracker.result()
     detector = MotionDetector(rule, motion)
-    tracker = MoverTracker(rule, movers or MoverSettings())
     posed: dict[int, tuple[SensorModel, Pose]] = {}
     done = 0
 

@@ -30,6 +30,7 @@ from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
 
 if TYPE_CHECKING:
+    from ..detect.learned import LearnedDetector
     from ..detect.motion import MotionSettings
     from ..detect.movers import Movers, MoverSettings
 from ..terrain import DEM
@@ -210,7 +211,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
               select: FrameSelection = FrameSelection(), klv_stream: str | None = None,
               time_offset_s: float | None = None, max_gap_s: float = 0.5, write_frames: bool = True,
               mosaic: bool = True, tiles: bool = True, player: bool = True, dem_name: str = "dem",
-              serve_command: str = "", strict: bool = False, detect: MotionSettings | None = None,
+              serve_command: str = "", strict: bool = False, detect: MotionSettings | LearnedDetector | None = None,
               movers: MoverSettings | None = None, progress: Callable[[int, int], None] | None = None,
               detect_progress: Callable[[int, int], None] | None = None) -> VideoJob:
     """Rectify the selected frames of ``video`` (see the module notes for the metadata) onto
@@ -219,8 +220,9 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles, and with
     ``player`` the player page (its clicks ask `eoloc serve` for the DEM named ``dem_name``;
     ``serve_command`` is what the page tells its user to run for that). The VMTI detections of
-    the KLV are located with their own packets' poses. ``detect``: find the movers in every
-    frame with a pose (:mod:`eoloc.detect`; needs a DEM or a height), tracked by ``movers``.
+    the KLV are located with their own packets' poses. ``detect``: find the targets in every
+    frame with a pose (:mod:`eoloc.detect`: what moves, with these motion settings, or the boxes of
+    a learned detector; needs a DEM or a height), tracked by ``movers``.
     ``progress(done, total)`` after each rectified frame, ``detect_progress`` after each frame
     searched."""
     from ..ground import rectify
@@ -368,8 +370,12 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
 
         unix: dict[int, float] = {}
         frames = posed_frames(video, times, poses, meta, base_sensor, max_gap_s, decode_errors, unix)
-        job.movers = detect_movers(frames, surface_rule(surface), detect, movers, total=int(times.size),
-                                   progress=detect_progress)
+        from ..detect.motion import MotionSettings
+
+        motion = detect if isinstance(detect, MotionSettings) else None
+        learned = None if motion is not None else detect
+        job.movers = detect_movers(frames, surface_rule(surface), motion, movers, learned=learned,
+                                   total=int(times.size), progress=detect_progress)
         for r in job.movers.rows:  # the metadata's own clock (ST 0601 tag 2), where it has one
             u = unix.get(r["frame"], math.nan)
             r["time_utc"] = (datetime.fromtimestamp(u, UTC).isoformat(timespec="milliseconds")
