@@ -367,7 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  all corners, in the frame's own pixels (GSD {np.median(gsd):.1f} m median, up to {gsd.max():.0f} m on "
           f"slopes seen edge-on): median {np.median(px):.2f}, p95 {np.percentile(px, 95):.2f} px")
     if vmti_m.size:
-        print(f"VMTI: {vmti_m.size} detections of the {len(cars.start)} vehicles located by eoloc with their packets' poses: "
+        print(f"VMTI: {vmti_m.size} detections of the {len(cars.start)} vehicles located by eoloc with their packets' "
+              "poses: "
               f"median {np.median(vmti_m):.1f} m, max {vmti_m.max():.1f} m from the vehicles' true centres (the "
               "encoder's centroids are whole pixels)")
     print(f"movers found by eoloc in the pixels (--detect motion): {movers['tracks']} tracks, "

@@ -53,7 +53,7 @@ Written into --out:
                            per-frame ground grids)
   vmti.csv, vmti.geojson   the VMTI targets (ST 0903 in the KLV), each located with its packet's pose
   detections.csv, .geojson with --detect motion: every detection of a mover (frame, time_s,
-                           track_id, u_px, v_px, box, ground area, point, sigma, speed, heading)
+                           track_id, u_px, v_px, box, ground area, point, speed and its sigma, heading)
   movers.geojson           with --detect motion: one LineString per mover (its Kalman track)
   movers.cot.zip           with --detect motion: a TAK data package, each mover where it was last seen
                            (course and speed in <track>; ce/le unknown: the fixes carry no error budget)

@@ -4,23 +4,22 @@ Each blob's reference pixel is located with its frame's pose by the job's stop r
 rays and kernels as every fix). The fixes go to constant-velocity Kalman tracks in local ENU
 (:class:`eoloc.sequence.track.Tracker`, gated global nearest neighbour on the ground: the
 camera's motion plays no part in the association). A fix's sigma per axis is the telemetry's
-frame-to-frame error (``meas_sigma_m``) and a quarter of the blob's size on the ground, together
+frame-to-frame error (``tracker.meas_sigma_m``) and a quarter of the blob's size on the ground, together
 (half of it for a blob found from one side only, at the ends of a target's time in view; a blob
 the image's edge cuts, whose centroid is not the target's, EDGE_SIGMA_M). The
 tracks of the movers are smoothed at the end (Rauch–Tung–Striebel: each position, speed and
 heading given all of the track's fixes).
 
-A track is a mover when it was updated at least ``confirm_hits`` times over at least
+A track is a mover when it was updated at least ``tracker.confirm_hits`` times over at least
 ``min_track_s`` seconds, in at least ``min_hit_ratio`` of the frames it spans (a target is seen
 in most frames; stray false blobs strung together are not), and its median smoothed speed is
-at least ``min_speed_mps``; a track that goes ``max_coast_s`` without a blob ends
+at least ``min_speed_mps``; a track that goes ``tracker.max_coast_s`` without a blob ends
 (shorter occlusions keep its id). Blobs of tracks that are not movers (parallax, noise) are
 dropped, and counted.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,30 +35,30 @@ EDGE_SIGMA_M = 30.0  # the position sigma of a blob the image's edge cuts
 SIDES = {0: "both", -1: "before", 1: "after"}  # which reference frames a detection differs from
 
 
+def mover_tracker_config() -> TrackerConfig:
+    """The tracker's settings for movers: frame-to-frame fix noise 3 m per axis, manoeuvring
+    vehicles (white acceleration 1 m^2/s^3), confirmed after 5 updates, ended after 1.5 s unseen."""
+    return TrackerConfig(accel_psd=1.0, meas_sigma_m=3.0, init_speed_sigma_mps=40.0, confirm_hits=5, max_coast_s=1.5)
+
+
 @dataclass(frozen=True)
 class MoverSettings:
-    """What makes a track a mover (see the module notes): min_speed_mps (m/s), min_track_s (s),
-    min_hit_ratio (its detections / the frames it spans), confirm_hits; the tracker's
-    meas_sigma_m (m per axis), accel_psd (m^2/s^3), max_coast_s (s)."""
+    """What makes a track a mover (see the module notes): min_speed_mps (m/s, 0 keeps standing
+    targets), min_track_s (s), min_hit_ratio (its detections / the frames it spans); ``tracker``:
+    the Kalman tracker's own settings (its meas_sigma_m is the fixes' frame-to-frame noise)."""
 
     min_speed_mps: float = 2.0
     min_track_s: float = 1.0
     min_hit_ratio: float = 0.5
-    confirm_hits: int = 5
-    meas_sigma_m: float = 3.0
-    accel_psd: float = 1.0
-    max_coast_s: float = 1.5
+    tracker: TrackerConfig = field(default_factory=mover_tracker_config)
 
     def __post_init__(self) -> None:
         if not self.min_speed_mps >= 0:
             raise ValueError(f"MoverSettings.min_speed_mps must be >= 0, got {self.min_speed_mps!r}")
-        for name in ("min_track_s", "meas_sigma_m", "accel_psd", "max_coast_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"MoverSettings.{name} must be > 0, got {getattr(self, name)!r}")
+        if not self.min_track_s > 0:
+            raise ValueError(f"MoverSettings.min_track_s must be > 0, got {self.min_track_s!r}")
         if not 0 < self.min_hit_ratio <= 1:
             raise ValueError(f"MoverSettings.min_hit_ratio must be in (0, 1], got {self.min_hit_ratio!r}")
-        if self.confirm_hits < 1:
-            raise ValueError("MoverSettings.confirm_hits must be >= 1")
 
 
 @dataclass
@@ -89,9 +88,7 @@ class MoverTracker:
 
     def __post_init__(self) -> None:
         s = self.settings
-        self.tracker = Tracker(TrackerConfig(accel_psd=s.accel_psd, meas_sigma_m=s.meas_sigma_m,
-                                             confirm_hits=s.confirm_hits, max_coast_s=s.max_coast_s,
-                                             init_speed_sigma_mps=40.0), associate=True)
+        self.tracker = Tracker(s.tracker, associate=True)
         self.origin: tuple[float, float, float] | None = None
         self.rows: list[dict] = []
         self.by_track: dict[str, list[int]] = {}
@@ -119,7 +116,7 @@ class MoverTracker:
         # (half of it for a blob found from one side only, at the ends of a target's time in view);
         # a blob the image's edge cuts tells where the target is to EDGE_SIGMA_M only
         share = np.where(blobs.side == 0, 1 / 16, 1 / 4)
-        sig2 = self.settings.meas_sigma_m**2 + np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
+        sig2 = self.settings.tracker.meas_sigma_m**2 + np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
         R = sig2[:, None, None] * np.eye(2)
         here = np.flatnonzero(ok)
         for key, j in self.tracker.frame(blobs.time_s, here, z, R, None):
@@ -133,7 +130,7 @@ class MoverTracker:
                    **({} if blobs.label is None else {"class": str(blobs.label[j]),
                                                        "score": round(float(blobs.score[j]), 3)}),
                    "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
-                   "sigma_m": round(math.sqrt(sig2[j]), 2), "status": Status(int(f.status[j])).name}
+                   "status": Status(int(f.status[j])).name}
             self.by_track.setdefault(key, []).append(len(self.rows))
             self.rows.append(row)
 
@@ -147,7 +144,7 @@ class MoverTracker:
             if not (tr.confirmed and t1 - t0 >= s.min_track_s - 1e-9 and len(tr.time_s) >= s.min_hit_ratio * spanned):
                 dropped += 1
                 continue
-            states, covs = smooth_track(tr, s.accel_psd)
+            states, covs = smooth_track(tr, s.tracker.accel_psd)
             if np.median(np.hypot(states[:, 2], states[:, 3])) < s.min_speed_mps:
                 dropped += 1
                 continue
