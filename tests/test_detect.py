@@ -365,3 +365,19 @@ def test_a_model_that_is_not_one_is_refused_by_name(tmp_path):
         LearnedDetector(bad, RULE)
     with pytest.raises(InputError, match="no such model file"):
         LearnedDetector(tmp_path / "missing.onnx", RULE)
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+def test_grey_and_16_bit_frames(images, depth):
+    """A thermal camera's frames: one channel, 8 or 16 bits (16-bit scaled once for the whole
+    video, no automatic gain): the vehicles are found as in colour."""
+    import cv2
+
+    grey = [cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) for img in images]
+    if depth == 16:
+        grey = [g.astype(np.uint16) * 64 + 1000 for g in grey]  # 14 bits of signal over an offset
+    fr = [(i, t, g, s, p) for (i, t, _, s, p), g in zip(frames(images), grey, strict=True)]
+    sc = score(detect_movers(fr, RULE))
+    assert sc["false"] == 0
+    for k in range(len(CARS)):
+        assert sc["vehicles"][k]["recall"] >= 0.9 and np.median(sc["vehicles"][k]["err"]) < 1.0

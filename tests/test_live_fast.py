@@ -51,18 +51,20 @@ def _same_numbers(a, b, what: str) -> None:
 
 
 def _same_look(a: dict | None, b: dict | None) -> None:
-    """Look angles equal; the azimuth as a direction (359.99999999999 is 0.00000000001) and to
-    within what rounding in the positions does to it: 1e-6 degrees, plus the angle a few ECEF
-    ulps (2e-9 m at the Earth's radius) make over the slant range (a ray 0.7 mm long turns by
-    1.6e-4 deg), over the cosine of the elevation (straight down, where the azimuth is any,
-    nothing is compared)."""
+    """Look angles equal to within what rounding in the positions does to them: 1e-6 degrees,
+    plus the angle ten ECEF ulps (1e-8 m at the Earth's radius: the two drivers round in different
+    places) make over the slant range (a hostile packet's aircraft 2 cm from its frame centre:
+    3e-5 deg); the azimuth as a direction (359.99999999999 is 0.00000000001), over the cosine of
+    the elevation (straight down, where the azimuth is any, nothing is compared)."""
     if a is None or b is None or a["azimuth_deg"] is None or b["azimuth_deg"] is None:
         _same_numbers(a, b, "look")
         return
+    rounding = 1e-6 + math.degrees(1e-8 / max(abs(b.get("range_m") or 0.0), 1e-300))
     gap = abs((a["azimuth_deg"] - b["azimuth_deg"] + 180.0) % 360.0 - 180.0)
-    rounding = 1e-6 + math.degrees(2e-9 / max(abs(b.get("range_m") or 0.0), 1e-300))
     assert gap <= rounding / max(math.cos(math.radians(b["elevation_deg"])), 1e-300), ("look.azimuth_deg", a, b)
-    _same_numbers({**a, "azimuth_deg": 0.0}, {**b, "azimuth_deg": 0.0}, "look")
+    assert abs(a["elevation_deg"] - b["elevation_deg"]) <= rounding, ("look.elevation_deg", a, b)
+    _same_numbers({**a, "azimuth_deg": 0.0, "elevation_deg": 0.0}, {**b, "azimuth_deg": 0.0, "elevation_deg": 0.0},
+                  "look")
 
 
 def _assert_drivers_agree(raw: bytes) -> int:

@@ -154,7 +154,7 @@ class MotionDetector:
         self.origin: tuple[float, float, float] | None = None
         self._cache: dict = {}
         self._pairs: dict[tuple[int, int], tuple[float, float]] = {}  # (frame, reference) -> residual
-        self._scale8: float | None = None
+        self._scale8: tuple[float, float] | None = None  # 16-bit frames: (offset, gain) to 8 bits
         self.scale: float | None = self.s.scale  # the working scale (chosen on the first frame when None)
 
     # -- the frames ---------------------------------------------------------------------------
@@ -168,10 +168,12 @@ class MotionDetector:
         if img.ndim not in (2, 3) or not np.issubdtype(img.dtype, np.integer):
             raise InputError(f"frame {index}: the motion detector takes integer images (H, W) or (H, W, C), got "
                              f"{img.dtype} {img.shape}")
-        if img.dtype != np.uint8:  # e.g. 16-bit thermal: one fixed scale for the whole video (no AGC)
-            if self._scale8 is None:
-                self._scale8 = 255.0 / max(float(np.percentile(img, 99.9)), 1.0)
-            img = np.clip(img * self._scale8, 0, 255).astype(np.uint8)
+        if img.dtype != np.uint8:  # e.g. 16-bit thermal: one fixed mapping for the whole video (no AGC):
+            if self._scale8 is None:  # the first frame's 0.1..99.9 % to 16..239, headroom for what comes
+                lo, hi = (float(x) for x in np.percentile(img, [0.1, 99.9]))
+                self._scale8 = (lo, 223.0 / max(hi - lo, 1.0))
+            lo, k = self._scale8
+            img = np.clip((img.astype(np.float32) - lo) * k + 16.0, 0, 255).astype(np.uint8)
         if self.scale is None:
             self.scale = self._choose_scale(sensor, pose, img.shape[1], img.shape[0])
         if self.scale < 1:
