@@ -378,8 +378,10 @@ def test_48_synthetic_srt_and_log_located_within_1cm(tmp_path):
 
 # -- drone video -> MISB ------------------------------------------------------------------------------
 
-def _drone_mp4(path, fps=10, seconds=3.0, size=(160, 96)):
-    """A small H.264 MP4 as a drone writes (avcC in an MP4 container), each frame showing its index."""
+def _drone_mp4(path, fps=10, seconds=3.0, size=(160, 96), bframes=0):
+    """A small H.264 MP4 as a drone writes (avcC in an MP4 container), each frame showing its index;
+    ``bframes``: B-frames between references, as real cameras write (the MPEG-TS a remux makes of it
+    then starts 0.2 s later: its decoder delay)."""
     import av
 
     from eoloc.io.klv.mux import index_frame
@@ -387,7 +389,7 @@ def _drone_mp4(path, fps=10, seconds=3.0, size=(160, 96)):
     with av.open(str(path), "w", format="mp4") as out:
         s = out.add_stream("libx264", rate=fps)
         s.width, s.height, s.pix_fmt = size[0], size[1], "yuv420p"
-        s.options = {"preset": "ultrafast"}
+        s.options = {"preset": "ultrafast", "x264-params": f"bframes={bframes}"}
         for i in range(int(fps * seconds)):
             frame = av.VideoFrame.from_ndarray(index_frame(i, size), format="gray").reformat(format="yuv420p")
             frame.pts = i
@@ -398,10 +400,12 @@ def _drone_mp4(path, fps=10, seconds=3.0, size=(160, 96)):
     return path
 
 
-@pytest.mark.parametrize("carriage", ["async", "sync"])
-def test_48_mux_drone_video_to_misb_read_back_frame_by_frame(tmp_path, carriage):
+@pytest.mark.parametrize(("carriage", "bframes"), [("async", 0), ("sync", 0), ("async", 2)])
+def test_48_mux_drone_video_to_misb_read_back_frame_by_frame(tmp_path, carriage, bframes):
     """`eoloc mux clip.mp4 --telemetry clip.SRT -o out.ts`: one packet per frame, its PTS the
-    frame's; each packet (decoded independently by `klvdata`) carries the SRT's values linearly
+    frame's (also when B-frames make the transport stream's times start 0.2 s after the MP4's:
+    session 49's mux paired those by the MP4's times and gave every frame the packet of the frame
+    two later); each packet (decoded independently by `klvdata`) carries the SRT's values linearly
     interpolated at the frame's time (a straight, steady flight: eoloc's ECEF spline and a line
     agree to far below the tags' resolution): latitude, longitude, MSL altitude (tag 15), the
     gimbal's yaw as heading, its pitch as relative elevation; `eoloc video out.ts --target-height`
@@ -411,7 +415,7 @@ def test_48_mux_drone_video_to_misb_read_back_frame_by_frame(tmp_path, carriage)
     from eoloc.io.klv import read_klv
     from eoloc.io.videofile import frame_times
 
-    video = _drone_mp4(tmp_path / "clip.mp4")
+    video = _drone_mp4(tmp_path / "clip.mp4", bframes=bframes)
     n = 4
     lat = 40.0 + 1e-4 * np.arange(n)
     lon = -105.0 + 2e-4 * np.arange(n)

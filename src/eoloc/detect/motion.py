@@ -472,8 +472,9 @@ class MotionDetector:
             py, px = ys[a:b], xs[a:b]
             area = b - a
             cu, cv_ = float(px.mean()), float(py.mean())
-            pm2 = float(_sample(cur.pixel_m2[..., None], np.array((cu + 0.5) / step + 0.5),
-                                np.array((cv_ + 0.5) / step + 0.5))[0])
+            at = (np.full((1, 1), (cu + 0.5) / step + 0.5, np.float32), np.full((1, 1), (cv_ + 0.5) / step + 0.5,
+                                                                                   np.float32))
+            pm2 = float(_remap_nan(cur.grid32, *at)[0, 0, 3])
             a_m2 = area * pm2
             if not (self.s.min_area_m2 <= a_m2 <= self.s.max_area_m2):
                 continue
@@ -553,12 +554,6 @@ def _dft_span(n: int) -> tuple[int, int]:
     return start, start + m
 
 
-def _luma(img: np.ndarray) -> np.ndarray:
-    if img.ndim == 3 and img.shape[2] == 3:
-        return (img[..., 0] * 0.299 + img[..., 1] * 0.587 + img[..., 2] * 0.114).astype(np.float32)
-    return img.reshape(img.shape[:2]).astype(np.float32)
-
-
 def _remap_nan(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear samples (cv2.remap) of ``grid`` (gh, gw, C) float32 at fractional (x col, y row)
     float32 maps; NaN outside, and wherever a NaN takes part."""
@@ -567,23 +562,3 @@ def _remap_nan(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     out = cv2.remap(grid, np.nan_to_num(x, nan=-1e6), np.nan_to_num(y, nan=-1e6), cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)
     return out.reshape((*x.shape, grid.shape[-1]))
-
-
-def _sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear samples of ``grid`` (gh, gw, C) at fractional (x col, y row); NaN outside."""
-    gh, gw = grid.shape[:2]
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        inside = (x >= 0) & (x <= gw - 1) & (y >= 0) & (y <= gh - 1)
-    xc = np.clip(np.nan_to_num(x), 0, gw - 1)
-    yc = np.clip(np.nan_to_num(y), 0, gh - 1)
-    x0 = np.minimum(np.floor(xc).astype(np.intp), gw - 2) if gw > 1 else np.zeros(xc.shape, np.intp)
-    y0 = np.minimum(np.floor(yc).astype(np.intp), gh - 2) if gh > 1 else np.zeros(yc.shape, np.intp)
-    fx = (xc - x0)[..., None]
-    fy = (yc - y0)[..., None]
-    x1 = np.minimum(x0 + 1, gw - 1)
-    y1 = np.minimum(y0 + 1, gh - 1)
-    out = (grid[y0, x0] * (1 - fx) * (1 - fy) + grid[y0, x1] * fx * (1 - fy) + grid[y1, x0] * (1 - fx) * fy
-           + grid[y1, x1] * fx * fy)
-    return np.where(inside[..., None], out, np.nan)

@@ -128,15 +128,24 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
         notes.append(f"{missing} of {times.size} frames lie outside the telemetry or in a gap of it (> {max_gap_s:g} "
                      "s): no packet for them")
 
-    def packet_for(n: int, pts_s: float) -> bytes | None:
-        """The packet of the frame shown at pts_s (frame_times are sorted)."""
-        j = int(np.clip(np.searchsorted(times, pts_s), 1, max(times.size - 1, 1)))
-        j = j - 1 if j > 0 and abs(times[j - 1] - pts_s) <= abs(times[j] - pts_s) else j
-        return by_frame.get(j) if abs(times[j] - pts_s) < 1e-3 else None
-
     import tempfile
 
     dest = Path(dest)
     with tempfile.TemporaryDirectory() as tmp:
-        add_klv(remux_video(video, Path(tmp) / "video.ts"), dest, packet_for, carriage=carriage)
+        ts = remux_video(video, Path(tmp) / "video.ts")
+        # the transport stream's own frame times: its muxer may start them later than the source's
+        # (an MP4 with B-frames: its first frame at 0.0 s, in the TS at 0.2 s); the frames are the
+        # same, in the same presentation order
+        ts_times = frame_times(ts)
+
+        def packet_for(n: int, pts_s: float) -> bytes | None:
+            """The packet of the frame shown at pts_s in the transport stream (its times sorted)."""
+            j = int(np.clip(np.searchsorted(ts_times, pts_s), 1, max(ts_times.size - 1, 1)))
+            j = j - 1 if j > 0 and abs(ts_times[j - 1] - pts_s) <= abs(ts_times[j] - pts_s) else j
+            return by_frame.get(j) if abs(ts_times[j] - pts_s) < 1e-3 else None
+
+        if ts_times.size != times.size:
+            raise InputError(f"{video}: its {times.size} frames came out of the remux as {ts_times.size}: "
+                             "cannot pair them with the telemetry")
+        add_klv(ts, dest, packet_for, carriage=carriage)
     return MuxJob(dest, int(times.size), len(by_frame), carriage, list(inputs.issues), notes)
