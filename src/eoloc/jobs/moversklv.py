@@ -25,15 +25,18 @@ def write_movers_klv(video: str | Path, dest: str | Path, rows: list[dict], fram
 
     import av
 
+    from ..io.klv.demux import PTS_HZ
     from ..io.klv.encode import encode_uas_packet, encode_vmti
 
+    if not rows:
+        raise InputError("no mover to write: --klv-out needs movers found by --detect")
     by_frame: dict[int, list[dict]] = {}
     for r in rows:
         by_frame.setdefault(int(r["frame"]), []).append(r)
-    frame_of = {round(float(t) * 90_000): i for i, t in enumerate(frame_pts_s)}
+    frame_of = {round(float(t) * PTS_HZ): i for i, t in enumerate(frame_pts_s)}
 
     def packet_for(pts_s: float) -> bytes | None:
-        i = frame_of.get(round(pts_s * 90_000))
+        i = frame_of.get(round(pts_s * PTS_HZ))
         here = by_frame.get(i, []) if i is not None else []
         if not here:
             return None
@@ -64,9 +67,7 @@ def write_movers_klv(video: str | Path, dest: str | Path, rows: list[dict], fram
                 if raw is not None:
                     mine = av.Packet(raw)
                     mine.stream = movers
-                    mine.pts = mine.dts = round(float(pts * vin.time_base) * 90_000)
-                    mine.time_base = Fraction(1, 90_000)
+                    mine.pts = mine.dts = round(float(pts * vin.time_base) * PTS_HZ)
+                    mine.time_base = Fraction(1, PTS_HZ)
                     out.mux(mine)
-    if not by_frame:
-        raise InputError("no mover to write: --klv-out needs movers found by --detect")
     return dest
