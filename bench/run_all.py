@@ -18,6 +18,7 @@ import bench_klv
 import bench_live
 import bench_locate
 import bench_ortho
+import bench_refine
 import bench_serve
 import bench_startup
 import bench_terrain
@@ -30,5 +31,6 @@ if __name__ == "__main__":
                  + bench_accuracy.main(1_000_000) + bench_compensation.main(1_000_000) + bench_ortho.main(2.25)
                  + bench_startup.main(15)
                  + bench_csv.main() + bench_klv.main(3000) + bench_evaluate.main(1_000_000)
-                 + bench_batch.main(12_000) + bench_live.main(1.0) + bench_serve.main(20.0) + bench_detect.main(60)):
+                 + bench_batch.main(12_000) + bench_live.main(1.0) + bench_serve.main(20.0) + bench_detect.main(60)
+                 + bench_refine.main(60.0)):
         print(line, flush=True)

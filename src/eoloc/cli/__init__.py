@@ -20,6 +20,7 @@ COMMANDS = (  # (module, command object name): registered in this order
     ("track", "track"),
     ("triangulate", "triangulate"),
     ("calibrate", "calibrate"),
+    ("refine", "refine"),
     ("join", "join"),
     ("klv", "klv"),
     ("batch", "batch"),

@@ -254,9 +254,15 @@ class SensorModel:
         p = _f64(p_ecef)
         if p.shape[-1:] != (3,):
             raise ValueError(f"p_ecef must have 3 components in its last axis, got shape {p.shape}")
-        frame = self.camera_frame(pose)
+        return self.frame_to_image(self.camera_frame(pose), p, pose.focal_scale)
+
+    def frame_to_image(self, frame: CameraFrame, p_ecef: ArrayLike,
+                       focal_scale: ArrayLike = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`ground_to_image` with the camera frames already made (e.g. once per video frame,
+        then :meth:`CameraFrame.take` per point): pixels (u, v), NaN behind the camera."""
+        p = _f64(p_ecef)
         xn, yn, _depth = run("project_point", frame.R, frame.ox, frame.oy, frame.oz, p[..., 0], p[..., 1], p[..., 2])
-        u, v = self.camera.normalized_to_pixel(xn, yn, focal_scale=pose.focal_scale)
+        u, v = self.camera.normalized_to_pixel(xn, yn, focal_scale=focal_scale)
         bad = np.broadcast_to(frame.invalid, u.shape)
         return np.where(bad, np.nan, u), np.where(bad, np.nan, v)
 

@@ -91,7 +91,10 @@ class Calibration:
         return float(np.sqrt(np.nanmean(r**2)))
 
 
-def _apply(sensor: SensorModel, names: tuple[str, ...], x: np.ndarray, heading0: float, time0: float):
+def apply_parameters(sensor: SensorModel, names: tuple[str, ...], x: np.ndarray, heading0: float,
+                     time0: float) -> tuple[SensorModel, float, float]:
+    """The sensor with the installation angles among ``names`` set to ``x``'s, and the heading bias
+    and time offset (``x``'s where named, else ``heading0`` / ``time0``)."""
     v = dict(zip(names, x, strict=True))
     mount = tuple(v.get(n, b) for n, b in zip(GROUPS["mount"], sensor.mount_misalignment_deg, strict=True))
     bore = tuple(v.get(n, b) for n, b in zip(GROUPS["boresight"], sensor.boresight_misalignment_deg, strict=True))
@@ -99,7 +102,10 @@ def _apply(sensor: SensorModel, names: tuple[str, ...], x: np.ndarray, heading0:
     return s, float(v.get("heading_bias_deg", heading0)), float(v.get("time_offset_s", time0))
 
 
-def _pose_for(pose: Pose | None, track: TelemetryTrack | None, time_s, heading_bias: float, offset: float) -> Pose:
+def pose_with_biases(pose: Pose | None, track: TelemetryTrack | None, time_s, heading_bias: float,
+                     offset: float) -> Pose:
+    """The poses at video times ``time_s`` (``track`` interpolated at time_s + offset, or ``pose``
+    as given) with the heading bias taken out of the yaw."""
     if track is not None:
         p = interpolate_poses(track.time_s, track.pose, time_s, time_offset_s=offset, max_gap_s=track.max_gap_s).pose
     else:
@@ -145,8 +151,8 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     tq = None if time_s is None else np.asarray(time_s, dtype=np.float64).ravel()
 
     def project(x):
-        s, hb, dt = _apply(sensor, names, x, heading_bias_deg, time_offset_s)
-        u, v = s.ground_to_image(_pose_for(pose, telemetry, tq, hb, dt), p_gcp)
+        s, hb, dt = apply_parameters(sensor, names, x, heading_bias_deg, time_offset_s)
+        u, v = s.ground_to_image(pose_with_biases(pose, telemetry, tq, hb, dt), p_gcp)
         return np.stack([np.broadcast_to(u, uv.shape[:1]), np.broadcast_to(v, uv.shape[:1])], -1)
 
     r0 = project(x0) - uv
@@ -181,7 +187,7 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     if undetermined:
         cov[weak, :] = np.inf
         cov[:, weak] = np.inf
-    s_cal, hb, dt = _apply(sensor, names, sol.x, heading_bias_deg, time_offset_s)
+    s_cal, hb, dt = apply_parameters(sensor, names, sol.x, heading_bias_deg, time_offset_s)
     r1 = project(sol.x) - uv
     warnings = []
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -206,8 +212,9 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
     for i in np.flatnonzero(used & (norm > 3.5)):
         warnings.append(f"observation {i}: residual {np.hypot(*r1[i]):.2f} px is an outlier (> 3.5 sigma); "
                         "check the GCP's identification")
-    err0 = _ground_error(sensor, _pose_for(pose, telemetry, tq, heading_bias_deg, time_offset_s), uv, llh, p_gcp)
-    err1 = _ground_error(s_cal, _pose_for(pose, telemetry, tq, hb, dt), uv, llh, p_gcp)
+    err0 = _ground_error(sensor, pose_with_biases(pose, telemetry, tq, heading_bias_deg, time_offset_s), uv, llh,
+                         p_gcp)
+    err1 = _ground_error(s_cal, pose_with_biases(pose, telemetry, tq, hb, dt), uv, llh, p_gcp)
     nan2 = np.where(used[:, None], 0.0, np.nan)
     return Calibration(names, sol.x, cov, s0, r0 + nan2, r1 + nan2, np.where(used, err0, np.nan),
                        np.where(used, err1, np.nan), used, s_cal, hb, dt, warnings, undetermined)

@@ -1,0 +1,230 @@
+"""The `eoloc refine` job: what the telemetry gets wrong (installation, heading bias, time offset)
+estimated from the video's own pixels (:mod:`eoloc.refine`) and written back as corrected
+telemetry and config.
+
+Keyframes every ``every_s`` seconds of the frames that have a pose; which of them overlap is
+predicted from the poses and the ground; tie points matched across them; the bundle adjustment
+with the DEM as a soft constraint. Written into ``out``: ``refine.json`` (the estimates with their
+sigma, correlations, what the geometry cannot determine, residuals, counts, timings),
+``telemetry_refined.csv`` (the records with the heading bias taken out of the yaw and the time
+offset out of time_s), ``config_refined.toml`` (the config with the installation estimated; its
+heading bias and time offset as they were, since the CSV now carries those corrections: use the
+two together), ``tiepoints.csv`` (every observation with its residuals before/after) and
+``residuals.png``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.export import json_safe
+from ..io.videofile import iter_frames, probe_video
+from ..refine.adjust import AdjustSettings, Refinement, adjust
+from ..refine.tiepoints import TiePoints, TieSettings, choose_pairs, find_tie_points, predicted_overlap
+from ..rules import OnDEM
+from ..sequence.calibration import GROUPS, TelemetryTrack, pose_with_biases
+from ..sequence.sync import poses_at_frames
+from ..terrain import DEM
+
+
+@dataclass
+class RefineJob:
+    """The refinement, its tie points, the keyframes' indices and times, the report (refine.json's
+    content), the files written and the input issues."""
+
+    refinement: Refinement
+    ties: TiePoints
+    keyframes: np.ndarray
+    report: dict
+    written: list[Path] = field(default_factory=list)
+    issues: list = field(default_factory=list)
+
+
+def keyframe_indices(times: np.ndarray, ok: np.ndarray, every_s: float) -> np.ndarray:
+    """Frames with a pose, at least ``every_s`` apart in time (the first such frame first)."""
+    chosen, last = [], -math.inf
+    for i in np.flatnonzero(ok):
+        if times[i] - last >= every_s - 1e-9:
+            chosen.append(int(i))
+            last = float(times[i])
+    return np.array(chosen, dtype=np.int64)
+
+
+def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | None = None, out: str | Path,
+                 every_s: float = 1.0, tie: TieSettings | None = None,
+                 settings: AdjustSettings | None = None, max_gap_s: float = 0.5,
+                 progress: Callable[[str], None] | None = None) -> RefineJob:
+    """Refine the telemetry of ``video`` (a telemetry file with ``cfg``, its camera) on ``dem``
+    (``tie``/``settings``: the tie points' and the adjustment's; default their defaults)."""
+    tie = tie if tie is not None else TieSettings()
+    settings = settings if settings is not None else AdjustSettings()
+    from ..io.videofile import frame_times
+    from .video import csv_metadata
+
+    if not isinstance(dem, DEM):
+        raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
+    if not every_s > 0:
+        raise InputError(f"--every-s must be > 0, got {every_s!r}")
+    say = progress or (lambda _msg: None)
+    clock: dict[str, float] = {}
+    t_start = time.perf_counter()
+    out = Path(out)
+    probe_video(video)
+    times = frame_times(video)
+    if times.size == 0:
+        raise InputError(f"{video}: the video stream has no frame with a presentation time")
+    meta, issues, sensor = csv_metadata(telemetry, cfg, float(times[0]), dem=dem)
+    poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
+    keys = keyframe_indices(times, np.asarray(poses.ok, dtype=bool), every_s)
+    if keys.size < 3:
+        raise InputError(f"{video}: {keys.size} frame(s) with a pose at least {every_s:g} s apart: refining needs "
+                         "three or more (a lower --every-s, or telemetry covering the video)", issues)
+    wanted = set(keys.tolist())
+    images: dict[int, np.ndarray] = {}
+    errors: list[str] = []
+    say(f"decoding {keys.size} keyframes")
+    for fr in iter_frames(video, want=lambda i, _t: i in wanted, errors=errors):
+        if fr.image is not None and fr.index in wanted:
+            images[fr.index] = fr.image
+    keys = np.array([k for k in keys if k in images], dtype=np.int64)
+    if keys.size < 3:
+        raise InputError(f"{video}: only {keys.size} keyframe(s) could be decoded", [*issues, *errors])
+    h, w = images[int(keys[0])].shape[:2]
+    if (w, h) != (sensor.camera.width, sensor.camera.height):
+        raise InputError(f"{video}: frames are {w} x {h} but the config's camera is {sensor.camera.width} x "
+                         f"{sensor.camera.height}: give the config of this video's camera")
+    clock["decode_s"] = time.perf_counter() - t_start
+    track = TelemetryTrack(meta.clock_s, meta.pose, max_gap_s)
+    key_t = times[keys]
+    rule = OnDEM(dem)
+    t = time.perf_counter()
+    start = pose_with_biases(None, track, key_t, 0.0, 0.0)
+    overlap = predicted_overlap([sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule, (w, h))
+    pairs = choose_pairs(overlap, tie)
+    say(f"matching {len(pairs)} frame pairs")
+    ties = find_tie_points([images[int(k)] for k in keys], pairs, tie)
+    clock["tie_points_s"] = time.perf_counter() - t
+    del images
+    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points")
+    t = time.perf_counter()
+    ref = adjust([sensor], np.zeros(keys.size, np.int64), track, key_t, ties, rule, dem, settings)
+    clock["adjust_s"] = time.perf_counter() - t
+    clock["total_s"] = time.perf_counter() - t_start
+    report = refine_report(ref, ties, keys, len(pairs), settings, clock)
+    job = RefineJob(ref, ties, keys, report, issues=[*issues, *errors])
+    job.written = write_refinement(job, out, telemetry, cfg, config_path, key_t)
+    return job
+
+
+def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: int, settings: AdjustSettings,
+                  clock: dict[str, float]) -> dict:
+    """refine.json's content (JSON-safe)."""
+    def rms(r):
+        return float(np.sqrt(np.nanmean(np.sum(r ** 2, -1)))) if np.isfinite(r).any() else math.nan
+
+    return json_safe({
+        "parameters": ref.as_dict(), "sigma": dict(zip(ref.names, ref.sigma.tolist(), strict=True)),
+        "prior_sigma": dict(zip(ref.names, ref.prior_sigma.tolist(), strict=True)),
+        "correlation": ref.correlation.tolist(), "undetermined": ref.undetermined, "s0": ref.s0,
+        "heading_bias_deg": ref.heading_bias_deg, "time_offset_s": ref.time_offset_s,
+        "estimated": list(settings.estimate), "pixel_sigma_px": settings.pixel_sigma_px,
+        "dem_sigma_m": settings.dem_sigma_m, "keyframes": int(keys.size), "pairs_matched": n_pairs,
+        "pairs_verified": len(ties.pairs), "tie_points": ref.n_tracks, "observations": ref.n_observations,
+        "outlier_tracks": len(ref.outlier_tracks), "rms_px_before": rms(ref.residual_px_before),
+        "rms_px_after": rms(ref.residual_px_after), "timing_s": clock, "warnings": ref.warnings})
+
+
+def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key_t: np.ndarray) -> list[Path]:
+    import json
+
+    from ..io.config import write_calibration
+    from ..io.writers import write_layer
+    from .inputs import job_inputs
+
+    out.mkdir(parents=True, exist_ok=True)
+    ref, ties = job.refinement, job.ties
+    written = []
+    js = out / "refine.json"
+    js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    written.append(js)
+    # the records as eoloc read them (the config's heading bias already out of the yaw), corrected
+    tel = job_inputs(cfg, telemetry).telemetry
+    c = tel.columns
+    hb0 = cfg.telemetry.heading_bias_deg if cfg is not None else 0.0
+    d_heading = ref.heading_bias_deg  # on top of the config's, which the reader took out
+    d_time = ref.time_offset_s
+    rows = []
+    for i in range(len(tel)):
+        rows.append({"time_s": float(c["time_s"][i]) - d_time, "lat_deg": float(c["lat_deg"][i]),
+                     "lon_deg": float(c["lon_deg"][i]), "h_m": float(c["h_m"][i]),
+                     "yaw_deg": (float(c["yaw_deg"][i]) + hb0 - d_heading) % 360.0,
+                     "pitch_deg": float(c["pitch_deg"][i]), "roll_deg": float(c["roll_deg"][i]),
+                     "gimbal1_deg": float(c["gimbal1_deg"][i]), "gimbal2_deg": float(c["gimbal2_deg"][i]),
+                     "sensor_roll_deg": float(np.nan_to_num(c["sensor_roll_deg"][i]))})
+    written += write_layer(out, "telemetry_refined", rows, ["csv"])
+    if config_path is not None:
+        refined = out / "config_refined.toml"
+        refined.write_text(Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
+        s = ref.sensors[0]
+        write_calibration(refined, mount_misalignment_deg=s.mount_misalignment_deg if "mount" in ref_groups(ref)
+                          else None,
+                          boresight_misalignment_deg=s.boresight_misalignment_deg if "boresight" in ref_groups(ref)
+                          else None)
+        written.append(refined)
+    obs = [{"track": int(ties.track[i]), "keyframe": int(job.keyframes[ties.frame[i]]),
+            "video_time_s": float(key_t[ties.frame[i]] - key_t[0]), "u_px": float(ties.u_px[i]),
+            "v_px": float(ties.v_px[i]), "du_before_px": float(ref.residual_px_before[i, 0]),
+            "dv_before_px": float(ref.residual_px_before[i, 1]), "du_after_px": float(ref.residual_px_after[i, 0]),
+            "dv_after_px": float(ref.residual_px_after[i, 1])} for i in range(len(ties))]
+    written += write_layer(out, "tiepoints", obs, ["csv"])
+    written.append(residual_plot(out / "residuals.png", ties, ref, key_t - key_t[0]))
+    return written
+
+
+def ref_groups(ref: Refinement) -> set[str]:
+    """The groups whose parameters ``ref`` estimated."""
+    return {g for g, names in GROUPS.items() if set(names) <= set(ref.names)}
+
+
+def residual_plot(path: Path, ties: TiePoints, ref: Refinement, key_t: np.ndarray) -> Path:
+    """Two panels: the pixel residuals' distribution and their RMS per keyframe, before and after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    before = np.hypot(*ref.residual_px_before.T)
+    after = np.hypot(*ref.residual_px_after.T)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+    top = float(np.nanpercentile(before, 99)) if np.isfinite(before).any() else 1.0
+    bins = np.linspace(0, max(top, 1e-3), 60)
+    a.hist(before[np.isfinite(before)], bins=bins, alpha=0.6, label="telemetry as given")
+    a.hist(after[np.isfinite(after)], bins=bins, alpha=0.6, label="refined")
+    a.set_xlabel("tie-point residual (px)")
+    a.set_ylabel("observations")
+    a.legend()
+    k = key_t.size
+    per_b = np.full(k, np.nan)
+    per_a = np.full(k, np.nan)
+    for i in range(k):
+        m = ties.frame == i
+        if m.any():
+            with np.errstate(invalid="ignore"):
+                per_b[i] = np.sqrt(np.nanmean(before[m] ** 2))
+                per_a[i] = np.sqrt(np.nanmean(after[m] ** 2))
+    b.plot(key_t, per_b, "o-", ms=3, label="telemetry as given")
+    b.plot(key_t, per_a, "o-", ms=3, label="refined")
+    b.set_xlabel("video time (s)")
+    b.set_ylabel("RMS residual (px)")
+    b.set_yscale("log")
+    b.legend()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

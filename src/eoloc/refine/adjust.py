@@ -1,0 +1,388 @@
+"""Bundle adjustment of what the telemetry gets wrong, from tie points and the DEM.
+
+Unknowns: the installation, heading bias and time offset of :mod:`eoloc.sequence.calibration`
+(any of its groups: ``mount``, ``boresight``, ``heading``, ``time``), shared by every frame, and
+the ground position of every tie-point track (three metres east, north, up from where the
+starting poses put it). Observations, each weighted by its standard deviation:
+
+- every tie point's pixel (``pixel_sigma_px``): the sensor's own ground -> image projection at
+  the frame's pose (the telemetry interpolated at the frame's time + the time offset, the
+  heading bias taken out of the yaw), so the residuals are in pixels;
+- every track's height against the DEM under it (``dem_sigma_m``, the DEM's stated vertical
+  accuracy): a soft constraint, the only thing that ties a relative solution to the ground;
+- a prior on every global unknown (its budget's 1-sigma: ``prior_sigma``).
+
+Solved by scipy's ``least_squares`` (trust-region reflective, LSMR inner solver) with the
+Jacobian's sparsity given (each pixel depends on the globals and its own track only: K frames and
+T tracks cost the globals + 3 function evaluations per Jacobian, not 3T), a robust soft-L1 pass
+first, then the observations whose residual exceeds ``outlier_sigma`` dropped (named by track) and
+a plain least-squares pass. The globals' covariance is the Schur complement of the tracks' blocks
+in J^T J, scaled by the a-posteriori variance factor when it exceeds 1.
+
+What the geometry cannot separate is said, not hidden: a parameter whose posterior sigma is more
+than ``prior_share`` of its prior's has not been determined by the images (its value is the
+prior's), and pairs correlated beyond 0.95 are named (a straight pass over flat ground cannot tell
+a heading bias from a time offset or the mount's yaw).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import geodesy
+from ..errors import InputError
+from ..rules import StopRule
+from ..sensor.model import CameraFrame, Pose, SensorModel
+from ..sequence.calibration import GROUPS, TelemetryTrack, apply_parameters, pose_with_biases
+from ..terrain import DEM
+from .tiepoints import TiePoints
+
+PRIOR_SIGMA = {"mount": 1.0, "boresight": 1.0, "heading": 2.0, "time": 0.5}  # deg, deg, deg, s
+GLOBAL_STEP = 1e-5  # forward-difference steps: deg or s for the globals
+GROUND_STEP_M = 1e-3  # and metres for the tracks (ECEF has ~1e-9 m resolution)
+
+
+@dataclass(frozen=True)
+class AdjustSettings:
+    """estimate: the groups solved for; pixel_sigma_px: a tie point's pixel noise; dem_sigma_m:
+    the DEM's vertical 1-sigma; prior_sigma: each group's prior 1-sigma (deg or s) around the
+    starting value; outlier_sigma: observations past this many sigma after the robust pass are
+    dropped; prior_share: a posterior sigma above this share of the prior's = not determined."""
+
+    estimate: tuple[str, ...] = ("mount", "heading", "time")
+    pixel_sigma_px: float = 1.0
+    dem_sigma_m: float = 10.0
+    prior_sigma: dict[str, float] = field(default_factory=lambda: dict(PRIOR_SIGMA))
+    outlier_sigma: float = 4.0
+    prior_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        bad = [g for g in self.estimate if g not in GROUPS]
+        if bad or not self.estimate:
+            raise InputError(f"estimate: unknown or no groups {bad or list(self.estimate)}; choose from "
+                             f"{', '.join(GROUPS)}")
+        if not (self.pixel_sigma_px > 0 and self.dem_sigma_m > 0 and self.outlier_sigma > 0
+                and 0 < self.prior_share <= 1):
+            raise InputError(f"adjustment settings out of range: {self}")
+        missing = [g for g in self.estimate if not self.prior_sigma.get(g, 0) > 0]
+        if missing:
+            raise InputError(f"no prior sigma for {', '.join(missing)}")
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """The adjustment's answer: ``names``/``values``/``cov`` of the globals (deg, s), the sensor
+    with the installation estimated, the heading bias and time offset to apply, the tracks' ground
+    points (lat, lon, h (T,), NaN for dropped tracks), pixel residuals before/after (N, 2) (NaN for
+    dropped observations), the variance factor ``s0``, the parameters the images did not
+    determine, the outlier tracks and warnings."""
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    cov: np.ndarray
+    prior_sigma: np.ndarray
+    sensors: list[SensorModel]
+    heading_bias_deg: float
+    time_offset_s: float
+    track_lat_deg: np.ndarray
+    track_lon_deg: np.ndarray
+    track_h_m: np.ndarray
+    residual_px_before: np.ndarray
+    residual_px_after: np.ndarray
+    s0: float
+    n_observations: int
+    n_tracks: int
+    undetermined: list[str] = field(default_factory=list)
+    outlier_tracks: list[int] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.diagonal(self.cov))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        s = self.sigma
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.cov / np.outer(s, s)
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(self.names, self.values, strict=True)}
+
+
+class _Problem:
+    """The weighted residuals of one set of observations: rows = 2 per tie-point observation (u, v),
+    1 per track (its height against the DEM), 1 per global (its prior); ``row_track`` names the
+    track each row depends on (-1: a prior's row, which depends on its global only)."""
+
+    def __init__(self, sensors, frame_sensor, telemetry, frame_time_s, ties: TiePoints, x_ground0, dem,
+                 names, g0, prior, s: AdjustSettings, heading0: float, time0: float):
+        self.sensors, self.telemetry = sensors, telemetry
+        self.frame_time_s, self.ties, self.dem, self.names = frame_time_s, ties, dem, names
+        self.g0, self.prior, self.s, self.heading0, self.time0 = g0, prior, s, heading0, time0
+        self.p, self.t = len(names), ties.n_tracks
+        self.x_ground0 = x_ground0  # (T, 3) ECEF
+        lat, lon, _ = geodesy.ecef_to_geodetic(*x_ground0.T)
+        self.R_ecef_enu = geodesy.R_ecef_enu(lat, lon)  # (T, 3, 3): ENU offsets -> ECEF
+        self.uv = np.stack([ties.u_px, ties.v_px], -1)
+        self.groups = [np.flatnonzero(np.asarray(frame_sensor)[ties.frame] == k) for k in range(len(sensors))]
+        self.row_track = np.r_[np.repeat(ties.track, 2), np.arange(self.t), np.full(self.p, -1)]
+        self._frames_key: bytes | None = None
+        self._frames: list = []
+
+    def ground(self, d: np.ndarray) -> np.ndarray:
+        """(T, 3) ECEF of the tracks moved by ENU offsets d (T, 3)."""
+        return self.x_ground0 + np.einsum("tij,tj->ti", self.R_ecef_enu, d)
+
+    def frames(self, g: np.ndarray) -> list:
+        """Per sensor: (sensor, its camera frames at the K frames, the poses' focal scales) with
+        globals g; the last set reused while g is unchanged (the tracks' derivatives)."""
+        key = g.tobytes()
+        if self._frames_key != key:
+            _, hb, dt = apply_parameters(self.sensors[0], self.names, g, self.heading0, self.time0)
+            pose = pose_with_biases(None, self.telemetry, self.frame_time_s, hb, dt)
+            made = []
+            for sensor in self.sensors:
+                s = apply_parameters(sensor, self.names, g, self.heading0, self.time0)[0]
+                made.append((s, s.camera_frame(pose), np.asarray(pose.focal_scale)))
+            self._frames, self._frames_key = made, key
+        return self._frames
+
+    def project(self, g: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels of every observation's track in its frame with globals g."""
+        out = np.full(self.uv.shape, np.nan)
+        xg = self.ground(d)
+        for (sensor, frame, zoom), rows in zip(self.frames(g), self.groups, strict=True):
+            if rows.size == 0:
+                continue
+            idx = self.ties.frame[rows]
+            fr = CameraFrame(*(tuple(np.asarray(x)[idx] for x in frame.R),
+                               *(np.asarray(x)[idx] if np.ndim(x) else x
+                                 for x in (frame.ox, frame.oy, frame.oz, frame.invalid))))
+            u, v = sensor.frame_to_image(fr, xg[self.ties.track[rows]], zoom[idx] if zoom.ndim else zoom)
+            out[rows, 0], out[rows, 1] = u, v
+        return out
+
+    def residuals(self, g: np.ndarray, d: np.ndarray) -> np.ndarray:
+        r_px = (self.project(g, d) - self.uv) / self.s.pixel_sigma_px
+        lat, lon, h = geodesy.ecef_to_geodetic(*self.ground(d).T)
+        h_dem = self.dem.height(lat, lon) if self.dem is not None else h
+        r_dem = np.nan_to_num((h - h_dem) / self.s.dem_sigma_m)  # off the DEM: no constraint
+        r_prior = (g - self.g0) / self.prior
+        # a point pushed behind a camera: a large residual, not a crash
+        return np.concatenate([np.nan_to_num(r_px, nan=1e3).ravel(), r_dem, r_prior])
+
+    def jacobian(self, g: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forward differences: (R, p) by the globals (one evaluation each) and (R, 3) by each
+        row's own track (three evaluations: every track moved at once, as no row sees two)."""
+        Jg = np.empty((r.size, self.p))
+        for j in range(self.p):
+            step = np.zeros(self.p)
+            step[j] = GLOBAL_STEP
+            Jg[:, j] = (self.residuals(g + step, d) - r) / GLOBAL_STEP
+        Jt = np.zeros((r.size, 3))
+        for c in range(3):
+            dd = d.copy()
+            dd[:, c] += GROUND_STEP_M
+            Jt[:, c] = (self.residuals(g, dd) - r) / GROUND_STEP_M
+        Jt[self.row_track < 0] = 0.0
+        return Jg, Jt
+
+    def normal(self, Jg, Jt, r, w):
+        """The normal equations' blocks: A (p, p), B (T, p, 3), C (T, 3, 3), gradients (p,), (T, 3)."""
+        tr = np.where(self.row_track >= 0, self.row_track, 0)
+        on = (self.row_track >= 0).astype(float) * w
+
+        def per_track(values):  # (R, ...) -> (T, ...) sums over each track's rows
+            flat = values.reshape(values.shape[0], -1)
+            out = np.stack([np.bincount(tr, weights=flat[:, k] * on, minlength=self.t)
+                            for k in range(flat.shape[1])], -1)
+            return out.reshape(self.t, *values.shape[1:])
+
+        A = Jg.T @ (Jg * w[:, None])
+        B = per_track(np.einsum("ri,rj->rij", Jg, Jt))
+        C = per_track(np.einsum("ri,rj->rij", Jt, Jt))
+        return A, B, C, Jg.T @ (w * r), per_track(Jt * r[:, None])
+
+    def solve(self, g: np.ndarray, d: np.ndarray, loss: str, max_iter: int = 50):
+        """Levenberg-Marquardt on the reduced (Schur complement) normal equations; ``loss``
+        "soft_l1" reweights each row by 1 / sqrt(1 + (r / 2)^2) (IRLS). Returns g, d, the
+        residuals, the row weights and the globals' inverse normal matrix."""
+        lam = 1e-3
+        r = self.residuals(g, d)
+
+        def weights(res):
+            return np.ones_like(res) if loss == "linear" else 1.0 / np.sqrt(1.0 + (res / 2.0) ** 2)
+
+        def cost(res):
+            if loss == "linear":
+                return float(np.sum(res ** 2))
+            return float(np.sum(8.0 * (np.sqrt(1 + (res / 2) ** 2) - 1)))
+
+        c0 = cost(r)
+        for _ in range(max_iter):
+            w = weights(r)
+            Jg, Jt = self.jacobian(g, d, r)
+            A, B, C, bg, bt = self.normal(Jg, Jt, r, w)
+            improved = False
+            while lam < 1e10:
+                Cd = C + lam * np.einsum("tii->ti", C)[:, :, None] * np.eye(3) + 1e-12 * np.eye(3)
+                Ci = np.linalg.inv(Cd)
+                BCi = np.einsum("tpj,tjk->tpk", B, Ci)
+                S = A + lam * np.diag(np.diag(A)) - np.einsum("tpk,tqk->pq", BCi, B)
+                rhs = bg - np.einsum("tpk,tk->p", BCi, bt)
+                dg = -np.linalg.solve(S, rhs)
+                dd = -np.einsum("tij,tj->ti", Ci, bt + np.einsum("tpj,p->tj", B, dg))
+                r_new = self.residuals(g + dg, d + dd)
+                c_new = cost(r_new)
+                if c_new < c0:
+                    g, d, r, lam = g + dg, d + dd, r_new, max(lam / 10, 1e-9)
+                    # converged: the cost falls by less than 1e-5 of itself, or the globals move by
+                    # less than 1e-6 (deg or s; a weakly seen track may still creep along its ray)
+                    improved = (c0 - c_new) > 1e-5 * c0 and np.max(np.abs(dg), initial=0.0) > 1e-6
+                    c0 = c_new
+                    break
+                lam *= 10
+            if not improved:
+                break
+        w = weights(r)
+        Jg, Jt = self.jacobian(g, d, r)
+        A, B, C, _, _ = self.normal(Jg, Jt, r, w)
+        Ci = np.linalg.pinv(C)
+        S = A - np.einsum("tpj,tjk,tqk->pq", B, Ci, B)
+        try:
+            S_inv = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            S_inv = np.full((self.p, self.p), np.inf)
+        return g, d, r, w, S_inv, lam < 1e10
+
+
+def initial_ground(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, poses: Pose, ties: TiePoints,
+                   rule: StopRule) -> np.ndarray:
+    """(T, 3) ECEF: each track's observations put on the ground by ``rule`` with the starting poses,
+    the median per axis (NaN where none of them was located)."""
+    p = np.full((len(ties), 3), np.nan)
+    for k, s in enumerate(sensors):
+        rows = np.flatnonzero(frame_sensor[ties.frame] == k)
+        if rows.size:
+            f = rule.locate(s, poses.take(ties.frame[rows]), np.stack([ties.u_px[rows], ties.v_px[rows]], -1))
+            p[rows] = np.where(f.ok[:, None], f.p_ecef(), np.nan)
+    return grouped_median(ties.track, p, ties.n_tracks)
+
+
+def grouped_median(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, C) median of the finite rows of ``values`` (N, C) in each group (NaN for none)."""
+    out = np.full((n_groups, values.shape[1]), np.nan)
+    for c in range(values.shape[1]):
+        ok = np.isfinite(values[:, c])
+        g, v = group[ok], values[ok, c]
+        order = np.lexsort((v, g))
+        g, v = g[order], v[order]
+        counts = np.bincount(g, minlength=n_groups)
+        start = np.r_[0, np.cumsum(counts)[:-1]]
+        has = counts > 0
+        lo = start[has] + (counts[has] - 1) // 2
+        hi = start[has] + counts[has] // 2
+        out[has, c] = 0.5 * (v[lo] + v[hi])
+    return out
+
+
+def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: TelemetryTrack,
+           frame_time_s: np.ndarray, ties: TiePoints, rule: StopRule, dem: DEM | None,
+           settings: AdjustSettings = AdjustSettings(), *, heading_bias_deg: float = 0.0,
+           time_offset_s: float = 0.0) -> Refinement:
+    """Adjust ``settings.estimate`` and the tracks' ground points to the tie points.
+
+    ``sensors``: the distinct sensors; ``frame_sensor`` (K,): each frame's sensor in it;
+    ``telemetry``: the pose records on the frames' clock; ``frame_time_s`` (K,) the frames' times;
+    ``ties``: observations (frame = position in 0..K-1); ``rule``: puts the tracks on the ground at
+    the start; ``dem``: the soft height constraint (None: none, a relative solution);
+    ``heading_bias_deg``/``time_offset_s``: the starting values (those not estimated stay)."""
+    s = settings
+    frame_sensor = np.asarray(frame_sensor, dtype=np.int64)
+    frame_time_s = np.asarray(frame_time_s, dtype=np.float64)
+    names = tuple(n for g in s.estimate for n in GROUPS[g])
+    prior = np.array([s.prior_sigma[g] for g in s.estimate for _ in GROUPS[g]], dtype=np.float64)
+    base = sensors[0]
+    start = {**dict(zip(GROUPS["mount"], base.mount_misalignment_deg, strict=True)),
+             **dict(zip(GROUPS["boresight"], base.boresight_misalignment_deg, strict=True)),
+             "heading_bias_deg": heading_bias_deg, "time_offset_s": time_offset_s}
+    g0 = np.array([start[n] for n in names], dtype=np.float64)
+    poses0 = pose_with_biases(None, telemetry, frame_time_s, heading_bias_deg, time_offset_s)
+    x_ground = initial_ground(sensors, frame_sensor, poses0, ties, rule)
+    located = np.isfinite(x_ground[:, 0])
+    n_obs = np.bincount(ties.track, minlength=ties.n_tracks)
+    keep = located & (n_obs >= 2)
+    work = ties.keep_tracks(keep)
+    kept_ids = np.flatnonzero(keep)
+    if work.n_tracks < 3 or len(work) < len(names) + 3:
+        raise InputError(f"{work.n_tracks} tie-point tracks seen in two frames or more could be put on the ground: "
+                         "too few to adjust (the frames must overlap and show texture)")
+    x_ground = x_ground[keep]
+    warnings: list[str] = []
+
+    def problem(tp: TiePoints, xg0: np.ndarray) -> _Problem:
+        return _Problem(sensors, frame_sensor, telemetry, frame_time_s, tp, xg0, dem, names, g0, prior, s,
+                        heading_bias_deg, time_offset_s)
+
+    prob = problem(work, x_ground)
+    d0 = np.zeros((work.n_tracks, 3))
+    before = prob.project(g0, d0) - prob.uv
+    g, d, _, _, _, _ = prob.solve(g0, d0, "soft_l1", max_iter=8)  # only to find the outliers
+    r = (prob.project(g, d) - prob.uv) / s.pixel_sigma_px
+    bad_obs = ~(np.hypot(r[:, 0], r[:, 1]) <= s.outlier_sigma)
+    outliers = sorted({int(kept_ids[t]) for t in np.unique(work.track[bad_obs])})
+    if bad_obs.any():
+        # drop the outlying observations; a track left with one observation goes with them
+        left = np.bincount(work.track[~bad_obs], minlength=work.n_tracks)
+        good_track = left >= 2
+        rows = ~bad_obs & good_track[work.track]
+        sub = TiePoints(work.frame[rows], work.track[rows], work.u_px[rows], work.v_px[rows], work.pairs,
+                        work.verified).keep_tracks(good_track)
+        ground_now = prob.ground(d)[good_track]
+        kept_ids = kept_ids[good_track]
+        before = before[rows]
+        work = sub
+    else:
+        ground_now = prob.ground(d)
+    prob = problem(work, ground_now)
+    g, d, res, _, S_inv, converged = prob.solve(g, np.zeros((work.n_tracks, 3)), "linear")
+    dof = res.size - (len(names) + 3 * work.n_tracks)
+    s0 = float(np.sqrt(np.sum(res ** 2) / dof)) if dof > 0 else float("nan")
+    cov = S_inv * max(s0, 1.0) ** 2
+    sigma = np.sqrt(np.diagonal(cov))
+    undetermined = [n for n, sg, pr in zip(names, sigma, prior, strict=True) if not sg <= s.prior_share * pr]
+    corr = cov / np.outer(sigma, sigma)
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if abs(corr[i, j]) > 0.95:
+                warnings.append(f"{names[i]} and {names[j]} are {corr[i, j]:+.3f} correlated: this geometry cannot "
+                                "tell them apart (a pass with turns, gimbal motion or relief separates them)")
+    if undetermined:
+        warnings.append(f"the images do not determine {', '.join(undetermined)}: its sigma is more than "
+                        f"{s.prior_share:.0%} of its prior's, so its value is mostly the prior (the starting value)")
+    if not converged:
+        warnings.append("the adjustment did not converge (no step lowered the residuals)")
+    if outliers:
+        warnings.append(f"{len(outliers)} tie-point track(s) had observations past {s.outlier_sigma:g} sigma "
+                        "(mismatches or moving objects): those observations were left out")
+    refined = [apply_parameters(x, names, g, heading_bias_deg, time_offset_s)[0] for x in sensors]
+    _, hb, dt = apply_parameters(base, names, g, heading_bias_deg, time_offset_s)
+    after = prob.project(g, d) - prob.uv
+    lat = np.full(ties.n_tracks, np.nan)
+    lon, h = lat.copy(), lat.copy()
+    la, lo, hh = geodesy.ecef_to_geodetic(*prob.ground(d).T)
+    lat[kept_ids], lon[kept_ids], h[kept_ids] = la, lo, hh
+    rb = np.full((len(ties), 2), np.nan)
+    ra = rb.copy()
+    # map the adjusted observations back onto the caller's rows (by track id and frame)
+    key_all = ties.track * (ties.frame.max() + 1) + ties.frame
+    key_used = kept_ids[work.track] * (ties.frame.max() + 1) + work.frame
+    where = np.searchsorted(key_all, key_used, sorter=np.argsort(key_all))
+    idx = np.argsort(key_all)[where]
+    rb[idx], ra[idx] = before, after
+    return Refinement(names, g, cov, prior, refined, hb, dt, lat, lon, h, rb, ra, s0, len(work), work.n_tracks,
+                      undetermined, outliers, warnings)
