@@ -207,15 +207,29 @@ def true_camera(flight: Flight, err: Errors, t: float):
 def render(flight: Flight, err: Errors, t: float) -> np.ndarray:
     """The frame (H, W) uint8 at video time t: first crossing of each pixel's ray with the terrain."""
     c_ecef, R_ec, _, _ = true_camera(flight, err, t)
+    return render_view(c_ecef, R_ec, K(), (W, H), flight.flat)
+
+
+def photo_camera(lat: float, lon: float, h: float, yaw: float, pitch: float, roll: float):
+    """(position ECEF, R_ecef_cam) of a drone camera whose earth-referenced attitude is yaw (the
+    optical axis' azimuth), pitch (its elevation) and roll (the image's): R_ned<-camera body =
+    Rz(yaw) Ry(pitch) Rx(roll), the optical axis along the body's x (camera x, y, z = body y, z, x)."""
+    c = np.array(pymap3d.geodetic2ecef(lat, lon, h))
+    R_nb = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True).as_matrix()
+    return c, _r_ecef_ned(lat, lon) @ R_nb[:, [1, 2, 0]]
+
+
+def render_view(c_ecef: np.ndarray, R_ec: np.ndarray, k: np.ndarray, size: tuple[int, int],
+                flat: bool = False) -> np.ndarray:
+    """The image (h, w) uint8 of a pinhole camera k at c_ecef with attitude R_ecef_cam."""
     o = origin()
     R_ue = _r_ecef_enu(o[0], o[1]).T  # ECEF -> origin ENU
     c = np.array(pymap3d.ecef2enu(*c_ecef, *o))
-    uu, vv = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
-    k = K()
+    uu, vv = np.meshgrid(np.arange(size[0], dtype=float), np.arange(size[1], dtype=float))
     los = np.stack([(uu - k[0, 2]) / k[0, 0], (vv - k[1, 2]) / k[1, 1], np.ones_like(uu)], -1)
     d = los @ (R_ue @ R_ec).T
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    U = height_field(flight.flat)
+    U = height_field(flat)
     U32 = U.astype(np.float32)
     lo, hi = float(U.min()) - 1.0, float(U.max()) + 1.0
 
@@ -285,30 +299,35 @@ def telemetry_rows(flight: Flight, err: Errors, t_end_s: float) -> list[dict]:
 def ground_truth_points(flight: Flight, err: Errors, t: float, n: int, rng: np.random.Generator):
     """n pixels of the frame at time t and the true ground points (lat, lon, h) they see."""
     c_ecef, R_ec, _, _ = true_camera(flight, err, t)
-    k = K()
     u = rng.uniform(40, W - 40, n)
     v = rng.uniform(30, H - 30, n)
+    return u, v, ground_points(c_ecef, R_ec, K(), u, v, flight.flat)
+
+
+def ground_points(c_ecef: np.ndarray, R_ec: np.ndarray, k: np.ndarray, u: np.ndarray, v: np.ndarray,
+                  flat: bool = False) -> np.ndarray:
+    """(n, 3) lat, lon, h where pixels (u, v) of the camera see the DEM's bilinear surface: the first
+    crossing of each ray by dense steps, then bisection, in geodetic terms (pymap3d); NaN: none."""
+    n = len(u)
     los = np.stack([(u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1], np.ones(n)], -1)
     d = los @ R_ec.T
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    # first crossing with the DEM's own surface, by dense steps then bisection in geodetic terms
-    s = np.linspace(500.0, 12000.0, 2300)
+    s = np.linspace(50.0, 12000.0, 4800)
     out = np.full((n, 3), np.nan)
     for i in range(n):
         q = c_ecef + s[:, None] * d[i]
         lat, lon, h = pymap3d.ecef2geodetic(q[:, 0], q[:, 1], q[:, 2])
-        g = h - dem_height(lat, lon, flight.flat)
+        g = h - dem_height(lat, lon, flat)
         j = np.flatnonzero(g <= 0)
         if j.size == 0 or j[0] == 0:
             continue
         a, b = s[j[0] - 1], s[j[0]]
         for _ in range(50):
             m = 0.5 * (a + b)
-            p = c_ecef + m * d[i]
-            la, lo, hh = pymap3d.ecef2geodetic(*p)
-            if hh - dem_height(la, lo, flight.flat) > 0:
+            la, lo, hh = pymap3d.ecef2geodetic(*(c_ecef + m * d[i]))
+            if hh - dem_height(la, lo, flat) > 0:
                 a = m
             else:
                 b = m
         out[i] = pymap3d.ecef2geodetic(*(c_ecef + 0.5 * (a + b) * d[i]))
-    return u, v, out
+    return out

@@ -67,7 +67,7 @@ def refine_frames(images, flight, err, dem, s: SensorModel, times=TIMES):
     track = track_of(ts.telemetry_rows(flight, err, float(times[-1])))
     rule = OnDEM(dem)
     start = pose_with_biases(None, track, times, 0.0, 0.0)
-    overlap = predicted_overlap([s] * len(times), [start.take(i) for i in range(len(times))], rule, (ts.W, ts.H))
+    overlap = predicted_overlap([s] * len(times), [start.take(i) for i in range(len(times))], rule)
     ties = find_tie_points(images, choose_pairs(overlap, TieSettings()))
     return adjust([s], np.zeros(len(times), np.int64), track, times, ties, rule, dem, AdjustSettings()), track, rule
 
@@ -249,4 +249,98 @@ def test_cli_refines_a_video_and_the_refined_telemetry_locates_better(orbit, tmp
             e, n, _ = pymap3d.geodetic2enu(f["lat_deg"], f["lon_deg"], f["h_m"], *p)
             err.append(np.hypot(e, n))
         ce90[name] = np.percentile(err, 90)
+    assert ce90["given"] > 5 * ce90["refined"], ce90
+
+
+PHOTO_W, PHOTO_H, PHOTO_F = 640, 480, 560.0
+PHOTO_MOUNT = (0.0, 0.4, -0.3)  # the camera's mounting error (deg, about its body x, y, z)
+PHOTO_YAW_BIAS = 1.5  # the gimbal yaw reads 1.5 deg high
+
+
+def photo_set(folder: Path, n: int = 20):
+    """n overlapping DJI photos (XMP Version 7.0: ellipsoidal altitude; calibrated intrinsics) from
+    a ring of 450 m radius, 400 m above the origin, each looking at the ring's centre from its own
+    pitch (-35 .. -70 deg) and roll; the XMP attitude is the truth seen through the mounting error
+    and the yaw bias. Returns each photo's path, true (c_ecef, R_ecef_cam) and true (yaw, pitch, roll)."""
+    from scipy.spatial.transform import Rotation
+
+    from dronephoto import write_photo
+
+    rng = np.random.default_rng(52)
+    o = ts.origin()
+    k = np.array([[PHOTO_F, 0, (PHOTO_W - 1) / 2], [0, PHOTO_F, (PHOTO_H - 1) / 2], [0, 0, 1.0]])
+    R_mount = Rotation.from_euler("ZYX", PHOTO_MOUNT[::-1], degrees=True)
+    out = []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        e, nn = 450 * np.sin(a), 450 * np.cos(a)
+        lat, lon, h = pymap3d.enu2geodetic(e, nn, 400.0, *o)
+        yaw_t = (np.degrees(a) + 180.0 + rng.uniform(-8, 8)) % 360.0
+        pitch_t, roll_t = rng.uniform(-70, -35), rng.uniform(-3, 3)
+        c, R_ec = ts.photo_camera(float(lat), float(lon), float(h), yaw_t, pitch_t, roll_t)
+        # what the drone writes: R_ned<-body(given) = Rz(bias) R(true) R_mount^T
+        given = (Rotation.from_euler("Z", PHOTO_YAW_BIAS, degrees=True)
+                 * Rotation.from_euler("ZYX", [yaw_t, pitch_t, roll_t], degrees=True) * R_mount.inv())
+        yaw_g, pitch_g, roll_g = given.as_euler("ZYX", degrees=True)
+        image = ts.render_view(c, R_ec, k, (PHOTO_W, PHOTO_H))
+        tags = {"Version": "7.0", "GpsStatus": "Normal", "GpsLatitude": f"{float(lat):+.10f}",
+                "GpsLongitude": f"{float(lon):+.10f}", "AbsoluteAltitude": f"{float(h):+.4f}",
+                "RelativeAltitude": "+400.000", "GimbalYawDegree": f"{yaw_g:+.6f}",
+                "GimbalPitchDegree": f"{pitch_g:+.6f}", "GimbalRollDegree": f"{roll_g:+.6f}",
+                "CalibratedFocalLength": f"{PHOTO_F}", "CalibratedOpticalCenterX": f"{(PHOTO_W - 1) / 2}",
+                "CalibratedOpticalCenterY": f"{(PHOTO_H - 1) / 2}"}
+        path = write_photo(folder / f"DJI_{i:04d}.JPG", PHOTO_W, PHOTO_H, tags, model="FC6310", focal_mm=8.8,
+                           picture=np.repeat(image[..., None], 3, axis=2))
+        out.append((path, (c, R_ec), (yaw_t, pitch_t, roll_t)))
+    return out, k
+
+
+def test_a_photo_set_refined_as_json_rows(tmp_path):
+    """`eoloc refine PHOTO... --dem --json`: a ring of 20 overlapping DJI photos with a biased gimbal
+    yaw and a camera mounting error. One row per photo under `eoloc photo --json`'s keys; every
+    refined camera yaw/pitch/roll within 3 of its sigma of the truth (sigma under 0.1 deg; not yet
+    2: this ring leaves the heading bias and the mount's yaw 0.98 correlated and both ~0.07 deg
+    off, 2.2 sigma, a systematic of the matching the adjustment does not model), and the truth
+    pixels located with the refined attitude 5x closer (CE90) than with the XMP's."""
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    photos, k = photo_set(folder)
+    dem_path = ts.write_dem(tmp_path / "dem.tif")
+    r = eoloc("refine", folder, "--dem", dem_path, "--vertical", "ellipsoid", "--json", "--out", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    rows = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+    assert [Path(x["file"]).name for x in rows] == [p.name for p, _, _ in photos]
+    keys = {"file", "camera_lat", "camera_lon", "camera_h", "camera_yaw", "camera_pitch", "camera_roll",
+            "sigma_camera_yaw", "sigma_camera_pitch", "sigma_camera_roll"}
+    assert all(keys <= set(x) for x in rows)
+    photo_json = eoloc("photo", photos[0][0], "--dem", dem_path, "--vertical", "ellipsoid", "--json", "--out",
+                       tmp_path / "p")
+    assert photo_json.returncode == 0, photo_json.stderr
+    given = json.loads(photo_json.stdout.splitlines()[0])
+    assert given["camera_yaw"] == pytest.approx(rows[0]["given_camera_yaw"], abs=1e-9)
+    for row, (_, _, truth) in zip(rows, photos, strict=True):
+        got = np.array([row["camera_yaw"], row["camera_pitch"], row["camera_roll"]])
+        sig = np.array([row["sigma_camera_yaw"], row["sigma_camera_pitch"], row["sigma_camera_roll"]])
+        diff = (got - np.array(truth) + 180.0) % 360.0 - 180.0
+        assert np.all(sig < 0.1), sig
+        assert np.all(np.abs(diff) <= 3 * sig + 1e-4), (row["file"], diff, sig)
+    # the truth seen at pixels of three photos, located with each attitude on the DEM
+    dem = open_dem(dem_path, vertical="ellipsoid")
+    rule = OnDEM(dem)
+    cam = Camera(PHOTO_W, PHOTO_H, PHOTO_F, PHOTO_F, (PHOTO_W - 1) / 2, (PHOTO_H - 1) / 2)
+    s = SensorModel(cam, AzElGimbal())
+    rng = np.random.default_rng(9)
+    err = {"given": [], "refined": []}
+    for row, (_, (c, R_ec), _) in list(zip(rows, photos, strict=True))[::4]:
+        u, v = rng.uniform(30, PHOTO_W - 30, 25), rng.uniform(30, PHOTO_H - 30, 25)
+        truth = ts.ground_points(c, R_ec, k, u, v)
+        ok = np.isfinite(truth[:, 0])
+        for name, pre in (("given", "given_"), ("refined", "")):
+            pose = Pose(row["camera_lat"], row["camera_lon"], row["camera_h"], row[pre + "camera_yaw"],
+                        row[pre + "camera_pitch"], row[pre + "camera_roll"], (0.0, 0.0))
+            f = rule.locate(s, pose, np.stack([u[ok], v[ok]], -1))
+            e, n, _ = pymap3d.geodetic2enu(f.lat_deg, f.lon_deg, f.h_m, truth[ok, 0], truth[ok, 1], truth[ok, 2])
+            err[name].append(np.where(f.ok, np.hypot(e, n), np.inf))
+    ce90 = {name: np.percentile(np.concatenate(v), 90) for name, v in err.items()}
     assert ce90["given"] > 5 * ce90["refined"], ce90

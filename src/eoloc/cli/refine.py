@@ -9,11 +9,22 @@ from .main import console, err_console, report_issues, warn
 from .options import config_option, dem_options, out_option
 from .render import titled_table
 
-REFINE_HELP = """Refine the telemetry of a video from its own pixels: tie points and a bundle adjustment.
+REFINE_HELP = """Refine the telemetry of a video, or the poses of a photo set, from the pixels themselves:
+tie points and a bundle adjustment, no ground control needed.
 
 \b
   eoloc refine FLIGHT.mp4 --telemetry TEL.csv --config CAMERA.toml --dem DEM.tif --out out/
   eoloc video FLIGHT.mp4 --telemetry out/telemetry_refined.csv --config out/config_refined.toml --dem DEM.tif
+  eoloc refine PHOTO|FOLDER... --dem DEM.tif [--json]
+
+\b
+Photos (no --telemetry): overlapping drone photos (any vendor eoloc photo reads; a folder stands
+for its photos). Estimated by default: a mounting error and a heading bias (the gimbal yaw's)
+shared by the set; no time offset. --json prints one object per photo with its refined pose under
+eoloc photo --json's keys (file, camera_lat, camera_lon, camera_h, camera_yaw, camera_pitch,
+camera_roll), their 1-sigma (sigma_camera_yaw ...; the position is not estimated: null) and the
+attitude as given (given_camera_yaw ...); photos_refined.csv, refine.json and residuals.png go
+into --out.
 
 \b
 What it estimates (--estimate, comma-separated): mount (the turret base's three small angles to
@@ -40,14 +51,15 @@ Written into --out:
 
 
 @click.command(help=REFINE_HELP)
-@click.argument("video", type=click.Path(dir_okay=False))
-@click.option("--telemetry", required=True, type=click.Path(),
+@click.argument("sources", nargs=-1, required=True, type=click.Path())
+@click.option("--telemetry", type=click.Path(),
               help="The video's telemetry (CSV, DJI SRT, flight log): time_s is seconds since the first frame "
-                   "minus the config's time_offset_s.")
-@config_option(help_text="Camera/gimbal/installation TOML (the starting values).")
+                   "minus the config's time_offset_s. Without it, SOURCES are photos.")
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (the starting values; a video's).")
 @dem_options("The terrain (GeoTIFF, DTED, SRTM .hgt): the tie points' heights are held to it.")
-@click.option("--estimate", default="mount,heading,time", show_default=True,
-              help="Comma-separated: mount, boresight, heading, time.")
+@click.option("--estimate", default=None,
+              help="Comma-separated: mount, boresight, heading, time (default: mount,heading,time for a video; "
+                   "mount,heading for photos).")
 @click.option("--every-s", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True,
               help="Keyframes at least this many seconds apart.")
 @click.option("--pixel-sigma", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True,
@@ -64,7 +76,7 @@ Written into --out:
               help="Longest telemetry gap (s) to bridge.")
 @click.option("--json", "as_json", is_flag=True, help="Print refine.json's content instead of the tables.")
 @out_option("refine.json, telemetry_refined.csv, config_refined.toml, tiepoints.csv, residuals.png")
-def refine(video, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, estimate, every_s, pixel_sigma,
+def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, estimate, every_s, pixel_sigma,
            dem_sigma, prior_mount, prior_heading, prior_time, max_gap, as_json, out_dir) -> None:
     import json
 
@@ -72,29 +84,51 @@ def refine(video, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, e
     from ..jobs.refine import refine_video
     from ..refine.adjust import AdjustSettings
 
+    photos = telemetry is None
+    if estimate is None:
+        estimate = "mount,heading" if photos else "mount,heading,time"
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
     settings = AdjustSettings(estimate=groups, pixel_sigma_px=pixel_sigma, dem_sigma_m=dem_sigma,
                               prior_sigma={"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading,
                                            "time": prior_time})
+    if not photos and (len(sources) != 1 or config_path is None):
+        raise InputError("a video is refined one at a time with its --telemetry and --config: "
+                         "eoloc refine VIDEO --telemetry FILE --config C.toml --dem F")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is None:
         raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
+
+    def say(msg: str) -> None:
+        err_console.print(f"{msg}...", highlight=False)
+
+    if photos:
+        from ..jobs.refine import refine_photos
+
+        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, progress=say)
+        report_issues(pjob.failed)
+        if as_json:
+            for row in pjob.rows:
+                click.echo(json.dumps(row, allow_nan=False))
+        else:
+            _print_table(pjob.refinement, pjob.report)
+        for w in pjob.refinement.warnings:
+            warn(w)
+        err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png", highlight=False)
+        return
     cfg = load_config(config_path)
-    job = refine_video(video, telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
-                       settings=settings, max_gap_s=max_gap,
-                       progress=lambda msg: err_console.print(f"{msg}...", highlight=False))
+    job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
+                       settings=settings, max_gap_s=max_gap, progress=say)
     report_issues(job.issues)
     if as_json:
         click.echo(json.dumps(job.report, indent=1, allow_nan=False))
     else:
-        _print(job)
+        _print_table(job.refinement, job.report)
     for w in job.refinement.warnings:
         warn(w)
     err_console.print(f"wrote {', '.join(str(p) for p in job.written)}", highlight=False)
 
 
-def _print(job) -> None:
-    r, rep = job.refinement, job.report
+def _print_table(r, rep) -> None:
     t = titled_table(f"refined from {rep['observations']} observations of {rep['tie_points']} tie points in "
                      f"{rep['keyframes']} keyframes (s0 = {r.s0:.2f})")
     for col in ("parameter", "estimate", "± 1σ", "prior σ", ""):

@@ -106,7 +106,7 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     rule = OnDEM(dem)
     t = time.perf_counter()
     start = pose_with_biases(None, track, key_t, 0.0, 0.0)
-    overlap = predicted_overlap([sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule, (w, h))
+    overlap = predicted_overlap([sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule)
     pairs = choose_pairs(overlap, tie)
     say(f"matching {len(pairs)} frame pairs")
     ties = find_tie_points([images[int(k)] for k in keys], pairs, tie)
@@ -228,3 +228,157 @@ def residual_plot(path: Path, ties: TiePoints, ref: Refinement, key_t: np.ndarra
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+# -- photo sets -------------------------------------------------------------------------------------
+
+PHOTO_ESTIMATE = ("mount", "heading")  # a photo set has no clock between pictures and poses
+
+
+@dataclass
+class PhotoRefineJob:
+    """Per photo a row (``eoloc photo --json``'s pose keys, refined, with their 1-sigma and the
+    values as given), the refinement, its tie points, the report and the photos not used."""
+
+    rows: list[dict]
+    refinement: Refinement | None
+    ties: TiePoints | None
+    report: dict
+    failed: list[str] = field(default_factory=list)
+
+
+def refined_camera_attitude(yaw_deg, pitch_deg, roll_deg, mount_deg, heading_bias_deg) -> np.ndarray:
+    """(..., 3) yaw, pitch, roll (deg) of a photo's camera after refinement: its earth-referenced
+    attitude as given (R_ned<-camera body, ZYX), the heading bias taken out about the vertical, the
+    mounting angles applied about the camera body's own axes (SensorModel's R_mount)."""
+    from scipy.spatial.transform import Rotation
+
+    from ..rotation import small_angle_rotation
+
+    R = Rotation.from_euler("ZYX", np.stack(np.broadcast_arrays(np.asarray(yaw_deg, float) - heading_bias_deg,
+                                                                  pitch_deg, roll_deg), -1), degrees=True)
+    R = R * Rotation.from_matrix(small_angle_rotation(mount_deg))
+    ypr = R.as_euler("ZYX", degrees=True)
+    ypr[..., 0] %= 360.0
+    return ypr
+
+
+def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, tie: TieSettings | None = None,
+                  out: str | Path | None = None, progress: Callable[[str], None] | None = None) -> PhotoRefineJob:
+    """Refine the camera attitudes of a set of overlapping drone photos (files or folders) on
+    ``dem``: a mounting error and a heading (gimbal yaw) bias shared by the set, from tie points
+    between the photos whose views the poses predict overlap. Each photo's row carries its refined
+    attitude under ``eoloc photo --json``'s keys with its 1-sigma (``sigma_camera_yaw`` ...)."""
+    import cv2
+
+    from ..io.photo import read_photo
+    from ..io.sources.photos import photo_files
+    from ..sensor import Pose
+    from .photo import photo_sensor_pose
+
+    settings = settings if settings is not None else AdjustSettings(estimate=PHOTO_ESTIMATE)
+    tie = tie if tie is not None else TieSettings()
+    if "time" in settings.estimate:
+        raise InputError("--estimate time: photos have no clock offset to estimate (each photo carries its own "
+                         "pose); choose from mount, boresight, heading")
+    if not isinstance(dem, DEM):
+        raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
+    say = progress or (lambda _msg: None)
+    t_start = time.perf_counter()
+    files: list[Path] = []
+    for p in paths:
+        files += photo_files(Path(p)) if Path(p).is_dir() else [Path(p)]
+    poses, images, failed = [], [], []
+    from ..errors import EolocError
+
+    for f in files:
+        try:
+            pose = read_photo(f)
+        except EolocError as exc:
+            failed.append(str(exc))
+            continue
+        image = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION)
+        if image is None or image.shape[:2] != (pose.height, pose.width):
+            failed.append(f"{f}: its pixels cannot be read as a {pose.width} x {pose.height} image")
+            continue
+        poses.append(pose)
+        images.append(image)
+    if len(poses) < 3:
+        raise InputError(f"{len(poses)} usable photo(s): refining needs three or more that overlap", failed)
+    cameras: list = []
+    frame_sensor = []
+    sensors = []
+    for p in poses:
+        s, _ = photo_sensor_pose(p)
+        key = (p.camera, p.width, p.height)
+        if key not in cameras:
+            cameras.append(key)
+            sensors.append(s)
+        frame_sensor.append(cameras.index(key))
+    frame_sensor = np.array(frame_sensor, dtype=np.int64)
+    k = len(poses)
+    col = {n: np.array([getattr(p, n) for p in poses], dtype=np.float64)
+           for n in ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg")}
+    # each photo its own instant: a "clock" of photo numbers, the poses taken at their own numbers
+    track = TelemetryTrack(np.arange(k, dtype=np.float64),
+                           Pose(col["lat_deg"], col["lon_deg"], col["h_m"], col["yaw_deg"], col["pitch_deg"],
+                                col["roll_deg"], (np.zeros(k), np.zeros(k))), max_gap_s=1.5)
+    rule = OnDEM(dem)
+    start = [photo_sensor_pose(p)[1] for p in poses]
+    say(f"predicting the overlap of {k} photos")
+    overlap = predicted_overlap([sensors[i] for i in frame_sensor], start, rule)
+    pairs = choose_pairs(overlap, tie)
+    say(f"matching {len(pairs)} photo pairs")
+    ties = find_tie_points(images, pairs, tie)
+    del images
+    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points")
+    ref = adjust(sensors, frame_sensor, track, np.arange(k, dtype=np.float64), ties, rule, dem, settings)
+    clock = {"total_s": time.perf_counter() - t_start}
+    rows = photo_rows(poses, ref)
+    report = refine_report(ref, ties, np.arange(k), len(pairs), settings, clock)
+    job = PhotoRefineJob(rows, ref, ties, report, failed)
+    if out is not None:
+        import json
+
+        from ..io.writers import write_layer
+
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "refine.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+        write_layer(out, "photos_refined", rows, ["csv"])
+        residual_plot(out / "residuals.png", ties, ref, np.arange(k, dtype=np.float64))
+    return job
+
+
+def photo_rows(poses, ref: Refinement) -> list[dict]:
+    """One row per photo: the refined camera attitude under ``eoloc photo --json``'s keys, its
+    1-sigma by first-order propagation of the estimates' covariance, and the values as given."""
+    names = list(ref.names)
+    mount_idx = [names.index(n) if n in names else -1 for n in GROUPS["mount"]]
+    hb_idx = names.index("heading_bias_deg") if "heading_bias_deg" in names else -1
+
+    def attitude(p, x):
+        mount = [x[i] if i >= 0 else m for i, m in zip(mount_idx, ref.sensors[0].mount_misalignment_deg,
+                                                         strict=True)]
+        hb = x[hb_idx] if hb_idx >= 0 else ref.heading_bias_deg
+        return refined_camera_attitude(p.yaw_deg, p.pitch_deg, p.roll_deg, mount, hb)
+
+    rows = []
+    for p in poses:
+        ypr = attitude(p, ref.values)
+        J = np.empty((3, len(names)))
+        for j in range(len(names)):
+            step = np.zeros(len(names))
+            step[j] = 1e-6
+            d = attitude(p, ref.values + step) - ypr
+            d[0] = (d[0] + 180.0) % 360.0 - 180.0
+            J[:, j] = d / 1e-6
+        sig = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, ref.cov, J), 0.0))
+        rows.append(json_safe({
+            "file": p.path, "camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m,
+            "camera_yaw": float(ypr[0]), "camera_pitch": float(ypr[1]), "camera_roll": float(ypr[2]),
+            "sigma_camera_lat": None, "sigma_camera_lon": None, "sigma_camera_h": None,
+            "sigma_camera_yaw": float(sig[0]), "sigma_camera_pitch": float(sig[1]), "sigma_camera_roll": float(sig[2]),
+            "given_camera_yaw": p.yaw_deg, "given_camera_pitch": p.pitch_deg, "given_camera_roll": p.roll_deg,
+            "refined": "attitude (the position as given: not estimated)"}))
+    return rows

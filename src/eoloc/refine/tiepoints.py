@@ -81,19 +81,20 @@ class TiePoints:
 
 
 def predicted_overlap(sensors: Sequence[SensorModel], poses: Sequence[Pose], rule: StopRule,
-                      size: tuple[int, int], grid: tuple[int, int] = (9, 6)) -> np.ndarray:
+                      grid: tuple[int, int] = (9, 6)) -> np.ndarray:
     """(K, K) share of frame i's view (a grid of its pixels put on the ground by ``rule``) that
-    frame j sees inside its image, by the current poses; NaN-free, 0 where i sees no ground."""
-    w, h = size
-    uu, vv = np.meshgrid(np.linspace(0.05, 0.95, grid[0]) * (w - 1), np.linspace(0.05, 0.95, grid[1]) * (h - 1))
-    pix = np.stack([uu.ravel(), vv.ravel()], -1)
+    frame j sees inside its image (each frame's sensor and pose), by the current poses; 0 where i
+    sees no ground."""
+    gx, gy = np.meshgrid(np.linspace(0.05, 0.95, grid[0]), np.linspace(0.05, 0.95, grid[1]))
     k = len(poses)
-    ground = np.full((k, pix.shape[0], 3), np.nan)
+    ground = np.full((k, gx.size, 3), np.nan)
     for i, (s, p) in enumerate(zip(sensors, poses, strict=True)):
-        f = rule.locate(s, p, pix)
+        w, h = s.camera.width, s.camera.height
+        f = rule.locate(s, p, np.stack([gx.ravel() * (w - 1), gy.ravel() * (h - 1)], -1))
         ground[i] = np.where(f.ok[:, None], f.p_ecef(), np.nan)
     share = np.zeros((k, k))
     for j, (s, p) in enumerate(zip(sensors, poses, strict=True)):
+        w, h = s.camera.width, s.camera.height
         u, v = s.ground_to_image(p, ground)
         with np.errstate(invalid="ignore"):
             inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
