@@ -344,3 +344,22 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
             err[name].append(np.where(f.ok, np.hypot(e, n), np.inf))
     ce90 = {name: np.percentile(np.concatenate(v), 90) for name, v in err.items()}
     assert ce90["given"] > 5 * ce90["refined"], ce90
+
+
+def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
+    """Exit status 2 and one line naming the problem: a video without its telemetry, a folder with
+    no photo, a clock offset asked of photos, no DEM."""
+    rng = np.random.default_rng(1)
+    video = tmp_path / "v.mp4"
+    write_video(video, [rng.integers(0, 255, (ts.H, ts.W), dtype=np.uint8) for _ in range(3)], Fraction(1, 1))
+    dem = ts.write_dem(tmp_path / "dem.tif")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "notes.txt").write_text("not a photo")
+    cases = [((video, "--dem", dem), "is a video: give its --telemetry"),
+             ((tmp_path / "empty", "--dem", dem), "refining needs three or more"),
+             ((tmp_path / "notes.txt", "--dem", dem, "--estimate", "heading,time"), "photos have no clock offset"),
+             ((tmp_path / "empty",), "refining needs the terrain")]
+    for args, said in cases:
+        r = eoloc("refine", *args, "--out", tmp_path / "out")
+        assert r.returncode == 2, (args, r.stderr)
+        assert said in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)

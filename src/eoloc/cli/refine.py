@@ -79,6 +79,7 @@ Written into --out:
 def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, estimate, every_s, pixel_sigma,
            dem_sigma, prior_mount, prior_heading, prior_time, max_gap, as_json, out_dir) -> None:
     import json
+    from pathlib import Path
 
     from ..errors import InputError
     from ..jobs.refine import refine_video
@@ -91,6 +92,12 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     settings = AdjustSettings(estimate=groups, pixel_sigma_px=pixel_sigma, dem_sigma_m=dem_sigma,
                               prior_sigma={"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading,
                                            "time": prior_time})
+    if photos:
+        for src in sources:
+            head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
+            if head[:1] == b"\x47" or head[4:8] == b"ftyp" or head[:4] == b"\x1aE\xdf\xa3":
+                raise InputError(f"{src} is a video: give its --telemetry FILE and --config C.toml (refining from "
+                                 "the video's own KLV is not there yet)")
     if not photos and (len(sources) != 1 or config_path is None):
         raise InputError("a video is refined one at a time with its --telemetry and --config: "
                          "eoloc refine VIDEO --telemetry FILE --config C.toml --dem F")
