@@ -36,7 +36,14 @@ from .. import geodesy
 from ..errors import InputError
 from ..rules import StopRule
 from ..sensor.model import CameraFrame, Pose, SensorModel
-from ..sequence.calibration import GROUPS, TelemetryTrack, apply_parameters, pose_with_biases
+from ..sequence.calibration import (
+    GROUPS,
+    Estimates,
+    TelemetryTrack,
+    apply_parameters,
+    correlation_warnings,
+    pose_with_biases,
+)
 from ..terrain import DEM
 from .tiepoints import TiePoints
 
@@ -73,7 +80,7 @@ class AdjustSettings:
 
 
 @dataclass(frozen=True)
-class Refinement:
+class Refinement(Estimates):
     """The adjustment's answer: ``names``/``values``/``cov`` of the globals (deg, s), the sensor
     with the installation estimated, the heading bias and time offset to apply, the tracks' ground
     points (lat, lon, h (T,), NaN for dropped tracks), pixel residuals before/after (N, 2) (NaN for
@@ -99,18 +106,6 @@ class Refinement:
     outlier_tracks: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
-    @property
-    def sigma(self) -> np.ndarray:
-        return np.sqrt(np.diagonal(self.cov))
-
-    @property
-    def correlation(self) -> np.ndarray:
-        s = self.sigma
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self.cov / np.outer(s, s)
-
-    def as_dict(self) -> dict[str, float]:
-        return {k: float(v) for k, v in zip(self.names, self.values, strict=True)}
 
 
 class _Problem:
@@ -355,12 +350,9 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     cov = S_inv * max(s0, 1.0) ** 2
     sigma = np.sqrt(np.diagonal(cov))
     undetermined = [n for n, sg, pr in zip(names, sigma, prior, strict=True) if not sg <= s.prior_share * pr]
-    corr = cov / np.outer(sigma, sigma)
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if abs(corr[i, j]) > 0.95:
-                warnings.append(f"{names[i]} and {names[j]} are {corr[i, j]:+.3f} correlated: this geometry cannot "
-                                "tell them apart (a pass with turns, gimbal motion or relief separates them)")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sigma, sigma)
+    warnings += correlation_warnings(names, corr, "a pass with turns, gimbal motion or relief separates them")
     if undetermined:
         warnings.append(f"the images do not determine {', '.join(undetermined)}: its sigma is more than "
                         f"{s.prior_share:.0%} of its prior's, so its value is mostly the prior (the starting value)")

@@ -51,8 +51,41 @@ class TelemetryTrack:
     max_gap_s: float = 0.5
 
 
+class Estimates:
+    """What a least-squares answer holding ``names``, ``values`` and their covariance ``cov`` shows:
+    the 1-sigma, the correlations and the values by name."""
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.diagonal(self.cov))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        s = self.sigma
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.cov / np.outer(s, s)
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(self.names, self.values, strict=True)}
+
+
+def correlation_warnings(names, corr: np.ndarray, fix: str) -> list[str]:
+    """One warning per pair of parameters correlated beyond 0.95 (``fix``: how to separate them)."""
+    out = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if abs(corr[i, j]) > 0.95:
+                out.append(f"{names[i]} and {names[j]} are {corr[i, j]:+.3f} correlated: this geometry cannot tell "
+                           f"them apart ({fix})")
+    return out
+
+
 @dataclass(frozen=True)
-class Calibration:
+class Calibration(Estimates):
     """Result of :func:`calibrate`. values/sigma in the parameters' units (deg, s), by ``names``."""
 
     names: tuple[str, ...]
@@ -70,18 +103,6 @@ class Calibration:
     warnings: list[str] = field(default_factory=list)
     undetermined: list[str] = field(default_factory=list)  # parameters these observations cannot fix
 
-    @property
-    def sigma(self) -> np.ndarray:
-        return np.sqrt(np.diagonal(self.cov))
-
-    @property
-    def correlation(self) -> np.ndarray:
-        s = self.sigma
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self.cov / np.outer(s, s)
-
-    def as_dict(self) -> dict[str, float]:
-        return {k: float(v) for k, v in zip(self.names, self.values, strict=True)}
 
     @staticmethod
     def rms(r: np.ndarray) -> float:
@@ -189,14 +210,9 @@ def calibrate(sensor: SensorModel, pixels: ArrayLike, gcp_lat_lon_h: ArrayLike, 
         cov[:, weak] = np.inf
     s_cal, hb, dt = apply_parameters(sensor, names, sol.x, heading_bias_deg, time_offset_s)
     r1 = project(sol.x) - uv
-    warnings = []
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(np.sqrt(np.diagonal(cov)), np.sqrt(np.diagonal(cov)))
-    for i in range(p):
-        for j in range(i + 1, p):
-            if abs(corr[i, j]) > 0.95:
-                warnings.append(f"{names[i]} and {names[j]} are {corr[i, j]:+.3f} correlated: this geometry cannot "
-                                "tell them apart (vary the attitude/look direction, or estimate one of them)")
+    warnings = correlation_warnings(names, corr, "vary the attitude/look direction, or estimate one of them")
     if not sol.success:
         warnings.append(f"least squares did not converge: {sol.message}")
     if undetermined:
