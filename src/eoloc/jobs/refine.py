@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.export import json_safe
+from ..io.telemetry import ZOOM_COLUMNS
 from ..io.videofile import iter_frames, probe_video
 from ..refine.adjust import AdjustSettings, Refinement, adjust
 from ..refine.tiepoints import TiePoints, TieSettings, choose_pairs, find_tie_points, predicted_overlap
@@ -168,6 +169,10 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
                      "pitch_deg": float(c["pitch_deg"][i]), "roll_deg": float(c["roll_deg"][i]),
                      "gimbal1_deg": float(c["gimbal1_deg"][i]), "gimbal2_deg": float(c["gimbal2_deg"][i]),
                      "sensor_roll_deg": float(np.nan_to_num(c["sensor_roll_deg"][i]))})
+    for name in KEPT_COLUMNS:  # a zoom lens' focal length, a laser's range: kept as they were
+        if name in c and np.isfinite(np.asarray(c[name], dtype=np.float64)).any():
+            for row, value in zip(rows, np.asarray(c[name], dtype=np.float64), strict=True):
+                row[name] = float(value)
     written += write_layer(out, "telemetry_refined", rows, ["csv"])
     if config_path is not None:
         refined = out / "config_refined.toml"
@@ -186,6 +191,9 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     written += write_layer(out, "tiepoints", obs, ["csv"])
     written.append(residual_plot(out / "residuals.png", ties, ref, key_t - key_t[0]))
     return written
+
+
+KEPT_COLUMNS = (*ZOOM_COLUMNS, "range_m")
 
 
 def ref_groups(ref: Refinement) -> set[str]:
