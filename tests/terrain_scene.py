@@ -134,6 +134,7 @@ class Errors:
     mount_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # about body x, y, z
     heading_bias_deg: float = 0.0
     time_offset_s: float = 0.0
+    position_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the GPS reads this far east, north, up
 
 
 @dataclass(frozen=True)
@@ -281,6 +282,30 @@ def render_view(c_ecef: np.ndarray, R_ec: np.ndarray, k: np.ndarray, size: tuple
     return img
 
 
+def write_reference(path: Path, cell_m: float = 2.5, half_m: float = 3800.0) -> Path:
+    """An orthophoto of the scene's ground as a GeoTIFF in UTM 13N (EPSG:32613), cells of cell_m
+    over +-half_m around the origin: each cell centre through pyproj to latitude/longitude, onto
+    the DEM's surface, into the origin's ENU (pymap3d), the texture read there."""
+    from pyproj import Transformer
+
+    o = origin()
+    x0, y0 = Transformer.from_crs("EPSG:4326", "EPSG:32613", always_xy=True).transform(o[1], o[0])
+    n = int(2 * half_m / cell_m)
+    left, top = x0 - half_m, y0 + half_m
+    xs = left + (np.arange(n) + 0.5) * cell_m
+    ys = top - (np.arange(n) + 0.5) * cell_m
+    X, Y = np.meshgrid(xs, ys)
+    lon, lat = Transformer.from_crs("EPSG:32613", "EPSG:4326", always_xy=True).transform(X, Y)
+    e, nn, _ = pymap3d.geodetic2enu(lat, lon, dem_height(lat, lon), *o)
+    tx = ((e + HALF_M) / TEXEL_M - 0.5).astype(np.float32)
+    ty = ((HALF_M - nn) / TEXEL_M - 0.5).astype(np.float32)
+    img = cv2.remap(texture(), tx, ty, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="uint8", crs="EPSG:32613",
+                       transform=from_origin(left, top, cell_m, cell_m)) as ds:
+        ds.write(img, 1)
+    return path
+
+
 def telemetry_rows(flight: Flight, err: Errors, t_end_s: float) -> list[dict]:
     """The telemetry as recorded: records every 1/TELEMETRY_HZ s on the telemetry clock from
     -1 s to t_end_s + 1 s; the record stamped T is the state at video time T - offset, its yaw
@@ -290,6 +315,8 @@ def telemetry_rows(flight: Flight, err: Errors, t_end_s: float) -> list[dict]:
         tv = T - err.time_offset_s
         lat, lon, h, yaw, pitch, roll, _ = flight.state(tv)
         _, _, az, el = true_camera(flight, err, tv)
+        if any(err.position_enu_m):  # measured = true + bias, in the aircraft's own ENU
+            lat, lon, h = pymap3d.enu2geodetic(*err.position_enu_m, float(lat), float(lon), float(h))
         rows.append({"time_s": round(float(T), 6), "lat_deg": float(lat), "lon_deg": float(lon), "h_m": float(h),
                      "yaw_deg": float((yaw + err.heading_bias_deg) % 360.0), "pitch_deg": float(pitch),
                      "roll_deg": float(roll), "azimuth_deg": az, "elevation_deg": el})

@@ -171,6 +171,64 @@ def test_a_straight_pass_over_flat_ground_says_what_it_cannot_separate(tmp_path)
     assert np.all(np.abs(err) <= 3 * ref.sigma), (ref.values, ref.sigma)
 
 
+POSITION_BIAS = (6.0, -4.0, 3.0)  # the GPS reads 6 m east, 4 m south, 3 m up of the truth
+
+
+def test_a_reference_ortho_makes_it_absolute(orbit, tmp_path):
+    """A GPS position bias moves every fix alike: the frames still agree with each other, so tie
+    points cannot see it and the relative solution says it is relative. With an orthophoto of the
+    ground (`terrain_scene.write_reference`: UTM 13N, 2.5 m cells, sampled from the scene's own
+    texture) the keyframes' control points make the solution absolute: the position bias within
+    2 sigma, the other biases too, and the fixes within 1 m CE90 of the truth."""
+    from eoloc.io.raster import read_reference_band
+    from eoloc.refine.register import Reference, control_points
+
+    flight, images, _, dem = orbit
+    err = ts.Errors(mount_deg=ERRORS.mount_deg, heading_bias_deg=ERRORS.heading_bias_deg,
+                    time_offset_s=ERRORS.time_offset_s, position_enu_m=POSITION_BIAS)
+    s = sensor()
+    track = track_of(ts.telemetry_rows(flight, err, float(TIMES[-1])))
+    rule = OnDEM(dem)
+    start = pose_with_biases(None, track, TIMES, 0.0, 0.0)
+    poses = [start.take(i) for i in range(len(TIMES))]
+    ties = find_tie_points(images, choose_pairs(predicted_overlap([s] * len(TIMES), poses, rule), TieSettings()))
+    relative = adjust([s], np.zeros(len(TIMES), np.int64), track, TIMES, ties, rule, dem, AdjustSettings())
+    assert any("relative" in w for w in relative.warnings)
+    ref = Reference(*read_reference_band(ts.write_reference(tmp_path / "ortho.tif", half_m=3000.0)), sigma_m=1.0)
+    control = control_points(images, [s] * len(TIMES), poses, rule, ref)
+    assert len(control) > 20 * len(TIMES) * 0.5
+    settings = AdjustSettings(estimate=("mount", "heading", "time", "position"))
+    absolute = adjust([s], np.zeros(len(TIMES), np.int64), track, TIMES, ties, rule, dem, settings, control=control,
+                      control_sigma_m=0.5 * ref.cell_m, control_shared_sigma_m=ref.sigma_m)
+    assert not any("relative" in w for w in absolute.warnings)
+    truth = np.r_[truth_vector(ERRORS), POSITION_BIAS]
+    assert np.all(np.abs(absolute.values - truth) <= 2 * absolute.sigma), (absolute.values, absolute.sigma)
+    # the reference's 1 m georeferencing moves the whole solution: east/north sigma at least that
+    assert np.all(absolute.sigma[-3:-1] >= 1.0) and np.all(absolute.sigma[-3:] < 1.5), absolute.sigma
+
+    def ce90(r, position):
+        from eoloc.refine.adjust import shift_position
+
+        errs = []
+        rng = np.random.default_rng(5)
+        for t in np.linspace(1.0, 57.0, 8):
+            u, v, p = ts.ground_truth_points(flight, err, float(t), 25, rng)
+            ok = np.isfinite(p[:, 0])
+            pose = shift_position(pose_with_biases(None, track, np.array([t]), r.heading_bias_deg, r.time_offset_s),
+                                  np.asarray(position)).take(0)
+            f = rule.locate(r.sensors[0], pose, np.stack([u[ok], v[ok]], -1))
+            e, n, _ = pymap3d.geodetic2enu(f.lat_deg, f.lon_deg, f.h_m, p[ok, 0], p[ok, 1], p[ok, 2])
+            errs.append(np.where(f.ok, np.hypot(e, n), np.inf))
+        return np.percentile(np.concatenate(errs), 90)
+
+    ce90_relative = ce90(relative, (0.0, 0.0, 0.0))
+    ce90_absolute = ce90(absolute, absolute.values[-3:])
+    print(f"reference: {len(control)} control points; estimates {absolute.values} +- {absolute.sigma}; CE90 "
+          f"relative {ce90_relative:.2f} m, absolute {ce90_absolute:.2f} m")
+    assert ce90_absolute <= 1.0, (ce90_relative, ce90_absolute)
+    assert ce90_relative > 3 * ce90_absolute, (ce90_relative, ce90_absolute)
+
+
 def write_video(path: Path, images, rate: Fraction) -> None:
     import av
 
@@ -197,8 +255,9 @@ def eoloc(*args) -> subprocess.CompletedProcess:
 
 
 def test_cli_refines_a_video_and_the_refined_telemetry_locates_better(orbit, tmp_path):
-    """`eoloc refine` on an H.264 video of the orbit with a telemetry CSV: the estimates within
-    2 sigma, the files written; then `eoloc locate` with telemetry_refined.csv and
+    """`eoloc refine` on an H.264 video of the orbit with a telemetry CSV and an orthophoto of the
+    ground (--reference): the estimates within 2 sigma (the GPS position bias, none here, too), the
+    solution absolute, the files written; then `eoloc locate` with telemetry_refined.csv and
     config_refined.toml puts truth pixels 5x closer (CE90) than with the telemetry as given."""
     flight, images, dem_path, dem = orbit
     video = tmp_path / "orbit.mp4"
@@ -211,15 +270,19 @@ def test_cli_refines_a_video_and_the_refined_telemetry_locates_better(orbit, tmp
         f"# the orbit's camera\n[camera]\nwidth = {ts.W}\nheight = {ts.H}\nfx = {fx!r}\nfy = {fy!r}\n"
         f"cx = {cx!r}\ncy = {cy!r}\n\n[gimbal]\nmodel = \"az-el\"\n")
     out = tmp_path / "out"
+    ortho = ts.write_reference(tmp_path / "ortho.tif", half_m=3000.0)
     r = eoloc("refine", video, "--telemetry", tmp_path / "tel.csv", "--config", tmp_path / "cam.toml", "--dem",
-              dem_path, "--vertical", "ellipsoid", "--every-s", 2, "--out", out, "--json")
+              dem_path, "--vertical", "ellipsoid", "--every-s", 2, "--reference", ortho, "--reference-sigma", 0.5,
+              "--out", out, "--json")
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
     rep = json.loads(r.stdout)
-    values = np.array([rep["parameters"][n] for n in NAMES])
-    sigma = np.array([rep["sigma"][n] for n in NAMES])
+    names = (*NAMES, "position_e_m", "position_n_m", "position_u_m")
+    values = np.array([rep["parameters"][n] for n in names])
+    sigma = np.array([rep["sigma"][n] for n in names])
     assert rep["keyframes"] == len(TIMES)
-    assert np.all(np.abs(values - truth_vector(ERRORS)) <= 2 * sigma), (values, sigma)
+    assert rep["absolute"] and rep["control_points"] > 10 * len(TIMES)
+    assert np.all(np.abs(values - np.r_[truth_vector(ERRORS), 0.0, 0.0, 0.0]) <= 2 * sigma), (values, sigma)
     for name in ("refine.json", "telemetry_refined.csv", "config_refined.toml", "tiepoints.csv", "residuals.png"):
         assert (out / name).stat().st_size > 0, name
     assert cv2.imread(str(out / "residuals.png")) is not None
@@ -344,6 +407,23 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
             err[name].append(np.where(f.ok, np.hypot(e, n), np.inf))
     ce90 = {name: np.percentile(np.concatenate(v), 90) for name, v in err.items()}
     assert ce90["given"] > 5 * ce90["refined"], ce90
+    # with an orthophoto of the ground: the position is estimated too (no bias here: within 2 sigma of
+    # the XMP's), the attitude as before
+    ortho = ts.write_reference(tmp_path / "ortho.tif", half_m=1500.0, cell_m=1.0)
+    r = eoloc("refine", folder, "--dem", dem_path, "--vertical", "ellipsoid", "--reference", ortho, "--json",
+              "--out", tmp_path / "out_ref")
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    rows = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+    for row, (_, _, truth) in zip(rows, photos, strict=True):
+        assert row["refined"] == "attitude and position"
+        e, n, u = pymap3d.geodetic2enu(row["camera_lat"], row["camera_lon"], row["camera_h"], row["given_camera_lat"],
+                                       row["given_camera_lon"], row["given_camera_h"])
+        assert abs(e) <= 2 * row["sigma_camera_lon_m"] and abs(n) <= 2 * row["sigma_camera_lat_m"], (e, n, row)
+        assert abs(u) <= 2 * row["sigma_camera_h"], (u, row)
+        got = np.array([row["camera_yaw"], row["camera_pitch"], row["camera_roll"]])
+        sig = np.array([row["sigma_camera_yaw"], row["sigma_camera_pitch"], row["sigma_camera_roll"]])
+        diff = (got - np.array(truth) + 180.0) % 360.0 - 180.0
+        assert np.all(np.abs(diff) <= 3 * sig + 1e-4), (row["file"], diff, sig)
 
 
 def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):

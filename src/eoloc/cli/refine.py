@@ -27,23 +27,30 @@ attitude as given (given_camera_yaw ...); photos_refined.csv, refine.json and re
 into --out.
 
 \b
-What it estimates (--estimate, comma-separated): mount (the turret base's three small angles to
-the INS body axes, deg), boresight (the optical axis' three angles to the gimbal, deg), heading
-(the INS heading bias, deg: measured = true + bias), time (the telemetry clock minus the video
-clock, s), each around the config's value with a prior 1-sigma (--prior-mount, --prior-heading,
---prior-time). Keyframes every --every-s seconds; the frames that overlap are predicted from the
-poses and the DEM (no all-pairs matching); SIFT tie points matched between them (ratio test,
-RANSAC), joined into tracks; then the biases and every tie point's ground position adjusted so
-that each tie point projects onto its pixels (1-sigma --pixel-sigma px) and lies on the DEM
-(1-sigma --dem-sigma m). No ground control needed: the images and the DEM tell the biases apart
+What it estimates (--estimate, comma-separated): mount (the turret base's three small angles to the
+INS body axes, deg), boresight (the optical axis' three angles to the gimbal, deg), heading (the INS
+heading bias, deg: measured = true + bias), time (the telemetry clock minus the video clock, s),
+position (the GPS position's bias east, north, up, m: measured = true + bias; needs --reference or
+strong relief), each around the config's value with a prior 1-sigma (--prior-mount, --prior-heading,
+--prior-time, --prior-position). Keyframes every --every-s seconds; the frames that overlap are
+predicted from the poses and the DEM (no all-pairs matching); SIFT tie points matched between them
+(ratio test, RANSAC), joined into tracks; then the biases and every tie point's ground position
+adjusted so that each tie point projects onto its pixels (1-sigma --pixel-sigma px) and lies on the
+DEM (1-sigma --dem-sigma m). No ground control needed: the images and the DEM tell the biases apart
 when the geometry varies (turns, gimbal motion, relief). Parameters the pass cannot separate are
 said (correlations above 0.95, and any whose sigma stays above half its prior's), not guessed.
+Without a reference the solution is relative (the frames agree with each other) and held to the
+ground by the DEM only, and says so. --reference ORTHO.tif (any georeferenced image of the ground:
+an orthophoto, a hillshade of the DEM): each keyframe is matched to the reference drawn as the frame
+would see it (its pose and the DEM), each match a control point (the frame's pixel sees the
+reference's ground there, 1-sigma --reference-sigma m): the solution becomes absolute.
 
 \b
 Written into --out:
   refine.json            estimates, 1-sigma, correlations, undetermined parameters, residuals, timings
-  telemetry_refined.csv  the telemetry with the heading bias out of yaw_deg and the time offset out
-                         of time_s (heights ellipsoidal, gimbal angles as gimbal1/gimbal2_deg)
+  telemetry_refined.csv  the telemetry with the heading bias out of yaw_deg, the time offset out of
+                         time_s, a position bias out of lat/lon/h_m (heights ellipsoidal, gimbal
+                         angles as gimbal1/gimbal2_deg)
   config_refined.toml    the config with the installation estimated (use it with the CSV above)
   tiepoints.csv          every tie-point observation with its residual before and after (px)
   residuals.png          the residuals' distribution and per-keyframe RMS, before and after
@@ -72,12 +79,21 @@ Written into --out:
               help="Prior 1-sigma of the heading bias (deg).")
 @click.option("--prior-time", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
               help="Prior 1-sigma of the time offset (s).")
+@click.option("--reference", "reference_path", type=click.Path(dir_okay=False), default=None,
+              help="A georeferenced image of the ground (orthophoto or DEM hillshade, GeoTIFF): every keyframe or "
+                   "photo matched to it gives control points; the solution becomes absolute and the GPS position "
+                   "bias (position, m) is estimated too.")
+@click.option("--reference-sigma", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True,
+              help="1-sigma of the reference's georeferencing, horizontal (m).")
+@click.option("--prior-position", type=click.FloatRange(0.0, min_open=True), default=5.0, show_default=True,
+              help="Prior 1-sigma of each axis of the GPS position bias (east, north, up; m).")
 @click.option("--max-gap", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
               help="Longest telemetry gap (s) to bridge.")
 @click.option("--json", "as_json", is_flag=True, help="Print refine.json's content instead of the tables.")
 @out_option("refine.json, telemetry_refined.csv, config_refined.toml, tiepoints.csv, residuals.png")
 def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, estimate, every_s, pixel_sigma,
-           dem_sigma, prior_mount, prior_heading, prior_time, max_gap, as_json, out_dir) -> None:
+           dem_sigma, prior_mount, prior_heading, prior_time, reference_path, reference_sigma, prior_position, max_gap,
+           as_json, out_dir) -> None:
     import json
     from pathlib import Path
 
@@ -87,11 +103,11 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
 
     photos = telemetry is None
     if estimate is None:
-        estimate = "mount,heading" if photos else "mount,heading,time"
+        estimate = ("mount,heading" if photos else "mount,heading,time") + (",position" if reference_path else "")
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
     settings = AdjustSettings(estimate=groups, pixel_sigma_px=pixel_sigma, dem_sigma_m=dem_sigma,
                               prior_sigma={"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading,
-                                           "time": prior_time})
+                                           "time": prior_time, "position": prior_position})
     if photos:
         for src in sources:
             head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
@@ -105,13 +121,20 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     if dem is None:
         raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
 
+    reference = None
+    if reference_path is not None:
+        from ..io.raster import read_reference_band
+        from ..refine.register import Reference
+
+        reference = Reference(*read_reference_band(reference_path), sigma_m=reference_sigma)
+
     def say(msg: str) -> None:
         err_console.print(f"{msg}...", highlight=False)
 
     if photos:
         from ..jobs.refine import refine_photos
 
-        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, progress=say)
+        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, reference=reference, progress=say)
         report_issues(pjob.failed)
         if as_json:
             for row in pjob.rows:
@@ -124,7 +147,7 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
         return
     cfg = load_config(config_path)
     job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
-                       settings=settings, max_gap_s=max_gap, progress=say)
+                       settings=settings, max_gap_s=max_gap, reference=reference, progress=say)
     report_issues(job.issues)
     if as_json:
         click.echo(json.dumps(job.report, indent=1, allow_nan=False))

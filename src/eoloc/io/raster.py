@@ -33,6 +33,25 @@ def read_image(path) -> np.ndarray:
         raise InputError(f"image {str(path)!r} cannot be read (GDAL reads PNG, JPEG, TIFF, ...): {exc}") from None
 
 
+def read_reference_band(path) -> tuple[np.ndarray, object, object]:
+    """A georeferenced image (an orthophoto, a hillshade) as one grey band (the mean of its first
+    three bands; nodata cells NaN), with its affine transform and CRS; an InputError naming the
+    file when it cannot be read or carries no georeferencing."""
+    import rasterio
+    from rasterio.errors import RasterioIOError
+
+    try:
+        with rasterio.open(path) as ds:
+            if ds.crs is None or ds.transform.is_identity:
+                raise InputError(f"reference {str(path)!r} has no georeferencing (a CRS and a geotransform): give a "
+                                 "GeoTIFF, or a world file and .prj beside the image")
+            bands = ds.read(list(range(1, min(ds.count, 3) + 1)), masked=True).astype(np.float32)
+            grey = bands.mean(axis=0)
+            return np.ma.filled(grey, np.nan), ds.transform, ds.crs
+    except RasterioIOError as exc:
+        raise InputError(f"reference {str(path)!r} cannot be read (GDAL reads GeoTIFF, JPEG2000, ...): {exc}") from None
+
+
 def write_dem(dem: DEM, path: str | Path) -> Path:
     """A DEM's posts as a float32 GeoTIFF in EPSG:4326, ellipsoidal heights (read it back with
     ``open_dem(path, vertical="ellipsoid")``); voids become the nodata value -32768."""

@@ -27,7 +27,8 @@ from ..errors import InputError
 from ..io.export import json_safe
 from ..io.telemetry import ZOOM_COLUMNS
 from ..io.videofile import iter_frames, probe_video
-from ..refine.adjust import AdjustSettings, Refinement, adjust
+from ..refine.adjust import REFINE_GROUPS, AdjustSettings, Refinement, adjust
+from ..refine.register import Reference, control_points
 from ..refine.tiepoints import TiePoints, TieSettings, choose_pairs, find_tie_points, predicted_overlap
 from ..rules import OnDEM
 from ..sequence.calibration import GROUPS, TelemetryTrack, pose_with_biases
@@ -60,10 +61,11 @@ def keyframe_indices(times: np.ndarray, ok: np.ndarray, every_s: float) -> np.nd
 
 def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | None = None, out: str | Path,
                  every_s: float = 1.0, tie: TieSettings | None = None,
-                 settings: AdjustSettings | None = None, max_gap_s: float = 0.5,
+                 settings: AdjustSettings | None = None, max_gap_s: float = 0.5, reference: Reference | None = None,
                  progress: Callable[[str], None] | None = None) -> RefineJob:
     """Refine the telemetry of ``video`` (a telemetry file with ``cfg``, its camera) on ``dem``
-    (``tie``/``settings``: the tie points' and the adjustment's; default their defaults)."""
+    (``tie``/``settings``: the tie points' and the adjustment's; default their defaults); with a
+    ``reference`` image the keyframes are matched to it too (control points: an absolute solution)."""
     tie = tie if tie is not None else TieSettings()
     settings = settings if settings is not None else AdjustSettings()
     from ..io.videofile import frame_times
@@ -110,18 +112,37 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     overlap = predicted_overlap([sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule)
     pairs = choose_pairs(overlap, tie)
     say(f"matching {len(pairs)} frame pairs")
-    ties = find_tie_points([images[int(k)] for k in keys], pairs, tie)
+    frames = [images[int(k)] for k in keys]
+    ties = find_tie_points(frames, pairs, tie)
     clock["tie_points_s"] = time.perf_counter() - t
-    del images
-    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points")
+    control = None
+    if reference is not None:
+        say(f"matching {keys.size} keyframes to the reference")
+        t = time.perf_counter()
+        control = control_points(frames, [sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule,
+                                 reference, tie)
+        clock["control_points_s"] = time.perf_counter() - t
+    del images, frames
+    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points"
+        + (f" and {len(control)} control points" if control is not None else ""))
     t = time.perf_counter()
-    ref = adjust([sensor], np.zeros(keys.size, np.int64), track, key_t, ties, rule, dem, settings)
+    ref = adjust([sensor], np.zeros(keys.size, np.int64), track, key_t, ties, rule, dem, settings,
+                 **reference_weights(reference, control))
     clock["adjust_s"] = time.perf_counter() - t
     clock["total_s"] = time.perf_counter() - t_start
     report = refine_report(ref, ties, keys, len(pairs), settings, clock)
     job = RefineJob(ref, ties, keys, report, issues=[*issues, *errors])
     job.written = write_refinement(job, out, telemetry, cfg, config_path, key_t)
     return job
+
+
+def reference_weights(reference: Reference | None, control) -> dict:
+    """adjust()'s control arguments: each point within half a reference cell, the reference's own
+    georeferencing error shared by all of them."""
+    if reference is None:
+        return {"control": None}
+    return {"control": control, "control_sigma_m": max(0.5 * reference.cell_m, 0.05),
+            "control_shared_sigma_m": reference.sigma_m}
 
 
 def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: int, settings: AdjustSettings,
@@ -138,7 +159,9 @@ def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: i
         "estimated": list(settings.estimate), "pixel_sigma_px": settings.pixel_sigma_px,
         "dem_sigma_m": settings.dem_sigma_m, "keyframes": int(keys.size), "pairs_matched": n_pairs,
         "pairs_verified": len(ties.pairs), "tie_points": ref.n_tracks, "observations": ref.n_observations,
-        "outlier_tracks": len(ref.outlier_tracks), "rms_px_before": rms(ref.residual_px_before),
+        "outlier_tracks": len(ref.outlier_tracks), "control_points": ref.n_control,
+        "absolute": ref.n_control > 0, "rms_px_control": rms(ref.control_residual_px),
+        "rms_px_before": rms(ref.residual_px_before),
         "rms_px_after": rms(ref.residual_px_after), "timing_s": clock, "warnings": ref.warnings})
 
 
@@ -161,10 +184,16 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     hb0 = cfg.telemetry.heading_bias_deg if cfg is not None else 0.0
     d_heading = ref.heading_bias_deg  # on top of the config's, which the reader took out
     d_time = ref.time_offset_s
+    from ..refine.adjust import position_bias, shift_position
+    from ..sensor import Pose
+
+    at = shift_position(Pose(c["lat_deg"], c["lon_deg"], c["h_m"]), position_bias(ref.names, ref.values))
+    lat, lon, h = (np.broadcast_to(np.asarray(x, dtype=np.float64), (len(tel),)) for x in (at.lat_deg, at.lon_deg,
+                                                                                           at.h_m))
     rows = []
     for i in range(len(tel)):
-        rows.append({"time_s": float(c["time_s"][i]) - d_time, "lat_deg": float(c["lat_deg"][i]),
-                     "lon_deg": float(c["lon_deg"][i]), "h_m": float(c["h_m"][i]),
+        rows.append({"time_s": float(c["time_s"][i]) - d_time, "lat_deg": float(lat[i]),
+                     "lon_deg": float(lon[i]), "h_m": float(h[i]),
                      "yaw_deg": (float(c["yaw_deg"][i]) + hb0 - d_heading) % 360.0,
                      "pitch_deg": float(c["pitch_deg"][i]), "roll_deg": float(c["roll_deg"][i]),
                      "gimbal1_deg": float(c["gimbal1_deg"][i]), "gimbal2_deg": float(c["gimbal2_deg"][i]),
@@ -198,7 +227,7 @@ KEPT_COLUMNS = (*ZOOM_COLUMNS, "range_m")
 
 def ref_groups(ref: Refinement) -> set[str]:
     """The groups whose parameters ``ref`` estimated."""
-    return {g for g, names in GROUPS.items() if set(names) <= set(ref.names)}
+    return {g for g, names in REFINE_GROUPS.items() if set(names) <= set(ref.names)}
 
 
 def residual_plot(path: Path, ties: TiePoints, ref: Refinement, key_t: np.ndarray) -> Path:
@@ -272,7 +301,8 @@ def refined_camera_attitude(yaw_deg, pitch_deg, roll_deg, mount_deg, heading_bia
 
 
 def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, tie: TieSettings | None = None,
-                  out: str | Path | None = None, progress: Callable[[str], None] | None = None) -> PhotoRefineJob:
+                  out: str | Path | None = None, reference: Reference | None = None,
+                  progress: Callable[[str], None] | None = None) -> PhotoRefineJob:
     """Refine the camera attitudes of a set of overlapping drone photos (files or folders) on
     ``dem``: a mounting error and a heading (gimbal yaw) bias shared by the set, from tie points
     between the photos whose views the poses predict overlap. Each photo's row carries its refined
@@ -338,9 +368,15 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
     pairs = choose_pairs(overlap, tie)
     say(f"matching {len(pairs)} photo pairs")
     ties = find_tie_points(images, pairs, tie)
+    control = None
+    if reference is not None:
+        say(f"matching {k} photos to the reference")
+        control = control_points(images, [sensors[i] for i in frame_sensor], start, rule, reference, tie)
     del images
-    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points")
-    ref = adjust(sensors, frame_sensor, track, np.arange(k, dtype=np.float64), ties, rule, dem, settings)
+    say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points"
+        + (f" and {len(control)} control points" if control is not None else ""))
+    ref = adjust(sensors, frame_sensor, track, np.arange(k, dtype=np.float64), ties, rule, dem, settings,
+                 **reference_weights(reference, control))
     clock = {"total_s": time.perf_counter() - t_start}
     rows = photo_rows(poses, ref)
     report = refine_report(ref, ties, np.arange(k), len(pairs), settings, clock)
@@ -371,8 +407,14 @@ def photo_rows(poses, ref: Refinement) -> list[dict]:
         hb = x[hb_idx] if hb_idx >= 0 else ref.heading_bias_deg
         return refined_camera_attitude(p.yaw_deg, p.pitch_deg, p.roll_deg, mount, hb)
 
+    from ..refine.adjust import position_bias, shift_position
+    from ..sensor import Pose
+
+    bias = position_bias(ref.names, ref.values)
+    pos_sigma = [float(ref.sigma[names.index(n)]) if n in names else None for n in REFINE_GROUPS["position"]]
     rows = []
     for p in poses:
+        moved = shift_position(Pose(p.lat_deg, p.lon_deg, p.h_m), bias)
         ypr = attitude(p, ref.values)
         J = np.empty((3, len(names)))
         for j in range(len(names)):
@@ -383,10 +425,13 @@ def photo_rows(poses, ref: Refinement) -> list[dict]:
             J[:, j] = d / 1e-6
         sig = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, ref.cov, J), 0.0))
         rows.append(json_safe({
-            "file": p.path, "camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m,
+            "file": p.path, "camera_lat": float(moved.lat_deg), "camera_lon": float(moved.lon_deg),
+            "camera_h": float(moved.h_m),
             "camera_yaw": float(ypr[0]), "camera_pitch": float(ypr[1]), "camera_roll": float(ypr[2]),
-            "sigma_camera_lat": None, "sigma_camera_lon": None, "sigma_camera_h": None,
+            "sigma_camera_lat_m": pos_sigma[1], "sigma_camera_lon_m": pos_sigma[0], "sigma_camera_h": pos_sigma[2],
             "sigma_camera_yaw": float(sig[0]), "sigma_camera_pitch": float(sig[1]), "sigma_camera_roll": float(sig[2]),
             "given_camera_yaw": p.yaw_deg, "given_camera_pitch": p.pitch_deg, "given_camera_roll": p.roll_deg,
-            "refined": "attitude (the position as given: not estimated)"}))
+            "given_camera_lat": p.lat_deg, "given_camera_lon": p.lon_deg, "given_camera_h": p.h_m,
+            "refined": "attitude and position" if pos_sigma[0] is not None else
+                       "attitude (the position as given: not estimated)"}))
     return rows

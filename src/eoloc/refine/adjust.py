@@ -27,6 +27,7 @@ a heading bias from a time offset or the mount's yaw).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -45,9 +46,13 @@ from ..sequence.calibration import (
     pose_with_biases,
 )
 from ..terrain import DEM
+from .register import ControlPoints
 from .tiepoints import TiePoints
 
-PRIOR_SIGMA = {"mount": 1.0, "boresight": 1.0, "heading": 2.0, "time": 0.5}  # deg, deg, deg, s
+#: calibrate's groups, and a constant position bias of the GPS (east, north, up of the aircraft, m;
+#: measured = true + bias): only a reference (control points) or strong relief determines it
+REFINE_GROUPS = {**GROUPS, "position": ("position_e_m", "position_n_m", "position_u_m")}
+PRIOR_SIGMA = {"mount": 1.0, "boresight": 1.0, "heading": 2.0, "time": 0.5, "position": 5.0}  # deg, deg, deg, s, m
 GLOBAL_STEP = 1e-5  # forward-difference steps: deg or s for the globals
 GROUND_STEP_M = 1e-3  # and metres for the tracks (ECEF has ~1e-9 m resolution)
 
@@ -67,10 +72,10 @@ class AdjustSettings:
     prior_share: float = 0.5
 
     def __post_init__(self) -> None:
-        bad = [g for g in self.estimate if g not in GROUPS]
+        bad = [g for g in self.estimate if g not in REFINE_GROUPS]
         if bad or not self.estimate:
             raise InputError(f"estimate: unknown or no groups {bad or list(self.estimate)}; choose from "
-                             f"{', '.join(GROUPS)}")
+                             f"{', '.join(REFINE_GROUPS)}")
         if not (self.pixel_sigma_px > 0 and self.dem_sigma_m > 0 and self.outlier_sigma > 0
                 and 0 < self.prior_share <= 1):
             raise InputError(f"adjustment settings out of range: {self}")
@@ -105,6 +110,8 @@ class Refinement(Estimates):
     undetermined: list[str] = field(default_factory=list)
     outlier_tracks: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    n_control: int = 0  # control points (frame pixels matched to a reference) used
+    control_residual_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 
@@ -114,7 +121,8 @@ class _Problem:
     track each row depends on (-1: a prior's row, which depends on its global only)."""
 
     def __init__(self, sensors, frame_sensor, telemetry, frame_time_s, ties: TiePoints, x_ground0, dem,
-                 names, g0, prior, s: AdjustSettings, heading0: float, time0: float):
+                 names, g0, prior, s: AdjustSettings, heading0: float, time0: float, *, control=None,
+                 control_sigma_m: float = 1.0):
         self.sensors, self.telemetry = sensors, telemetry
         self.frame_time_s, self.ties, self.dem, self.names = frame_time_s, ties, dem, names
         self.g0, self.prior, self.s, self.heading0, self.time0 = g0, prior, s, heading0, time0
@@ -124,7 +132,12 @@ class _Problem:
         self.R_ecef_enu = geodesy.R_ecef_enu(lat, lon)  # (T, 3, 3): ENU offsets -> ECEF
         self.uv = np.stack([ties.u_px, ties.v_px], -1)
         self.groups = [np.flatnonzero(np.asarray(frame_sensor)[ties.frame] == k) for k in range(len(sensors))]
-        self.row_track = np.r_[np.repeat(ties.track, 2), np.arange(self.t), np.full(self.p, -1)]
+        # control tracks (their ground given by a reference): east and north held to it (control_sigma_m)
+        self.control = np.zeros(self.t, bool) if control is None else np.asarray(control, bool)
+        self.control_ids = np.flatnonzero(self.control)
+        self.control_sigma_m = control_sigma_m
+        self.row_track = np.r_[np.repeat(ties.track, 2), np.arange(self.t), np.repeat(self.control_ids, 2),
+                               np.full(self.p, -1)]
         self._frames_key: bytes | None = None
         self._frames: list = []
 
@@ -138,7 +151,8 @@ class _Problem:
         key = g.tobytes()
         if self._frames_key != key:
             _, hb, dt = apply_parameters(self.sensors[0], self.names, g, self.heading0, self.time0)
-            pose = pose_with_biases(None, self.telemetry, self.frame_time_s, hb, dt)
+            pose = shift_position(pose_with_biases(None, self.telemetry, self.frame_time_s, hb, dt),
+                                  position_bias(self.names, g))
             made = []
             for sensor in self.sensors:
                 s = apply_parameters(sensor, self.names, g, self.heading0, self.time0)[0]
@@ -167,8 +181,9 @@ class _Problem:
         h_dem = self.dem.height(lat, lon) if self.dem is not None else h
         r_dem = np.nan_to_num((h - h_dem) / self.s.dem_sigma_m)  # off the DEM: no constraint
         r_prior = (g - self.g0) / self.prior
+        r_control = (d[self.control_ids, :2] / self.control_sigma_m).ravel()
         # a point pushed behind a camera: a large residual, not a crash
-        return np.concatenate([np.nan_to_num(r_px, nan=1e3).ravel(), r_dem, r_prior])
+        return np.concatenate([np.nan_to_num(r_px, nan=1e3).ravel(), r_dem, r_control, r_prior])
 
     def jacobian(self, g: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward differences: (R, p) by the globals (one evaluation each) and (R, 3) by each
@@ -255,6 +270,22 @@ class _Problem:
         return g, d, r, w, S_inv, lam < 1e10
 
 
+def position_bias(names: Sequence[str], g: np.ndarray) -> np.ndarray:
+    """The position bias (east, north, up m) among the globals ``g`` (zeros where not estimated)."""
+    v = dict(zip(names, g, strict=True))
+    return np.array([v.get(n, 0.0) for n in REFINE_GROUPS["position"]], dtype=np.float64)
+
+
+def shift_position(pose: Pose, bias_enu_m: np.ndarray) -> Pose:
+    """The poses with a GPS position bias taken out (true = measured - bias, in each pose's ENU)."""
+    if not np.any(bias_enu_m):
+        return pose
+    lat, lon, h = (np.asarray(x, dtype=np.float64) for x in (pose.lat_deg, pose.lon_deg, pose.h_m))
+    p = np.stack(geodesy.geodetic_to_ecef(lat, lon, h), -1) - geodesy.R_ecef_enu(lat, lon) @ bias_enu_m
+    la, lo, hh = geodesy.ecef_to_geodetic(p[..., 0], p[..., 1], p[..., 2])
+    return dataclasses.replace(pose, lat_deg=la, lon_deg=lo, h_m=hh)
+
+
 def initial_ground(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, poses: Pose, ties: TiePoints,
                    rule: StopRule) -> np.ndarray:
     """(T, 3) ECEF: each track's observations put on the ground by ``rule`` with the starting poses,
@@ -288,23 +319,31 @@ def grouped_median(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.n
 def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: TelemetryTrack,
            frame_time_s: np.ndarray, ties: TiePoints, rule: StopRule, dem: DEM | None,
            settings: AdjustSettings = AdjustSettings(), *, heading_bias_deg: float = 0.0,
-           time_offset_s: float = 0.0) -> Refinement:
+           time_offset_s: float = 0.0, control: ControlPoints | None = None,
+           control_sigma_m: float = 1.0, control_shared_sigma_m: float = 0.0) -> Refinement:
     """Adjust ``settings.estimate`` and the tracks' ground points to the tie points.
 
     ``sensors``: the distinct sensors; ``frame_sensor`` (K,): each frame's sensor in it;
     ``telemetry``: the pose records on the frames' clock; ``frame_time_s`` (K,) the frames' times;
     ``ties``: observations (frame = position in 0..K-1); ``rule``: puts the tracks on the ground at
     the start; ``dem``: the soft height constraint (None: none, a relative solution);
-    ``heading_bias_deg``/``time_offset_s``: the starting values (those not estimated stay)."""
+    ``heading_bias_deg``/``time_offset_s``: the starting values (those not estimated stay);
+    ``control``: frame pixels matched to a reference (:mod:`.register`), each a track of one
+    observation whose east/north are held to the reference's within ``control_sigma_m`` (each
+    point's own error); ``control_shared_sigma_m``: the reference's georeferencing error, which
+    all its points share: it moves the whole solution, so it is added to the position bias'
+    east/north variance (a shift the points' number cannot average away). The solution is then
+    absolute, not only relative + the DEM."""
     s = settings
     frame_sensor = np.asarray(frame_sensor, dtype=np.int64)
     frame_time_s = np.asarray(frame_time_s, dtype=np.float64)
-    names = tuple(n for g in s.estimate for n in GROUPS[g])
-    prior = np.array([s.prior_sigma[g] for g in s.estimate for _ in GROUPS[g]], dtype=np.float64)
+    names = tuple(n for g in s.estimate for n in REFINE_GROUPS[g])
+    prior = np.array([s.prior_sigma[g] for g in s.estimate for _ in REFINE_GROUPS[g]], dtype=np.float64)
     base = sensors[0]
     start = {**dict(zip(GROUPS["mount"], base.mount_misalignment_deg, strict=True)),
              **dict(zip(GROUPS["boresight"], base.boresight_misalignment_deg, strict=True)),
-             "heading_bias_deg": heading_bias_deg, "time_offset_s": time_offset_s}
+             "heading_bias_deg": heading_bias_deg, "time_offset_s": time_offset_s,
+             **dict.fromkeys(REFINE_GROUPS["position"], 0.0)}
     g0 = np.array([start[n] for n in names], dtype=np.float64)
     poses0 = pose_with_biases(None, telemetry, frame_time_s, heading_bias_deg, time_offset_s)
     x_ground = initial_ground(sensors, frame_sensor, poses0, ties, rule)
@@ -312,42 +351,56 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     n_obs = np.bincount(ties.track, minlength=ties.n_tracks)
     keep = located & (n_obs >= 2)
     work = ties.keep_tracks(keep)
-    kept_ids = np.flatnonzero(keep)
     if work.n_tracks < 3 or len(work) < len(names) + 3:
         raise InputError(f"{work.n_tracks} tie-point tracks seen in two frames or more could be put on the ground: "
                          "too few to adjust (the frames must overlap and show texture)")
+    ids = np.flatnonzero(keep)  # each working track's id among the caller's tracks; -1: a control point
     x_ground = x_ground[keep]
+    n_control = 0 if control is None else len(control)
+    if n_control:  # each control point a track of one observation whose ground is known
+        c = control
+        work = TiePoints(np.r_[work.frame, c.frame], np.r_[work.track, work.n_tracks + np.arange(n_control)],
+                         np.r_[work.u_px, c.u_px], np.r_[work.v_px, c.v_px], work.pairs, work.verified)
+        x_ground = np.r_[x_ground, np.stack(geodesy.geodetic_to_ecef(c.lat_deg, c.lon_deg, c.h_m), -1)]
+        ids = np.r_[ids, np.full(n_control, -1)]
+    x_given = x_ground.copy()
     warnings: list[str] = []
 
-    def problem(tp: TiePoints, xg0: np.ndarray) -> _Problem:
+    def problem(tp: TiePoints, xg0: np.ndarray, tie_ids: np.ndarray) -> _Problem:
         return _Problem(sensors, frame_sensor, telemetry, frame_time_s, tp, xg0, dem, names, g0, prior, s,
-                        heading_bias_deg, time_offset_s)
+                        heading_bias_deg, time_offset_s, control=tie_ids < 0, control_sigma_m=control_sigma_m)
 
-    prob = problem(work, x_ground)
+    prob = problem(work, x_ground, ids)
     d0 = np.zeros((work.n_tracks, 3))
     before = prob.project(g0, d0) - prob.uv
     g, d, _, _, _, _ = prob.solve(g0, d0, "soft_l1", max_iter=8)  # only to find the outliers
     r = (prob.project(g, d) - prob.uv) / s.pixel_sigma_px
     bad_obs = ~(np.hypot(r[:, 0], r[:, 1]) <= s.outlier_sigma)
-    outliers = sorted({int(kept_ids[t]) for t in np.unique(work.track[bad_obs])})
+    outliers = sorted({int(ids[t]) for t in np.unique(work.track[bad_obs]) if ids[t] >= 0})
+    bad_control = int(np.sum(bad_obs & (ids[work.track] < 0)))
     if bad_obs.any():
-        # drop the outlying observations; a track left with one observation goes with them
+        # drop the outlying observations; a tie track left with one observation goes with them
         left = np.bincount(work.track[~bad_obs], minlength=work.n_tracks)
-        good_track = left >= 2
+        good_track = np.where(ids < 0, left >= 1, left >= 2)
         rows = ~bad_obs & good_track[work.track]
         sub = TiePoints(work.frame[rows], work.track[rows], work.u_px[rows], work.v_px[rows], work.pairs,
                         work.verified).keep_tracks(good_track)
         ground_now = prob.ground(d)[good_track]
-        kept_ids = kept_ids[good_track]
+        ids, x_given = ids[good_track], x_given[good_track]
         before = before[rows]
         work = sub
     else:
         ground_now = prob.ground(d)
-    prob = problem(work, ground_now)
+    ground_now[ids < 0] = x_given[ids < 0]  # the control points' priors stay on the reference's ground
+    prob = problem(work, ground_now, ids)
     g, d, res, _, S_inv, converged = prob.solve(g, np.zeros((work.n_tracks, 3)), "linear")
     dof = res.size - (len(names) + 3 * work.n_tracks)
     s0 = float(np.sqrt(np.sum(res ** 2) / dof)) if dof > 0 else float("nan")
     cov = S_inv * max(s0, 1.0) ** 2
+    if n_control and control_shared_sigma_m > 0:
+        for name in REFINE_GROUPS["position"][:2]:
+            if name in names:
+                cov[names.index(name), names.index(name)] += control_shared_sigma_m ** 2
     sigma = np.sqrt(np.diagonal(cov))
     undetermined = [n for n, sg, pr in zip(names, sigma, prior, strict=True) if not sg <= s.prior_share * pr]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -361,20 +414,29 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     if outliers:
         warnings.append(f"{len(outliers)} tie-point track(s) had observations past {s.outlier_sigma:g} sigma "
                         "(mismatches or moving objects): those observations were left out")
+    if bad_control:
+        warnings.append(f"{bad_control} control point(s) matched to the reference were past {s.outlier_sigma:g} sigma "
+                        "and left out")
+    if not n_control:
+        warnings.append("no reference: the adjustment is relative (the frames agree with each other) and held to the "
+                        "ground by the DEM only; a reference image (--reference) makes it absolute")
     refined = [apply_parameters(x, names, g, heading_bias_deg, time_offset_s)[0] for x in sensors]
     _, hb, dt = apply_parameters(base, names, g, heading_bias_deg, time_offset_s)
     after = prob.project(g, d) - prob.uv
+    tie_rows = ids[work.track] >= 0
+    control_after = after[~tie_rows]
     lat = np.full(ties.n_tracks, np.nan)
     lon, h = lat.copy(), lat.copy()
     la, lo, hh = geodesy.ecef_to_geodetic(*prob.ground(d).T)
-    lat[kept_ids], lon[kept_ids], h[kept_ids] = la, lo, hh
+    tie_tracks = ids >= 0
+    lat[ids[tie_tracks]], lon[ids[tie_tracks]], h[ids[tie_tracks]] = la[tie_tracks], lo[tie_tracks], hh[tie_tracks]
     rb = np.full((len(ties), 2), np.nan)
     ra = rb.copy()
-    # map the adjusted observations back onto the caller's rows (by track id and frame)
+    # map the adjusted tie observations back onto the caller's rows (by track id and frame)
     key_all = ties.track * (ties.frame.max() + 1) + ties.frame
-    key_used = kept_ids[work.track] * (ties.frame.max() + 1) + work.frame
+    key_used = ids[work.track[tie_rows]] * (ties.frame.max() + 1) + work.frame[tie_rows]
     where = np.searchsorted(key_all, key_used, sorter=np.argsort(key_all))
     idx = np.argsort(key_all)[where]
-    rb[idx], ra[idx] = before, after
-    return Refinement(names, g, cov, prior, refined, hb, dt, lat, lon, h, rb, ra, s0, len(work), work.n_tracks,
-                      undetermined, outliers, warnings)
+    rb[idx], ra[idx] = before[tie_rows], after[tie_rows]
+    return Refinement(names, g, cov, prior, refined, hb, dt, lat, lon, h, rb, ra, s0, int(tie_rows.sum()),
+                      int(tie_tracks.sum()), undetermined, outliers, warnings, int((~tie_rows).sum()), control_after)
