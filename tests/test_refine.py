@@ -426,16 +426,67 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
         assert np.all(np.abs(diff) <= 3 * sig + 1e-4), (row["file"], diff, sig)
 
 
+def test_a_klv_video_is_refined_from_its_own_metadata(orbit, tmp_path):
+    """An MPEG-TS of the orbit whose ST 0601 KLV (platform attitude, sensor position with HAE,
+    turret angles, fields of view, at 10 Hz) carries the injected errors: `eoloc refine VIDEO.ts
+    --dem` with no telemetry file and no config; the estimates within 2 sigma; the refined CSV and
+    the config written for it locate truth pixels between the keyframes within 5 m CE90."""
+    from datetime import UTC, datetime
+
+    from eoloc.io.klv.encode import encode_uas_packet
+    from eoloc.io.klv.mux import write_klv_ts
+
+    flight, images, dem_path, _ = orbit
+    vfov = 2 * np.degrees(np.arctan(np.tan(np.radians(ts.HFOV_DEG / 2)) * ts.H / ts.W))
+    packets = []
+    for r in ts.telemetry_rows(flight, ERRORS, float(TIMES[-1])):
+        if r["time_s"] < 0:
+            continue
+        values = {2: datetime.fromtimestamp(1_780_000_000 + r["time_s"], UTC), 5: r["yaw_deg"], 6: r["pitch_deg"],
+                  7: r["roll_deg"], 13: r["lat_deg"], 14: r["lon_deg"], 75: r["h_m"], 16: ts.HFOV_DEG, 17: vfov,
+                  18: r["azimuth_deg"] % 360.0, 19: r["elevation_deg"], 20: 0.0}
+        packets.append((encode_uas_packet(values), r["time_s"]))
+    video = write_klv_ts(tmp_path / "orbit.ts", [packets], video_fps=1.0, video_size=(ts.W, ts.H),
+                         frame_source=lambda i: images[min(i // 2, len(images) - 1)])
+    out = tmp_path / "out"
+    r = eoloc("refine", video, "--dem", dem_path, "--vertical", "ellipsoid", "--every-s", 2, "--json", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    rep = json.loads(r.stdout)
+    values = np.array([rep["parameters"][n] for n in NAMES])
+    sigma = np.array([rep["sigma"][n] for n in NAMES])
+    assert np.all(np.abs(values - truth_vector(ERRORS)) <= 2 * sigma), (values, sigma)
+    rng = np.random.default_rng(4)
+    dets, truth = [], []
+    for t in np.linspace(3.0, 55.0, 5):
+        u, v, p = ts.ground_truth_points(flight, ERRORS, float(t), 20, rng)
+        for i in np.flatnonzero(np.isfinite(p[:, 0])):
+            dets.append({"time_s": float(t), "target_id": f"p{len(dets)}", "u_px": float(u[i]), "v_px": float(v[i])})
+            truth.append(p[i])
+    write_csv(tmp_path / "dets.csv", dets)
+    r = eoloc("locate", out / "telemetry_refined.csv", tmp_path / "dets.csv", "--config", out / "config_refined.toml",
+              "--dem", dem_path, "--vertical", "ellipsoid", "--interpolate", "--json", "--out", tmp_path / "loc")
+    assert r.returncode == 0, r.stderr
+    fixes = {f["target_id"]: f for f in json.loads(r.stdout)["fixes"]}
+    err = []
+    for d, p in zip(dets, truth, strict=True):
+        f = fixes[d["target_id"]]
+        assert f["status"] == "OK"
+        e, n, _ = pymap3d.geodetic2enu(f["lat_deg"], f["lon_deg"], f["h_m"], *p)
+        err.append(np.hypot(e, n))
+    assert np.percentile(err, 90) < 5.0, np.percentile(err, 90)
+
+
 def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
-    """Exit status 2 and one line naming the problem: a video without its telemetry, a folder with
-    no photo, a clock offset asked of photos, no DEM."""
+    """Exit status 2 and one line naming the problem: a video with neither KLV nor telemetry, a
+    folder with no photo, a clock offset asked of photos, no DEM."""
     rng = np.random.default_rng(1)
     video = tmp_path / "v.mp4"
     write_video(video, [rng.integers(0, 255, (ts.H, ts.W), dtype=np.uint8) for _ in range(3)], Fraction(1, 1))
     dem = ts.write_dem(tmp_path / "dem.tif")
     (tmp_path / "empty").mkdir()
     (tmp_path / "notes.txt").write_text("not a photo")
-    cases = [((video, "--dem", dem), "is a video: give its --telemetry"),
+    cases = [((video, "--dem", dem), "without its own KLV a video needs its telemetry: --telemetry FILE"),
              ((tmp_path / "empty", "--dem", dem), "refining needs three or more"),
              ((tmp_path / "notes.txt", "--dem", dem, "--estimate", "heading,time"), "photos have no clock offset"),
              ((tmp_path / "empty",), "refining needs the terrain")]

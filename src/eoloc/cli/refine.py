@@ -15,6 +15,7 @@ tie points and a bundle adjustment, no ground control needed.
 \b
   eoloc refine FLIGHT.mp4 --telemetry TEL.csv --config CAMERA.toml --dem DEM.tif --out out/
   eoloc video FLIGHT.mp4 --telemetry out/telemetry_refined.csv --config out/config_refined.toml --dem DEM.tif
+  eoloc refine FLIGHT.ts --dem DEM.tif --out out/      (the ST 0601 KLV in the video's own TS)
   eoloc refine PHOTO|FOLDER... --dem DEM.tif [--json]
 
 \b
@@ -61,7 +62,7 @@ Written into --out:
 @click.argument("sources", nargs=-1, required=True, type=click.Path())
 @click.option("--telemetry", type=click.Path(),
               help="The video's telemetry (CSV, DJI SRT, flight log): time_s is seconds since the first frame "
-                   "minus the config's time_offset_s. Without it, SOURCES are photos.")
+                   "minus the config's time_offset_s. Without it: the video's own KLV (MPEG-TS), or photos.")
 @config_option(required=False, help_text="Camera/gimbal/installation TOML (the starting values; a video's).")
 @dem_options("The terrain (GeoTIFF, DTED, SRTM .hgt): the tie points' heights are held to it.")
 @click.option("--estimate", default=None,
@@ -101,22 +102,22 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     from ..jobs.refine import refine_video
     from ..refine.adjust import AdjustSettings
 
-    photos = telemetry is None
+    def is_video(src) -> bool:
+        head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
+        return head[:1] == b"\x47" or head[4:8] == b"ftyp" or head[:4] == b"\x1aE\xdf\xa3"
+
+    photos = telemetry is None and not any(is_video(src) for src in sources)
     if estimate is None:
         estimate = ("mount,heading" if photos else "mount,heading,time") + (",position" if reference_path else "")
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
     settings = AdjustSettings(estimate=groups, pixel_sigma_px=pixel_sigma, dem_sigma_m=dem_sigma,
                               prior_sigma={"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading,
                                            "time": prior_time, "position": prior_position})
-    if photos:
-        for src in sources:
-            head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
-            if head[:1] == b"\x47" or head[4:8] == b"ftyp" or head[:4] == b"\x1aE\xdf\xa3":
-                raise InputError(f"{src} is a video: give its --telemetry FILE and --config C.toml (refining from "
-                                 "the video's own KLV is not there yet)")
-    if not photos and (len(sources) != 1 or config_path is None):
-        raise InputError("a video is refined one at a time with its --telemetry and --config: "
-                         "eoloc refine VIDEO --telemetry FILE --config C.toml --dem F")
+    if not photos and len(sources) != 1:
+        raise InputError("a video is refined one at a time: eoloc refine VIDEO [--telemetry FILE --config C.toml] "
+                         "--dem F")
+    if telemetry is not None and config_path is None:
+        raise InputError("--telemetry needs the camera: --config C.toml")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     if dem is None:
         raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
@@ -145,7 +146,7 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
             warn(w)
         err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png", highlight=False)
         return
-    cfg = load_config(config_path)
+    cfg = load_config(config_path) if config_path is not None else None
     job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
                        settings=settings, max_gap_s=max_gap, reference=reference, progress=say)
     report_issues(job.issues)

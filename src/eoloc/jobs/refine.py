@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import EolocError, InputError
 from ..io.export import json_safe
 from ..io.telemetry import ZOOM_COLUMNS
 from ..io.videofile import iter_frames, probe_video
@@ -63,13 +63,16 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
                  every_s: float = 1.0, tie: TieSettings | None = None,
                  settings: AdjustSettings | None = None, max_gap_s: float = 0.5, reference: Reference | None = None,
                  progress: Callable[[str], None] | None = None) -> RefineJob:
-    """Refine the telemetry of ``video`` (a telemetry file with ``cfg``, its camera) on ``dem``
-    (``tie``/``settings``: the tie points' and the adjustment's; default their defaults); with a
-    ``reference`` image the keyframes are matched to it too (control points: an absolute solution)."""
+    """Refine the telemetry of ``video`` (a telemetry file with ``cfg``, its camera; ``telemetry``
+    None: the ST 0601 KLV in the video's own transport stream, each frame's camera from its fields
+    of view) on ``dem`` (``tie``/``settings``: the tie points' and the adjustment's; default their
+    defaults); with a ``reference`` image the keyframes are matched to it too (control points: an
+    absolute solution)."""
     tie = tie if tie is not None else TieSettings()
     settings = settings if settings is not None else AdjustSettings()
+    from ..ground.frame import misb_frame_sensor
     from ..io.videofile import frame_times
-    from .video import csv_metadata
+    from .video import csv_metadata, klv_metadata
 
     if not isinstance(dem, DEM):
         raise InputError("refining needs the terrain: --dem FILE (the tie points' heights are held to it)")
@@ -83,7 +86,15 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     times = frame_times(video)
     if times.size == 0:
         raise InputError(f"{video}: the video stream has no frame with a presentation time")
-    meta, issues, sensor = csv_metadata(telemetry, cfg, float(times[0]), dem=dem)
+    if telemetry is not None:
+        meta, issues, sensor = csv_metadata(telemetry, cfg, float(times[0]), dem=dem)
+    else:
+        try:
+            meta, issues, _ = klv_metadata(video, float(times[0]), in_video=True)
+        except EolocError as exc:
+            raise InputError(f"{exc} -- without its own KLV a video needs its telemetry: --telemetry FILE "
+                             "--config C.toml", exc.issues) from None
+        sensor = None
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
     keys = keyframe_indices(times, np.asarray(poses.ok, dtype=bool), every_s)
     if keys.size < 3:
@@ -100,16 +111,27 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     if keys.size < 3:
         raise InputError(f"{video}: only {keys.size} keyframe(s) could be decoded", [*issues, *errors])
     h, w = images[int(keys[0])].shape[:2]
-    if (w, h) != (sensor.camera.width, sensor.camera.height):
+    if sensor is not None and (w, h) != (sensor.camera.width, sensor.camera.height):
         raise InputError(f"{video}: frames are {w} x {h} but the config's camera is {sensor.camera.width} x "
                          f"{sensor.camera.height}: give the config of this video's camera")
+    if sensor is not None:
+        sensors, frame_sensor = [sensor], np.zeros(keys.size, np.int64)
+    else:  # KLV: each keyframe's pinhole from its fields of view (tags 16, 17), one sensor per zoom
+        fov = [(round(float(poses.values["hfov_deg"][k]), 6), round(float(poses.values["vfov_deg"][k]), 6))
+               for k in keys]
+        distinct = list(dict.fromkeys(fov))
+        sensors = [misb_frame_sensor(w, h, *f) for f in distinct]
+        if any(x is None for x in sensors):
+            raise InputError(f"{video}: a keyframe's KLV has no usable field of view (tags 16, 17)", issues)
+        frame_sensor = np.array([distinct.index(f) for f in fov], dtype=np.int64)
     clock["decode_s"] = time.perf_counter() - t_start
     track = TelemetryTrack(meta.clock_s, meta.pose, max_gap_s)
     key_t = times[keys]
     rule = OnDEM(dem)
     t = time.perf_counter()
     start = pose_with_biases(None, track, key_t, 0.0, 0.0)
-    overlap = predicted_overlap([sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule)
+    key_sensors = [sensors[i] for i in frame_sensor]
+    overlap = predicted_overlap(key_sensors, [start.take(i) for i in range(keys.size)], rule)
     pairs = choose_pairs(overlap, tie)
     say(f"matching {len(pairs)} frame pairs")
     frames = [images[int(k)] for k in keys]
@@ -119,20 +141,22 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     if reference is not None:
         say(f"matching {keys.size} keyframes to the reference")
         t = time.perf_counter()
-        control = control_points(frames, [sensor] * keys.size, [start.take(i) for i in range(keys.size)], rule,
-                                 reference, tie)
+        control = control_points(frames, key_sensors, [start.take(i) for i in range(keys.size)], rule, reference,
+                                 tie)
         clock["control_points_s"] = time.perf_counter() - t
     del images, frames
     say(f"adjusting {len(ties)} observations of {ties.n_tracks} tie points"
         + (f" and {len(control)} control points" if control is not None else ""))
     t = time.perf_counter()
-    ref = adjust([sensor], np.zeros(keys.size, np.int64), track, key_t, ties, rule, dem, settings,
+    ref = adjust(sensors, frame_sensor, track, key_t, ties, rule, dem, settings,
                  **reference_weights(reference, control))
     clock["adjust_s"] = time.perf_counter() - t
     clock["total_s"] = time.perf_counter() - t_start
     report = refine_report(ref, ties, keys, len(pairs), settings, clock)
+    report["video"] = str(video)
     job = RefineJob(ref, ties, keys, report, issues=[*issues, *errors])
-    job.written = write_refinement(job, out, telemetry, cfg, config_path, key_t)
+    job.written = write_refinement(job, out, telemetry, cfg, config_path, key_t,
+                                   klv=None if telemetry is not None else (meta, float(times[0]), (w, h)))
     return job
 
 
@@ -165,11 +189,18 @@ def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: i
         "rms_px_after": rms(ref.residual_px_after), "timing_s": clock, "warnings": ref.warnings})
 
 
-def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key_t: np.ndarray) -> list[Path]:
+def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key_t: np.ndarray, *,
+                     klv=None) -> list[Path]:
+    """The job's files (module notes); ``klv``: (metadata, first frame's time, frame size) when the
+    records came from the video's own KLV: the CSV then counts time_s from the first frame and a
+    config for it is written from scratch (the frames' pinhole at the first record's field of view,
+    the az-el turret, the installation estimated)."""
     import json
 
     from ..io.config import write_calibration
     from ..io.writers import write_layer
+    from ..refine.adjust import position_bias, shift_position
+    from ..sensor import Pose
     from .inputs import job_inputs
 
     out.mkdir(parents=True, exist_ok=True)
@@ -178,38 +209,57 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     js = out / "refine.json"
     js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     written.append(js)
-    # the records as eoloc read them (the config's heading bias already out of the yaw), corrected
-    tel = job_inputs(cfg, telemetry).telemetry
-    c = tel.columns
-    hb0 = cfg.telemetry.heading_bias_deg if cfg is not None else 0.0
+    if klv is None:
+        # the records as eoloc read them (the config's heading bias already out of the yaw)
+        c = dict(job_inputs(cfg, telemetry).telemetry.columns)
+        hb0 = cfg.telemetry.heading_bias_deg if cfg is not None else 0.0
+    else:
+        meta, t0, _ = klv
+        p = meta.pose
+        g = [np.broadcast_to(np.asarray(x, dtype=np.float64), meta.clock_s.shape) for x in p.gimbal_deg]
+        c = {"time_s": meta.clock_s - t0, "lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "h_m": p.h_m,
+             "yaw_deg": p.yaw_deg, "pitch_deg": p.pitch_deg, "roll_deg": p.roll_deg, "gimbal1_deg": g[0],
+             "gimbal2_deg": g[1], "sensor_roll_deg": g[2] if len(g) > 2 else np.zeros(meta.clock_s.shape),
+             "hfov_deg": meta.values["hfov_deg"]}
+        hb0 = 0.0
+    n = len(np.atleast_1d(c["time_s"]))
     d_heading = ref.heading_bias_deg  # on top of the config's, which the reader took out
     d_time = ref.time_offset_s
-    from ..refine.adjust import position_bias, shift_position
-    from ..sensor import Pose
-
     at = shift_position(Pose(c["lat_deg"], c["lon_deg"], c["h_m"]), position_bias(ref.names, ref.values))
-    lat, lon, h = (np.broadcast_to(np.asarray(x, dtype=np.float64), (len(tel),)) for x in (at.lat_deg, at.lon_deg,
-                                                                                           at.h_m))
+
+    def col(x):
+        return np.broadcast_to(np.asarray(x, dtype=np.float64), (n,))
+
+    lat, lon, h = col(at.lat_deg), col(at.lon_deg), col(at.h_m)
     rows = []
-    for i in range(len(tel)):
-        rows.append({"time_s": float(c["time_s"][i]) - d_time, "lat_deg": float(lat[i]),
+    for i in range(n):
+        rows.append({"time_s": float(col(c["time_s"])[i]) - d_time, "lat_deg": float(lat[i]),
                      "lon_deg": float(lon[i]), "h_m": float(h[i]),
-                     "yaw_deg": (float(c["yaw_deg"][i]) + hb0 - d_heading) % 360.0,
-                     "pitch_deg": float(c["pitch_deg"][i]), "roll_deg": float(c["roll_deg"][i]),
-                     "gimbal1_deg": float(c["gimbal1_deg"][i]), "gimbal2_deg": float(c["gimbal2_deg"][i]),
-                     "sensor_roll_deg": float(np.nan_to_num(c["sensor_roll_deg"][i]))})
+                     "yaw_deg": (float(col(c["yaw_deg"])[i]) + hb0 - d_heading) % 360.0,
+                     "pitch_deg": float(col(c["pitch_deg"])[i]), "roll_deg": float(col(c["roll_deg"])[i]),
+                     "gimbal1_deg": float(col(c["gimbal1_deg"])[i]), "gimbal2_deg": float(col(c["gimbal2_deg"])[i]),
+                     "sensor_roll_deg": float(np.nan_to_num(col(c["sensor_roll_deg"])[i]))})
     for name in KEPT_COLUMNS:  # a zoom lens' focal length, a laser's range: kept as they were
-        if name in c and np.isfinite(np.asarray(c[name], dtype=np.float64)).any():
-            for row, value in zip(rows, np.asarray(c[name], dtype=np.float64), strict=True):
+        if name in c and np.isfinite(col(c[name])).any():
+            for row, value in zip(rows, col(c[name]), strict=True):
                 row[name] = float(value)
     written += write_layer(out, "telemetry_refined", rows, ["csv"])
-    if config_path is not None:
-        refined = out / "config_refined.toml"
+    refined = out / "config_refined.toml"
+    if klv is not None:
+        _, _, (w, hgt) = klv
+        hfov = col(c["hfov_deg"])
+        first = float(hfov[np.isfinite(hfov)][0])
+        refined.write_text(f"# eoloc refine: the camera of {Path(str(job.report.get('video', 'the video'))).name}'s "
+                           "frames (from its KLV's fields of view; per record in telemetry_refined.csv's hfov_deg)\n"
+                           f"[camera]\nwidth = {w}\nheight = {hgt}\nhfov_deg = {first!r}\n\n"
+                           "[gimbal]\nmodel = \"az-el\"\n", encoding="utf-8")
+    elif config_path is not None:
         refined.write_text(Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
+    if klv is not None or config_path is not None:
         s = ref.sensors[0]
-        write_calibration(refined, mount_misalignment_deg=s.mount_misalignment_deg if "mount" in ref_groups(ref)
-                          else None,
-                          boresight_misalignment_deg=s.boresight_misalignment_deg if "boresight" in ref_groups(ref)
+        groups = ref_groups(ref)
+        write_calibration(refined, mount_misalignment_deg=s.mount_misalignment_deg if "mount" in groups else None,
+                          boresight_misalignment_deg=s.boresight_misalignment_deg if "boresight" in groups
                           else None)
         written.append(refined)
     obs = [{"track": int(ties.track[i]), "keyframe": int(job.keyframes[ties.frame[i]]),
@@ -327,8 +377,6 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
     for p in paths:
         files += photo_files(Path(p)) if Path(p).is_dir() else [Path(p)]
     poses, images, failed = [], [], []
-    from ..errors import EolocError
-
     for f in files:
         try:
             pose = read_photo(f)
