@@ -392,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, v in refined["parameters"].items():
         sig = refined["sigma"][name]
         note = " (not determined by this pass)" if name in refined["undetermined"] else ""
-        print(f"  {name} {v:+.5f} +- {sig:.5f}{note}")
+        print(f"  {name} {v:+.3g} +- {sig:.2g}{note}")
     # a figure outside its stated bound fails the demo (and make demo); the movers' on the whole pass
     out_of_bounds = []
     for name, v in refined["parameters"].items():

@@ -229,15 +229,17 @@ def test_a_reference_ortho_makes_it_absolute(orbit, tmp_path):
     assert ce90_relative > 3 * ce90_absolute, (ce90_relative, ce90_absolute)
 
 
-def truth_detections(flight, path: Path, times, seed: int) -> tuple[list[dict], np.ndarray]:
-    """20 pixels per time of ``times`` as a detections CSV at ``path``, and the ground (lat, lon, h)
-    each truly sees."""
+def truth_detections(flight, path: Path, times, seed: int,
+                     video_offset_s: float = 0.0) -> tuple[list[dict], np.ndarray]:
+    """20 pixels per scene time of ``times`` as a detections CSV at ``path`` (time_s: the scene's
+    time + ``video_offset_s``, the video's clock), and the ground (lat, lon, h) each truly sees."""
     rng = np.random.default_rng(seed)
     dets, truth = [], []
     for t in times:
         u, v, p = ts.ground_truth_points(flight, ERRORS, float(t), 20, rng)
         for i in np.flatnonzero(np.isfinite(p[:, 0])):
-            dets.append({"time_s": float(t), "target_id": f"p{len(dets)}", "u_px": float(u[i]), "v_px": float(v[i])})
+            dets.append({"time_s": float(t) + video_offset_s, "target_id": f"p{len(dets)}", "u_px": float(u[i]),
+                         "v_px": float(v[i])})
             truth.append(p[i])
     write_csv(path, dets)
     return dets, np.array(truth)
@@ -449,14 +451,14 @@ def test_a_klv_video_is_refined_from_its_own_metadata(orbit, tmp_path):
     vfov = 2 * np.degrees(np.arctan(np.tan(np.radians(ts.HFOV_DEG / 2)) * ts.H / ts.W))
     packets = []
     for r in ts.telemetry_rows(flight, ERRORS, float(TIMES[-1])):
-        if r["time_s"] < 0:
-            continue
         values = {2: datetime.fromtimestamp(1_780_000_000 + r["time_s"], UTC), 5: r["yaw_deg"], 6: r["pitch_deg"],
                   7: r["roll_deg"], 13: r["lat_deg"], 14: r["lon_deg"], 75: r["h_m"], 16: ts.HFOV_DEG, 17: vfov,
                   18: r["azimuth_deg"] % 360.0, 19: r["elevation_deg"], 20: 0.0}
         packets.append((encode_uas_packet(values), r["time_s"]))
+    # the stream starts with the first record (stamped -1 s): frame i is at scene time i - 1, and the
+    # odd frames are the rendered ones (the keyframes, 1 s in from the metadata's start, every 2 s)
     video = write_klv_ts(tmp_path / "orbit.ts", [packets], video_fps=1.0, video_size=(ts.W, ts.H),
-                         frame_source=lambda i: images[min(i // 2, len(images) - 1)])
+                         frame_source=lambda i: images[min(max(i - 1, 0) // 2, len(images) - 1)])
     out = tmp_path / "out"
     r = eoloc("refine", video, "--dem", dem_path, "--vertical", "ellipsoid", "--every-s", 2, "--json", "--out", out)
     assert r.returncode == 0, r.stderr
@@ -465,7 +467,7 @@ def test_a_klv_video_is_refined_from_its_own_metadata(orbit, tmp_path):
     values = np.array([rep["parameters"][n] for n in NAMES])
     sigma = np.array([rep["sigma"][n] for n in NAMES])
     assert np.all(np.abs(values - truth_vector(ERRORS)) <= 2 * sigma), (values, sigma)
-    dets, truth = truth_detections(flight, tmp_path / "dets.csv", np.linspace(3.0, 55.0, 5), 4)
+    dets, truth = truth_detections(flight, tmp_path / "dets.csv", np.linspace(3.0, 55.0, 5), 4, video_offset_s=1.0)
     ce90 = located_ce90(out / "telemetry_refined.csv", tmp_path / "dets.csv", out / "config_refined.toml", dem_path,
                         dets, truth, tmp_path / "loc")
     assert ce90 < 5.0, ce90

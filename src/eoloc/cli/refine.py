@@ -165,7 +165,7 @@ def _print_table(r, rep) -> None:
     for col in ("parameter", "estimate", "± 1σ", "prior σ", ""):
         t.add_column(col, justify="right")
     for name, v, s, p in zip(r.names, r.values, r.sigma, r.prior_sigma, strict=True):
-        t.add_row(name, f"{v:+.4f}", f"{s:.4f}", f"{p:g}", "not determined" if name in r.undetermined else "")
+        t.add_row(name, f"{v:+.4g}", f"{s:.2g}", f"{p:g}", "not determined" if name in r.undetermined else "")
     console.print(t)
     console.print(f"tie-point residuals RMS: {rep['rms_px_before']:.2f} px with the telemetry as given, "
                   f"{rep['rms_px_after']:.2f} px refined; {rep['timing_s']['total_s']:.1f} s")

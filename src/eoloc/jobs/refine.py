@@ -96,7 +96,11 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
                              "--config C.toml", exc.issues) from None
         sensor = None
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
-    keys = keyframe_indices(times, np.asarray(poses.ok, dtype=bool), every_s)
+    usable = np.asarray(poses.ok, dtype=bool)
+    if "time" in settings.estimate:  # a keyframe must keep its pose when the offset moves (2 prior sigmas)
+        margin = min(1.0, 2.0 * settings.prior_sigma["time"])
+        usable &= (times - margin >= poses.span_s[0]) & (times + margin <= poses.span_s[1])
+    keys = keyframe_indices(times, usable, every_s)
     if keys.size < 3:
         raise InputError(f"{video}: {keys.size} frame(s) with a pose at least {every_s:g} s apart: refining needs "
                          "three or more (a lower --every-s, or telemetry covering the video)", issues)

@@ -55,6 +55,7 @@ REFINE_GROUPS = {**GROUPS, "position": ("position_e_m", "position_n_m", "positio
 PRIOR_SIGMA = {"mount": 1.0, "boresight": 1.0, "heading": 2.0, "time": 0.5, "position": 5.0}  # deg, deg, deg, s, m
 GLOBAL_STEP = 1e-5  # forward-difference steps: deg or s for the globals
 GROUND_STEP_M = 1e-3  # and metres for the tracks (ECEF has ~1e-9 m resolution)
+UNSEEN = 1e3  # the residual (in sigmas) of an observation that cannot be projected
 
 
 @dataclass(frozen=True)
@@ -176,28 +177,40 @@ class _Problem:
         return out
 
     def residuals(self, g: np.ndarray, d: np.ndarray) -> np.ndarray:
+        # a point pushed behind a camera, a frame pushed off the telemetry: a large residual, not a crash
+        return np.nan_to_num(self.raw_residuals(g, d), nan=UNSEEN)
+
+    def raw_residuals(self, g: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """The residuals, NaN where an observation cannot be projected (behind its camera, or its
+        frame's time + the offset outside the telemetry)."""
         r_px = (self.project(g, d) - self.uv) / self.s.pixel_sigma_px
         lat, lon, h = geodesy.ecef_to_geodetic(*self.ground(d).T)
         h_dem = self.dem.height(lat, lon) if self.dem is not None else h
         r_dem = np.nan_to_num((h - h_dem) / self.s.dem_sigma_m)  # off the DEM: no constraint
         r_prior = (g - self.g0) / self.prior
         r_control = (d[self.control_ids, :2] / self.control_sigma_m).ravel()
-        # a point pushed behind a camera: a large residual, not a crash
-        return np.concatenate([np.nan_to_num(r_px, nan=1e3).ravel(), r_dem, r_control, r_prior])
+        return np.concatenate([r_px.ravel(), r_dem, r_control, r_prior])
 
     def jacobian(self, g: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward differences: (R, p) by the globals (one evaluation each) and (R, 3) by each
         row's own track (three evaluations: every track moved at once, as no row sees two)."""
+        raw = self.raw_residuals(g, d)
         Jg = np.empty((r.size, self.p))
         for j in range(self.p):
             step = np.zeros(self.p)
             step[j] = GLOBAL_STEP
-            Jg[:, j] = (self.residuals(g + step, d) - r) / GLOBAL_STEP
+            col = (self.raw_residuals(g + step, d) - raw) / GLOBAL_STEP
+            edge = ~np.isfinite(col)
+            if edge.any():  # a step that leaves the telemetry (a frame at its end): the other side's difference
+                back = (raw - self.raw_residuals(g - step, d)) / GLOBAL_STEP
+                col[edge] = back[edge]
+            Jg[:, j] = np.nan_to_num(col, nan=0.0, posinf=0.0, neginf=0.0)
         Jt = np.zeros((r.size, 3))
         for c in range(3):
             dd = d.copy()
             dd[:, c] += GROUND_STEP_M
-            Jt[:, c] = (self.residuals(g, dd) - r) / GROUND_STEP_M
+            Jt[:, c] = np.nan_to_num((self.raw_residuals(g, dd) - raw) / GROUND_STEP_M, nan=0.0, posinf=0.0,
+                                     neginf=0.0)
         Jt[self.row_track < 0] = 0.0
         return Jg, Jt
 
