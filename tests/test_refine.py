@@ -144,6 +144,22 @@ def test_orbit_biases_recovered_within_two_sigma_and_fixes_five_times_better(orb
     assert ce90_after < 5.0
 
 
+def test_a_keyframe_at_the_telemetrys_end_claims_no_certainty(orbit):
+    """The last keyframe exactly at the last record: a step of the clock offset takes it off the
+    telemetry. That must not count as information (it once made the offset's sigma 5e-10 s): the
+    offset's sigma stays of the order the other frames give (> 1e-5 s)."""
+    flight, images, _, dem = orbit
+    s = sensor()
+    rows = [r for r in ts.telemetry_rows(flight, ERRORS, float(TIMES[-1])) if r["time_s"] <= TIMES[-1] + 1e-9]
+    track = track_of(rows)
+    rule = OnDEM(dem)
+    start = pose_with_biases(None, track, TIMES, 0.0, 0.0)
+    ties = find_tie_points(images, choose_pairs(
+        predicted_overlap([s] * len(TIMES), [start.take(i) for i in range(len(TIMES))], rule), TieSettings()))
+    ref = adjust([s], np.zeros(len(TIMES), np.int64), track, TIMES, ties, rule, dem, AdjustSettings())
+    assert ref.sigma[NAMES.index("time_offset_s")] > 1e-5, ref.sigma
+
+
 def test_with_nothing_wrong_it_corrects_nothing(orbit):
     """The same frames, the mounting given in the config and the telemetry right: every estimate
     within 2 sigma of the truth (the mounting as configured, no heading bias, no clock offset)."""
