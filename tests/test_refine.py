@@ -5,6 +5,7 @@ ray through the scene's own camera (scipy rotations, pymap3d) to the DEM's bilin
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -15,6 +16,8 @@ import cv2
 import numpy as np
 import pymap3d
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
 import terrain_scene as ts
@@ -487,6 +490,49 @@ def test_a_klv_video_is_refined_from_its_own_metadata(orbit, tmp_path):
     ce90 = located_ce90(out / "telemetry_refined.csv", tmp_path / "dets.csv", out / "config_refined.toml", dem_path,
                         dets, truth, tmp_path / "loc")
     assert ce90 < 5.0, ce90
+    # the video again with its KLV corrected in place: only the KLV's transport packets differ
+    refined = out / "orbit_refined.ts"
+    before = np.frombuffer(video.read_bytes(), np.uint8).reshape(-1, 188)
+    after = np.frombuffer(refined.read_bytes(), np.uint8).reshape(-1, 188)
+    assert before.shape == after.shape
+    changed = (before != after).any(1)
+    pid = ((before[:, 1].astype(np.int64) & 0x1F) << 8) | before[:, 2]
+    from stanag4609.st0601 import SpecialValue, decode_uas_local_set
+
+    from eoloc.io.klv import read_klv
+
+    klv_pid = int(read_klv(video).packets[0].stream.removeprefix("PID "))
+    assert set(pid[changed].tolist()) == {klv_pid}
+    # every packet rewritten and valid for another decoder (stanag4609 checks the checksum); the
+    # last ones, whose corrected time (+0.3 s) leaves the telemetry, sent without a position
+    new = read_klv(refined)
+    assert len(new.packets) == len(packets) and not new.issues
+    assert all(p.raw != q for p, (q, _) in zip(new.packets, packets, strict=True))
+    lat = [decode_uas_local_set(p.raw).value(13) for p in new.packets]
+    unknown = [i for i, x in enumerate(lat) if x is SpecialValue.RESERVED]
+    assert len(unknown) in (2, 3, 4) and unknown[-1] == len(packets) - 1 and np.all(np.diff(unknown) == 1), unknown
+    assert any(f"{len(unknown)} packet(s) whose corrected time leaves the telemetry" in n for n in rep["klv_notes"])
+    # the corrected stream alone (no config: the installation is in the sensor angles) puts truth
+    # pixels within 5 m CE90, where the stream as it came is tens of metres off
+    for d in dets:
+        d["time_s"] = 1_780_000_000 + d["time_s"] - 1.0  # tag 2's UNIX clock: scene time + 1.78e9
+    write_csv(tmp_path / "dets_unix.csv", dets)
+    (tmp_path / "cam.toml").write_text(f"[camera]\nwidth = {ts.W}\nheight = {ts.H}\nhfov_deg = {ts.HFOV_DEG!r}\n")
+    ce = {}
+    for name, ts_path in (("given", video), ("refined", refined)):
+        r = eoloc("locate", ts_path, tmp_path / "dets_unix.csv", "--config", tmp_path / "cam.toml", "--dem", dem_path,
+                  "--vertical", "ellipsoid",
+                  "--interpolate", "--json", "--out", tmp_path / f"klv_{name}")
+        assert r.returncode == 0, r.stderr
+        fixes = {f["target_id"]: f for f in json.loads(r.stdout)["fixes"]}
+        err = []
+        for d, p in zip(dets, truth, strict=True):
+            f = fixes[d["target_id"]]
+            assert f["status"] == "OK", f
+            e, n, _ = pymap3d.geodetic2enu(f["lat_deg"], f["lon_deg"], f["h_m"], *p)
+            err.append(np.hypot(e, n))
+        ce[name] = float(np.percentile(err, 90))
+    assert ce["refined"] < 5.0 and ce["given"] > 5 * ce["refined"], ce
 
 
 def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
@@ -506,3 +552,26 @@ def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
         r = eoloc("refine", *args, "--out", tmp_path / "out")
         assert r.returncode == 2, (args, r.stderr)
         assert said in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.tuples(*[st.floats(-3.0, 3.0)] * 3), st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+       st.floats(0.0, 360.0), st.floats(-90.0, 30.0), st.floats(-30.0, 30.0), st.floats(-20.0, 20.0))
+def test_an_installation_folded_into_the_gimbal_angles_points_the_same_way(mount, bore, az, el, roll, pitch):
+    """The refined KLV's sensor angles: a turret without installation terms at the folded angles has
+    the camera orientation of the turret with them (to 1e-9 rad), nadir's gimbal lock included."""
+    from scipy.spatial.transform import Rotation
+
+    from eoloc.ground.frame import misb_sensor
+    from eoloc.refine.correct import fold_installation
+
+    pose = Pose(np.array([40.0, -33.0]), np.array([-105.0, 151.0]), np.array([3000.0, 500.0]),
+                np.array([10.0, 250.0]), np.array([pitch, -pitch]), np.array([5.0, -12.0]),
+                (np.array([az, 360.0 - az]), np.array([el, -90.0]), np.array([roll, 0.0])))
+    s = misb_sensor(mount, bore)
+    g, ok = fold_installation(s, pose)
+    assert ok.all()
+    want = Rotation.from_matrix(s.camera_frame(pose).R_ecef_cam.reshape(-1, 3, 3))
+    got = Rotation.from_matrix(misb_sensor().camera_frame(dataclasses.replace(pose, gimbal_deg=g))
+                               .R_ecef_cam.reshape(-1, 3, 3))
+    assert np.all((want * got.inv()).magnitude() < 1e-9)

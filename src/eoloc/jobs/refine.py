@@ -15,6 +15,7 @@ two together), ``tiepoints.csv`` (every observation with its residuals before/af
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -159,8 +160,14 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     report = refine_report(ref, ties, keys, len(pairs), settings, clock)
     report["video"] = str(video)
     job = RefineJob(ref, ties, keys, report, issues=[*issues, *errors])
-    job.written = write_refinement(job, out, telemetry, cfg, config_path, key_t,
-                                   klv=None if telemetry is not None else (meta, float(times[0]), (w, h)))
+    if telemetry is None:  # the video's own KLV, corrected in a copy of it
+        out.mkdir(parents=True, exist_ok=True)
+        say("writing the refined KLV into a copy of the video")
+        ts_path, report["klv_notes"] = write_refined_ts(video, out / f"{Path(video).stem}_refined.ts", meta, ref,
+                                                        track, dem)
+        job.written.append(ts_path)
+    job.written += write_refinement(job, out, telemetry, cfg, config_path, key_t,
+                                    klv=None if telemetry is not None else (meta, float(times[0]), (w, h)))
     return job
 
 
@@ -234,19 +241,14 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     def col(x):
         return np.broadcast_to(np.asarray(x, dtype=np.float64), (n,))
 
-    lat, lon, h = col(at.lat_deg), col(at.lon_deg), col(at.h_m)
-    rows = []
-    for i in range(n):
-        rows.append({"time_s": float(col(c["time_s"])[i]) - d_time, "lat_deg": float(lat[i]),
-                     "lon_deg": float(lon[i]), "h_m": float(h[i]),
-                     "yaw_deg": (float(col(c["yaw_deg"])[i]) + hb0 - d_heading) % 360.0,
-                     "pitch_deg": float(col(c["pitch_deg"])[i]), "roll_deg": float(col(c["roll_deg"])[i]),
-                     "gimbal1_deg": float(col(c["gimbal1_deg"])[i]), "gimbal2_deg": float(col(c["gimbal2_deg"])[i]),
-                     "sensor_roll_deg": float(np.nan_to_num(col(c["sensor_roll_deg"])[i]))})
-    for name in KEPT_COLUMNS:  # a zoom lens' focal length, a laser's range: kept as they were
-        if name in c and np.isfinite(col(c[name])).any():
-            for row, value in zip(rows, col(c[name]), strict=True):
-                row[name] = float(value)
+    columns = {"time_s": col(c["time_s"]) - d_time, "lat_deg": col(at.lat_deg), "lon_deg": col(at.lon_deg),
+               "h_m": col(at.h_m), "yaw_deg": (col(c["yaw_deg"]) + hb0 - d_heading) % 360.0,
+               "pitch_deg": col(c["pitch_deg"]), "roll_deg": col(c["roll_deg"]), "gimbal1_deg": col(c["gimbal1_deg"]),
+               "gimbal2_deg": col(c["gimbal2_deg"]), "sensor_roll_deg": np.nan_to_num(col(c["sensor_roll_deg"]))}
+    columns |= {name: col(c[name]) for name in KEPT_COLUMNS  # a zoom lens' focal length, a laser's range: as they were
+                if name in c and np.isfinite(col(c[name])).any()}
+    rows = [dict(zip(columns, values, strict=True)) for values in zip(*(v.tolist() for v in columns.values()),
+                                                                         strict=True)]
     written += write_layer(out, "telemetry_refined", rows, ["csv"])
     refined = out / "config_refined.toml"
     if klv is not None:
@@ -277,6 +279,100 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
 
 
 KEPT_COLUMNS = (*ZOOM_COLUMNS, "range_m")
+
+
+def write_refined_ts(video, dest: Path, meta, ref: Refinement, track: TelemetryTrack,
+                     dem: DEM) -> tuple[Path, list[str]]:
+    """``video`` (an MPEG-TS whose ST 0601 KLV was refined: ``meta`` its records, with each one's
+    packet number) copied to ``dest`` with each refined packet's pose written in place
+    (:func:`eoloc.io.klv.mux.rewrite_klv_in_ts`: every other byte as it was, the packet's length
+    and time stamp unchanged): the values the platform had at the packet's time as the refinement
+    corrects them (time offset, heading bias, position bias: tags 5, 6, 7, 90, 91, 13, 14, 15, 75),
+    the sensor angles that carry the estimated installation (tags 18, 19, 20: no config needed to
+    use them) and the frame centre and corners on the DEM through the refined camera (23, 24, 25,
+    78, 26-33, 82-89). Only tags a packet sends are written. A packet whose corrected time leaves
+    the telemetry gets the standard's error value in its position (and its frame centre and corners
+    off-earth), so no reader takes a pose from it; one that cannot be rewritten in place (an item
+    of non-standard size) is copied as it came. Returns the path and notes saying how many of each."""
+    from stanag4609.st0601 import SpecialValue
+
+    from ..ground.frame import frame_geometry, misb_sensor
+    from ..io.klv import read_klv
+    from ..io.klv.encode import replace_items
+    from ..io.klv.mux import rewrite_klv_in_ts
+    from ..io.klv.tables import FULL_CORNER_TAGS, OFFSET_CORNER_TAGS, TAGS
+    from ..refine.correct import fold_installation, refined_poses
+    from ..terrain.geoid import default_geoid
+
+    packets = {p.index: p for p in read_klv(video).packets}
+    number = meta.values["packet"].astype(np.int64)
+    pose = refined_poses(ref, track, meta.clock_s)
+    gimbal, folded = fold_installation(ref.sensors[0], pose)
+    lat, lon, h = (np.asarray(x, dtype=np.float64) for x in (pose.lat_deg, pose.lon_deg, pose.h_m))
+    good = folded & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+    geo = frame_geometry(misb_sensor(), dataclasses.replace(pose, gimbal_deg=gimbal), meta.values["hfov_deg"],
+                         meta.values["vfov_deg"], dem)
+    geoid = default_geoid()
+    n_sensor = geoid.undulation(lat, lon)
+    fc, co = geo.centre, geo.corners
+    fc_ok = good & fc.ok
+    n_fc = geoid.undulation(np.where(fc_ok, fc.lat_deg, 0.0), np.where(fc_ok, fc.lon_deg, 0.0))
+    off = SpecialValue.OFF_EARTH
+    new: dict[int, bytes | None] = {}
+    kept = 0
+    for i, k in enumerate(number.tolist()):
+        if k not in packets:
+            continue
+        v: dict[int, object] = {}
+        if good[i]:
+            v |= {TAGS["lat"]: lat[i], TAGS["lon"]: lon[i], TAGS["alt_msl"]: h[i] - n_sensor[i], TAGS["alt_hae"]: h[i],
+                  TAGS["heading"]: float(pose.yaw_deg[i]) % 360.0, TAGS["pitch"]: float(pose.pitch_deg[i]),
+                  TAGS["roll"]: float(pose.roll_deg[i]), TAGS["pitch_full"]: float(pose.pitch_deg[i]),
+                  TAGS["roll_full"]: float(pose.roll_deg[i]), TAGS["rel_az"]: float(gimbal[0][i]) % 360.0,
+                  TAGS["rel_el"]: (float(gimbal[1][i]) + 180.0) % 360.0 - 180.0,
+                  TAGS["rel_roll"]: float(gimbal[2][i]) % 360.0}
+        else:  # ST 0601's error indicator: this packet has no position a reader could trust
+            v |= {TAGS["lat"]: SpecialValue.RESERVED, TAGS["lon"]: SpecialValue.RESERVED}
+        if fc_ok[i]:
+            v |= {TAGS["fc_lat"]: float(fc.lat_deg[i]), TAGS["fc_lon"]: float(fc.lon_deg[i]),
+                  TAGS["fc_el_msl"]: float(fc.h_m[i] - n_fc[i]), TAGS["fc_hae"]: float(fc.h_m[i])}
+        else:
+            v |= {TAGS["fc_lat"]: off, TAGS["fc_lon"]: off}
+        for c in range(4):
+            both = fc_ok[i] and good[i] and bool(co.ok[i, c])
+            d_lat, d_lon = (float(co.lat_deg[i, c] - fc.lat_deg[i]), float(co.lon_deg[i, c] - fc.lon_deg[i])) \
+                if both else (math.inf, math.inf)
+            near = abs(d_lat) <= 0.075 and abs(d_lon) <= 0.075  # the offset tags' reach
+            v[OFFSET_CORNER_TAGS[2 * c]] = d_lat if near else off
+            v[OFFSET_CORNER_TAGS[2 * c + 1]] = d_lon if near else off
+            v[FULL_CORNER_TAGS[2 * c]] = float(co.lat_deg[i, c]) if both else off
+            v[FULL_CORNER_TAGS[2 * c + 1]] = float(co.lon_deg[i, c]) if both else off
+        try:
+            new[k] = replace_items(packets[k].raw, v)
+        except ValueError:
+            kept += 1
+    queue = [(packets[k].raw, new[k], int(packets[k].stream.removeprefix("PID ") or -1))
+             for k in sorted(new)]
+    at = 0
+
+    def rewrite(pid: int, raw: bytes) -> bytes | None:
+        nonlocal at
+        for j in range(at, min(at + 64, len(queue))):  # in stream order; a packet the reader dropped is skipped
+            if queue[j][2] == pid and queue[j][0] == raw:
+                at = j + 1
+                return queue[j][1]
+        return None
+
+    data, changed = rewrite_klv_in_ts(Path(video).read_bytes(), rewrite)
+    dest.write_bytes(data)
+    notes = [f"{dest.name}: {changed} ST 0601 packet(s) rewritten with the refined pose"]
+    if (~good).any():
+        notes.append(f"{int((~good).sum())} packet(s) whose corrected time leaves the telemetry sent without a "
+                     "position (ST 0601's error value in tags 13, 14)")
+    if kept:
+        notes.append(f"{kept} packet(s) copied as they came: an item of non-standard size cannot be rewritten "
+                     "in place")
+    return dest, notes
 
 
 def ref_groups(ref: Refinement) -> set[str]:

@@ -137,7 +137,7 @@ def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | 
                 f"UNIX {offset:.3f} s at the first frame"))
 
     values = {"hfov_deg": sub["hfov_deg"], "vfov_deg": sub["vfov_deg"], "fc_h_m": sub["fc_h_m"],
-              "unix_s": sub["time_s"]}
+              "unix_s": sub["time_s"], "packet": tel.line[rows].astype(np.float64)}  # each record's packet number
     meta = Metadata(clock, packet_pose(SimpleNamespace(columns=sub)), values, how)
     det = vmti_detections(stream)
     issues += [str(i) for i in det.issues]

@@ -132,6 +132,44 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
     return frame_uas_packet(bytes(body), length_bytes=start - 17)  # the length's form as sent (0: short)
 
 
+def replace_items(packet: bytes, values: dict[int, Any]) -> bytes:
+    """The packet with the items of ``values`` ({tag: value in the standard's units, or one of
+    stanag4609's ``SpecialValue``}) re-encoded in place by stanag4609's ST 0601 item encoder: only
+    tags the packet already sends are written (each copy of a repeated one), everything else stays
+    byte for byte, the checksum is computed again and the packet keeps its length (ST 0601's
+    mapped items have a fixed size). ValueError when a value lies outside its tag's range, an item
+    would change size (an encoder that sent a non-standard length) or the packet cannot be read
+    item by item."""
+    from stanag4609.st0601 import encode_field_value
+
+    from .localset import parse_items
+    from .reader import packet_end
+
+    end, start, why = packet_end(packet, 0)
+    if end is None:
+        raise ValueError(why)
+    whole, notes = parse_items(packet, start, end, whole=True)
+    if any(n.kind == "truncated item" for n in notes):
+        raise ValueError(next(n.message for n in notes if n.kind == "truncated item"))
+    items, _ = parse_items(packet, start, end)
+    sent = {t for t, _ in items}
+    new = {tag: encode_field_value(tag, v) for tag, v in values.items() if tag in sent}
+    body = bytearray()
+    for (tag, item), (_, value) in zip(whole, items, strict=True):
+        if tag == 1:
+            continue  # the checksum: computed again, last
+        if tag in new:
+            if len(new[tag]) != len(value):
+                raise ValueError(f"tag {tag} is sent with {len(value)} byte(s), the standard's size is "
+                                 f"{len(new[tag])}")
+            item = item[:len(item) - len(value)] + new[tag]  # its tag and length as sent
+        body += item
+    out = frame_uas_packet(bytes(body), length_bytes=start - 17)
+    if len(out) != end:
+        raise ValueError(f"the packet would change size ({end} -> {len(out)} bytes)")
+    return out
+
+
 def with_fix(packet: bytes, lat_deg: float, lon_deg: float, h_hae_m: float, *, ce90_m: float | None = None,
              le90_m: float | None = None, tag42_hae: bool) -> bytes | None:
     """The packet with a fix (ellipsoidal height) in its target location tags, tag 42 in the

@@ -65,6 +65,59 @@ def write_klv_ts(path: str | Path, streams: Sequence[Sequence[tuple[bytes, float
     return path
 
 
+def ts_cells(data: bytes) -> tuple[np.ndarray, np.ndarray, object]:
+    """A transport stream's whole 188-byte cells (C, 188), each one's PID (C,) and a
+    :class:`.demux.KLVDemux` that has read the program tables (PAT, then the PMTs): its
+    ``video_pids`` and ``streams`` (the metadata PIDs)."""
+    from .demux import KLVDemux
+
+    cells = np.frombuffer(data, np.uint8)[:len(data) // TS_PACKET * TS_PACKET].reshape(-1, TS_PACKET)
+    pids = (cells[:, 1].astype(np.int32) & 0x1F) << 8 | cells[:, 2]
+    tables = KLVDemux()
+    tables.feed_cells(cells[pids == 0].tobytes())
+    tables.feed_cells(cells[np.isin(pids, list(tables.pmt_pids))].tobytes())
+    return cells, pids, tables
+
+
+def rewrite_klv_in_ts(data: bytes, rewrite: Callable[[int, bytes], bytes | None]) -> tuple[bytes, int]:
+    """The transport stream ``data`` with its KLV packets rewritten in place: ``rewrite(pid, raw)``
+    is called with each ST 0601 packet found whole in a metadata PID's payload bytes, in stream
+    order, and gives the packet's new bytes (the same length) or None to leave it. Every other
+    byte of the file stays as it was (video, tables, PES headers, timing), so the result plays
+    and demultiplexes exactly as the input did. Returns the new bytes and how many packets changed.
+    ValueError when the file is not a transport stream of whole 188-byte cells from its first byte."""
+    from .reader import UAS_KEY, packet_end
+
+    cells, pids, tables = ts_cells(data)
+    if len(data) % TS_PACKET or not cells.size or not np.all(cells[:, 0] == 0x47):
+        raise ValueError("not an MPEG-TS of whole 188-byte cells, each with its sync byte, from the first byte")
+    out = np.frombuffer(bytearray(data), np.uint8)
+    changed = 0
+    for pid in sorted(tables.streams):
+        idx = np.flatnonzero(pids == pid)
+        sel = cells[idx]
+        control = (sel[:, 3] >> 4) & 3  # adaptation_field_control: 1 payload, 2 adaptation, 3 both
+        start = np.where(control == 3, 5 + sel[:, 4].astype(np.int64), 4)
+        keep = ((control & 1) == 1) & (start < TS_PACKET) & ((sel[:, 1] & 0x80) == 0)  # no transport error
+        idx, start = idx[keep], start[keep]
+        sizes = TS_PACKET - start
+        first = np.cumsum(sizes) - sizes
+        offs = np.repeat(idx * TS_PACKET + start - first, sizes) + np.arange(int(sizes.sum()))
+        buf = out[offs].tobytes()  # the PID's payload bytes; offs[i]: where byte i sits in the file
+        k = buf.find(UAS_KEY)
+        while k >= 0:
+            end, _, _ = packet_end(buf, k)
+            if end is None:
+                k = buf.find(UAS_KEY, k + 1)
+                continue
+            new = rewrite(int(pid), buf[k:end])
+            if new is not None and len(new) == end - k and new != buf[k:end]:
+                out[offs[k:end]] = np.frombuffer(new, np.uint8)
+                changed += 1
+            k = buf.find(UAS_KEY, end)
+    return out.tobytes(), changed
+
+
 def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, float], bytes | None], *,
             carriage: str = "async", pid: int = 0x1F1) -> Path:
     """Copy the transport stream ``video_ts`` to ``dest`` with a KLV metadata stream on ``pid``
@@ -84,7 +137,7 @@ def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, f
     from stanag4609.transport.psi import KLVCarriage
     from stanag4609.transport.transformer import LiveTransportTransformer
 
-    from .demux import KLVDemux, cell_pes_pts
+    from .demux import cell_pes_pts
 
     if carriage == "async":
         info, kind = asynchronous_klv_stream(pid), KLVCarriage.ASYNCHRONOUS
@@ -99,11 +152,7 @@ def add_klv(video_ts: str | Path, dest: str | Path, packet_for: Callable[[int, f
     data = Path(video_ts).read_bytes()
     # where each frame begins (a cell starting a PES on a video PID), found over all cells at once:
     # the transformer is then fed a frame at a time, not a cell at a time
-    cells = np.frombuffer(data, np.uint8)[:len(data) // TS_PACKET * TS_PACKET].reshape(-1, TS_PACKET)
-    pids = (cells[:, 1].astype(np.int32) & 0x1F) << 8 | cells[:, 2]
-    tables = KLVDemux()  # only to learn the video PIDs from the program tables (PAT, then the PMTs)
-    tables.feed_cells(cells[pids == 0].tobytes())
-    tables.feed_cells(cells[np.isin(pids, list(tables.pmt_pids))].tobytes())
+    cells, pids, tables = ts_cells(data)
     starts = np.flatnonzero((cells[:, 1] & 0x40).astype(bool) & np.isin(pids, list(tables.video_pids)))
     frame: tuple[int, int] | None = None  # (n, PTS) of the video PES being copied
     n = 0
