@@ -33,18 +33,21 @@ INS body axes, deg), boresight (the optical axis' three angles to the gimbal, de
 heading bias, deg: measured = true + bias), time (the telemetry clock minus the video clock, s),
 position (the GPS position's bias east, north, up, m: measured = true + bias; needs --reference or
 strong relief), each around the config's value with a prior 1-sigma (--prior-mount, --prior-heading,
---prior-time, --prior-position). Keyframes every --every-s seconds; the frames that overlap are
-predicted from the poses and the DEM (no all-pairs matching); SIFT tie points matched between them
-(ratio test, RANSAC), joined into tracks; then the biases and every tie point's ground position
-adjusted so that each tie point projects onto its pixels (1-sigma --pixel-sigma px) and lies on the
-DEM (1-sigma --dem-sigma m). No ground control needed: the images and the DEM tell the biases apart
-when the geometry varies (turns, gimbal motion, relief). Parameters the pass cannot separate are
-said (correlations above 0.95, and any whose sigma stays above half its prior's), not guessed.
-Without a reference the solution is relative (the frames agree with each other) and held to the
-ground by the DEM only, and says so. --reference ORTHO.tif (any georeferenced image of the ground:
-an orthophoto, a hillshade of the DEM): each keyframe is matched to the reference drawn as the frame
-would see it (its pose and the DEM), each match a control point (the frame's pixel sees the
-reference's ground there, 1-sigma --reference-sigma m): the solution becomes absolute.
+--prior-time, --prior-position; by default what the config's [accuracy.budget] says of them).
+Keyframes every --every-s seconds; the frames that overlap are predicted from the poses and the DEM
+(no all-pairs matching); SIFT tie points matched between them (ratio test, RANSAC), joined into
+tracks; then the biases and every tie point's ground position adjusted so that each tie point
+projects onto its pixels (1-sigma --pixel-sigma px) and lies on the DEM (1-sigma --dem-sigma m),
+each keyframe's attitude free to differ from its records by a little of its own (1-sigma
+--frame-sigma deg per axis: refine.json's frame_attitude_deg). No ground control needed: the images
+and the DEM tell the biases apart when the geometry varies (turns, gimbal motion, relief).
+Parameters the pass cannot separate are said (correlations above 0.95, and any whose sigma stays
+above half its prior's), not guessed. Without a reference the solution is relative (the frames agree
+with each other) and held to the ground by the DEM only, and says so. --reference ORTHO.tif (any
+georeferenced image of the ground: an orthophoto, a hillshade of the DEM): each keyframe is matched
+to the reference drawn as the frame would see it (its pose and the DEM), each match a control point
+(the frame's pixel sees the reference's ground there, 1-sigma --reference-sigma m): the solution
+becomes absolute.
 
 \b
 Written into --out:
@@ -52,7 +55,13 @@ Written into --out:
   telemetry_refined.csv  the telemetry with the heading bias out of yaw_deg, the time offset out of
                          time_s, a position bias out of lat/lon/h_m (heights ellipsoidal, gimbal
                          angles as gimbal1/gimbal2_deg)
-  config_refined.toml    the config with the installation estimated (use it with the CSV above)
+  config_refined.toml    the config with the installation estimated (use it with the CSV above); its
+                         [accuracy.budget] with what refinement left unknown in place of what it
+                         estimated (mount_*_deg, boresight_x/y_deg, yaw_deg, time_s, lat/lon/h:
+                         the estimate's 1-sigma, with a time-varying source's wander over the pass)
+  NAME_refined.ts        a video with its own KLV: the video again with every ST 0601 packet's pose
+                         corrected in place (platform, sensor position, sensor angles carrying the
+                         installation, frame centre and corners on the DEM): no config needed
   tiepoints.csv          every tie-point observation with its residual before and after (px)
   residuals.png          the residuals' distribution and per-keyframe RMS, before and after
 """
@@ -74,33 +83,39 @@ Written into --out:
               help="1-sigma of a tie point's pixel (px).")
 @click.option("--dem-sigma", type=click.FloatRange(0.0, min_open=True), default=10.0, show_default=True,
               help="1-sigma of the DEM's heights (m; SRTM about 10).")
-@click.option("--prior-mount", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True,
-              help="Prior 1-sigma of each mount / boresight angle (deg).")
-@click.option("--prior-heading", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
-              help="Prior 1-sigma of the heading bias (deg).")
-@click.option("--prior-time", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
-              help="Prior 1-sigma of the time offset (s).")
+@click.option("--prior-mount", type=click.FloatRange(0.0, min_open=True), default=None,
+              help="Prior 1-sigma of each mount / boresight angle (deg). Default: the config's [accuracy.budget] "
+                   "(its largest mount_*_deg), else 1.")
+@click.option("--prior-heading", type=click.FloatRange(0.0, min_open=True), default=None,
+              help="Prior 1-sigma of the heading bias (deg). Default: the budget's yaw_deg, else 2.")
+@click.option("--prior-time", type=click.FloatRange(0.0, min_open=True), default=None,
+              help="Prior 1-sigma of the time offset (s). Default: the budget's time_s, else 0.5.")
+@click.option("--frame-sigma", type=click.FloatRange(0.0), default=None,
+              help="1-sigma (deg) of each keyframe's own attitude error about each body axis, which the records "
+                   "do not show (INS noise, vibration): estimated per keyframe, so the shared biases' sigma "
+                   "allow for it. 0: none. Default: the budget's largest vibration_*_deg, else 0.01.")
 @click.option("--reference", "reference_path", type=click.Path(dir_okay=False), default=None,
               help="A georeferenced image of the ground (orthophoto or DEM hillshade, GeoTIFF): every keyframe or "
                    "photo matched to it gives control points; the solution becomes absolute and the GPS position "
                    "bias (position, m) is estimated too.")
 @click.option("--reference-sigma", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True,
               help="1-sigma of the reference's georeferencing, horizontal (m).")
-@click.option("--prior-position", type=click.FloatRange(0.0, min_open=True), default=5.0, show_default=True,
-              help="Prior 1-sigma of each axis of the GPS position bias (east, north, up; m).")
+@click.option("--prior-position", type=click.FloatRange(0.0, min_open=True), default=None,
+              help="Prior 1-sigma of each axis of the GPS position bias (east, north, up; m). Default: the "
+                   "budget's largest of lat_deg, lon_deg (in m), h_m, else 5.")
 @click.option("--max-gap", type=click.FloatRange(0.0, min_open=True), default=0.5, show_default=True,
               help="Longest telemetry gap (s) to bridge.")
 @click.option("--json", "as_json", is_flag=True, help="Print refine.json's content instead of the tables.")
 @out_option("refine.json, telemetry_refined.csv, config_refined.toml, tiepoints.csv, residuals.png")
 def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs, estimate, every_s, pixel_sigma,
-           dem_sigma, prior_mount, prior_heading, prior_time, reference_path, reference_sigma, prior_position, max_gap,
-           as_json, out_dir) -> None:
+           dem_sigma, prior_mount, prior_heading, prior_time, frame_sigma, reference_path, reference_sigma,
+           prior_position, max_gap, as_json, out_dir) -> None:
     import json
     from pathlib import Path
 
     from ..errors import InputError
     from ..jobs.refine import refine_video
-    from ..refine.adjust import AdjustSettings
+    from ..refine.adjust import FRAME_SIGMA_DEG, PRIOR_SIGMA, AdjustSettings
 
     def is_video(src) -> bool:
         head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
@@ -110,9 +125,12 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     if estimate is None:
         estimate = ("mount,heading" if photos else "mount,heading,time") + (",position" if reference_path else "")
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())
+    given = {"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading, "time": prior_time,
+             "position": prior_position, "frame": frame_sigma}
     settings = AdjustSettings(estimate=groups, pixel_sigma_px=pixel_sigma, dem_sigma_m=dem_sigma,
-                              prior_sigma={"mount": prior_mount, "boresight": prior_mount, "heading": prior_heading,
-                                           "time": prior_time, "position": prior_position})
+                              frame_sigma_deg=FRAME_SIGMA_DEG if frame_sigma is None else frame_sigma,
+                              prior_sigma={**PRIOR_SIGMA, **{g: v for g, v in given.items()
+                                                            if v is not None and g in PRIOR_SIGMA}})
     if not photos and len(sources) != 1:
         raise InputError("a video is refined one at a time: eoloc refine VIDEO [--telemetry FILE --config C.toml] "
                          "--dem F")
@@ -148,7 +166,8 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
         return
     cfg = load_config(config_path) if config_path is not None else None
     job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
-                       settings=settings, max_gap_s=max_gap, reference=reference, progress=say)
+                       settings=settings, max_gap_s=max_gap, reference=reference,
+                       priors_from_budget={g for g, v in given.items() if v is None}, progress=say)
     report_issues(job.issues)
     if as_json:
         click.echo(json.dumps(job.report, indent=1, allow_nan=False))

@@ -279,13 +279,24 @@ def _tuples(v):
 
 
 def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresight_misalignment_deg=None,
-                      heading_bias_deg: float | None = None, time_offset_s: float | None = None) -> None:
+                      heading_bias_deg: float | None = None, time_offset_s: float | None = None,
+                      budget: dict[str, dict[str, float | str]] | None = None, budget_note: str = "") -> None:
     """Write calibrated installation values into a config file, keeping its comments and layout
-    (tomlkit); the file is validated before it is replaced. None leaves a value as it is."""
+    (tomlkit); the file is validated before it is replaced. None leaves a value as it is.
+    ``budget``: [accuracy.budget] entries to set ({source: {"normal": sigma, "kind": ...}}), each
+    with ``budget_note`` as its comment (the file must have an [accuracy] section)."""
     import tomlkit
 
     path = Path(path)
     doc = tomlkit.parse(path.read_text(encoding="utf-8"))
+    if budget:
+        table = doc["accuracy"]["budget"]
+        for name, spec in budget.items():
+            entry = tomlkit.inline_table()
+            entry.update(spec)
+            table[name] = entry
+            if budget_note:
+                table[name].comment(budget_note)
     updates = {("installation", "mount_misalignment_deg"): mount_misalignment_deg,
                ("installation", "boresight_misalignment_deg"): boresight_misalignment_deg,
                ("telemetry", "heading_bias_deg"): heading_bias_deg, ("telemetry", "time_offset_s"): time_offset_s}

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -63,12 +63,15 @@ def keyframe_indices(times: np.ndarray, ok: np.ndarray, every_s: float) -> np.nd
 def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | None = None, out: str | Path,
                  every_s: float = 1.0, tie: TieSettings | None = None,
                  settings: AdjustSettings | None = None, max_gap_s: float = 0.5, reference: Reference | None = None,
+                 priors_from_budget: Collection[str] = (),
                  progress: Callable[[str], None] | None = None) -> RefineJob:
     """Refine the telemetry of ``video`` (a telemetry file with ``cfg``, its camera; ``telemetry``
     None: the ST 0601 KLV in the video's own transport stream, each frame's camera from its fields
     of view) on ``dem`` (``tie``/``settings``: the tie points' and the adjustment's; default their
     defaults); with a ``reference`` image the keyframes are matched to it too (control points: an
-    absolute solution)."""
+    absolute solution). ``priors_from_budget``: groups whose prior 1-sigma is taken from the
+    config's [accuracy.budget] when it has one (:func:`eoloc.refine.correct.budget_priors`;
+    "frame": the per-keyframe attitude sigma)."""
     tie = tie if tie is not None else TieSettings()
     settings = settings if settings is not None else AdjustSettings()
     from ..ground.frame import misb_frame_sensor
@@ -96,6 +99,14 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
             raise InputError(f"{exc} -- without its own KLV a video needs its telemetry: --telemetry FILE "
                              "--config C.toml", exc.issues) from None
         sensor = None
+    budget = error_budget_of(cfg)
+    if budget is not None and priors_from_budget:
+        from ..refine.correct import budget_priors
+
+        taken = {g: v for g, v in budget_priors(budget, float(np.nanmedian(meta.pose.lat_deg))).items()
+                 if g in priors_from_budget}
+        frame = taken.pop("frame", settings.frame_sigma_deg)
+        settings = dataclasses.replace(settings, prior_sigma={**settings.prior_sigma, **taken}, frame_sigma_deg=frame)
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
     usable = np.asarray(poses.ok, dtype=bool)
     if "time" in settings.estimate:  # a keyframe must keep its pose when the offset moves (2 prior sigmas)
@@ -171,6 +182,15 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     return job
 
 
+def error_budget_of(cfg):
+    """The config's [accuracy.budget] as an ErrorBudget, or None."""
+    if cfg is None or cfg.accuracy is None:
+        return None
+    from ..accuracy.budget import ErrorBudget
+
+    return ErrorBudget.from_mapping(cfg.accuracy.budget)
+
+
 def reference_weights(reference: Reference | None, control) -> dict:
     """adjust()'s control arguments: each point within half a reference cell, the reference's own
     georeferencing error shared by all of them."""
@@ -195,6 +215,8 @@ def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: i
         "dem_sigma_m": settings.dem_sigma_m, "keyframes": int(keys.size), "pairs_matched": n_pairs,
         "pairs_verified": len(ties.pairs), "tie_points": ref.n_tracks, "observations": ref.n_observations,
         "outlier_tracks": len(ref.outlier_tracks), "control_points": ref.n_control,
+        "frame_sigma_deg": settings.frame_sigma_deg, "frame_attitude_deg": ref.frame_attitude_deg.tolist(),
+        "frame_attitude_sigma_deg": ref.frame_attitude_sigma_deg.tolist(),
         "absolute": ref.n_control > 0, "rms_px_control": rms(ref.control_residual_px),
         "rms_px_before": rms(ref.residual_px_before),
         "rms_px_after": rms(ref.residual_px_after), "timing_s": clock, "warnings": ref.warnings})
@@ -217,12 +239,20 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     out.mkdir(parents=True, exist_ok=True)
     ref, ties = job.refinement, job.ties
     written = []
+    records = job_inputs(cfg, telemetry).telemetry.columns if klv is None else None
+    budget = None
+    if records is not None and config_path is not None and cfg.accuracy is not None:  # what refinement left unknown
+        from ..refine.correct import refined_budget
+
+        budget, job.report["budget"] = refined_budget(error_budget_of(cfg), ref, float(key_t[-1] - key_t[0]),
+                                                      float(np.nanmedian(records["lat_deg"])),
+                                                      job.report["frame_sigma_deg"])
     js = out / "refine.json"
     js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     written.append(js)
     if klv is None:
         # the records as eoloc read them (the config's heading bias already out of the yaw)
-        c = dict(job_inputs(cfg, telemetry).telemetry.columns)
+        c = dict(records)
         hb0 = cfg.telemetry.heading_bias_deg if cfg is not None else 0.0
     else:
         meta, t0, _ = klv
@@ -266,7 +296,7 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
         groups = ref_groups(ref)
         write_calibration(refined, mount_misalignment_deg=s.mount_misalignment_deg if "mount" in groups else None,
                           boresight_misalignment_deg=s.boresight_misalignment_deg if "boresight" in groups
-                          else None)
+                          else None, budget=budget, budget_note="refined by eoloc refine (refine.json: budget)")
         written.append(refined)
     obs = [{"track": int(ties.track[i]), "keyframe": int(job.keyframes[ties.frame[i]]),
             "video_time_s": float(key_t[ties.frame[i]] - key_t[0]), "u_px": float(ties.u_px[i]),

@@ -56,6 +56,9 @@ PRIOR_SIGMA = {"mount": 1.0, "boresight": 1.0, "heading": 2.0, "time": 0.5, "pos
 GLOBAL_STEP = 1e-5  # forward-difference steps: deg or s for the globals
 GROUND_STEP_M = 1e-3  # and metres for the tracks (ECEF has ~1e-9 m resolution)
 UNSEEN = 1e3  # the residual (in sigmas) of an observation that cannot be projected
+#: each keyframe's own attitude error (deg, 1-sigma about each body axis) that the telemetry's
+#: records do not resolve: INS noise, isolator vibration, an interpolation between records
+FRAME_SIGMA_DEG = 0.01
 
 
 @dataclass(frozen=True)
@@ -63,7 +66,10 @@ class AdjustSettings:
     """estimate: the groups solved for; pixel_sigma_px: a tie point's pixel noise; dem_sigma_m:
     the DEM's vertical 1-sigma; prior_sigma: each group's prior 1-sigma (deg or s) around the
     starting value; outlier_sigma: observations past this many sigma after the robust pass are
-    dropped; prior_share: a posterior sigma above this share of the prior's = not determined."""
+    dropped; prior_share: a posterior sigma above this share of the prior's = not determined;
+    frame_sigma_deg: each keyframe's own attitude error (roll, pitch, yaw corrections per frame,
+    with this prior 1-sigma; 0: none), without which a per-frame error the records cannot show
+    would be fitted by the shared biases, and their sigma would claim too much."""
 
     estimate: tuple[str, ...] = ("mount", "heading", "time")
     pixel_sigma_px: float = 1.0
@@ -71,6 +77,7 @@ class AdjustSettings:
     prior_sigma: dict[str, float] = field(default_factory=lambda: dict(PRIOR_SIGMA))
     outlier_sigma: float = 4.0
     prior_share: float = 0.5
+    frame_sigma_deg: float = FRAME_SIGMA_DEG
 
     def __post_init__(self) -> None:
         bad = [g for g in self.estimate if g not in REFINE_GROUPS]
@@ -78,7 +85,7 @@ class AdjustSettings:
             raise InputError(f"estimate: unknown or no groups {bad or list(self.estimate)}; choose from "
                              f"{', '.join(REFINE_GROUPS)}")
         if not (self.pixel_sigma_px > 0 and self.dem_sigma_m > 0 and self.outlier_sigma > 0
-                and 0 < self.prior_share <= 1):
+                and 0 < self.prior_share <= 1 and self.frame_sigma_deg >= 0):
             raise InputError(f"adjustment settings out of range: {self}")
         missing = [g for g in self.estimate if not self.prior_sigma.get(g, 0) > 0]
         if missing:
@@ -113,6 +120,8 @@ class Refinement(Estimates):
     warnings: list[str] = field(default_factory=list)
     n_control: int = 0  # control points (frame pixels matched to a reference) used
     control_residual_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    frame_attitude_deg: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (K, 3) roll, pitch, yaw
+    frame_attitude_sigma_deg: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 
@@ -126,8 +135,14 @@ class _Problem:
                  control_sigma_m: float = 1.0):
         self.sensors, self.telemetry = sensors, telemetry
         self.frame_time_s, self.ties, self.dem, self.names = frame_time_s, ties, dem, names
-        self.g0, self.prior, self.s, self.heading0, self.time0 = g0, prior, s, heading0, time0
-        self.p, self.t = len(names), ties.n_tracks
+        self.s, self.heading0, self.time0 = s, heading0, time0
+        # the unknowns g: the globals (names), then with frame_sigma_deg each keyframe's attitude
+        # correction (roll, pitch, yaw; deg) around 0
+        self.n_globals = len(names)
+        self.k = len(frame_time_s) if s.frame_sigma_deg > 0 else 0
+        self.g0 = np.r_[g0, np.zeros(3 * self.k)]
+        self.prior = np.r_[prior, np.full(3 * self.k, s.frame_sigma_deg)]
+        self.p, self.t = self.n_globals + 3 * self.k, ties.n_tracks
         self.x_ground0 = x_ground0  # (T, 3) ECEF
         lat, lon, _ = geodesy.ecef_to_geodetic(*x_ground0.T)
         self.R_ecef_enu = geodesy.R_ecef_enu(lat, lon)  # (T, 3, 3): ENU offsets -> ECEF
@@ -139,6 +154,8 @@ class _Problem:
         self.control_sigma_m = control_sigma_m
         self.row_track = np.r_[np.repeat(ties.track, 2), np.arange(self.t), np.repeat(self.control_ids, 2),
                                np.full(self.p, -1)]
+        # each row's keyframe (-1: a row no frame's attitude moves)
+        self.row_frame = np.r_[np.repeat(ties.frame, 2), np.full(self.row_track.size - 2 * len(ties), -1)]
         self._frames_key: bytes | None = None
         self._frames: list = []
 
@@ -151,12 +168,17 @@ class _Problem:
         globals g; the last set reused while g is unchanged (the tracks' derivatives)."""
         key = g.tobytes()
         if self._frames_key != key:
-            _, hb, dt = apply_parameters(self.sensors[0], self.names, g, self.heading0, self.time0)
+            gg = g[:self.n_globals]
+            _, hb, dt = apply_parameters(self.sensors[0], self.names, gg, self.heading0, self.time0)
             pose = shift_position(pose_with_biases(None, self.telemetry, self.frame_time_s, hb, dt),
-                                  position_bias(self.names, g))
+                                  position_bias(self.names, gg))
+            if self.k:
+                e = g[self.n_globals:].reshape(self.k, 3)
+                pose = dataclasses.replace(pose, roll_deg=pose.roll_deg + e[:, 0], pitch_deg=pose.pitch_deg + e[:, 1],
+                                           yaw_deg=pose.yaw_deg + e[:, 2])
             made = []
             for sensor in self.sensors:
-                s = apply_parameters(sensor, self.names, g, self.heading0, self.time0)[0]
+                s = apply_parameters(sensor, self.names, gg, self.heading0, self.time0)[0]
                 made.append((s, s.camera_frame(pose), np.asarray(pose.focal_scale)))
             self._frames, self._frames_key = made, key
         return self._frames
@@ -195,16 +217,28 @@ class _Problem:
         """Forward differences: (R, p) by the globals (one evaluation each) and (R, 3) by each
         row's own track (three evaluations: every track moved at once, as no row sees two)."""
         raw = self.raw_residuals(g, d)
-        Jg = np.empty((r.size, self.p))
-        for j in range(self.p):
-            step = np.zeros(self.p)
-            step[j] = GLOBAL_STEP
+        Jg = np.zeros((r.size, self.p))
+
+        def difference(step: np.ndarray) -> np.ndarray:
             col = (self.raw_residuals(g + step, d) - raw) / GLOBAL_STEP
             edge = ~np.isfinite(col)
             if edge.any():  # a step that leaves the telemetry (a frame at its end): the other side's difference
                 back = (raw - self.raw_residuals(g - step, d)) / GLOBAL_STEP
                 col[edge] = back[edge]
-            Jg[:, j] = np.nan_to_num(col, nan=0.0, posinf=0.0, neginf=0.0)
+            return np.nan_to_num(col, nan=0.0, posinf=0.0, neginf=0.0)
+
+        for j in range(self.n_globals):
+            step = np.zeros(self.p)
+            step[j] = GLOBAL_STEP
+            Jg[:, j] = difference(step)
+        if self.k:  # one axis of every frame's correction at once: a row sees its own frame's only
+            mine = self.row_frame[:, None] == np.arange(self.k)
+            for c in range(3):
+                step = np.zeros(self.p)
+                step[self.n_globals + c::3] = GLOBAL_STEP
+                Jg[:, self.n_globals + c::3] = difference(step)[:, None] * mine
+            j = self.n_globals + np.arange(3 * self.k)
+            Jg[r.size - self.p + j, j] = 1.0 / self.prior[j]  # their prior rows
         Jt = np.zeros((r.size, 3))
         for c in range(3):
             dd = d.copy()
@@ -215,20 +249,16 @@ class _Problem:
         return Jg, Jt
 
     def normal(self, Jg, Jt, r, w):
-        """The normal equations' blocks: A (p, p), B (T, p, 3), C (T, 3, 3), gradients (p,), (T, 3)."""
-        tr = np.where(self.row_track >= 0, self.row_track, 0)
-        on = (self.row_track >= 0).astype(float) * w
+        """The normal equations' blocks: A (p, p), B (T, p, 3), C (T, 3, 3), gradients (p,), (T, 3).
+        Sums over each track's rows as one sparse (T, R) product (a row belongs to one track)."""
+        from scipy.sparse import csr_matrix
 
-        def per_track(values):  # (R, ...) -> (T, ...) sums over each track's rows
-            flat = values.reshape(values.shape[0], -1)
-            out = np.stack([np.bincount(tr, weights=flat[:, k] * on, minlength=self.t)
-                            for k in range(flat.shape[1])], -1)
-            return out.reshape(self.t, *values.shape[1:])
-
+        on = np.flatnonzero(self.row_track >= 0)
+        M = csr_matrix((w[on], (self.row_track[on], on)), shape=(self.t, r.size))
         A = Jg.T @ (Jg * w[:, None])
-        B = per_track(np.einsum("ri,rj->rij", Jg, Jt))
-        C = per_track(np.einsum("ri,rj->rij", Jt, Jt))
-        return A, B, C, Jg.T @ (w * r), per_track(Jt * r[:, None])
+        B = np.stack([M @ (Jg * Jt[:, [c]]) for c in range(3)], -1)
+        C = np.stack([M @ (Jt * Jt[:, [c]]) for c in range(3)], -1)
+        return A, B, C, Jg.T @ (w * r), M @ (Jt * r[:, None])
 
     def solve(self, g: np.ndarray, d: np.ndarray, loss: str, max_iter: int = 50):
         """Levenberg-Marquardt on the reduced (Schur complement) normal equations; ``loss``
@@ -255,7 +285,7 @@ class _Problem:
                 Cd = C + lam * np.einsum("tii->ti", C)[:, :, None] * np.eye(3) + 1e-12 * np.eye(3)
                 Ci = np.linalg.inv(Cd)
                 BCi = np.einsum("tpj,tjk->tpk", B, Ci)
-                S = A + lam * np.diag(np.diag(A)) - np.einsum("tpk,tqk->pq", BCi, B)
+                S = A + lam * np.diag(np.diag(A)) - reduce(BCi, B)
                 rhs = bg - np.einsum("tpk,tk->p", BCi, bt)
                 dg = -np.linalg.solve(S, rhs)
                 dd = -np.einsum("tij,tj->ti", Ci, bt + np.einsum("tpj,p->tj", B, dg))
@@ -275,12 +305,18 @@ class _Problem:
         Jg, Jt = self.jacobian(g, d, r)
         A, B, C, _, _ = self.normal(Jg, Jt, r, w)
         Ci = np.linalg.pinv(C)
-        S = A - np.einsum("tpj,tjk,tqk->pq", B, Ci, B)
+        S = A - reduce(np.einsum("tpj,tjk->tpk", B, Ci), B)
         try:
             S_inv = np.linalg.inv(S)
         except np.linalg.LinAlgError:
             S_inv = np.full((self.p, self.p), np.inf)
         return g, d, r, w, S_inv, lam < 1e10
+
+
+def reduce(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """sum over t and k of X[t, p, k] Y[t, q, k] (p, q), as one matrix product (BLAS)."""
+    p = X.shape[1]
+    return X.transpose(1, 0, 2).reshape(p, -1) @ Y.transpose(1, 0, 2).reshape(p, -1).T
 
 
 def position_bias(names: Sequence[str], g: np.ndarray) -> np.ndarray:
@@ -385,8 +421,8 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
 
     prob = problem(work, x_ground, ids)
     d0 = np.zeros((work.n_tracks, 3))
-    before = prob.project(g0, d0) - prob.uv
-    g, d, _, _, _, _ = prob.solve(g0, d0, "soft_l1", max_iter=8)  # only to find the outliers
+    before = prob.project(prob.g0, d0) - prob.uv
+    g, d, _, _, _, _ = prob.solve(prob.g0, d0, "soft_l1", max_iter=8)  # only to find the outliers
     r = (prob.project(g, d) - prob.uv) / s.pixel_sigma_px
     bad_obs = ~(np.hypot(r[:, 0], r[:, 1]) <= s.outlier_sigma)
     outliers = sorted({int(ids[t]) for t in np.unique(work.track[bad_obs]) if ids[t] >= 0})
@@ -407,9 +443,12 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     ground_now[ids < 0] = x_given[ids < 0]  # the control points' priors stay on the reference's ground
     prob = problem(work, ground_now, ids)
     g, d, res, _, S_inv, converged = prob.solve(g, np.zeros((work.n_tracks, 3)), "linear")
-    dof = res.size - (len(names) + 3 * work.n_tracks)
+    dof = res.size - (prob.p + 3 * work.n_tracks)
     s0 = float(np.sqrt(np.sum(res ** 2) / dof)) if dof > 0 else float("nan")
-    cov = S_inv * max(s0, 1.0) ** 2
+    cov_all = S_inv * max(s0, 1.0) ** 2
+    frame_attitude = g[len(names):].reshape(-1, 3)
+    frame_sigma = np.sqrt(np.diagonal(cov_all)[len(names):]).reshape(-1, 3)
+    g_full, g, cov = g, g[:len(names)], cov_all[:len(names), :len(names)].copy()
     if n_control and control_shared_sigma_m > 0:
         for name in REFINE_GROUPS["position"][:2]:
             if name in names:
@@ -435,7 +474,7 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
                         "ground by the DEM only; a reference image (--reference) makes it absolute")
     refined = [apply_parameters(x, names, g, heading_bias_deg, time_offset_s)[0] for x in sensors]
     _, hb, dt = apply_parameters(base, names, g, heading_bias_deg, time_offset_s)
-    after = prob.project(g, d) - prob.uv
+    after = prob.project(g_full, d) - prob.uv
     tie_rows = ids[work.track] >= 0
     control_after = after[~tie_rows]
     lat = np.full(ties.n_tracks, np.nan)
@@ -452,4 +491,5 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     idx = np.argsort(key_all)[where]
     rb[idx], ra[idx] = before[tie_rows], after[tie_rows]
     return Refinement(names, g, cov, prior, refined, hb, dt, lat, lon, h, rb, ra, s0, int(tie_rows.sum()),
-                      int(tie_tracks.sum()), undetermined, outliers, warnings, int((~tie_rows).sum()), control_after)
+                      int(tie_tracks.sum()), undetermined, outliers, warnings, int((~tie_rows).sum()), control_after,
+                      frame_attitude, frame_sigma)

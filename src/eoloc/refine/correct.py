@@ -11,14 +11,17 @@ the refined pointing, and every reader of it gets the refined camera without a c
 from __future__ import annotations
 
 import dataclasses
+import math
+import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from ..accuracy.budget import SOURCES, ErrorBudget
 from ..sensor.model import Pose, SensorModel
 from ..sequence.calibration import TelemetryTrack, pose_with_biases
-from .adjust import Refinement, position_bias, shift_position
+from .adjust import REFINE_GROUPS, Refinement, position_bias, shift_position
 
 FOLD_TOLERANCE_RAD = 1e-9  # the pointing left after folding (5e-8 deg: below ST 0601's resolution)
 
@@ -56,6 +59,9 @@ def fold_installation(sensor: SensorModel, pose: Pose, *, iterations: int = 40) 
         return (target * now.inv()).as_rotvec()  # (n, 3) rad
 
     a = angles[ok]
+    if ok.any():  # a start from the turret's own form, an az-el-roll (Z-Y-X) chain, where it is that
+        a = np.where((np.linalg.norm(error(guess := euler_start(plain, use, target)), axis=-1)
+                      < np.linalg.norm(error(a), axis=-1))[:, None], guess, a)
     step = 1e-6
     for _ in range(iterations if ok.any() else 0):
         e = error(a)
@@ -71,3 +77,99 @@ def fold_installation(sensor: SensorModel, pose: Pose, *, iterations: int = 40) 
         out[np.flatnonzero(ok)] = a
         ok[np.flatnonzero(ok)] = reached
     return tuple(x.reshape(shape) for x in out.T), ok.reshape(shape)
+
+
+def euler_start(plain: SensorModel, pose: Pose, target: Rotation) -> np.ndarray:
+    """Angles (n, 3) that would give ``target`` (R_ecef_cam) if the turret is an azimuth (about z),
+    elevation (y), roll (x) chain with the camera looking along its x axis (ST 0601's): from the
+    frame at zero angles, R0 = R_ecef_body P, the turret's rotation is P R0^T target P^T. Exact
+    across a gimbal lock, where a step from the given angles would have to swing the azimuth."""
+    P = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # camera (right, down, ahead) -> turret
+    n = len(target)
+    zero = dataclasses.replace(pose, gimbal_deg=(np.zeros(n), np.zeros(n), np.zeros(n)))
+    R0 = plain.camera_frame(zero).R_ecef_cam.reshape(-1, 3, 3)
+    G = P @ np.swapaxes(R0, 1, 2) @ target.as_matrix() @ P.T
+    with warnings.catch_warnings():  # at a gimbal lock scipy sets the roll to 0 and says so: still exact
+        warnings.simplefilter("ignore", UserWarning)
+        return Rotation.from_matrix(G).as_euler("ZYX", degrees=True)
+
+
+# -- the error budget after refinement --------------------------------------------------------------
+
+#: each estimated parameter and the budget source (accuracy.budget.SOURCES) it stands for, with
+#: the factor from the parameter's unit to the source's (None: metres to degrees, by latitude)
+BUDGET_TERMS = {"mount_x_deg": "mount_x_deg", "mount_y_deg": "mount_y_deg", "mount_z_deg": "mount_z_deg",
+                "boresight_x_deg": "boresight_x_deg", "boresight_y_deg": "boresight_y_deg",
+                "heading_bias_deg": "yaw_deg", "time_offset_s": "time_s", "position_n_m": "lat_deg",
+                "position_e_m": "lon_deg", "position_u_m": "h_m"}
+
+
+def metres_per_degree(lat_deg: float) -> tuple[float, float]:
+    """(north, east) metres per degree of latitude and of longitude at ``lat_deg`` on WGS-84."""
+    from pyproj import Geod
+
+    g = Geod(ellps="WGS84")
+    _, _, north = g.inv(0.0, lat_deg - 0.5, 0.0, lat_deg + 0.5)
+    _, _, east = g.inv(0.0, lat_deg, 1.0, lat_deg)
+    return north, east
+
+
+def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, lat_deg: float,
+                   frame_sigma_deg: float = 0.0) -> tuple[dict[str, dict[str, float | str]], list[str]]:
+    """The budget entries a refinement replaces or adds (``{source: {"normal": sigma, "kind":
+    "bias"}}``, the config's [accuracy.budget] form) and a line per entry saying what it was.
+
+    What the refinement estimated is no longer an unknown of the budget's size: what is left is
+    the estimate's own error (its posterior 1-sigma: a bias over the pass), and of a source that
+    varies in time the part the pass's constant could not take out: a Gauss-Markov error's wander
+    about its mean over a pass of ``span_s`` (variance sigma^2 min(1, T / 3 tau), the Ornstein-
+    Uhlenbeck process' for T << tau), a noise term whole. Both are added in quadrature and written
+    as a bias (the part that will not average away over the pass). boresight_z (a roll about the
+    optical axis) has no source of its own and is left out; sources the refinement did not touch
+    stay as they are. The per-keyframe attitude error the refinement allowed for
+    (``frame_sigma_deg``) goes in as vibration_*_deg noise where the budget has none."""
+    given = {s.name: s for s in budget} if budget is not None else {}
+    north, east = metres_per_degree(lat_deg)
+    unit = {"position_n_m": 1.0 / north, "position_e_m": 1.0 / east}
+    out: dict[str, dict[str, float | str]] = {}
+    said = []
+    for name, sigma in zip(ref.names, ref.sigma, strict=True):
+        source = BUDGET_TERMS.get(name)
+        if source is None:
+            continue
+        left = float(sigma) * unit.get(name, 1.0)
+        was = given.get(source)
+        if was is not None:
+            rest = {"bias": 0.0, "noise": 1.0}.get(was.kind, min(1.0, span_s / (3.0 * (was.tau_s or math.inf))))
+            left = math.hypot(left, was.sigma * math.sqrt(rest))
+        out[source] = {"normal": float(f"{left:.3g}"), "kind": "bias"}
+        said.append(f"{source}: {was.describe() if was is not None else 'not in the budget'} -> "
+                    f"σ{out[source]['normal']:g} {SOURCES[source][0]} (bias): refined ({name})")
+    for source in VIBRATION if frame_sigma_deg > 0 else ():
+        if source not in given:
+            out[source] = {"normal": float(f"{frame_sigma_deg:.3g}"), "kind": "noise"}
+            said.append(f"{source}: not in the budget -> σ{frame_sigma_deg:.3g} deg (noise): each keyframe's own "
+                        "attitude error the refinement allowed for")
+    return out, said
+
+
+VIBRATION = ("vibration_roll_deg", "vibration_pitch_deg", "vibration_yaw_deg")
+
+
+def budget_priors(budget: ErrorBudget, lat_deg: float) -> dict[str, float]:
+    """Each refinement group's prior 1-sigma from a budget (the largest of its sources' sigma, in
+    the group's unit): what refinement starts from is what the budget says it does not know; and
+    under "frame" each keyframe's own attitude error, the largest vibration_*_deg."""
+    given = {s.name: s.sigma for s in budget}
+    north, east = metres_per_degree(lat_deg)
+    scale = {"lat_deg": north, "lon_deg": east}
+    out = {}
+    for group, names in REFINE_GROUPS.items():
+        sig = [given[BUDGET_TERMS[n]] * scale.get(BUDGET_TERMS[n], 1.0) for n in names
+               if n in BUDGET_TERMS and BUDGET_TERMS[n] in given]
+        if sig and max(sig) > 0:
+            out[group] = max(sig)
+    vib = [given[n] for n in VIBRATION if n in given]
+    if vib and max(vib) > 0:
+        out["frame"] = max(vib)
+    return out
