@@ -213,11 +213,12 @@ class _Problem:
         r_control = (d[self.control_ids, :2] / self.control_sigma_m).ravel()
         return np.concatenate([r_px.ravel(), r_dem, r_control, r_prior])
 
-    def jacobian(self, g: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Forward differences: (R, p) by the globals (one evaluation each) and (R, 3) by each
-        row's own track (three evaluations: every track moved at once, as no row sees two)."""
+    def jacobian(self, g: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Forward differences: (R, n_globals) by the globals (one evaluation each), (R, 3) by each
+        row's own keyframe's attitude correction (three evaluations: every frame moved at once, as
+        a row sees one frame; the corrections' prior rows are left to :meth:`normal`) and (R, 3) by
+        each row's own track (three evaluations: every track moved at once, as no row sees two)."""
         raw = self.raw_residuals(g, d)
-        Jg = np.zeros((r.size, self.p))
 
         def difference(step: np.ndarray) -> np.ndarray:
             col = (self.raw_residuals(g + step, d) - raw) / GLOBAL_STEP
@@ -227,18 +228,16 @@ class _Problem:
                 col[edge] = back[edge]
             return np.nan_to_num(col, nan=0.0, posinf=0.0, neginf=0.0)
 
+        Jg = np.empty((r.size, self.n_globals))
         for j in range(self.n_globals):
             step = np.zeros(self.p)
             step[j] = GLOBAL_STEP
             Jg[:, j] = difference(step)
-        if self.k:  # one axis of every frame's correction at once: a row sees its own frame's only
-            mine = self.row_frame[:, None] == np.arange(self.k)
-            for c in range(3):
-                step = np.zeros(self.p)
-                step[self.n_globals + c::3] = GLOBAL_STEP
-                Jg[:, self.n_globals + c::3] = difference(step)[:, None] * mine
-            j = self.n_globals + np.arange(3 * self.k)
-            Jg[r.size - self.p + j, j] = 1.0 / self.prior[j]  # their prior rows
+        Jf = np.zeros((r.size, 3))
+        for c in range(3 if self.k else 0):
+            step = np.zeros(self.p)
+            step[self.n_globals + c::3] = GLOBAL_STEP
+            Jf[:, c] = np.where(self.row_frame >= 0, difference(step), 0.0)
         Jt = np.zeros((r.size, 3))
         for c in range(3):
             dd = d.copy()
@@ -246,19 +245,49 @@ class _Problem:
             Jt[:, c] = np.nan_to_num((self.raw_residuals(g, dd) - raw) / GROUND_STEP_M, nan=0.0, posinf=0.0,
                                      neginf=0.0)
         Jt[self.row_track < 0] = 0.0
-        return Jg, Jt
+        return Jg, Jf, Jt
 
-    def normal(self, Jg, Jt, r, w):
-        """The normal equations' blocks: A (p, p), B (T, p, 3), C (T, 3, 3), gradients (p,), (T, 3).
-        Sums over each track's rows as one sparse (T, R) product (a row belongs to one track)."""
+    def normal(self, Jg, Jf, Jt, r, w):
+        """The normal equations' blocks over all the unknowns g (globals, then the keyframes'
+        corrections): A (p, p), B (T, p, 3), C (T, 3, 3), gradients (p,), (T, 3). Sums over each
+        track's (and each keyframe's) rows as sparse products: a row belongs to one track and
+        one keyframe."""
+        from scipy.linalg import block_diag
         from scipy.sparse import csr_matrix
 
         on = np.flatnonzero(self.row_track >= 0)
         M = csr_matrix((w[on], (self.row_track[on], on)), shape=(self.t, r.size))
-        A = Jg.T @ (Jg * w[:, None])
-        B = np.stack([M @ (Jg * Jt[:, [c]]) for c in range(3)], -1)
+        ng, nf = self.n_globals, 3 * self.k
+        A = np.zeros((self.p, self.p))
+        A[:ng, :ng] = Jg.T @ (Jg * w[:, None])
+        B = np.zeros((self.t, self.p, 3))
+        for c in range(3):
+            B[:, :ng, c] = M @ (Jg * Jt[:, [c]])
         C = np.stack([M @ (Jt * Jt[:, [c]]) for c in range(3)], -1)
-        return A, B, C, Jg.T @ (w * r), M @ (Jt * r[:, None])
+        bg = np.zeros(self.p)
+        bg[:ng] = Jg.T @ (w * r)
+        if self.k:
+            rows = np.flatnonzero(self.row_frame >= 0)
+            cols = 3 * self.row_frame[rows][:, None] + np.arange(3)  # (n, 3): the row's frame's three columns
+            F = csr_matrix(((Jf[rows] * w[rows, None]).ravel(), (cols.ravel(), np.repeat(rows, 3))),
+                           shape=(nf, r.size))  # (3K, R): w Jf^T
+            A[ng:, :ng] = F @ Jg
+            A[:ng, ng:] = A[ng:, :ng].T
+            blocks = np.zeros((self.k, 3, 3))  # each keyframe's own 3 x 3
+            for i in range(3):
+                for j in range(3):
+                    blocks[:, i, j] = np.bincount(self.row_frame[rows], weights=w[rows] * Jf[rows, i] * Jf[rows, j],
+                                                  minlength=self.k)
+            prior = self.prior[ng:]
+            A[ng:, ng:] = block_diag(*blocks) + np.diag(1.0 / prior ** 2)
+            r_prior = r[r.size - self.p + ng:]  # the corrections' prior rows: (g - 0) / sigma
+            bg[ng:] = F @ r + r_prior / prior
+            track_rows = self.row_track[rows]
+            for c in range(3):
+                vals = (Jf[rows] * (w[rows] * Jt[rows, c])[:, None]).ravel()
+                B[:, ng:, c] = csr_matrix((vals, (np.repeat(track_rows, 3), cols.ravel())),
+                                          shape=(self.t, nf)).toarray()
+        return A, B, C, bg, M @ (Jt * r[:, None])
 
     def solve(self, g: np.ndarray, d: np.ndarray, loss: str, max_iter: int = 50):
         """Levenberg-Marquardt on the reduced (Schur complement) normal equations; ``loss``
@@ -278,8 +307,7 @@ class _Problem:
         c0 = cost(r)
         for _ in range(max_iter):
             w = weights(r)
-            Jg, Jt = self.jacobian(g, d, r)
-            A, B, C, bg, bt = self.normal(Jg, Jt, r, w)
+            A, B, C, bg, bt = self.normal(*self.jacobian(g, d, r), r, w)
             improved = False
             while lam < 1e10:
                 Cd = C + lam * np.einsum("tii->ti", C)[:, :, None] * np.eye(3) + 1e-12 * np.eye(3)
@@ -302,8 +330,7 @@ class _Problem:
             if not improved:
                 break
         w = weights(r)
-        Jg, Jt = self.jacobian(g, d, r)
-        A, B, C, _, _ = self.normal(Jg, Jt, r, w)
+        A, B, C, _, _ = self.normal(*self.jacobian(g, d, r), r, w)
         Ci = np.linalg.pinv(C)
         S = A - reduce(np.einsum("tpj,tjk->tpk", B, Ci), B)
         try:
