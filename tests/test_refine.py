@@ -442,7 +442,8 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
     refined camera yaw/pitch/roll within 3 of its sigma of the truth (sigma under 0.1 deg; not yet
     2: this ring leaves the heading bias and the mount's yaw 0.98 correlated and both ~0.07 deg
     off, 2.2 sigma, a systematic of the matching the adjustment does not model), and the truth
-    pixels located with the refined attitude 5x closer (CE90) than with the XMP's."""
+    pixels located with the refined attitude 5x closer (CE90) than with the XMP's; the refined poses
+    written as OpenDroneMap's geo.txt and taken back by `eoloc photo --poses`, its fixes 5x closer."""
     folder = tmp_path / "photos"
     folder.mkdir()
     photos, k = photo_set(folder)
@@ -485,6 +486,29 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
             err[name].append(np.where(f.ok, np.hypot(e, n), np.inf))
     ce90 = {name: np.percentile(np.concatenate(v), 90) for name, v in err.items()}
     assert ce90["given"] > 5 * ce90["refined"], ce90
+    # the refined poses as ODM's image geolocation file, and back into `eoloc photo --poses`
+    geo = (tmp_path / "out" / "geo.txt").read_text().splitlines()
+    assert geo[0] == "EPSG:4326" and len(geo) == 1 + len(rows)
+    name, lon, lat, h, yaw, *_ = geo[1].split()
+    assert name == photos[0][0].name and float(lon) == pytest.approx(rows[0]["camera_lon"], abs=1e-8)
+    assert float(yaw) == pytest.approx(rows[0]["camera_yaw"], abs=1e-5)
+    (c, R_ec) = photos[0][1]
+    u, v = rng.uniform(30, PHOTO_W - 30, 6), rng.uniform(30, PHOTO_H - 30, 6)
+    truth = ts.ground_points(c, R_ec, k, u, v)
+    pix = [a for uu, vv in zip(u, v, strict=True) for a in ("--pixel", uu, vv)]
+    off = {}
+    for name, extra in (("given", ()), ("refined", ("--poses", tmp_path / "out" / "photos_refined.csv"))):
+        r = eoloc("photo", photos[0][0], *pix, "--dem", dem_path, "--vertical", "ellipsoid", "--json", "--out",
+                  tmp_path / f"p_{name}", *extra)
+        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+        fixes = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+        assert len(fixes) == 6
+        if name == "refined":
+            assert fixes[0]["camera_yaw"] == pytest.approx(rows[0]["camera_yaw"], abs=1e-4)  # the CSV: 4 decimals
+        e, n, _ = pymap3d.geodetic2enu([f["lat"] for f in fixes], [f["lon"] for f in fixes],
+                                       [f["h"] for f in fixes], truth[:, 0], truth[:, 1], truth[:, 2])
+        off[name] = float(np.max(np.hypot(e, n)))
+    assert off["given"] > 5 * off["refined"], off
     # with an orthophoto of the ground: the position is estimated too (no bias here: within 2 sigma of
     # the XMP's), the attitude as before
     ortho = ts.write_reference(tmp_path / "ortho.tif", half_m=1500.0, cell_m=1.0)

@@ -59,13 +59,16 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
                    "Cloud-Optimised GeoTIFFs (--crs, --gsd, --resampling, --nodata, --occlusion as eoloc rectify).")
 @config_option(required=False, help_text="TOML with [accuracy.budget]: each fix's uncertainty (the camera comes "
                                          "from the photos).")
+@click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None,
+              help="Camera poses that replace the photos' own, by file name: eoloc refine's photos_refined.csv (or "
+                   "its --json lines). With a --config budget, give refine's refined one.")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
 @out_option("photo_fixes.*")
 @formats_option()
 @tak_options
 def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion,
-          write_orthos, config_path, as_json, out_dir, formats, cot_urls, tak_cert, tak_cert_password, tak_ca,
-          tak_package, tak_protocol) -> None:
+          write_orthos, config_path, poses_path, as_json, out_dir, formats, cot_urls, tak_cert, tak_cert_password,
+          tak_ca, tak_package, tak_protocol) -> None:
     from pathlib import Path
 
     import orjson
@@ -86,8 +89,14 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
         raise click.UsageError("--ortho needs the ground to rectify onto: give --dem FILE or --target-height H")
     settings = OrthoSettings(crs, gsd, resampling, nodata, occlusion)
     with working("orthorectifying the photos..." if write_orthos else "reading the photos..."):
+        poses = None
+        if poses_path is not None:
+            from ..io.photo import read_photo_poses
+
+            poses = read_photo_poses(poses_path)
         job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget,
-                        ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings)
+                        ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings, poses=poses,
+                        poses_from=str(poses_path or ""))
     for msg in job.failed:
         warn(msg)
     if as_json:

@@ -67,9 +67,13 @@ def write_csv(path: str | Path, records: Records | Sequence[Mapping], *, columns
     return path
 
 
+ANGLE_WORDS = ("lat", "lon", "yaw", "pitch", "roll")  # eoloc photo's keys: camera_lat, camera_yaw, sigma_camera_roll
+
+
 def decimals(name: str) -> int:
-    """The decimals a number column is written with: 9 for angles (``*_deg``), else 4."""
-    return 9 if name.endswith("_deg") else 4
+    """The decimals a number column is written with: 9 for angles (``*_deg``, and the photo
+    vocabulary's ``*lat``, ``*_yaw`` ... in degrees: 1e-4 deg would be 11 m of latitude), else 4."""
+    return 9 if name.endswith("_deg") or name.rsplit("_", 1)[-1] in ANGLE_WORDS else 4
 
 
 class _Cells:

@@ -404,3 +404,42 @@ def _version(v: str) -> tuple[int, ...]:
         digits = "".join(ch for ch in part if ch.isdigit())
         out.append(int(digits) if digits else 0)
     return tuple(out)
+
+
+POSE_KEYS = ("camera_lat", "camera_lon", "camera_h", "camera_yaw", "camera_pitch", "camera_roll")
+
+
+def read_photo_poses(path: str | Path) -> dict[str, dict[str, float]]:
+    """Poses that replace the photos' own: {photo file name: {camera_lat ... camera_roll}} from
+    ``eoloc refine PHOTO...``'s photos_refined.csv, or its --json lines (``file`` and
+    :data:`POSE_KEYS`, eoloc photo --json's names: degrees, ellipsoidal metres). A
+    :class:`PhotoError` names the file, the line and the key when one is missing or not a number."""
+    import csv
+    import json
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PhotoError(f"{path}: the photos' poses cannot be read ({exc})") from None
+    if text.lstrip().startswith("{"):
+        try:
+            rows = [(i, json.loads(line)) for i, line in enumerate(text.splitlines(), 1) if line.strip()]
+        except json.JSONDecodeError as exc:
+            raise PhotoError(f"{path}: line {exc.lineno}: not JSON ({exc.msg})") from None
+    else:
+        rows = list(enumerate(csv.DictReader(text.splitlines()), 2))
+    out: dict[str, dict[str, float]] = {}
+    for line, row in rows:
+        missing = [k for k in ("file", *POSE_KEYS) if row.get(k) in (None, "")]
+        if missing:
+            raise PhotoError(f"{path}:{line}: no {', '.join(missing)} (give eoloc refine's photos_refined.csv, "
+                             "or its --json lines)")
+        try:
+            pose = {k: float(row[k]) for k in POSE_KEYS}
+        except (TypeError, ValueError):
+            raise PhotoError(f"{path}:{line}: {', '.join(POSE_KEYS)} must be numbers") from None
+        if not all(math.isfinite(v) for v in pose.values()) or abs(pose["camera_lat"]) > 90:
+            raise PhotoError(f"{path}:{line}: a pose value is not finite, or the latitude is past 90 degrees")
+        out[Path(str(row["file"])).name] = pose
+    return out

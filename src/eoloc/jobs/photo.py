@@ -13,6 +13,7 @@ first-order uncertainty (:func:`eoloc.accuracy.covariance.locate_with_covariance
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,13 +57,17 @@ def photo_sensor_pose(p: PhotoPose):
 
 
 def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None,
-              budget=None, ortho_dir: Path | None = None, ortho: OrthoSettings = OrthoSettings()) -> PhotoJob:
+              budget=None, ortho_dir: Path | None = None, ortho: OrthoSettings = OrthoSettings(),
+              poses: dict[str, dict[str, float]] | None = None, poses_from: str = "") -> PhotoJob:
     """Every photo of ``paths`` (files, or folders standing for the photos in them) located at
     ``pixels`` ((u, v) pairs; none: the image centre); ``budget`` (an ErrorBudget): each fix's
     covariance columns (sigma_e_m ... ce90_m, le90_m). With a ground (``dem`` or
     ``target_height_m``) each photo's footprint too; with ``ortho_dir`` each photo orthorectified
     onto that ground as ``<ortho_dir>/<photo name>.tif`` (a Cloud-Optimised GeoTIFF), written as
-    it is made (one photo's pixels in memory at a time)."""
+    it is made (one photo's pixels in memory at a time). ``poses`` ({photo file name: camera_lat ...
+    camera_roll}, :func:`eoloc.io.photo.read_photo_poses`, read from ``poses_from``): each named
+    photo's camera pose replaced (a refined one); a photo it does not name keeps its own, and is
+    said."""
     from ..ground.footprint import footprint_features, footprints
     from ..io.sources.photos import photo_files
 
@@ -92,6 +97,15 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
             job.failed.append(str(exc))
             job.rows.append({"file": str(path), "status": "UNREADABLE", "reason": str(exc)})
             continue
+        if poses is not None:
+            q = poses.get(Path(path).name)
+            if q is None:
+                job.failed.append(f"{path}: not in {poses_from or 'the poses given'}: located with its own pose")
+            else:
+                p = dataclasses.replace(p, lat_deg=q["camera_lat"], lon_deg=q["camera_lon"], h_m=q["camera_h"],
+                                        yaw_deg=q["camera_yaw"], pitch_deg=q["camera_pitch"],
+                                        roll_deg=q["camera_roll"], height_rule=f"from {poses_from or 'the poses'}",
+                                        notes=[*p.notes, f"pose from {poses_from or 'the poses given'}"])
         job.photos.append(p)
         rows = locate_photo(p, pixels=pixels, dem=dem, target_height_m=target_height_m, budget=budget)
         job.rows += rows

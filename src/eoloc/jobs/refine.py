@@ -568,8 +568,26 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
         out.mkdir(parents=True, exist_ok=True)
         (out / "refine.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
         write_layer(out, "photos_refined", rows, ["csv"])
+        write_odm_geo(out / "geo.txt", rows)
         residual_plot(out / "residuals.png", ties, ref, np.arange(k, dtype=np.float64))
     return job
+
+
+def write_odm_geo(path: Path, rows: list[dict]) -> Path:
+    """OpenDroneMap's image geolocation file (its docs, "Image Geolocation Files"): EPSG:4326, then
+    per photo its name, longitude, latitude, height (ellipsoidal), yaw, pitch, roll (eoloc photo's
+    camera attitude, deg) and, where refinement estimated the position, its horizontal and vertical
+    1-sigma (m). ODM reads a geo.txt in the project folder, or --geo PATH."""
+    lines = ["EPSG:4326"]
+    for r in rows:
+        acc = ""
+        if r.get("sigma_camera_lat_m") is not None:
+            acc = (f" {math.hypot(r['sigma_camera_lat_m'], r['sigma_camera_lon_m']):.3f}"
+                   f" {r['sigma_camera_h']:.3f}")
+        lines.append(f"{Path(r['file']).name} {r['camera_lon']:.9f} {r['camera_lat']:.9f} {r['camera_h']:.3f} "
+                     f"{r['camera_yaw']:.6f} {r['camera_pitch']:.6f} {r['camera_roll']:.6f}{acc}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
 
 
 def photo_rows(poses, ref: Refinement) -> list[dict]:
@@ -579,29 +597,33 @@ def photo_rows(poses, ref: Refinement) -> list[dict]:
     mount_idx = [names.index(n) if n in names else -1 for n in GROUPS["mount"]]
     hb_idx = names.index("heading_bias_deg") if "heading_bias_deg" in names else -1
 
-    def attitude(p, x):
+    def attitude(p, x, e):  # e: the photo's own correction (roll, pitch, yaw)
         mount = [x[i] if i >= 0 else m for i, m in zip(mount_idx, ref.sensors[0].mount_misalignment_deg,
                                                          strict=True)]
         hb = x[hb_idx] if hb_idx >= 0 else ref.heading_bias_deg
-        return refined_camera_attitude(p.yaw_deg, p.pitch_deg, p.roll_deg, mount, hb)
+        return refined_camera_attitude(p.yaw_deg + e[2], p.pitch_deg + e[1], p.roll_deg + e[0], mount, hb)
 
     from ..refine.adjust import position_bias, shift_position
     from ..sensor import Pose
 
     bias = position_bias(ref.names, ref.values)
     pos_sigma = [float(ref.sigma[names.index(n)]) if n in names else None for n in REFINE_GROUPS["position"]]
+    own = ref.frame_attitude_deg if ref.frame_attitude_deg.size else np.zeros((len(poses), 3))
+    own_sigma = ref.frame_attitude_sigma_deg if ref.frame_attitude_sigma_deg.size else np.zeros((len(poses), 3))
     rows = []
-    for p in poses:
+    for p, e, es in zip(poses, own, own_sigma, strict=True):
         moved = shift_position(Pose(p.lat_deg, p.lon_deg, p.h_m), bias)
-        ypr = attitude(p, ref.values)
+        ypr = attitude(p, ref.values, e)
         J = np.empty((3, len(names)))
         for j in range(len(names)):
             step = np.zeros(len(names))
             step[j] = 1e-6
-            d = attitude(p, ref.values + step) - ypr
+            d = attitude(p, ref.values + step, e) - ypr
             d[0] = (d[0] + 180.0) % 360.0 - 180.0
             J[:, j] = d / 1e-6
-        sig = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, ref.cov, J), 0.0))
+        # the shared estimates' part, and the photo's own correction's (yaw, pitch, roll; its cross
+        # terms with the shared ones left out)
+        sig = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, ref.cov, J), 0.0) + es[::-1] ** 2)
         rows.append(json_safe({
             "file": p.path, "camera_lat": float(moved.lat_deg), "camera_lon": float(moved.lon_deg),
             "camera_h": float(moved.h_m),
