@@ -106,8 +106,6 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
     packet cannot be read item by item."""
     from stanag4609.st0601 import encode_field_value
 
-    from .localset import parse_items
-    from .reader import packet_end
 
     values: dict[int, float] = {40: float(lat_deg), 41: float(lon_deg), 42: float(h_m)}
     for tag, v in ((45, ce90_m), (46, le90_m)):
@@ -116,12 +114,7 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
     if not all(np.isfinite(v) for v in values.values()):
         raise ValueError("the fix has a NaN or infinite coordinate")
     new = {tag: encode_items([(tag, encode_field_value(tag, v))]) for tag, v in values.items()}
-    end, start, why = packet_end(packet, 0)
-    if end is None:
-        raise ValueError(why)
-    items, notes = parse_items(packet, start, end, whole=True)
-    if any(n.kind == "truncated item" for n in notes):
-        raise ValueError(next(n.message for n in notes if n.kind == "truncated item"))
+    items, _, start, _ = packet_items(packet)
     last = {tag: i for i, (tag, _) in enumerate(items)}
     body = bytearray()
     for i, (tag, raw) in enumerate(items):
@@ -130,6 +123,22 @@ def with_target_location(packet: bytes, lat_deg: float, lon_deg: float, h_m: flo
         body += (new.pop(tag, b"") if last[tag] == i else b"") if tag in TARGET_TAGS else raw
     body += b"".join(new.values())
     return frame_uas_packet(bytes(body), length_bytes=start - 17)  # the length's form as sent (0: short)
+
+
+def packet_items(packet: bytes) -> tuple[list[tuple[int, bytes]], list[tuple[int, bytes]], int, int]:
+    """A packet read item by item: its items as sent (tag, length and value bytes), the same as
+    (tag, value), where its value starts and its end. ValueError when it cannot be read so (a
+    bad length, an item cut short)."""
+    from .localset import parse_items
+    from .reader import packet_end
+
+    end, start, why = packet_end(packet, 0)
+    if end is None:
+        raise ValueError(why)
+    whole, notes = parse_items(packet, start, end, whole=True)
+    if any(n.kind == "truncated item" for n in notes):
+        raise ValueError(next(n.message for n in notes if n.kind == "truncated item"))
+    return whole, parse_items(packet, start, end)[0], start, end
 
 
 def replace_items(packet: bytes, values: dict[int, Any]) -> bytes:
@@ -142,16 +151,7 @@ def replace_items(packet: bytes, values: dict[int, Any]) -> bytes:
     item by item."""
     from stanag4609.st0601 import encode_field_value
 
-    from .localset import parse_items
-    from .reader import packet_end
-
-    end, start, why = packet_end(packet, 0)
-    if end is None:
-        raise ValueError(why)
-    whole, notes = parse_items(packet, start, end, whole=True)
-    if any(n.kind == "truncated item" for n in notes):
-        raise ValueError(next(n.message for n in notes if n.kind == "truncated item"))
-    items, _ = parse_items(packet, start, end)
+    whole, items, start, end = packet_items(packet)
     sent = {t for t, _ in items}
     new = {tag: encode_field_value(tag, v) for tag, v in values.items() if tag in sent}
     body = bytearray()
