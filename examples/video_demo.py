@@ -396,6 +396,8 @@ def main(argv: list[str] | None = None) -> int:
             sig = refined["sigma"][name]
             note = " (not determined by this pass)" if name in refined["undetermined"] else ""
             print(f"  {name} {v:+.3g} +- {sig:.2g}{note}")
+        for note in refined.get("klv_notes", []):  # the TS again with its packets' poses corrected in place
+            print(f"  {note} ({out / 'refine'})")
     # a figure outside its stated bound fails the demo (and make demo); the movers' on the whole pass
     out_of_bounds = []
     for name, v in (refined or {"parameters": {}})["parameters"].items():

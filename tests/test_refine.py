@@ -391,6 +391,23 @@ def test_cli_refines_a_video_and_the_refined_telemetry_locates_better(orbit, tmp
     assert np.median(stated["given"]) > 5 * np.median(stated["refined"]), {k: np.median(v) for k, v in stated.items()}
     for name, (err, _) in loc.items():  # each fix's truth within its stated CE90 (nine in ten or more)
         assert np.mean(err <= stated[name]) >= 0.9, (name, np.mean(err <= stated[name]))
+    # `eoloc video --refine`: refined first (into OUT/refine/), then every frame posed by the refined
+    # telemetry: the aircraft where it was at the frame's time, its heading without the bias
+    vid = tmp_path / "vid"
+    r = eoloc("video", video, "--telemetry", tmp_path / "tel.csv", "--config", tmp_path / "cam.toml", "--dem",
+              dem_path, "--vertical", "ellipsoid", "--refine", "--no-frames", "--no-mosaic", "--no-tiles",
+              "--no-player", "--out", vid)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert json.loads((vid / "refine" / "refine.json").read_text())["keyframes"] == len(TIMES)
+    import csv
+
+    frames = list(csv.DictReader((vid / "frames.csv").open()))
+    assert len(frames) == len(TIMES)
+    for row, t in zip(frames, TIMES, strict=True):
+        lat, lon, h, yaw, *_ = flight.state(float(t))
+        e, n, _ = pymap3d.geodetic2enu(float(row["lat_deg"]), float(row["lon_deg"]), float(row["h_m"]), lat, lon, h)
+        assert np.hypot(e, n) < 1.0, (t, e, n)  # 15 m with the clock 0.3 s off at 50 m/s
+        assert abs((float(row["yaw_deg"]) - float(yaw) + 180) % 360 - 180) < 0.1, (t, row["yaw_deg"], yaw)
 
 
 PHOTO_W, PHOTO_H, PHOTO_F = 640, 480, 560.0

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from .common import load_config, open_dem, progress
+from .common import load_config, open_dem, progress, working
 from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
 from .render import titled_table
@@ -38,6 +38,12 @@ says why). With KLV the camera is a pinhole whose fields of view (tags 16, 17) s
 \b
 Ground: --dem (terrain, with occlusion) or --target-height H; with KLV and neither, each frame's
 own frame-centre elevation (tag 78, or 25 + geoid).
+
+\b
+--refine: the telemetry is first refined from the video's own pixels (eoloc refine with its
+defaults, into OUT/refine/: the installation, heading bias and clock offset, each keyframe's own
+attitude), then everything below is made with the refined telemetry and config, or, for a video
+with its own KLV, with OUT/refine/NAME_refined.ts (its packets corrected in place).
 
 \b
 Written into --out:
@@ -130,6 +136,10 @@ Nothing is downloaded. detections.csv adds the class and score.
               help="--detect: largest target, square metres on the ground.")
 @click.option("--min-speed", type=click.FloatRange(0.0), default=None,
               help="--detect: slowest target kept, m/s over the ground [default: 2 for motion, 0 for a model].")
+@click.option("--refine", "refine_first", is_flag=True,
+              help="First refine the telemetry from the video's own pixels (eoloc refine, its defaults, into "
+                   "OUT/refine/; needs --dem), then run on the refined telemetry and config (or the video's own KLV "
+                   "refined: OUT/refine/NAME_refined.ts).")
 @click.option("--klv-out", "klv_out", type=click.Path(dir_okay=False), default=None, metavar="OUT.ts",
               help="--detect: the video written again as MPEG-TS, its metadata kept, with the movers as ST 0903 "
                    "VMTI in a KLV stream of its own (ids, centroid, box, location).")
@@ -138,7 +148,7 @@ Nothing is downloaded. detections.csv adds the class and score.
 def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
           mosaic, tiles, player, detect, detect_score, detect_classes, detect_point, detect_window, detect_threshold,
-          min_area, max_area, min_speed, klv_out, out_dir, flight_log) -> None:
+          min_area, max_area, min_speed, refine_first, klv_out, out_dir, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.video import FrameSelection, video_job
@@ -177,6 +187,9 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
             finder = LearnedDetector(detect, surface_rule(dem if dem is not None else target_height),
                                      score=detect_score, classes=classes, point=detect_point)
         movers = MoverSettings(min_speed_mps=(2.0 if detect == "motion" else 0.0) if min_speed is None else min_speed)
+    if refine_first:
+        video, telemetry, config_path = refined_inputs(video, klv_path, telemetry, config_path, time_offset, dem,
+                                                       max_gap, Path(out_dir))
     dem_name = Path(dem_paths[0]).stem if dem_paths else "dem"
     serve_line = serve_command(Path(out_dir), dem_name, dem_paths, vertical, geoid, dem_crs, config_path)
     surface = dem if dem is not None else target_height
@@ -287,6 +300,35 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if not job.n_rectified:
         warn("nothing was located: no frame was rectified: see the status and note columns of frames.csv")
         sys.exit(NOTHING_LOCATED)
+
+
+def refined_inputs(video, klv_path, telemetry, config_path, time_offset, dem, max_gap: float, out: Path):
+    """``--refine``: `eoloc refine` run into OUT/refine/ first; the video, telemetry and config to
+    go on with (the refined CSV and config, or the video with its own KLV refined)."""
+    from ..jobs.refine import refine_video
+    from ..terrain import DEM
+
+    if not isinstance(dem, DEM):
+        raise click.UsageError("--refine needs the terrain: --dem FILE (the tie points' heights are held to it)")
+    if klv_path:
+        raise click.UsageError("--refine takes the video's own KLV or --telemetry with --config, not --klv FILE: "
+                               "mux the KLV into the video first (eoloc mux)")
+    if time_offset is not None:
+        raise click.UsageError("--refine estimates the clock offset itself: leave out --time-offset (the config's "
+                               "time_offset_s is its starting value)")
+    cfg = load_config(config_path) if config_path else None
+    with working("refining the telemetry from the pixels..."):
+        job = refine_video(video, telemetry, cfg, dem, config_path=config_path, out=out / "refine", max_gap_s=max_gap)
+    report_issues(job.issues)
+    for w in job.refinement.warnings:
+        warn(w)
+    r = job.refinement
+    err_console.print("refined: " + ", ".join(f"{n} {v:+.4g} ± {sg:.2g}" for n, v, sg in
+                                              zip(r.names, r.values, r.sigma, strict=True))
+                      + f" (wrote {out / 'refine'})", highlight=False)
+    if telemetry is not None:
+        return video, out / "refine" / "telemetry_refined.csv", out / "refine" / "config_refined.toml"
+    return out / "refine" / f"{Path(video).stem}_refined.ts", None, config_path
 
 
 def serve_command(out: Path, dem_name: str, dem_paths, vertical: str, geoid, dem_crs, config_path) -> str:
