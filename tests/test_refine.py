@@ -526,6 +526,13 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
                                        [f["h"] for f in fixes], truth[:, 0], truth[:, 1], truth[:, 2])
         off[name] = float(np.max(np.hypot(e, n)))
     assert off["given"] > 5 * off["refined"], off
+    # `eoloc photo --refine`: the same in one go (refined into OUT/refine/, then located)
+    r = eoloc("photo", folder, "--dem", dem_path, "--vertical", "ellipsoid", "--refine", "--json", "--out",
+              tmp_path / "p_one_go")
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    first = json.loads(r.stdout.splitlines()[0])
+    assert first["camera_yaw"] == pytest.approx(rows[0]["camera_yaw"], abs=1e-6)
+    assert (tmp_path / "p_one_go" / "refine" / "photos_refined.csv").is_file()
     # with an orthophoto of the ground: the position is estimated too (no bias here: within 2 sigma of
     # the XMP's), the attitude as before
     ortho = ts.write_reference(tmp_path / "ortho.tif", half_m=1500.0, cell_m=1.0)
@@ -720,3 +727,20 @@ def test_the_estimates_sigma_cover_the_truth_over_many_flights(orbit):
     z = np.abs(np.array(z))
     assert np.mean(z <= 2.0) >= 0.9 and z.max() < 4.0, np.round(z, 2)
     assert np.all(np.mean(z ** 2, axis=0) <= 1.3) and np.mean(z ** 2) >= 0.1, np.mean(z ** 2, axis=0)
+
+
+def test_photo_poses_that_cannot_be_used_are_named(tmp_path):
+    """`eoloc photo --poses FILE`: a file without poses, a row without its pose keys, and --refine
+    without the terrain: exit status 2 and one line naming the file, the line and the fix."""
+    photo = Path(__file__).parent / "data" / "drone" / "H20N__DJI_0006_R.JPG"
+    (tmp_path / "empty.csv").write_text("file,camera_lat\n")
+    (tmp_path / "short.csv").write_text("file,camera_lat\nx.JPG,40\n")
+    (tmp_path / "words.jsonl").write_text('{"file": "x.JPG", "camera_lat": "north", "camera_lon": 1, "camera_h": 1, '
+                                          '"camera_yaw": 1, "camera_pitch": 1, "camera_roll": 1}\n')
+    cases = [(("--poses", tmp_path / "empty.csv"), "empty.csv: no photo pose in it"),
+             (("--poses", tmp_path / "short.csv"), "short.csv:2: no camera_lon, camera_h"),
+             (("--poses", tmp_path / "words.jsonl"), "words.jsonl:1: camera_lat, camera_lon"),
+             (("--refine",), "--refine needs the terrain: --dem FILE")]
+    for args, message in cases:
+        r = eoloc("photo", photo, *args, "--out", tmp_path / "out")
+        assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import click
 
@@ -32,6 +33,9 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
   is located — by the laser range finder's distance when the photo has one (DJI H20/M30/M3T:
   LRFTargetDistance; DJI's own LRFTarget answer is shown beside eoloc's), else on the DEM or the
   target height; with --pixel U V (repeatable) every pixel given, on the DEM or the height.
+  --poses FILE: the camera poses of eoloc refine (photos_refined.csv, or its --json lines) instead
+  of the photos' own, by file name; --refine: refined first from the set's own overlap (eoloc
+  refine into OUT/refine/, needs --dem), then located with them.
   Vendors: DJI (drone-dji:), Skydio (drone-skydio:), Parrot (drone-parrot:), Autel (drone-dji:
   or Pix4D Camera:), Teal (exif:Platform*/Camera*). Heights are ellipsoidal (converted from EGM96
   where the vendor's tag is MSL: README, Input formats).
@@ -62,15 +66,16 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
 @click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None,
               help="Camera poses that replace the photos' own, by file name: eoloc refine's photos_refined.csv (or "
                    "its --json lines). With a --config budget, give refine's refined one.")
+@click.option("--refine", "refine_first", is_flag=True,
+              help="First refine the set's camera poses from the photos' own overlap (eoloc refine, its defaults, "
+                   "into OUT/refine/; needs --dem and three or more overlapping photos), then locate with them.")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
 @out_option("photo_fixes.*")
 @formats_option()
 @tak_options
 def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion,
-          write_orthos, config_path, poses_path, as_json, out_dir, formats, cot_urls, tak_cert, tak_cert_password,
-          tak_ca, tak_package, tak_protocol) -> None:
-    from pathlib import Path
-
+          write_orthos, config_path, poses_path, refine_first, as_json, out_dir, formats, cot_urls, tak_cert,
+          tak_cert_password, tak_ca, tak_package, tak_protocol) -> None:
     import orjson
 
     from ..jobs.photo import OrthoSettings, photo_job
@@ -94,6 +99,8 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
             from ..io.photo import read_photo_poses
 
             poses = read_photo_poses(poses_path)
+        if refine_first:
+            poses, poses_path = refined_poses(photos, dem, poses_path, Path(out_dir) / "refine")
         job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget,
                         ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings, poses=poses,
                         poses_from=str(poses_path or ""))
@@ -169,3 +176,22 @@ def send_photo_fixes(rows: list[dict], urls: list[str], tls, protocol: str, *, p
     if fatal:
         fail(fatal)
     err_console.print(f"CoT: {len(events)} events -> " + json.dumps(summaries), soft_wrap=True, highlight=False)
+
+
+def refined_poses(photos, dem, poses_path, out: Path) -> tuple[dict, Path]:
+    """``--refine``: the photos' poses refined by `eoloc refine` (into ``out``), by file name."""
+    from ..jobs.refine import refine_photos
+    from ..terrain import DEM
+
+    if not isinstance(dem, DEM):
+        raise click.UsageError("--refine needs the terrain: --dem FILE (the tie points' heights are held to it)")
+    if poses_path is not None:
+        raise click.UsageError("give --refine or --poses FILE, not both")
+    job = refine_photos(photos, dem, out=out)
+    for w in [*job.failed, *job.refinement.warnings]:
+        warn(w)
+    r = job.refinement
+    err_console.print("refined: " + ", ".join(f"{n} {v:+.4g} ± {sg:.2g}" for n, v, sg in
+                                              zip(r.names, r.values, r.sigma, strict=True)) + f" (wrote {out})",
+                      highlight=False)
+    return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv"

@@ -442,4 +442,6 @@ def read_photo_poses(path: str | Path) -> dict[str, dict[str, float]]:
         if not all(math.isfinite(v) for v in pose.values()) or abs(pose["camera_lat"]) > 90:
             raise PhotoError(f"{path}:{line}: a pose value is not finite, or the latitude is past 90 degrees")
         out[Path(str(row["file"])).name] = pose
+    if not out:
+        raise PhotoError(f"{path}: no photo pose in it (give eoloc refine's photos_refined.csv, or its --json lines)")
     return out
