@@ -18,7 +18,7 @@ from .options import (
     tak_connection,
     tak_options,
 )
-from .render import titled_table
+from .render import say_refined, titled_table
 
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
@@ -188,10 +188,7 @@ def refined_poses(photos, dem, poses_path, out: Path) -> tuple[dict, Path]:
     if poses_path is not None:
         raise click.UsageError("give --refine or --poses FILE, not both")
     job = refine_photos(photos, dem, out=out)
-    for w in [*job.failed, *job.refinement.warnings]:
+    for w in job.failed:
         warn(w)
-    r = job.refinement
-    err_console.print("refined: " + ", ".join(f"{n} {v:+.4g} ± {sg:.2g}" for n, v, sg in
-                                              zip(r.names, r.values, r.sigma, strict=True)) + f" (wrote {out})",
-                      highlight=False)
+    say_refined(job.refinement, out, warn, err_console)
     return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv"

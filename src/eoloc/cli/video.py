@@ -12,7 +12,7 @@ import click
 from .common import load_config, open_dem, progress, working
 from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
-from .render import titled_table
+from .render import say_refined, titled_table
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
 GeoTIFF, a mosaic of the pass, XYZ map tiles.
@@ -320,12 +320,7 @@ def refined_inputs(video, klv_path, telemetry, config_path, time_offset, dem, ma
     with working("refining the telemetry from the pixels..."):
         job = refine_video(video, telemetry, cfg, dem, config_path=config_path, out=out / "refine", max_gap_s=max_gap)
     report_issues(job.issues)
-    for w in job.refinement.warnings:
-        warn(w)
-    r = job.refinement
-    err_console.print("refined: " + ", ".join(f"{n} {v:+.4g} ± {sg:.2g}" for n, v, sg in
-                                              zip(r.names, r.values, r.sigma, strict=True))
-                      + f" (wrote {out / 'refine'})", highlight=False)
+    say_refined(job.refinement, out / "refine", warn, err_console)
     if telemetry is not None:
         return video, out / "refine" / "telemetry_refined.csv", out / "refine" / "config_refined.toml"
     return out / "refine" / f"{Path(video).stem}_refined.ts", None, config_path

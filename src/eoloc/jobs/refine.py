@@ -35,6 +35,7 @@ from ..rules import OnDEM
 from ..sequence.calibration import GROUPS, TelemetryTrack, pose_with_biases
 from ..sequence.sync import poses_at_frames
 from ..terrain import DEM
+from .setup import error_budget
 
 
 @dataclass
@@ -99,7 +100,7 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
             raise InputError(f"{exc} -- without its own KLV a video needs its telemetry: --telemetry FILE "
                              "--config C.toml", exc.issues) from None
         sensor = None
-    budget = error_budget_of(cfg)
+    budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
     if budget is not None and priors_from_budget:
         from ..refine.correct import budget_priors
 
@@ -182,15 +183,6 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     return job
 
 
-def error_budget_of(cfg):
-    """The config's [accuracy.budget] as an ErrorBudget, or None."""
-    if cfg is None or cfg.accuracy is None:
-        return None
-    from ..accuracy.budget import ErrorBudget
-
-    return ErrorBudget.from_mapping(cfg.accuracy.budget)
-
-
 def reference_weights(reference: Reference | None, control) -> dict:
     """adjust()'s control arguments: each point within half a reference cell, the reference's own
     georeferencing error shared by all of them."""
@@ -203,9 +195,7 @@ def reference_weights(reference: Reference | None, control) -> dict:
 def refine_report(ref: Refinement, ties: TiePoints, keys: np.ndarray, n_pairs: int, settings: AdjustSettings,
                   clock: dict[str, float]) -> dict:
     """refine.json's content (JSON-safe)."""
-    def rms(r):
-        return float(np.sqrt(np.nanmean(np.sum(r ** 2, -1)))) if np.isfinite(r).any() else math.nan
-
+    rms = ref.rms
     return json_safe({
         "parameters": ref.as_dict(), "sigma": dict(zip(ref.names, ref.sigma.tolist(), strict=True)),
         "prior_sigma": dict(zip(ref.names, ref.prior_sigma.tolist(), strict=True)),
@@ -244,7 +234,7 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     if records is not None and config_path is not None and cfg.accuracy is not None:  # what refinement left unknown
         from ..refine.correct import refined_budget
 
-        budget, job.report["budget"] = refined_budget(error_budget_of(cfg), ref, float(key_t[-1] - key_t[0]),
+        budget, job.report["budget"] = refined_budget(error_budget(cfg, config_path), ref, float(key_t[-1] - key_t[0]),
                                                       float(np.nanmedian(records["lat_deg"])),
                                                       job.report["frame_sigma_deg"])
     js = out / "refine.json"
@@ -348,7 +338,7 @@ def write_refined_ts(video, dest: Path, meta, ref: Refinement, track: TelemetryT
     fc_ok = good & fc.ok
     n_fc = geoid.undulation(np.where(fc_ok, fc.lat_deg, 0.0), np.where(fc_ok, fc.lon_deg, 0.0))
     off = SpecialValue.OFF_EARTH
-    new: dict[int, bytes | None] = {}
+    new: dict[int, bytes] = {}
     kept = 0
     for i, k in enumerate(number.tolist()):
         if k not in packets:

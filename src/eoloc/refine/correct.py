@@ -19,6 +19,8 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from ..accuracy.budget import SOURCES, ErrorBudget
+from ..accuracy.montecarlo import metres_per_degree
+from ..geodesy import WGS84
 from ..sensor.model import Pose, SensorModel
 from ..sequence.calibration import TelemetryTrack, pose_with_biases
 from .adjust import REFINE_GROUPS, Refinement, position_bias, shift_position
@@ -37,10 +39,11 @@ def refined_poses(ref: Refinement, track: TelemetryTrack, time_s: ArrayLike) -> 
 def fold_installation(sensor: SensorModel, pose: Pose, *, iterations: int = 40) -> tuple[tuple[np.ndarray, ...],
                                                                                        np.ndarray]:
     """Gimbal angles (deg, the gimbal's order) that point ``sensor``'s camera without its mount and
-    boresight misalignment exactly as ``sensor`` points it at ``pose`` (its own angles the
-    start), and a mask of the poses where that was reached (to FOLD_TOLERANCE_RAD; a three-angle
-    gimbal reaches every orientation, but not through a gimbal lock at the end of its travel).
-    Damped Gauss-Newton on the rotation between the two cameras, every pose at once."""
+    boresight misalignment exactly as ``sensor`` points it at ``pose``, and a mask of the poses
+    where that was reached (to FOLD_TOLERANCE_RAD). Started from :func:`euler_start` (exact for
+    the az-el-roll turret, gimbal lock included) or the pose's own angles, whichever is nearer,
+    then damped Gauss-Newton on the rotation between the two cameras, every pose at once (which
+    leaves the az-el start as it is and serves any other three-angle gimbal)."""
     plain = dataclasses.replace(sensor, mount_misalignment_deg=(0.0, 0.0, 0.0),
                                 boresight_misalignment_deg=(0.0, 0.0, 0.0))
     shape = np.shape(pose.lat_deg)
@@ -96,22 +99,13 @@ def euler_start(plain: SensorModel, pose: Pose, target: Rotation) -> np.ndarray:
 
 # -- the error budget after refinement --------------------------------------------------------------
 
-#: each estimated parameter and the budget source (accuracy.budget.SOURCES) it stands for, with
-#: the factor from the parameter's unit to the source's (None: metres to degrees, by latitude)
+#: each estimated parameter and the budget source (accuracy.budget.SOURCES) it stands for (the
+#: position's metres become the budget's degrees as the covariance reads them back:
+#: accuracy.montecarlo.metres_per_degree)
 BUDGET_TERMS = {"mount_x_deg": "mount_x_deg", "mount_y_deg": "mount_y_deg", "mount_z_deg": "mount_z_deg",
                 "boresight_x_deg": "boresight_x_deg", "boresight_y_deg": "boresight_y_deg",
                 "heading_bias_deg": "yaw_deg", "time_offset_s": "time_s", "position_n_m": "lat_deg",
                 "position_e_m": "lon_deg", "position_u_m": "h_m"}
-
-
-def metres_per_degree(lat_deg: float) -> tuple[float, float]:
-    """(north, east) metres per degree of latitude and of longitude at ``lat_deg`` on WGS-84."""
-    from pyproj import Geod
-
-    g = Geod(ellps="WGS84")
-    _, _, north = g.inv(0.0, lat_deg - 0.5, 0.0, lat_deg + 0.5)
-    _, _, east = g.inv(0.0, lat_deg, 1.0, lat_deg)
-    return north, east
 
 
 def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, lat_deg: float,
@@ -129,7 +123,7 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
     stay as they are. The per-keyframe attitude error the refinement allowed for
     (``frame_sigma_deg``) goes in as vibration_*_deg noise where the budget has none."""
     given = {s.name: s for s in budget} if budget is not None else {}
-    north, east = metres_per_degree(lat_deg)
+    north, east = (float(x) for x in metres_per_degree(lat_deg, 0.0, WGS84))
     unit = {"position_n_m": 1.0 / north, "position_e_m": 1.0 / east}
     out: dict[str, dict[str, float | str]] = {}
     said = []
@@ -161,7 +155,7 @@ def budget_priors(budget: ErrorBudget, lat_deg: float) -> dict[str, float]:
     the group's unit): what refinement starts from is what the budget says it does not know; and
     under "frame" each keyframe's own attitude error, the largest vibration_*_deg."""
     given = {s.name: s.sigma for s in budget}
-    north, east = metres_per_degree(lat_deg)
+    north, east = (float(x) for x in metres_per_degree(lat_deg, 0.0, WGS84))
     scale = {"lat_deg": north, "lon_deg": east}
     out = {}
     for group, names in REFINE_GROUPS.items():

@@ -24,6 +24,7 @@ horizontal error of each GCP located from its pixel at its own height, before an
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -72,6 +73,14 @@ class Estimates:
     def as_dict(self) -> dict[str, float]:
         return {k: float(v) for k, v in zip(self.names, self.values, strict=True)}
 
+    @staticmethod
+    def rms(r: np.ndarray) -> float:
+        """RMS of pixel residuals (N, 2) (radial) or of distances (N,), NaN ones left out (NaN if
+        there is none)."""
+        r = np.asarray(r, dtype=np.float64)
+        r = np.hypot(r[..., 0], r[..., 1]) if r.ndim == 2 else r
+        return float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else math.nan
+
 
 def correlation_warnings(names, corr: np.ndarray, fix: str) -> list[str]:
     """One warning per pair of parameters correlated beyond 0.95 (``fix``: how to separate them)."""
@@ -103,13 +112,6 @@ class Calibration(Estimates):
     warnings: list[str] = field(default_factory=list)
     undetermined: list[str] = field(default_factory=list)  # parameters these observations cannot fix
 
-
-    @staticmethod
-    def rms(r: np.ndarray) -> float:
-        """RMS of pixel residuals (N, 2) (radial) or of distances (N,)."""
-        r = np.asarray(r, dtype=np.float64)
-        r = np.hypot(r[..., 0], r[..., 1]) if r.ndim == 2 else r
-        return float(np.sqrt(np.nanmean(r**2)))
 
 
 def apply_parameters(sensor: SensorModel, names: tuple[str, ...], x: np.ndarray, heading0: float,
