@@ -124,11 +124,11 @@ def main(minutes: float) -> list[str]:
             f"{per_core:.1f} such streams",
             f"batch path (`eoloc klv` job) {batch_cpu_per_packet * 1e3:.2f} ms per packet",
             batch_cpu_per_packet / cpu_per_packet),
-        row("`--refine static` (the default: RLS per target id), CPU per packet in-process (LiveSession)",
-            f"{refine_ms['static']:.2f} ms", f"--refine off {refine_ms['off']:.2f} ms", refine_ms["off"] /
+        row("`--track static` (the default: RLS per target id), CPU per packet in-process (LiveSession)",
+            f"{refine_ms['static']:.2f} ms", f"--track off {refine_ms['off']:.2f} ms", refine_ms["off"] /
             refine_ms["static"]),
-        row("`--refine auto` (RLS + the Kalman tracker per target id), CPU per packet in-process",
-            f"{refine_ms['auto']:.2f} ms", f"--refine off {refine_ms['off']:.2f} ms", refine_ms["off"] /
+        row("`--track auto` (RLS + the Kalman tracker per target id), CPU per packet in-process",
+            f"{refine_ms['auto']:.2f} ms", f"--track off {refine_ms['off']:.2f} ms", refine_ms["off"] /
             refine_ms["auto"]),
     ]
 

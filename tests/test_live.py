@@ -161,3 +161,22 @@ def test_a_late_packet_does_not_replace_the_newer_values_carried(tmp_path):
         if st == "OK":
             lon_l, lat_l = a["geometry"]["coordinates"][:2]
             assert abs(lon_l - lo) < 1e-12 and abs(lat_l - la) < 1e-12
+
+
+def test_the_target_filter_is_chosen_by_track_and_the_old_refine_still_works(tmp_path):
+    """`eoloc live FILE --track moving` puts the Kalman estimate of each target in the NDJSON; the
+    flag's old name (`--refine moving`, renamed so that --refine means one thing across commands:
+    refining the telemetry from the pixels) gives the same lines with a deprecation warning."""
+    lines = {}
+    for name in ("--track", "--refine"):
+        r = subprocess.run([str(Path(sys.executable).parent / "eoloc"), "live", str(FLIGHT), "--ndjson", "-",
+                            "--packets", "40", name, "moving"], capture_output=True, text=True, timeout=120,
+                           cwd=tmp_path)
+        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+        rows = [json.loads(x) for x in r.stdout.splitlines() if x.strip()]
+        estimates = [x for x in rows if x["properties"]["what"] == "estimate"]
+        assert estimates and all(x["properties"]["model"] == "moving (Kalman)" for x in estimates)
+        lines[name] = (r.stdout, r.stderr)
+    assert lines["--track"][0] == lines["--refine"][0]
+    assert "deprecated" not in lines["--track"][1]
+    assert "--refine moving is now --track moving" in lines["--refine"][1]

@@ -17,6 +17,7 @@ geolocate its VMTI targets and write everything out.
 
 \b
 eoloc klv FILE [--dem F ...] [--config C.toml] [--out DIR] [--basemap TILES] [--tiles OpenStreetMap] [--klv-out OUT.klv]
+eoloc klv FLIGHT.ts --refine --dem F [--config C.toml]   (the KLV refined from the video's pixels first)
   Flags as elsewhere: --dem stops the VMTI rays on the terrain instead of at the frame-centre
   elevation; --format picks the fix formats (default csv, geojson, cot).
   1. Decodes every packet: MISB ST 0601 (and the older EG 0104), with ST 0903 VMTI and ST 1607
@@ -79,12 +80,25 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @click.option("--assume", "assume", multiple=True, type=click.Choice(list(CONVENTIONS)),
               help="Read the stream under an encoder's own convention (repeatable); the convention check prints "
                    "which one the encoder follows. See the list below.")
+@click.option("--refine", "refine_first", is_flag=True,
+              help="An MPEG-TS with its video: first refine its KLV from the video's own pixels (eoloc refine, its "
+                   "defaults, into OUT/refine/; needs --dem), then read OUT/refine/NAME_refined.ts (and, with "
+                   "--config, NAME_refined.toml: the refined budget).")
 def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, basemap, world,
-        tiles, write_klv, footprint_every, strict, assume) -> None:
+        tiles, write_klv, footprint_every, strict, assume, refine_first) -> None:
     from ..jobs.klv import klv_job, write_klv_products
     from .render import print_klv_job
 
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    if refine_first:
+        from pathlib import Path
+
+        from .refined import refine_video_first
+
+        if assume:
+            raise click.UsageError("--refine reads the KLV as ST 0601 writes it: leave out --assume (refine a stream "
+                                   "that follows the standard)")
+        path, _, config_path = refine_video_first(path, None, config_path, dem, Path(out_dir) / "refine")
     from ..jobs.setup import misb_setup
 
     sensor, budget = misb_setup(load_config(config_path) if config_path else None)

@@ -34,7 +34,7 @@ eoloc live SOURCE [--dem F] [--config C] [--ndjson FILE|-] [--cot URL ...]
   border traced on the terrain) and VMTI targets are located on --dem, else on the packet's
   frame-centre elevation; heights ellipsoidal (WGS-84), angles in degrees; with the config's
   [accuracy.budget] each target gets its uncertainty. Across packets each target id is refined
-  (--refine): by recursive least squares (static targets), or by a constant-velocity Kalman filter
+  (--track): by recursive least squares (static targets), or by a constant-velocity Kalman filter
   (moving ones), the same steps as eoloc track --static and eoloc track.
 \b
 Outputs (any combination, at least one):
@@ -51,7 +51,7 @@ Outputs (any combination, at least one):
                     packet: the aircraft with its sensor's field of view, the frame centre
                     (sensor point of interest), the footprint as a shape, and each located
                     target with ce/le (1 sigma) from its covariance; stale after 10 packet intervals.
-                    --cot-targets estimates: each target's refined estimate (--refine)
+                    --cot-targets estimates: each target's refined estimate (--track)
                     under the same uid instead, ce = its CEP50/1.1774; both: the two.
   --klv-out URL|FILE  the stream re-sent (udp://HOST:PORT, multicast ?ttl=N) or recorded (FILE)
                     with each packet's first located target (lowest VMTI id) in ST 0601 tags
@@ -98,15 +98,19 @@ STREAM_SCHEMES = ("udp", "srt", "rtsp", "rtsps", "rtp", "rtmp", "http", "https")
 @click.option("--cot-targets", "cot_targets", type=click.Choice(["fixes", "estimates", "both"]), default="fixes",
               show_default=True,
               help="What each target's CoT marker carries: every packet's fix, the target refined across packets "
-                   "(--refine; the same uid, so one marker converges), or both (the estimate as '<uid>-refined').")
+                   "(--track; the same uid, so one marker converges), or both (the estimate as '<uid>-refined').")
 @click.option("--cot-interval", type=click.FloatRange(0.0), default=0.0, show_default=True, metavar="S",
               help="At most one CoT event per target (and per aircraft, footprint) every S seconds; 0: all.")
-@click.option("--refine", type=click.Choice(["static", "moving", "auto", "off"]), default="static", show_default=True,
+@click.option("--track", "refine", type=click.Choice(["static", "moving", "auto", "off"]), default="static",
+              show_default=True,
               help="Refine each VMTI target id across packets: static (RLS, as eoloc track --static; a target "
                    "whose fixes walk gets a warning and their scatter as its uncertainty), moving (Kalman, as "
                    "eoloc track), auto (Kalman once the speed is significant: a drifting attitude bias makes a "
                    "fixed target look moving too), off. The estimates go to --ndjson, --map and (--cot-targets) "
                    "CoT.")
+@click.option("--refine", "refine_legacy", type=click.Choice(["static", "moving", "auto", "off"]), default=None,
+              hidden=True, help="The old name of --track (--refine now means refining the telemetry from the pixels, "
+                                "in eoloc video, photo, klv and locate).")
 @click.option("--realtime", is_flag=True, help="A file SOURCE: replay at the stream's own clock.")
 @click.option("--packets", "max_packets", type=click.IntRange(1), default=None, help="Stop after N good packets.")
 @click.option("--duration", type=click.FloatRange(0.0, min_open=True), default=None, metavar="S",
@@ -116,7 +120,7 @@ STREAM_SCHEMES = ("udp", "srt", "rtsp", "rtsps", "rtp", "rtmp", "http", "https")
 @allow_host_option
 def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, tak_cert, tak_cert_password,
          tak_ca, tak_package, tak_protocol, video_url, video_package, klv_out, map_at, cot_targets, cot_interval,
-         refine, realtime, max_packets, duration, silence, allow_hosts) -> None:
+         refine, refine_legacy, realtime, max_packets, duration, silence, allow_hosts) -> None:
     from ..jobs.setup import misb_setup
     from ..live.cotfeed import CotFeed
     from ..live.senders import cot_sender
@@ -124,13 +128,17 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     from ..live.sources import open_source
     from .common import load_config
 
+    if refine_legacy is not None:
+        warn(f"--refine {refine_legacy} is now --track {refine_legacy} (--refine means refining the telemetry from "
+             "the pixels in eoloc video, photo, klv and locate)", "deprecated")
+        refine = refine_legacy
     cot_urls, tak_tls = tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package)
     if ndjson is None and not cot_urls and map_at is None and klv_out is None:
         fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
              "--map HOST:PORT")
     map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
     if cot_targets != "fixes" and (refine == "off" or not cot_urls):
-        fail(f"--cot-targets {cot_targets}: the refined targets need --refine (static, moving or auto) and a --cot URL")
+        fail(f"--cot-targets {cot_targets}: the refined targets need --track (static, moving or auto) and a --cot URL")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 import numpy as np
@@ -55,6 +56,10 @@ FILE MODE:  eoloc locate TELEMETRY.csv [DETECTIONS.csv] --config CAMERA.toml
   --covariance adds each fix's first-order uncertainty from the config's [accuracy.budget]:
   sigma east/north/up, CEP50/CE90, LE90, the error ellipse, and a nonlinearity figure (> 0.1:
   the linearisation does not hold there, e.g. a ray grazing a ridge; use eoloc accuracy).
+  --refine: TELEMETRY refined from its own images first (eoloc refine into OUT/refine/, --dem
+  needed): an MPEG-TS with its video is located from its refined copy (NAME_refined.ts; with
+  --config, NAME_refined.toml: no installation left to apply, the budget what refinement left
+  unknown); drone photos with their refined poses. --poses FILE: photos with eoloc refine's poses.
 
 \b
 ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 10 --pitch 5
@@ -95,9 +100,24 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
               help="File mode: add a learned error correction (eoloc compensate train) to every fix inside the "
                    "model's trained range and report it per fix (default: the config's [compensation] model).")
 @flight_log_option
+@click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="TELEMETRY drone photos: camera poses that replace the photos' own, by file name (eoloc refine's "
+                   "photos_refined.csv or its --json lines).")
+@click.option("--refine", "refine_first", is_flag=True,
+              help="First refine TELEMETRY from its own images (eoloc refine, its defaults, into OUT/refine/; needs "
+                   "--dem): an MPEG-TS with its video (then located from OUT/refine/NAME_refined.ts, with --config "
+                   "NAME_refined.toml) or overlapping drone photos (located with their refined poses).")
 def locate(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, height,
            lat, lon, yaw, pitch, roll, gimbal, gimbal_angles, sensor_roll, pixel, as_json, out_dir, formats,
-           grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path, flight_log) -> None:
+           grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path, flight_log, poses_path,
+           refine_first) -> None:
+    if (refine_first or poses_path) and telemetry is None:
+        fail("--refine and --poses belong to file mode: give a TELEMETRY file (an MPEG-TS with its video, or photos)")
+    if refine_first and poses_path:
+        fail("give --refine or --poses FILE, not both")
+    if refine_first and flight_log:
+        fail("--refine takes the telemetry in the video itself, not --flight-log (refine the video with its log: "
+             "eoloc video VIDEO --telemetry FILE --flight-log LOG --refine)")
     telemetry = with_flight_log(telemetry, flight_log)
     budget = None
     if covariance:
@@ -122,6 +142,18 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if interpolate and detections is None:
         fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
     rule = stop_rule(range_opt, target_height, dem)
+    poses = None
+    if refine_first:
+        telemetry, config_path, poses, poses_path = _refined(telemetry, config_path, dem, time_offset, max_gap,
+                                                             Path(out_dir) / "refine")
+        if budget is not None:  # the refined TS's config: what refinement left unknown
+            from ..jobs.setup import error_budget
+
+            budget = error_budget(load_config(config_path), config_path)
+    elif poses_path is not None:
+        from ..io.photo import read_photo_poses
+
+        poses = read_photo_poses(poses_path)
     if detections is not None:  # read while the configuration loads (~70 ms off 10^6 detections)
         from ..io.telemetry import read_detections
         from ..jobs.inputs import Prefetch
@@ -138,7 +170,8 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     model = compensation_model(cfg, config_path, compensate_path) if cfg is not None else None
     with working("locating..."):
         job = locate_files(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance, budget=budget,
-                           interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model)
+                           interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset, compensation=model,
+                           poses=poses, poses_from=str(poses_path or ""))
     report_issues(job.issues)
     written = write_layer(out_dir, "fixes", job.records, formats, grid=grid)
     if as_json:
@@ -152,6 +185,28 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
         warn(note)
     err_console.print("wrote " + ", ".join(f"[bold]{p}[/]" for p in written))
     exit_if_nothing_located(job.located.fixes)
+
+
+def _refined(telemetry, config_path, dem, time_offset, max_gap: float, out: Path):
+    """``--refine``: (telemetry, config, photo poses, their file) to locate with: a video's refined
+    TS and its config, or the photos with their refined poses."""
+    from ..io.sources import identify
+    from ..io.sources.photos import DronePhotos
+    from .refined import refine_photos_first, refine_video_first
+
+    kind = identify(telemetry).name
+    if kind == DronePhotos.name:
+        poses, poses_path = refine_photos_first([telemetry], dem, out)
+        return telemetry, config_path, poses, poses_path
+    if kind != "klv":
+        raise click.UsageError(f"--refine refines telemetry from its own images (an MPEG-TS with its video, or drone "
+                               f"photos); {telemetry} is {kind} telemetry without them: refine it with its video "
+                               "(eoloc refine VIDEO --telemetry FILE --config C.toml --dem F, then locate "
+                               "OUT/telemetry_refined.csv with OUT/config_refined.toml)")
+    if time_offset is not None:
+        raise click.UsageError("--refine estimates the clock offset itself: leave out --time-offset")
+    ts_path, _, ts_config = refine_video_first(telemetry, None, config_path, dem, out, max_gap_s=max_gap)
+    return ts_path, ts_config, None, None
 
 
 def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,

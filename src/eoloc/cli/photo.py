@@ -18,7 +18,7 @@ from .options import (
     tak_connection,
     tak_options,
 )
-from .render import say_refined, titled_table
+from .render import titled_table
 
 PHOTO_HELP = """Drone photos: the camera's pose read from each photo's own EXIF/XMP, the target located.
 
@@ -93,14 +93,18 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
     if write_orthos and dem is None and target_height is None:
         raise click.UsageError("--ortho needs the ground to rectify onto: give --dem FILE or --target-height H")
     settings = OrthoSettings(crs, gsd, resampling, nodata, occlusion)
-    with working("orthorectifying the photos..." if write_orthos else "reading the photos..."):
-        poses = None
-        if poses_path is not None:
-            from ..io.photo import read_photo_poses
+    poses = None
+    if refine_first:
+        from .refined import refine_photos_first
 
-            poses = read_photo_poses(poses_path)
-        if refine_first:
-            poses, poses_path = refined_poses(photos, dem, poses_path, Path(out_dir) / "refine")
+        if poses_path is not None:
+            raise click.UsageError("give --refine or --poses FILE, not both")
+        poses, poses_path = refine_photos_first(photos, dem, Path(out_dir) / "refine")
+    elif poses_path is not None:
+        from ..io.photo import read_photo_poses
+
+        poses = read_photo_poses(poses_path)
+    with working("orthorectifying the photos..." if write_orthos else "reading the photos..."):
         job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget,
                         ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings, poses=poses,
                         poses_from=str(poses_path or ""))
@@ -176,19 +180,3 @@ def send_photo_fixes(rows: list[dict], urls: list[str], tls, protocol: str, *, p
     if fatal:
         fail(fatal)
     err_console.print(f"CoT: {len(events)} events -> " + json.dumps(summaries), soft_wrap=True, highlight=False)
-
-
-def refined_poses(photos, dem, poses_path, out: Path) -> tuple[dict, Path]:
-    """``--refine``: the photos' poses refined by `eoloc refine` (into ``out``), by file name."""
-    from ..jobs.refine import refine_photos
-    from ..terrain import DEM
-
-    if not isinstance(dem, DEM):
-        raise click.UsageError("--refine needs the terrain: --dem FILE (the tie points' heights are held to it)")
-    if poses_path is not None:
-        raise click.UsageError("give --refine or --poses FILE, not both")
-    job = refine_photos(photos, dem, out=out)
-    for w in job.failed:
-        warn(w)
-    say_refined(job.refinement, out, warn, err_console)
-    return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv"

@@ -17,6 +17,7 @@ tie points and a bundle adjustment, no ground control needed.
   eoloc video FLIGHT.mp4 --telemetry out/telemetry_refined.csv --config out/config_refined.toml --dem DEM.tif
   eoloc refine FLIGHT.ts --dem DEM.tif --out out/      (the ST 0601 KLV in the video's own TS)
   eoloc refine PHOTO|FOLDER... --dem DEM.tif [--json]
+  (or --refine on eoloc video, photo, klv and locate: refined first into OUT/refine/, then run)
 
 \b
 Photos (no --telemetry): overlapping drone photos (any vendor eoloc photo reads; a folder stands
@@ -62,6 +63,8 @@ Written into --out:
   NAME_refined.ts        a video with its own KLV: the video again with every ST 0601 packet's pose
                          corrected in place (platform, sensor position, sensor angles carrying the
                          installation, frame centre and corners on the DEM): no config needed
+  NAME_refined.toml      ... and with --config, the config for that TS (installation, heading bias,
+                         clock offset zero: the packets carry them; the refined [accuracy.budget])
   tiepoints.csv          every tie-point observation with its residual before and after (px)
   residuals.png          the residuals' distribution and per-keyframe RMS, before and after
 """

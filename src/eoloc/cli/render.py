@@ -37,17 +37,6 @@ def titled_table(title: str, **kwargs) -> RichTable:
     return TitledTable(title=title, **kwargs)
 
 
-def say_refined(refinement, out, warn, err_console: Console) -> None:
-    """What a refinement run first (video/photo ``--refine``) found: its warnings, then one line
-    of estimates +- 1-sigma and where its files went."""
-    for w in refinement.warnings:
-        warn(w)
-    r = refinement
-    err_console.print("refined: " + ", ".join(f"{n} {v:+.4g} ± {sg:.2g}" for n, v, sg in
-                                              zip(r.names, r.values, r.sigma, strict=True)) + f" (wrote {out})",
-                      highlight=False)
-
-
 def number_cell(key: str, v) -> str:
     """A table cell: coordinates with 8 decimals (1 mm), other floats with 3, '-' for none."""
     if v is None:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import click
 
-from .common import load_config, open_dem, progress, working
+from .common import load_config, open_dem, progress
 from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
-from .render import say_refined, titled_table
+from .render import titled_table
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
 GeoTIFF, a mosaic of the pass, XYZ map tiles.
@@ -303,27 +303,17 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
 
 
 def refined_inputs(video, klv_path, telemetry, config_path, time_offset, dem, max_gap: float, out: Path):
-    """``--refine``: `eoloc refine` run into OUT/refine/ first; the video, telemetry and config to
-    go on with (the refined CSV and config, or the video with its own KLV refined)."""
-    from ..jobs.refine import refine_video
-    from ..terrain import DEM
+    """``--refine``: the video, telemetry and config to go on with (:func:`eoloc.cli.refined.refine_video_first`
+    into OUT/refine/)."""
+    from .refined import refine_video_first
 
-    if not isinstance(dem, DEM):
-        raise click.UsageError("--refine needs the terrain: --dem FILE (the tie points' heights are held to it)")
     if klv_path:
         raise click.UsageError("--refine takes the video's own KLV or --telemetry with --config, not --klv FILE: "
                                "mux the KLV into the video first (eoloc mux)")
     if time_offset is not None:
         raise click.UsageError("--refine estimates the clock offset itself: leave out --time-offset (the config's "
                                "time_offset_s is its starting value)")
-    cfg = load_config(config_path) if config_path else None
-    with working("refining the telemetry from the pixels..."):
-        job = refine_video(video, telemetry, cfg, dem, config_path=config_path, out=out / "refine", max_gap_s=max_gap)
-    report_issues(job.issues)
-    say_refined(job.refinement, out / "refine", warn, err_console)
-    if telemetry is not None:
-        return video, out / "refine" / "telemetry_refined.csv", out / "refine" / "config_refined.toml"
-    return out / "refine" / f"{Path(video).stem}_refined.ts", None, config_path
+    return refine_video_first(video, telemetry, config_path, dem, out / "refine", max_gap_s=max_gap)
 
 
 def serve_command(out: Path, dem_name: str, dem_paths, vertical: str, geoid, dem_crs, config_path) -> str:

@@ -284,12 +284,16 @@ def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresigh
     """Write calibrated installation values into a config file, keeping its comments and layout
     (tomlkit); the file is validated before it is replaced. None leaves a value as it is.
     ``budget``: [accuracy.budget] entries to set ({source: {"normal": sigma, "kind": ...}}), each
-    with ``budget_note`` as its comment (the file must have an [accuracy] section)."""
+    with ``budget_note`` as its comment ([accuracy.budget] made when the file has none)."""
     import tomlkit
 
     path = Path(path)
     doc = tomlkit.parse(path.read_text(encoding="utf-8"))
     if budget:
+        if "accuracy" not in doc:
+            doc["accuracy"] = tomlkit.table()
+        if "budget" not in doc["accuracy"]:
+            doc["accuracy"]["budget"] = tomlkit.table()
         table = doc["accuracy"]["budget"]
         for name, spec in budget.items():
             entry = tomlkit.inline_table()
@@ -316,3 +320,16 @@ def write_calibration(path: str | Path, *, mount_misalignment_deg=None, boresigh
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
+
+
+def copy_sections(dest: str | Path, source: str | Path, names: tuple[str, ...]) -> None:
+    """The tables ``names`` of config ``source`` (those it has, with their comments: tomlkit) put
+    into config ``dest`` in place of its own."""
+    import tomlkit
+
+    src = tomlkit.parse(Path(source).read_text(encoding="utf-8"))
+    doc = tomlkit.parse(Path(dest).read_text(encoding="utf-8"))
+    for name in names:
+        if name in src:
+            doc[name] = src[name]
+    Path(dest).write_text(tomlkit.dumps(doc), encoding="utf-8")

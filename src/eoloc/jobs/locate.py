@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..io.export import fix_records, with_utc
 from ..io.records import Records
 from ..io.table import Issue, Table
@@ -40,11 +41,19 @@ class LocateJob:
 
 def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch | None, rule: StopRule | str, *,
                  time_tolerance_s: float = 0.02, budget=None, interpolate: bool = False, max_gap_s: float = 0.5,
-                 time_offset_s: float | None = None, compensation=None) -> LocateJob:
+                 time_offset_s: float | None = None, compensation=None, poses: dict | None = None,
+                 poses_from: str = "") -> LocateJob:
     """Locate every detection (or every record's image centre) of the files with the config's
     sensor (``detections``: a path, or a :class:`Prefetch` of one started before the config was
-    loaded); ``time_offset_s`` None takes the config's [telemetry] time_offset_s."""
+    loaded); ``time_offset_s`` None takes the config's [telemetry] time_offset_s. ``poses``: drone
+    photos' poses by file name (eoloc refine's, read from ``poses_from``) in place of their own."""
     inputs = job_inputs(cfg, telemetry, detections, dem=getattr(rule, "dem", None))
+    if poses is not None:
+        from ..io.sources.photos import DronePhotos, with_poses
+
+        if inputs.source.source != DronePhotos.name:
+            raise InputError(f"{telemetry}: poses replace drone photos' own (--poses, --refine): give the photos")
+        inputs.issues += with_poses(inputs.telemetry, poses, poses_from or "the poses given")
     tel_cfg = cfg.telemetry if cfg is not None else None
     if time_offset_s is None:
         time_offset_s = tel_cfg.time_offset_s if tel_cfg is not None else 0.0
@@ -80,6 +89,6 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
                                names=telemetry_names(sensor.gimbal.angle_names, located.rule),
                                what=f"targets ({stop})")
         notes.append(("nothing was located: " if nothing_located(located.fixes) else "") + why)
-    extra = with_utc(located.extra, cfg.telemetry.time_origin)
+    extra = with_utc(located.extra, tel_cfg.time_origin if tel_cfg is not None else None)
     return LocateJob(fix_records(located.fixes, extra, after, coded=located.coded), located, extra,
                      inputs.issues + located.issues, notes, summary, inputs.telemetry)

@@ -73,6 +73,8 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     absolute solution). ``priors_from_budget``: groups whose prior 1-sigma is taken from the
     config's [accuracy.budget] when it has one (:func:`eoloc.refine.correct.budget_priors`;
     "frame": the per-keyframe attitude sigma)."""
+    import cv2
+
     tie = tie if tie is not None else TieSettings()
     settings = settings if settings is not None else AdjustSettings()
     from ..ground.frame import misb_frame_sensor
@@ -121,9 +123,22 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     images: dict[int, np.ndarray] = {}
     errors: list[str] = []
     say(f"decoding {keys.size} keyframes")
-    for fr in iter_frames(video, want=lambda i, _t: i in wanted, errors=errors):
-        if fr.image is not None and fr.index in wanted:
+    change: dict[int, float] = {}  # keyframe -> mean absolute difference to the frame before it
+    prev: tuple[int, np.ndarray] | None = None
+    for fr in iter_frames(video, want=lambda i, _t: i in wanted or i + 1 in wanted, errors=errors):
+        if fr.image is None:
+            continue
+        if fr.index in wanted:
             images[fr.index] = fr.image
+            if prev is not None and prev[0] == fr.index - 1 and prev[1].shape == fr.image.shape:
+                change[fr.index] = float(cv2.absdiff(prev[1], fr.image).mean())
+        prev = (fr.index, fr.image)
+    repeats = repeated_frames(change)
+    for k in repeats:
+        del images[k]
+    if repeats:
+        errors.append(f"{video}: {len(repeats)} keyframe(s) repeat the frame before them (an encoder's duplicate, its "
+                      "pixels from an earlier time than its own): left out")
     keys = np.array([k for k in keys if k in images], dtype=np.int64)
     if keys.size < 3:
         raise InputError(f"{video}: only {keys.size} keyframe(s) could be decoded", [*issues, *errors])
@@ -140,6 +155,11 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
         sensors = [misb_frame_sensor(w, h, *f) for f in distinct]
         if any(x is None for x in sensors):
             raise InputError(f"{video}: a keyframe's KLV has no usable field of view (tags 16, 17)", issues)
+        if cfg is not None:  # the config's [installation] (eoloc klv's) is the starting value
+            inst = cfg.installation
+            sensors = [dataclasses.replace(s, mount_misalignment_deg=inst.mount_misalignment_deg,
+                                           boresight_misalignment_deg=inst.boresight_misalignment_deg,
+                                           lever_arm_m=inst.lever_arm_m) for s in sensors]
         frame_sensor = np.array([distinct.index(f) for f in fov], dtype=np.int64)
     clock["decode_s"] = time.perf_counter() - t_start
     track = TelemetryTrack(meta.clock_s, meta.pose, max_gap_s)
@@ -183,6 +203,17 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     return job
 
 
+def repeated_frames(change: dict[int, float]) -> list[int]:
+    """The frames that repeat the one before them (an encoder's duplicate: its pixels are the earlier
+    frame's, up to compression noise), from each one's mean absolute difference to the frame before
+    (grey levels): below 1 and below a tenth of the upper quartile of all of them (a hovering camera
+    over a still scene changes little between all of its frames: none of them is a repeat)."""
+    if not change:
+        return []
+    limit = min(1.0, 0.1 * float(np.percentile(list(change.values()), 75)))
+    return [k for k, d in change.items() if d < limit]
+
+
 def reference_weights(reference: Reference | None, control) -> dict:
     """adjust()'s control arguments: each point within half a reference cell, the reference's own
     georeferencing error shared by all of them."""
@@ -220,7 +251,7 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     the az-el turret, the installation estimated)."""
     import json
 
-    from ..io.config import write_calibration
+    from ..io.config import copy_sections, write_calibration
     from ..io.writers import write_layer
     from ..refine.adjust import position_bias, shift_position
     from ..sensor import Pose
@@ -231,12 +262,12 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     written = []
     records = job_inputs(cfg, telemetry).telemetry.columns if klv is None else None
     budget = None
-    if records is not None and config_path is not None and cfg.accuracy is not None:  # what refinement left unknown
+    if config_path is not None and cfg.accuracy is not None:  # what refinement left unknown
         from ..refine.correct import refined_budget
 
+        lat = records["lat_deg"] if records is not None else klv[0].pose.lat_deg
         budget, job.report["budget"] = refined_budget(error_budget(cfg, config_path), ref, float(key_t[-1] - key_t[0]),
-                                                      float(np.nanmedian(records["lat_deg"])),
-                                                      job.report["frame_sigma_deg"])
+                                                      float(np.nanmedian(lat)), job.report["frame_sigma_deg"])
     js = out / "refine.json"
     js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     written.append(js)
@@ -279,15 +310,28 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
                            "frames (from its KLV's fields of view; per record in telemetry_refined.csv's hfov_deg)\n"
                            f"[camera]\nwidth = {w}\nheight = {hgt}\nhfov_deg = {first!r}\n\n"
                            "[gimbal]\nmodel = \"az-el\"\n", encoding="utf-8")
+        if config_path is not None:  # the config's lever arm and budget, its installation the start
+            copy_sections(refined, config_path, ("installation", "accuracy"))
     elif config_path is not None:
         refined.write_text(Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
+    note = "refined by eoloc refine (refine.json: budget)"
     if klv is not None or config_path is not None:
         s = ref.sensors[0]
         groups = ref_groups(ref)
         write_calibration(refined, mount_misalignment_deg=s.mount_misalignment_deg if "mount" in groups else None,
                           boresight_misalignment_deg=s.boresight_misalignment_deg if "boresight" in groups
-                          else None, budget=budget, budget_note="refined by eoloc refine (refine.json: budget)")
+                          else None, budget=budget, budget_note=note)
         written.append(refined)
+    if klv is not None and config_path is not None:  # the refined TS's: its sensor angles carry the installation
+        ts_config = out / f"{Path(str(job.report['video'])).stem}_refined.toml"
+        ts_config.write_text(f"# eoloc refine: the config of {ts_config.stem}.ts (its packets carry the installation, "
+                             "the heading bias and clock offset corrected; the budget: what refinement left "
+                             "unknown)\n"
+                             + Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
+        write_calibration(ts_config, mount_misalignment_deg=(0.0, 0.0, 0.0),
+                          boresight_misalignment_deg=(0.0, 0.0, 0.0), heading_bias_deg=0.0, time_offset_s=0.0,
+                          budget=budget, budget_note=note)
+        written.append(ts_config)
     obs = [{"track": int(ties.track[i]), "keyframe": int(job.keyframes[ties.frame[i]]),
             "video_time_s": float(key_t[ties.frame[i]] - key_t[0]), "u_px": float(ties.u_px[i]),
             "v_px": float(ties.v_px[i]), "du_before_px": float(ref.residual_px_before[i, 0]),

@@ -114,6 +114,9 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
         per_target = pose if pose_index is None else pose.take(pose_index)
         fixes, comp = compensate(compensation, sensor, per_target, fixes, (u, v), rule=rule)
     extra["record_line"] = np.where(has_pose, tel.line[np.where(has_pose, record, 0)], -1)
+    if tel.has("file"):  # drone photos: the photo each fix was made in
+        extra["file"] = np.where(has_pose, np.asarray(tel.columns["file"], dtype=object)[np.where(has_pose, record, 0)],
+                                 "")
     return Located(fixes, extra, issues, cov, comp, coded, pose, pose_index, (u, v), rule)
 
 

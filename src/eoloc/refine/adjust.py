@@ -15,8 +15,9 @@ starting poses put it). Observations, each weighted by its standard deviation:
 Solved by scipy's ``least_squares`` (trust-region reflective, LSMR inner solver) with the
 Jacobian's sparsity given (each pixel depends on the globals and its own track only: K frames and
 T tracks cost the globals + 3 function evaluations per Jacobian, not 3T), a robust soft-L1 pass
-first, then the observations whose residual exceeds ``outlier_sigma`` dropped (named by track) and
-a plain least-squares pass. The globals' covariance is the Schur complement of the tracks' blocks
+first, then the observations whose residual exceeds ``outlier_sigma`` dropped (named by track; on
+the tie points' own noise where it is below ``pixel_sigma_px``: :func:`outlier_scale_px`) and a
+plain least-squares pass. The globals' covariance is the Schur complement of the tracks' blocks
 in J^T J, scaled by the a-posteriori variance factor when it exceeds 1.
 
 What the geometry cannot separate is said, not hidden: a parameter whose posterior sigma is more
@@ -59,6 +60,17 @@ UNSEEN = 1e3  # the residual (in sigmas) of an observation that cannot be projec
 #: each keyframe's own attitude error (deg, 1-sigma about each body axis) that the telemetry's
 #: records do not resolve: INS noise, isolator vibration, an interpolation between records
 FRAME_SIGMA_DEG = 0.01
+
+
+def outlier_scale_px(residual_px: np.ndarray, pixel_sigma_px: float) -> float:
+    """The pixel scale outliers are judged on: the tie points' own noise as the robust pass leaves
+    it (1.4826 x the median absolute residual per axis, which mismatches do not move) where that is
+    below the stated ``pixel_sigma_px`` (clean images: a match 2 px off the rest is then a mismatch
+    along the epipolar line that RANSAC let through, not noise), never below a tenth of it."""
+    r = np.abs(np.asarray(residual_px, dtype=np.float64))
+    r = r[np.isfinite(r)]
+    robust = 1.4826 * float(np.median(r)) if r.size >= 20 else pixel_sigma_px
+    return min(pixel_sigma_px, max(robust, 0.1 * pixel_sigma_px))
 
 
 @dataclass(frozen=True)
@@ -450,7 +462,8 @@ def adjust(sensors: Sequence[SensorModel], frame_sensor: np.ndarray, telemetry: 
     d0 = np.zeros((work.n_tracks, 3))
     before = prob.project(prob.g0, d0) - prob.uv
     g, d, _, _, _, _ = prob.solve(prob.g0, d0, "soft_l1", max_iter=8)  # only to find the outliers
-    r = (prob.project(g, d) - prob.uv) / s.pixel_sigma_px
+    r_px = prob.project(g, d) - prob.uv
+    r = r_px / outlier_scale_px(r_px[ids[work.track] >= 0], s.pixel_sigma_px)
     bad_obs = ~(np.hypot(r[:, 0], r[:, 1]) <= s.outlier_sigma)
     outliers = sorted({int(ids[t]) for t in np.unique(work.track[bad_obs]) if ids[t] >= 0})
     bad_control = int(np.sum(bad_obs & (ids[work.track] < 0)))
