@@ -539,6 +539,32 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
     first = json.loads(r.stdout.splitlines()[0])
     assert first["camera_yaw"] == pytest.approx(rows[0]["camera_yaw"], abs=1e-6)
     assert (tmp_path / "p_one_go" / "refine" / "photos_refined.csv").is_file()
+    # with a budget: the fixes made with the refined poses carry what refinement left unknown
+    # (config_refined.toml), their stated CE90 5x smaller than the budget's and still covering the truth
+    (tmp_path / "drone.toml").write_text("[accuracy.budget]\nyaw_deg = {normal = 2.0, kind = \"bias\"}\n"
+                                         "pitch_deg = {normal = 1.0, kind = \"bias\"}\n"
+                                         "roll_deg = {normal = 1.0, kind = \"bias\"}\n"
+                                         "mount_x_deg = {normal = 1.0}\nmount_y_deg = {normal = 1.0}\n"
+                                         "mount_z_deg = {normal = 1.0}\nlat_deg = {normal = 1e-7}\n"
+                                         "lon_deg = {normal = 1e-7}\nh_m = {normal = 0.1}\n")
+    u, v = rng.uniform(30, PHOTO_W - 30, 4), rng.uniform(PHOTO_H / 2, PHOTO_H - 30, 4)  # the near ground
+    pix = [a for uu, vv in zip(u, v, strict=True) for a in ("--pixel", uu, vv)]
+    truth = np.concatenate([ts.ground_points(c, R_ec, k, u, v) for _, (c, R_ec), _ in photos])
+    stated, covered = {}, {}
+    for name, extra in (("given", ()), ("refined", ("--refine",))):
+        r = eoloc("photo", folder, *pix, "--dem", dem_path, "--vertical", "ellipsoid", "--config",
+                  tmp_path / "drone.toml", "--json", "--out", tmp_path / f"p_budget_{name}", *extra)
+        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+        fixes = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+        assert len(fixes) == len(truth)
+        ok = np.isfinite(truth[:, 0]) & np.array([f["status"] == "OK" for f in fixes])
+        e, n, _ = pymap3d.geodetic2enu(*np.array([[f["lat"], f["lon"], f["h"]] for f in fixes])[ok].T,
+                                       *truth[ok].T)
+        ce = np.array([f["ce90_m"] for f in fixes])[ok]
+        stated[name], covered[name] = float(np.median(ce)), float(np.mean(np.hypot(e, n) <= ce))
+    assert (tmp_path / "p_budget_refined" / "refine" / "config_refined.toml").is_file()
+    assert stated["given"] > 5 * stated["refined"], stated
+    assert covered["given"] >= 0.9 and covered["refined"] >= 0.9, covered
     # `eoloc locate PHOTOS --refine` (and --poses FILE): each photo's image centre located with the
     # refined pose, against the ground the true camera's centre pixel sees
     cx, cy = np.array([(PHOTO_W - 1) / 2]), np.array([(PHOTO_H - 1) / 2])
@@ -702,7 +728,6 @@ def test_a_klv_video_is_refined_from_its_own_metadata(orbit, tmp_path):
     assert "refined by eoloc refine" in refined_budget
     rows, err = vmti_fixes["refined"]
     stated = np.array([float(x["ce90_m"]) for x in rows])
-    print("stated CE90 median", np.median(stated), "covered", np.mean(err <= stated), "err p90", np.percentile(err, 90))
     assert np.median(stated) < 10.0, np.median(stated)  # the prior budget's: ~100 m
     assert np.mean(err <= stated) >= 0.8, np.mean(err <= stated)  # and honest
 

@@ -146,7 +146,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
     if refine_first:
         telemetry, config_path, poses, poses_path = _refined(telemetry, config_path, dem, time_offset, max_gap,
                                                              Path(out_dir) / "refine")
-        if budget is not None:  # the refined TS's config: what refinement left unknown
+        if budget is not None:  # the refined config: what refinement left unknown
             from ..jobs.setup import error_budget
 
             budget = error_budget(load_config(config_path), config_path)
@@ -196,8 +196,8 @@ def _refined(telemetry, config_path, dem, time_offset, max_gap: float, out: Path
 
     kind = identify(telemetry).name
     if kind == DronePhotos.name:
-        poses, poses_path = refine_photos_first([telemetry], dem, out)
-        return telemetry, config_path, poses, poses_path
+        poses, poses_path, config = refine_photos_first([telemetry], dem, out, config_path)
+        return telemetry, config, poses, poses_path
     if kind != "klv":
         raise click.UsageError(f"--refine refines telemetry from its own images (an MPEG-TS with its video, or drone "
                                f"photos); {telemetry} is {kind} telemetry without them: refine it with its video "

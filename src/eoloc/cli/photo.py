@@ -99,7 +99,12 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
 
         if poses_path is not None:
             raise click.UsageError("give --refine or --poses FILE, not both")
-        poses, poses_path = refine_photos_first(photos, dem, Path(out_dir) / "refine")
+        poses, poses_path, refined_config = refine_photos_first(photos, dem, Path(out_dir) / "refine", config_path)
+        if budget is not None:  # what refinement left unknown
+            from ..jobs.setup import error_budget
+            from .common import load_config
+
+            budget = error_budget(load_config(refined_config), refined_config)
     elif poses_path is not None:
         from ..io.photo import read_photo_poses
 

@@ -75,7 +75,8 @@ Written into --out:
 @click.option("--telemetry", type=click.Path(),
               help="The video's telemetry (CSV, DJI SRT, flight log): time_s is seconds since the first frame "
                    "minus the config's time_offset_s. Without it: the video's own KLV (MPEG-TS), or photos.")
-@config_option(required=False, help_text="Camera/gimbal/installation TOML (the starting values; a video's).")
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (the starting values; a video's); its "
+                                         "[accuracy.budget] gives the priors and comes back refined.")
 @dem_options("The terrain (GeoTIFF, DTED, SRTM .hgt): the tie points' heights are held to it.")
 @click.option("--estimate", default=None,
               help="Comma-separated: mount, boresight, heading, time (default: mount,heading,time for a video; "
@@ -153,10 +154,15 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     def say(msg: str) -> None:
         err_console.print(f"{msg}...", highlight=False)
 
+    cfg = load_config(config_path) if config_path is not None else None
+    from_budget = {g for g, v in given.items() if v is None}
     if photos:
         from ..jobs.refine import refine_photos
+        from ..jobs.setup import error_budget
 
-        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, reference=reference, progress=say)
+        budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
+        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, reference=reference, budget=budget,
+                             config_path=config_path, priors_from_budget=from_budget, progress=say)
         report_issues(pjob.failed)
         if as_json:
             for row in pjob.rows:
@@ -165,12 +171,12 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
             _print_table(pjob.refinement, pjob.report)
         for w in pjob.refinement.warnings:
             warn(w)
-        err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png", highlight=False)
+        err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png, geo.txt"
+                          + (", config_refined.toml" if pjob.budget and config_path else ""), highlight=False)
         return
-    cfg = load_config(config_path) if config_path is not None else None
     job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,
-                       settings=settings, max_gap_s=max_gap, reference=reference,
-                       priors_from_budget={g for g, v in given.items() if v is None}, progress=say)
+                       settings=settings, max_gap_s=max_gap, reference=reference, priors_from_budget=from_budget,
+                       progress=say)
     report_issues(job.issues)
     if as_json:
         click.echo(json.dumps(job.report, indent=1, allow_nan=False))

@@ -38,17 +38,24 @@ def refine_video_first(video, telemetry, config_path, dem, out: Path, *,
     return out / f"{stem}_refined.ts", None, (out / f"{stem}_refined.toml" if config_path else None)
 
 
-def refine_photos_first(photos, dem, out: Path) -> tuple[dict, Path]:
-    """The photos' poses refined (into ``out``) by file name, and the file they were written to."""
+def refine_photos_first(photos, dem, out: Path, config_path=None) -> tuple[dict, Path, Path | None]:
+    """The photos' poses refined (into ``out``) by file name, the file they were written to, and the
+    config to go on with: with a config that has an [accuracy.budget], the refined one
+    (config_refined.toml: what refinement left unknown), else the config as given."""
     from ..jobs.refine import refine_photos
+    from ..jobs.setup import error_budget
 
     need_dem(dem)
+    cfg = load_config(config_path) if config_path else None
+    budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
     with working("refining the photos' poses from their overlap..."):
-        job = refine_photos(photos, dem, out=out)
+        job = refine_photos(photos, dem, out=out, budget=budget, config_path=config_path,
+                            priors_from_budget=ALL_PRIORS)
     for w in job.failed:
         warn(w)
     say_refined(job.refinement, out)
-    return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv"
+    config = out / "config_refined.toml" if job.budget and config_path else config_path
+    return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv", config
 
 
 def is_transport_stream(path) -> bool:

@@ -104,12 +104,7 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
         sensor = None
     budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
     if budget is not None and priors_from_budget:
-        from ..refine.correct import budget_priors
-
-        taken = {g: v for g, v in budget_priors(budget, float(np.nanmedian(meta.pose.lat_deg))).items()
-                 if g in priors_from_budget}
-        frame = taken.pop("frame", settings.frame_sigma_deg)
-        settings = dataclasses.replace(settings, prior_sigma={**settings.prior_sigma, **taken}, frame_sigma_deg=frame)
+        settings = budget_settings(settings, budget, float(np.nanmedian(meta.pose.lat_deg)), priors_from_budget)
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
     usable = np.asarray(poses.ok, dtype=bool)
     if "time" in settings.estimate:  # a keyframe must keep its pose when the offset moves (2 prior sigmas)
@@ -201,6 +196,33 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
     job.written += write_refinement(job, out, telemetry, cfg, config_path, key_t,
                                     klv=None if telemetry is not None else (meta, float(times[0]), (w, h)))
     return job
+
+
+def budget_settings(settings: AdjustSettings, budget, lat_deg: float, groups: Collection[str]) -> AdjustSettings:
+    """``settings`` with the prior 1-sigma of ``groups`` taken from ``budget``
+    (:func:`eoloc.refine.correct.budget_priors`; "frame": the per-keyframe attitude sigma)."""
+    from ..refine.correct import budget_priors
+
+    taken = {g: v for g, v in budget_priors(budget, lat_deg).items() if g in groups}
+    frame = taken.pop("frame", settings.frame_sigma_deg)
+    return dataclasses.replace(settings, prior_sigma={**settings.prior_sigma, **taken}, frame_sigma_deg=frame)
+
+
+def photo_span_s(times) -> float:
+    """The seconds from the first photo to the last by their capture times (EXIF/XMP date-times);
+    infinite when any is missing or unreadable (a time-varying error then counts whole)."""
+    from datetime import datetime
+
+    stamps = []
+    for t in times:
+        text = str(t or "").strip()
+        if len(text) >= 10 and text[4] == ":" and text[7] == ":":  # EXIF's 2026:11:27 12:00:00
+            text = text[:4] + "-" + text[5:7] + "-" + text[8:]
+        try:
+            stamps.append(datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp())
+        except ValueError:
+            return math.inf
+    return max(stamps) - min(stamps) if len(stamps) >= 2 else math.inf
 
 
 def repeated_frames(change: dict[int, float]) -> list[int]:
@@ -489,13 +511,15 @@ PHOTO_ESTIMATE = ("mount", "heading")  # a photo set has no clock between pictur
 @dataclass
 class PhotoRefineJob:
     """Per photo a row (``eoloc photo --json``'s pose keys, refined, with their 1-sigma and the
-    values as given), the refinement, its tie points, the report and the photos not used."""
+    values as given), the refinement, its tie points, the report, the photos not used and the
+    budget entries refinement replaced."""
 
     rows: list[dict]
     refinement: Refinement | None
     ties: TiePoints | None
     report: dict
     failed: list[str] = field(default_factory=list)
+    budget: dict | None = None  # [accuracy.budget] entries refinement replaced (with a budget given)
 
 
 def refined_camera_attitude(yaw_deg, pitch_deg, roll_deg, mount_deg, heading_bias_deg) -> np.ndarray:
@@ -515,12 +539,17 @@ def refined_camera_attitude(yaw_deg, pitch_deg, roll_deg, mount_deg, heading_bia
 
 
 def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, tie: TieSettings | None = None,
-                  out: str | Path | None = None, reference: Reference | None = None,
+                  out: str | Path | None = None, reference: Reference | None = None, budget=None,
+                  config_path: str | Path | None = None, priors_from_budget: Collection[str] = (),
                   progress: Callable[[str], None] | None = None) -> PhotoRefineJob:
     """Refine the camera attitudes of a set of overlapping drone photos (files or folders) on
     ``dem``: a mounting error and a heading (gimbal yaw) bias shared by the set, from tie points
     between the photos whose views the poses predict overlap. Each photo's row carries its refined
-    attitude under ``eoloc photo --json``'s keys with its 1-sigma (``sigma_camera_yaw`` ...)."""
+    attitude under ``eoloc photo --json``'s keys with its 1-sigma (``sigma_camera_yaw`` ...).
+    ``budget`` (the [accuracy.budget] of ``config_path``): the priors of ``priors_from_budget``
+    taken from it, and what refinement left unknown of it (:func:`eoloc.refine.correct.refined_budget`,
+    over the photos' capture span) in the job's ``budget`` and, with ``out``, in
+    ``config_refined.toml`` (the config with that budget: for the fixes made with the refined poses)."""
     import cv2
 
     from ..io.photo import read_photo
@@ -555,6 +584,9 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
         images.append(image)
     if len(poses) < 3:
         raise InputError(f"{len(poses)} usable photo(s): refining needs three or more that overlap", failed)
+    lat = float(np.nanmedian([p.lat_deg for p in poses]))
+    if budget is not None and priors_from_budget:
+        settings = budget_settings(settings, budget, lat, priors_from_budget)
     cameras: list = []
     frame_sensor = []
     sensors = []
@@ -593,6 +625,11 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
     rows = photo_rows(poses, ref)
     report = refine_report(ref, ties, np.arange(k), len(pairs), settings, clock)
     job = PhotoRefineJob(rows, ref, ties, report, failed)
+    if budget is not None:
+        from ..refine.correct import refined_budget
+
+        job.budget, report["budget"] = refined_budget(budget, ref, photo_span_s([p.time for p in poses]), lat,
+                                                      settings.frame_sigma_deg)
     if out is not None:
         import json
 
@@ -604,6 +641,12 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
         write_layer(out, "photos_refined", rows, ["csv"])
         write_odm_geo(out / "geo.txt", rows)
         residual_plot(out / "residuals.png", ties, ref, np.arange(k, dtype=np.float64))
+        if job.budget and config_path is not None:
+            from ..io.config import write_calibration
+
+            refined = out / "config_refined.toml"
+            refined.write_text(Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
+            write_calibration(refined, budget=job.budget, budget_note="refined by eoloc refine (refine.json: budget)")
     return job
 
 

@@ -119,8 +119,9 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
     about its mean over a pass of ``span_s`` (variance sigma^2 min(1, T / 3 tau), the Ornstein-
     Uhlenbeck process' for T << tau), a noise term whole. Both are added in quadrature and written
     as a bias (the part that will not average away over the pass). boresight_z (a roll about the
-    optical axis) has no source of its own and is left out; sources the refinement did not touch
-    stay as they are. The per-keyframe attitude error the refinement allowed for
+    optical axis) has no source of its own and is left out; the attitude's pitch and roll errors
+    (:data:`ABSORBED`) keep only their wander when the mount's angle was estimated; sources the
+    refinement did not touch stay as they are. The per-keyframe attitude error the refinement allowed for
     (``frame_sigma_deg``) goes in as vibration_*_deg noise where the budget has none."""
     given = {s.name: s for s in budget} if budget is not None else {}
     north, east = (float(x) for x in metres_per_degree(lat_deg, 0.0, WGS84))
@@ -139,6 +140,14 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
         out[source] = {"normal": float(f"{left:.3g}"), "kind": "bias"}
         said.append(f"{source}: {was.describe() if was is not None else 'not in the budget'} -> "
                     f"σ{out[source]['normal']:g} {SOURCES[source][0]} (bias): refined ({name})")
+    for source, mount in ABSORBED.items():  # a constant tilt of the platform is a mounting error
+        was = given.get(source)
+        if was is None or mount not in ref.names or was.kind == "noise":
+            continue
+        rest = 0.0 if was.kind == "bias" else min(1.0, span_s / (3.0 * (was.tau_s or math.inf)))
+        out[source] = {"normal": float(f"{was.sigma * math.sqrt(rest):.3g}"), "kind": "bias"}
+        said.append(f"{source}: {was.describe()} -> σ{out[source]['normal']:g} {SOURCES[source][0]} (bias): its "
+                    f"constant part is estimated with {mount}, only its wander over the pass is left")
     for source in VIBRATION if frame_sigma_deg > 0 else ():
         if source not in given:
             out[source] = {"normal": float(f"{frame_sigma_deg:.3g}"), "kind": "noise"}
@@ -148,6 +157,10 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
 
 
 VIBRATION = ("vibration_roll_deg", "vibration_pitch_deg", "vibration_yaw_deg")
+#: attitude sources whose constant part a refinement estimates with a mounting angle: a platform
+#: (or a drone camera) pitched or rolled by a constant error is one mounted pitched or rolled
+#: (exactly at zero roll; to first order while the roll stays about constant over the pass)
+ABSORBED = {"pitch_deg": "mount_y_deg", "roll_deg": "mount_x_deg"}
 
 
 def budget_priors(budget: ErrorBudget, lat_deg: float) -> dict[str, float]:
