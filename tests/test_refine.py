@@ -454,6 +454,14 @@ def photo_set(folder: Path, n: int = 20):
     return out, k
 
 
+def sidecar_description(path: Path):
+    """The rdf:Description of an XMP sidecar (xml.etree)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(path.read_text(encoding="utf-8").split("?>", 1)[1].rsplit("<?xpacket", 1)[0])
+    return next(root.iter("{http://www.w3.org/1999/02/22-rdf-syntax-ns#}Description"))
+
+
 def test_a_photo_set_refined_as_json_rows(tmp_path):
     """`eoloc refine PHOTO... --dem --json`: a ring of 20 overlapping DJI photos with a biased gimbal
     yaw and a camera mounting error. One row per photo under `eoloc photo --json`'s keys; the shared
@@ -509,6 +517,15 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
             err[name].append(np.where(f.ok, np.hypot(e, n), np.inf))
     ce90 = {name: np.percentile(np.concatenate(v), 90) for name, v in err.items()}
     assert ce90["given"] > 5 * ce90["refined"], ce90
+    # each photo's own XMP again with the refined attitude (OUT/xmp/NAME.xmp, read here by the standard
+    # library's XML parser)
+    dji = "{http://www.dji.com/drone-dji/1.0/}"
+    for row in rows:
+        desc = sidecar_description(tmp_path / "out" / "xmp" / f"{Path(row['file']).stem}.xmp")
+        for tag, key in (("GimbalYawDegree", "camera_yaw"), ("GimbalPitchDegree", "camera_pitch"),
+                         ("GimbalRollDegree", "camera_roll")):
+            assert float(desc.attrib[dji + tag]) == pytest.approx(row[key], abs=1e-6)
+        assert float(desc.attrib[dji + "GpsLatitude"]) == pytest.approx(row["given_camera_lat"], abs=1e-10)
     # the refined poses as ODM's image geolocation file, and back into `eoloc photo --poses`
     geo = (tmp_path / "out" / "geo.txt").read_text().splitlines()
     assert geo[0] == "EPSG:4326" and len(geo) == 1 + len(rows)
@@ -591,6 +608,9 @@ def test_a_photo_set_refined_as_json_rows(tmp_path):
     rows = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
     for row, (_, _, truth) in zip(rows, photos, strict=True):
         assert row["refined"] == "attitude and position"
+        desc = sidecar_description(tmp_path / "out_ref" / "xmp" / f"{Path(row['file']).stem}.xmp")
+        assert float(desc.attrib[dji + "GpsLatitude"]) == pytest.approx(row["camera_lat"], abs=1e-9)
+        assert float(desc.attrib[dji + "AbsoluteAltitude"]) == pytest.approx(row["camera_h"], abs=1e-3)  # Version 7
         e, n, u = pymap3d.geodetic2enu(row["camera_lat"], row["camera_lon"], row["camera_h"], row["given_camera_lat"],
                                        row["given_camera_lon"], row["given_camera_h"])
         assert abs(e) <= 2 * row["sigma_camera_lon_m"] and abs(n) <= 2 * row["sigma_camera_lat_m"], (e, n, row)

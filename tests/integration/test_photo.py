@@ -284,6 +284,45 @@ def test_48_synthetic_vendor_photos_on_a_real_dem_within_1cm(tmp_path, case):
         assert "another camera's" in row["intrinsics"]
 
 
+@pytest.mark.parametrize("case", ["dji", "dji-old", "skydio", "skydio-struct", "parrot", "autel-old", "teal"])
+def test_52_a_refined_pose_goes_back_into_the_photos_own_xmp(tmp_path, case):
+    """`eoloc refine PHOTOS`' sidecars (OUT/xmp/NAME.xmp): the photo's own XMP packet with the
+    refined attitude in its vendor's tags and, where the XMP carries the position (DJI, Skydio),
+    the position moved by the refined change in the photo's own height datum. Put back into the
+    photo (the sidecar as its XMP), the photo reads as the refined pose: attitude to 1e-6 deg,
+    position to 1e-9 deg and 1 mm; a position kept in EXIF is left, and said."""
+    import dronephoto as D
+    from eoloc.io.photo import read_photo
+    from eoloc.io.xmpsidecar import refined_sidecar
+
+    rng = np.random.default_rng(zlib.crc32(case.encode()))
+    vendor = case.split("-")[0] if case.startswith("skydio") else case
+    tags, gps, make, model, kw, _, pose = _vendor_case(vendor, rng, w=640, h=480, resized=1, ir=False)
+    ns = {"dji": "dji", "dji-old": "dji", "skydio": "skydio", "parrot": "parrot", "autel-old": "pix4d",
+          "teal": "exif"}[vendor]
+    path = D.write_vendor_photo(tmp_path / f"{case}.jpg", 640, 480, ns, tags, make=make, model=model, gps=gps,
+                                struct_as_description=case == "skydio-struct", **kw)
+    given = read_photo(path)
+    new = ((given.yaw_deg + 0.5 + 180.0) % 360.0 - 180.0, given.pitch_deg - 0.3, given.roll_deg + 0.2)
+    shift = (2e-5, -3e-5, 4.25)
+    text, notes = refined_sidecar(path, *new, shift)
+    assert ET.fromstring(text[text.index("<x:xmpmeta"):text.rindex("</x:xmpmeta>") + 12]) is not None
+    back = tmp_path / f"{case}_refined.jpg"
+    jpeg = D._jpeg(640, 480, make=make, model=model, gps=gps, focal_mm=kw.get("focal_mm"), f35_mm=kw.get("f35_mm"))
+    back.write_bytes(D._with_xmp(jpeg, text.encode("utf-8")))
+    got = read_photo(back)
+    assert (got.yaw_deg - new[0] + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=2e-6)
+    assert got.pitch_deg == pytest.approx(new[1], abs=2e-6) and got.roll_deg == pytest.approx(new[2], abs=2e-6)
+    if ns in ("dji", "skydio"):
+        assert not notes
+        assert got.lat_deg == pytest.approx(given.lat_deg + shift[0], abs=1e-9)
+        assert got.lon_deg == pytest.approx(given.lon_deg + shift[1], abs=1e-9)
+        assert got.h_m == pytest.approx(given.h_m + shift[2], abs=1e-3)
+    else:
+        assert (got.lat_deg, got.lon_deg, got.h_m) == (given.lat_deg, given.lon_deg, given.h_m)
+        assert any("position is in its EXIF" in n for n in notes), notes
+
+
 def test_48_a_wrong_altitude_tag_is_named_on_the_dem(tmp_path):
     """A Parrot photo whose EXIF altitude is 800 m too low puts the camera under the tile: refused,
     naming the tag (no point kilometres off)."""

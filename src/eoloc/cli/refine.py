@@ -25,8 +25,10 @@ for its photos). Estimated by default: a mounting error and a heading bias (the 
 shared by the set; no time offset. --json prints one object per photo with its refined pose under
 eoloc photo --json's keys (file, camera_lat, camera_lon, camera_h, camera_yaw, camera_pitch,
 camera_roll), their 1-sigma (sigma_camera_yaw ...; the position is not estimated: null) and the
-attitude as given (given_camera_yaw ...); photos_refined.csv, refine.json and residuals.png go
-into --out.
+attitude as given (given_camera_yaw ...); photos_refined.csv, refine.json, residuals.png, geo.txt
+(OpenDroneMap's) and xmp/NAME.xmp go into --out: each photo's own XMP packet with the refined
+attitude in its vendor's tags (and a position refined with --reference, where the XMP has it), a
+sidecar for exiftool -tagsfromfile NAME.xmp -xmp:all NAME.JPG.
 
 \b
 What it estimates (--estimate, comma-separated): mount (the turret base's three small angles to the
@@ -171,7 +173,7 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
             _print_table(pjob.refinement, pjob.report)
         for w in pjob.refinement.warnings:
             warn(w)
-        err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png, geo.txt"
+        err_console.print(f"wrote {out_dir}/photos_refined.csv, refine.json, residuals.png, geo.txt, xmp/*.xmp"
                           + (", config_refined.toml" if pjob.budget and config_path else ""), highlight=False)
         return
     job = refine_video(sources[0], telemetry, cfg, dem, config_path=config_path, out=out_dir, every_s=every_s,

@@ -640,6 +640,7 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
         (out / "refine.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
         write_layer(out, "photos_refined", rows, ["csv"])
         write_odm_geo(out / "geo.txt", rows)
+        job.failed += write_sidecars(out / "xmp", rows)
         residual_plot(out / "residuals.png", ties, ref, np.arange(k, dtype=np.float64))
         if job.budget and config_path is not None:
             from ..io.config import write_calibration
@@ -648,6 +649,28 @@ def refine_photos(paths, dem: DEM, *, settings: AdjustSettings | None = None, ti
             refined.write_text(Path(config_path).read_text(encoding="utf-8"), encoding="utf-8")
             write_calibration(refined, budget=job.budget, budget_note="refined by eoloc refine (refine.json: budget)")
     return job
+
+
+def write_sidecars(folder: Path, rows: list[dict]) -> list[str]:
+    """Each photo's XMP sidecar with its refined pose (``folder``/NAME.xmp: its own XMP packet, the
+    pose's values changed; :func:`eoloc.io.xmpsidecar.refined_sidecar`); the notes of what could
+    not be written."""
+    from ..io.xmpsidecar import refined_sidecar
+
+    folder.mkdir(parents=True, exist_ok=True)
+    notes = []
+    for r in rows:
+        moved = r.get("sigma_camera_lat_m") is not None
+        shift = ((r["camera_lat"] - r["given_camera_lat"], r["camera_lon"] - r["given_camera_lon"],
+                  r["camera_h"] - r["given_camera_h"]) if moved else None)
+        try:
+            text, more = refined_sidecar(r["file"], r["camera_yaw"], r["camera_pitch"], r["camera_roll"], shift)
+        except EolocError as exc:
+            notes.append(f"{exc}: no sidecar")
+            continue
+        (folder / f"{Path(r['file']).stem}.xmp").write_text(text, encoding="utf-8")
+        notes += more
+    return notes
 
 
 def write_odm_geo(path: Path, rows: list[dict]) -> Path:
