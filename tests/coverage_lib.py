@@ -252,6 +252,41 @@ def per_fix(p: Passes, rule: str, frame: int = -1):
     return fixes, cov, coverage(f"covariance per fix, {rule} rule", err, cov.cep(0.5), cov.cep(0.9), cov.le90, keep)
 
 
+def movers(p: Passes, rule: str, frame: int = -1, blob_m: float = 0.0):
+    """The movers' fixes: in one frame of each pass a blob at the target's measured pixel (of
+    ``blob_m`` x ``blob_m`` m on the ground, its centroid off by the quarter of its size eoloc
+    allows for, drawn here), through eoloc's MoverTracker with the budget: each row's stated
+    CEP50/CE90/LE90 against the truth."""
+    from eoloc.detect.motion import Blobs
+    from eoloc.detect.movers import MoverTracker
+
+    sensor, pose, r, budget = eoloc_inputs(p, rule)
+    m = p.measured
+    value = np.asarray(m["height_m" if rule == "height" else "range_m"])[frame]
+    rng = np.random.default_rng(53)
+    err, c50, c90, le, keep = [], [], [], [], []
+    for i in range(np.shape(m["u_px"])[-1]):
+        one = type(pose)(*(float(np.asarray(a)[frame, i]) for a in (pose.lat_deg, pose.lon_deg, pose.h_m,
+                                                                     pose.yaw_deg, pose.pitch_deg, pose.roll_deg)),
+                         tuple(float(np.asarray(g)[frame, i]) for g in pose.gimbal_deg))
+        tracker = MoverTracker(type(r)(float(np.ravel(value)[i] if np.ndim(value) else value)), budget=budget)
+        u, v = float(m["u_px"][frame][i]), float(m["v_px"][frame][i])
+        blob = Blobs(0, 0.0, np.array([u]), np.array([v]), np.array([[u - 2, v - 2, u + 2, v + 2]]), np.array([16.0]),
+                     np.array([blob_m**2]), np.array([30.0]), np.array([0]), np.array([False]), np.zeros((2, 2)), 1.0)
+        tracker.add(blob, sensor, one)
+        row = tracker.rows[0]
+        off = rng.normal(0.0, blob_m / 4.0, 2)  # the centroid's own error, east and north
+        target = p.target_at[frame][i]
+        e = enu_error(row["lat_deg"], row["lon_deg"], row["h_m"], target)
+        err.append(np.r_[np.ravel(e)[:2] + off, np.ravel(e)[2]])
+        c50.append(row["cep50_m"] if row["cep50_m"] is not None else np.nan)
+        c90.append(row["ce90_m"] if row["ce90_m"] is not None else np.nan)
+        le.append(row["le90_m"] if row["le90_m"] is not None else np.nan)
+        keep.append(row["status"] == "OK" and row["nonlinearity"] is not None and row["nonlinearity"] <= 0.1)
+    return coverage(f"movers' fixes, {rule} rule" + (f", {blob_m:g} m blobs" if blob_m else ""), np.array(err),
+                    np.array(c50), np.array(c90), np.array(le), np.array(keep))
+
+
 def rls(p: Passes, rule: str):
     """RLS static over each whole pass, with the budget's structure: all passes in one call (the
     targets of :func:`simulate` with a ``spread_deg``, in the ENU frame of one origin), each

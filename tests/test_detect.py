@@ -248,6 +248,22 @@ def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
         assert float(tr.get("speed")) == pytest.approx(best.speed_mps, rel=0.03)
         assert abs((float(tr.get("course")) - best.heading_deg + 180) % 360 - 180) < 3
         assert float(pt.get("ce")) == 9999999  # no error budget: unknown, not a guess
+    # with a config's [accuracy.budget]: every detection's fix carries its uncertainty (its coverage:
+    # tests/integration/test_coverage.py), and the CoT markers their ce/le from it
+    (tmp_path / "budget.toml").write_text("[accuracy.budget]\nyaw_deg = {normal = 0.2}\npitch_deg = {normal = 0.1}\n"
+                                          "lat_deg = {normal = 1e-5}\nlon_deg = {normal = 1e-5}\n")
+    out_b = tmp_path / "out_budget"
+    run = subprocess.run([*eoloc, "--target-height", str(ms.ORIGIN[2]), "--detect", "motion", "--no-frames",
+                          "--no-mosaic", "--no-player", "--config", str(tmp_path / "budget.toml"), "--out", str(out_b)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0 and "Traceback" not in run.stderr, run.stderr
+    with_budget = list(csv.DictReader((out_b / "detections.csv").open()))
+    assert len(with_budget) == len(rows)
+    ce90 = np.array([float(r["ce90_m"]) for r in with_budget])
+    assert np.all(np.isfinite(ce90) & (ce90 > 0)), ce90
+    with zipfile.ZipFile(out_b / "movers.cot.zip") as z:
+        ces = [float(ET.fromstring(z.read(n)).find("point").get("ce")) for n in z.namelist() if n.endswith(".cot")]
+    assert len(ces) == 3 and all(0 < c < 1000 for c in ces), ces
     # --klv-out: the movers as ST 0903 VMTI in a KLV stream of its own, read back by PyAV (the
     # transport stream) and stanag4609 (ST 0601 and ST 0903), neither of them eoloc
     import av

@@ -67,6 +67,16 @@ def test_47_coverage_of_the_covariance_per_fix_and_of_cot(passes, rule):
     assert tak.in50 >= C.band(tak.n, 0.5)[0]  # never less than 50 %
 
 
+def test_53_coverage_of_the_movers_fixes(passes, rule):
+    """The motion detector's movers with a config budget: each detection's fix carries CEP50, CE90
+    and LE90 (the telemetry's errors through the ray, and the blob's centroid error on the ground),
+    and they cover the truth: point blobs (the telemetry alone), then 8 m blobs whose centroids are
+    off by the quarter of their size the tracker allows for."""
+    for blob_m in (0.0, 8.0):
+        cv = C.movers(passes, rule, blob_m=blob_m)
+        _assert_covers(cv)
+
+
 def test_47_coverage_of_rls_static_with_biases_noise_and_gauss_markov(passes, rule):
     """RLS over each 40-frame pass with the budget's structure: biases not averaged down,
     Gauss–Markov errors by their correlation; no false INCONSISTENT (<= 1 %)."""

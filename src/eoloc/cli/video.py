@@ -59,10 +59,12 @@ Written into --out:
                            per-frame ground grids)
   vmti.csv, vmti.geojson   the VMTI targets (ST 0903 in the KLV), each located with its packet's pose
   detections.csv, .geojson with --detect motion: every detection of a mover (frame, time_s,
-                           track_id, u_px, v_px, box, ground area, point, speed and its sigma, heading)
+                           track_id, u_px, v_px, box, ground area, point, speed and its sigma, heading;
+                           with a --config [accuracy.budget]: sigma_e/n/u_m, CEP50, CE90, LE90 of the
+                           point: the telemetry's errors and the blob's centroid on the ground)
   movers.geojson           with --detect motion: one LineString per mover (its Kalman track)
   movers.cot.zip           with --detect motion: a TAK data package, each mover where it was last seen
-                           (course and speed in <track>; ce/le unknown: the fixes carry no error budget)
+                           (course and speed in <track>; ce/le from the budget, unknown without one)
   --klv-out OUT.ts         with --detect motion: the video again (MPEG-TS, its metadata kept), with the
                            movers as ST 0903 VMTI (id, centroid, box, location) in a KLV stream of its own,
                            one packet at each frame's PTS where movers were found
@@ -96,7 +98,8 @@ Nothing is downloaded. detections.csv adds the class and score.
 @click.option("--telemetry", type=click.Path(dir_okay=False), default=None,
               help="Telemetry beside the video (needs --config), paired by time_s: an eoloc CSV, a DJI .SRT "
                    "(its time codes are the video's clock) or a flight log.")
-@config_option(required=False, help_text="Camera/gimbal/installation TOML (with --telemetry).")
+@config_option(required=False, help_text="Camera/gimbal/installation TOML (with --telemetry); its [accuracy.budget] "
+                                         "gives --detect's fixes their uncertainty (any source).")
 @click.option("--stream", "klv_stream", default=None, metavar="NAME",
               help='The KLV stream to use when there are several, as eoloc klv names them ("PID 497").')
 @click.option("--time-offset", type=float, default=None,

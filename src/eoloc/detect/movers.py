@@ -16,15 +16,25 @@ in most frames; stray false blobs strung together are not), and its median smoot
 at least ``min_speed_mps``; a track that goes ``tracker.max_coast_s`` without a blob ends
 (shorter occlusions keep its id). Blobs of tracks that are not movers (parallax, noise) are
 dropped, and counted.
+
+With an error budget each detection's fix also carries its absolute uncertainty (sigma_e/n/u_m,
+CEP50, CE90, LE90, the ellipse): the telemetry's errors through the ray
+(:func:`eoloc.accuracy.covariance.locate_with_covariance`, as every other fix) and, on top, the
+blob's own centroid error on the ground (the same quarter of its size as above, EDGE_SIGMA_M for
+a blob the edge cuts) in east and north; CoT's ce/le come from them.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import geodesy
+from ..accuracy.budget import ErrorBudget
+from ..accuracy.covariance import covariance_columns, locate_with_covariance
 from ..result import Status
 from ..rules import StopRule, locate
 from ..sensor.model import Pose, SensorModel
@@ -85,6 +95,7 @@ class MoverTracker:
 
     rule: StopRule
     settings: MoverSettings = field(default_factory=MoverSettings)
+    budget: ErrorBudget | None = None  # each fix's absolute uncertainty (see the module notes)
 
     def __post_init__(self) -> None:
         s = self.settings
@@ -103,7 +114,14 @@ class MoverTracker:
         if not len(blobs):
             self.tracker.frame(blobs.time_s, np.zeros(0, np.intp), np.zeros((0, 3)), np.zeros((0, 2, 2)), None)
             return
-        f = locate(sensor, pose, self.rule, (blobs.u_px, blobs.v_px))
+        share = np.where(blobs.side == 0, 1 / 16, 1 / 4)
+        centroid2 = np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
+        if self.budget is None:
+            f, sigma = locate(sensor, pose, self.rule, (blobs.u_px, blobs.v_px)), None
+        else:
+            f, cov = locate_with_covariance(sensor, pose, self.budget, (blobs.u_px, blobs.v_px), self.rule)
+            sigma = covariance_columns(dataclasses.replace(
+                cov, cov_enu=cov.cov_enu + centroid2[:, None, None] * np.diag([1.0, 1.0, 0.0])), f.ok)
         ok = np.asarray(f.ok)
         if self.origin is None and ok.any():
             i = int(np.flatnonzero(ok)[0])
@@ -115,8 +133,7 @@ class MoverTracker:
         # a blob's centroid: within about a quarter of its size
         # (half of it for a blob found from one side only, at the ends of a target's time in view);
         # a blob the image's edge cuts tells where the target is to EDGE_SIGMA_M only
-        share = np.where(blobs.side == 0, 1 / 16, 1 / 4)
-        sig2 = self.settings.tracker.meas_sigma_m**2 + np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
+        sig2 = self.settings.tracker.meas_sigma_m**2 + centroid2
         R = sig2[:, None, None] * np.eye(2)
         here = np.flatnonzero(ok)
         for key, j in self.tracker.frame(blobs.time_s, here, z, R, None):
@@ -130,7 +147,8 @@ class MoverTracker:
                    **({} if blobs.label is None else {"class": str(blobs.label[j]),
                                                        "score": round(float(blobs.score[j]), 3)}),
                    "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
-                   "status": Status(int(f.status[j])).name}
+                   "status": Status(int(f.status[j])).name,
+                   **({} if sigma is None else {k: _num(v[j]) for k, v in sigma.items()})}
             self.by_track.setdefault(key, []).append(len(self.rows))
             self.rows.append(row)
 
@@ -167,3 +185,9 @@ class MoverTracker:
         rows.sort(key=lambda r: (r["frame"], r["track_id"]))
         located = len(self.rows)
         return Movers(rows, movers, self.origin, self.n_blobs, self.not_located, dropped, located - kept)
+
+
+def _num(x) -> float | None:
+    """A column's value for a row: 4 decimals, None where there is none."""
+    x = float(x)
+    return round(x, 4) if math.isfinite(x) else None

@@ -17,15 +17,16 @@ PosedFrame = tuple[int, float, np.ndarray, SensorModel, Pose]
 
 
 def detect_movers(frames: Iterable[PosedFrame], rule: StopRule, motion: MotionSettings | None = None,
-                  movers: MoverSettings | None = None, *, learned: LearnedDetector | None = None,
+                  movers: MoverSettings | None = None, *, learned: LearnedDetector | None = None, budget=None,
                   total: int | None = None, progress: Callable[[int, int], None] | None = None) -> Movers:
     """Frames (index, time s, image uint8, sensor, pose) in time order -> the movers found by
     motion (``motion``'s settings) or the boxes of a ``learned`` detector, tracked. A frame
     without a pose is left out of ``frames`` (it is neither searched nor a reference). Without
-    ``movers``: the defaults, standing targets kept for a learned detector (min_speed_mps 0)."""
+    ``movers``: the defaults, standing targets kept for a learned detector (min_speed_mps 0).
+    ``budget``: an ErrorBudget: each fix's absolute uncertainty (:class:`MoverTracker`)."""
     if movers is None:
         movers = MoverSettings(min_speed_mps=0.0) if learned is not None else MoverSettings()
-    tracker = MoverTracker(rule, movers)
+    tracker = MoverTracker(rule, movers, budget)
     if learned is not None:
         for done, (index, t, image, sensor, pose) in enumerate(frames, start=1):
             tracker.add(learned.detect(index, t, image, sensor, pose), sensor, pose)
