@@ -10,7 +10,15 @@ import click
 from ..io.klv.conventions import CONVENTIONS
 from .common import load_config, open_dem, working
 from .main import NOTHING_LOCATED, console, err_console, warn
-from .options import basemap_options, config_option, dem_options, formats_option, grid_option, out_option
+from .options import (
+    basemap_options,
+    config_option,
+    dem_options,
+    formats_option,
+    grid_option,
+    out_option,
+    refine_option,
+)
 
 KLV_HELP = """Read MISB ST 0601 metadata (raw .klv/.bin, or MPEG-TS with a KLV data stream), check it,
 geolocate its VMTI targets and write everything out.
@@ -80,10 +88,9 @@ KLV_HELP = KLV_HELP.replace("{assume_list}", "\n".join(
 @click.option("--assume", "assume", multiple=True, type=click.Choice(list(CONVENTIONS)),
               help="Read the stream under an encoder's own convention (repeatable); the convention check prints "
                    "which one the encoder follows. See the list below.")
-@click.option("--refine", "refine_first", is_flag=True,
-              help="An MPEG-TS with its video: first refine its KLV from the video's own pixels (eoloc refine, its "
-                   "defaults, into OUT/refine/; needs --dem), then read OUT/refine/NAME_refined.ts (and, with "
-                   "--config, NAME_refined.toml: the refined budget).")
+@refine_option("the KLV of an MPEG-TS from its video's own pixels (eoloc refine, its defaults, into OUT/refine/; "
+               "needs --dem), then read OUT/refine/NAME_refined.ts (and, with --config, NAME_refined.toml: the "
+               "refined budget).")
 def klv(path, dem_paths, vertical, geoid, dem_crs, config_path, out_dir, formats, grid, make_map, basemap, world,
         tiles, write_klv, footprint_every, strict, assume, refine_first) -> None:
     from ..jobs.klv import klv_job, write_klv_products

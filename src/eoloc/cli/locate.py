@@ -20,6 +20,8 @@ from .options import (
     json_option,
     out_option,
     pairing_options,
+    poses_option,
+    refine_option,
     stop_rule_options,
     with_flight_log,
 )
@@ -100,13 +102,10 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
               help="File mode: add a learned error correction (eoloc compensate train) to every fix inside the "
                    "model's trained range and report it per fix (default: the config's [compensation] model).")
 @flight_log_option
-@click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
-              help="TELEMETRY drone photos: camera poses that replace the photos' own, by file name (eoloc refine's "
-                   "photos_refined.csv or its --json lines).")
-@click.option("--refine", "refine_first", is_flag=True,
-              help="First refine TELEMETRY from its own images (eoloc refine, its defaults, into OUT/refine/; needs "
-                   "--dem): an MPEG-TS with its video (then located from OUT/refine/NAME_refined.ts, with --config "
-                   "NAME_refined.toml) or overlapping drone photos (located with their refined poses).")
+@poses_option("(For TELEMETRY that is drone photos.)")
+@refine_option("TELEMETRY from its own images (eoloc refine, its defaults, into OUT/refine/; needs --dem): an MPEG-TS "
+               "with its video (then located from OUT/refine/NAME_refined.ts, with --config NAME_refined.toml) or "
+               "overlapping drone photos (located with their refined poses).")
 def locate(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, height,
            lat, lon, yaw, pitch, roll, gimbal, gimbal_angles, sensor_roll, pixel, as_json, out_dir, formats,
            grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path, flight_log, poses_path,

@@ -170,6 +170,20 @@ def config_option(required: bool = True, help_text: str = "Camera/gimbal/install
                         metavar="CONFIG.toml", help=help_text)
 
 
+def refine_option(help_text: str):
+    """--refine: refine the command's input from its own images first (eoloc refine, its defaults,
+    into OUT/refine/), then run on what it wrote; ``help_text`` says what that is for the command."""
+    return click.option("--refine", "refine_first", is_flag=True,
+                        help="First refine " + help_text)
+
+
+def poses_option(help_text: str = ""):
+    """--poses FILE: drone photos' camera poses (eoloc refine's) in place of their own."""
+    return click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+                        help="Camera poses that replace the photos' own, by file name: eoloc refine's "
+                             "photos_refined.csv (or its --json lines)." + (" " + help_text if help_text else ""))
+
+
 def flight_log_option(f):
     """--flight-log LOG: the flight log that completes a video's telemetry (a DJI .SRT without
     attitude): synced by the tracks they share, it gives every record's pose."""

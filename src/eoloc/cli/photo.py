@@ -15,6 +15,8 @@ from .options import (
     formats_option,
     ortho_options,
     out_option,
+    poses_option,
+    refine_option,
     tak_connection,
     tak_options,
 )
@@ -63,12 +65,10 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
                    "Cloud-Optimised GeoTIFFs (--crs, --gsd, --resampling, --nodata, --occlusion as eoloc rectify).")
 @config_option(required=False, help_text="TOML with [accuracy.budget]: each fix's uncertainty (the camera comes "
                                          "from the photos).")
-@click.option("--poses", "poses_path", type=click.Path(dir_okay=False), default=None,
-              help="Camera poses that replace the photos' own, by file name: eoloc refine's photos_refined.csv (or "
-                   "its --json lines). With a --config budget, give refine's refined one.")
-@click.option("--refine", "refine_first", is_flag=True,
-              help="First refine the set's camera poses from the photos' own overlap (eoloc refine, its defaults, "
-                   "into OUT/refine/; needs --dem and three or more overlapping photos), then locate with them.")
+@poses_option("With a --config budget, give refine's refined one (its config_refined.toml).")
+@refine_option("the set's camera poses from the photos' own overlap (eoloc refine, its defaults, into OUT/refine/; "
+               "needs --dem and three or more overlapping photos), then locate with them (and with --config, its "
+               "refined budget).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per fix on stdout.")
 @out_option("photo_fixes.*")
 @formats_option()

@@ -11,7 +11,15 @@ import click
 
 from .common import load_config, open_dem, progress
 from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, flight_log_option, ortho_options, out_option, with_flight_log
+from .options import (
+    CONVENTIONS,
+    config_option,
+    flight_log_option,
+    ortho_options,
+    out_option,
+    refine_option,
+    with_flight_log,
+)
 from .render import titled_table
 
 VIDEO_HELP = """Orthorectify the frames of a video with their metadata: each frame a Cloud-Optimised
@@ -139,10 +147,9 @@ Nothing is downloaded. detections.csv adds the class and score.
               help="--detect: largest target, square metres on the ground.")
 @click.option("--min-speed", type=click.FloatRange(0.0), default=None,
               help="--detect: slowest target kept, m/s over the ground [default: 2 for motion, 0 for a model].")
-@click.option("--refine", "refine_first", is_flag=True,
-              help="First refine the telemetry from the video's own pixels (eoloc refine, its defaults, into "
-                   "OUT/refine/; needs --dem), then run on the refined telemetry and config (or the video's own KLV "
-                   "refined: OUT/refine/NAME_refined.ts).")
+@refine_option("the telemetry from the video's own pixels (eoloc refine, its defaults, into OUT/refine/; needs "
+               "--dem), then run on the refined telemetry and config (or the video's own KLV refined: "
+               "OUT/refine/NAME_refined.ts).")
 @click.option("--klv-out", "klv_out", type=click.Path(dir_okay=False), default=None, metavar="OUT.ts",
               help="--detect: the video written again as MPEG-TS, its metadata kept, with the movers as ST 0903 "
                    "VMTI in a KLV stream of its own (ids, centroid, box, location).")
