@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import pymap3d
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -797,6 +797,7 @@ def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
                        "camera_yaw": 10.0, "camera_pitch": -45.0, "camera_roll": 0.0}])
     cases = [(("klv", klv, "--dem", dem, "--refine"), "raw KLV has no pixels to refine from"),
              (("klv", video, "--refine"), "--refine needs the terrain"),
+             (("video", video, "--dem", dem, "--refine"), "without its own KLV a video needs its telemetry"),
              (("locate", tel, "--dem", dem, "--refine"), "is csv telemetry without them"),
              (("locate", klv, "--dem", dem, "--refine"), "raw KLV has no pixels to refine from"),
              (("locate", tel, "--dem", dem, "--poses", poses), "poses replace drone photos' own")]
@@ -808,10 +809,13 @@ def test_what_cannot_be_refined_is_named_without_a_traceback(tmp_path):
 
 @settings(max_examples=40, deadline=None)
 @given(st.tuples(*[st.floats(-3.0, 3.0)] * 3), st.tuples(*[st.floats(-1.0, 1.0)] * 3),
-       st.floats(0.0, 360.0), st.floats(-90.0, 30.0), st.floats(-30.0, 30.0), st.floats(-20.0, 20.0))
+       st.floats(0.0, 360.0), st.one_of(st.floats(-90.0, 30.0), st.floats(-90.0, -89.99999)),
+       st.floats(-30.0, 30.0), st.floats(-20.0, 20.0))
+@example((0.0, 0.0, 0.0), (0.0, 1e-6, 0.0), 0.0, 0.0, 0.0, 0.0)  # 1e-6 deg off nadir's lock (a fresh CI found it)
 def test_an_installation_folded_into_the_gimbal_angles_points_the_same_way(mount, bore, az, el, roll, pitch):
     """The refined KLV's sensor angles: a turret without installation terms at the folded angles has
-    the camera orientation of the turret with them (to 1e-9 rad), nadir's gimbal lock included."""
+    the camera orientation of the turret with them (to 1e-9 rad), nadir's gimbal lock and the
+    elevations a hair from it included."""
     from scipy.spatial.transform import Rotation
 
     from eoloc.ground.frame import misb_sensor
@@ -827,6 +831,23 @@ def test_an_installation_folded_into_the_gimbal_angles_points_the_same_way(mount
     got = Rotation.from_matrix(misb_sensor().camera_frame(dataclasses.replace(pose, gimbal_deg=g))
                                .R_ecef_cam.reshape(-1, 3, 3))
     assert np.all((want * got.inv()).magnitude() < 1e-9)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-180.0, 180.0), st.one_of(st.floats(-90.0, 90.0), st.floats(-1e-5, 1e-5).map(lambda d: 90.0 - abs(d)),
+                                           st.floats(-1e-5, 1e-5).map(lambda d: abs(d) - 90.0)),
+       st.floats(-180.0, 180.0))
+def test_turret_angles_compose_back_to_the_rotation_also_at_the_lock(a, b, c):
+    """refine.correct.zyx_angles: the angles of a Z-Y-X rotation made by scipy compose back to it to
+    1e-12 rad, within 1e-5 deg of the elevation's gimbal lock too (where scipy's own as_euler gives
+    up ~2e-8 rad)."""
+    from scipy.spatial.transform import Rotation
+
+    from eoloc.refine.correct import zyx_angles
+
+    R = Rotation.from_euler("ZYX", [a, b, c], degrees=True)
+    got = Rotation.from_euler("ZYX", zyx_angles(R.as_matrix()[None])[0], degrees=True)
+    assert (R * got.inv()).magnitude() < 1e-12
 
 
 def synthetic_ties(flight, err: ts.Errors, rng: np.random.Generator, times=TIMES, per_aim=60):

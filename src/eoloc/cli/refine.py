@@ -122,12 +122,9 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     from ..errors import InputError
     from ..jobs.refine import refine_video
     from ..refine.adjust import FRAME_SIGMA_DEG, PRIOR_SIGMA, AdjustSettings
+    from .refined import looks_like_video
 
-    def is_video(src) -> bool:
-        head = Path(src).read_bytes()[:12] if Path(src).is_file() else b""
-        return head[:1] == b"\x47" or head[4:8] == b"ftyp" or head[:4] == b"\x1aE\xdf\xa3"
-
-    photos = telemetry is None and not any(is_video(src) for src in sources)
+    photos = telemetry is None and not any(Path(src).is_file() and looks_like_video(src) for src in sources)
     if estimate is None:
         estimate = ("mount,heading" if photos else "mount,heading,time") + (",position" if reference_path else "")
     groups = tuple(e.strip() for e in estimate.split(",") if e.strip())

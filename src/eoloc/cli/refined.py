@@ -23,9 +23,9 @@ def refine_video_first(video, telemetry, config_path, dem, out: Path, *,
     from ..jobs.refine import refine_video
 
     need_dem(dem)
-    if telemetry is None and not is_transport_stream(video):
-        raise click.UsageError(f"--refine needs the video the KLV came with: {video} is no MPEG-TS (raw KLV has no "
-                               "pixels to refine from; give the TS, or mux the KLV into its video: eoloc mux)")
+    if telemetry is None and not looks_like_video(video):
+        raise click.UsageError(f"--refine needs the video the KLV came with: {video} is not a video (raw KLV has no "
+                               "pixels to refine from; give the MPEG-TS, or mux the KLV into its video: eoloc mux)")
     cfg = load_config(config_path) if config_path else None
     with working("refining the telemetry from the pixels..."):
         job = refine_video(video, telemetry, cfg, dem, config_path=config_path, out=out, max_gap_s=max_gap_s,
@@ -58,14 +58,16 @@ def refine_photos_first(photos, dem, out: Path, config_path=None) -> tuple[dict,
     return {Path(row["file"]).name: row for row in job.rows}, out / "photos_refined.csv", config
 
 
-def is_transport_stream(path) -> bool:
-    """An MPEG-TS by its first two 188-byte cells' sync bytes (a shorter file: its first)."""
+def looks_like_video(path) -> bool:
+    """A video container by its first bytes: MPEG-TS (sync bytes 188 apart), MP4/MOV ("ftyp"),
+    Matroska/WebM (EBML). Raw KLV (its key 06 0E 2B 34), photos and text are not."""
     try:
         with open(path, "rb") as f:
             head = f.read(189)
     except OSError:
         return False
-    return head[:1] == b"\x47" and (len(head) < 189 or head[188:189] == b"\x47")
+    ts = head[:1] == b"\x47" and (len(head) < 189 or head[188:189] == b"\x47")
+    return ts or head[4:8] == b"ftyp" or head[:4] == b"\x1aE\xdf\xa3"
 
 
 def need_dem(dem) -> None:

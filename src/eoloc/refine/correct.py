@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -92,9 +91,26 @@ def euler_start(plain: SensorModel, pose: Pose, target: Rotation) -> np.ndarray:
     zero = dataclasses.replace(pose, gimbal_deg=(np.zeros(n), np.zeros(n), np.zeros(n)))
     R0 = plain.camera_frame(zero).R_ecef_cam.reshape(-1, 3, 3)
     G = P @ np.swapaxes(R0, 1, 2) @ target.as_matrix() @ P.T
-    with warnings.catch_warnings():  # at a gimbal lock scipy sets the roll to 0 and says so: still exact
-        warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(G).as_euler("ZYX", degrees=True)
+    return zyx_angles(G)
+
+
+def zyx_angles(G: np.ndarray) -> np.ndarray:
+    """(n, 3) angles (deg) a, b, c with Rz(a) Ry(b) Rx(c) = G (n, 3, 3), exact also near the gimbal
+    lock (b -> +-90 deg). The elevation from atan2 of well-conditioned terms; the azimuth from terms
+    of size cos(b) (its error there only moves the product by cos(b) times itself); the roll then
+    from Ry(b)^T Rz(a)^T G, so the three compose to G whatever the azimuth came out as. (scipy's
+    as_euler treats a rotation within ~1e-7 rad of the lock as locked and sets the roll to 0: 2e-8
+    rad off there, past the folding tolerance.)"""
+    b = np.arctan2(-G[:, 2, 0], np.hypot(G[:, 0, 0], G[:, 1, 0]))
+    a = np.arctan2(G[:, 1, 0], G[:, 0, 0])
+    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+    Rz = np.zeros_like(G)
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = ca, -sa, sa, ca, 1.0
+    Ry = np.zeros_like(G)
+    Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 2, 0], Ry[:, 2, 2], Ry[:, 1, 1] = cb, sb, -sb, cb, 1.0
+    M = np.swapaxes(Ry, 1, 2) @ np.swapaxes(Rz, 1, 2) @ G  # = Rx(c)
+    c = np.arctan2(M[:, 2, 1], M[:, 1, 1])
+    return np.degrees(np.stack([a, b, c], -1))
 
 
 # -- the error budget after refinement --------------------------------------------------------------
