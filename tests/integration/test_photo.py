@@ -306,7 +306,8 @@ def test_52_a_refined_pose_goes_back_into_the_photos_own_xmp(tmp_path, case):
     new = ((given.yaw_deg + 0.5 + 180.0) % 360.0 - 180.0, given.pitch_deg - 0.3, given.roll_deg + 0.2)
     shift = (2e-5, -3e-5, 4.25)
     text, notes = refined_sidecar(path, *new, shift)
-    assert ET.fromstring(text[text.index("<x:xmpmeta"):text.rindex("</x:xmpmeta>") + 12]) is not None
+    root = ET.fromstring(text[text.index("<x:xmpmeta"):text.rindex("</x:xmpmeta>") + 12])  # well-formed, as a
+    assert root.tag == "{adobe:ns:meta/}xmpmeta"  # sidecar: the x:xmpmeta element at its root
     back = tmp_path / f"{case}_refined.jpg"
     jpeg = D._jpeg(640, 480, make=make, model=model, gps=gps, focal_mm=kw.get("focal_mm"), f35_mm=kw.get("f35_mm"))
     back.write_bytes(D._with_xmp(jpeg, text.encode("utf-8")))

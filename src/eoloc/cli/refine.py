@@ -157,10 +157,10 @@ def refine(sources, telemetry, config_path, dem_paths, vertical, geoid, dem_crs,
     from_budget = {g for g, v in given.items() if v is None}
     if photos:
         from ..jobs.refine import refine_photos
-        from ..jobs.setup import error_budget
+        from ..jobs.setup import optional_budget
 
-        budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
-        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, reference=reference, budget=budget,
+        pjob = refine_photos(sources, dem, settings=settings, out=out_dir, reference=reference,
+                             budget=optional_budget(cfg),
                              config_path=config_path, priors_from_budget=from_budget, progress=say)
         report_issues(pjob.failed)
         if as_json:

@@ -43,11 +43,10 @@ def refine_photos_first(photos, dem, out: Path, config_path=None) -> tuple[dict,
     config to go on with: with a config that has an [accuracy.budget], the refined one
     (config_refined.toml: what refinement left unknown), else the config as given."""
     from ..jobs.refine import refine_photos
-    from ..jobs.setup import error_budget
+    from ..jobs.setup import optional_budget
 
     need_dem(dem)
-    cfg = load_config(config_path) if config_path else None
-    budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
+    budget = optional_budget(load_config(config_path) if config_path else None)
     with working("refining the photos' poses from their overlap..."):
         job = refine_photos(photos, dem, out=out, budget=budget, config_path=config_path,
                             priors_from_budget=ALL_PRIORS)

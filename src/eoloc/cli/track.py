@@ -78,7 +78,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
     rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path)
     with working("locating..."):
-        job = located_detections(cfg, config_path, telemetry, detections, rule, time_tolerance_s=time_tolerance,
+        job = located_detections(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance,
                                  interpolate=interpolate, max_gap_s=max_gap, time_offset_s=time_offset)
     report_issues(job.issues)
     if static:

@@ -120,6 +120,20 @@ NAMESPACES = {"dji": "dji.com/drone-dji", "skydio": "skydio.com/drone-skydio", "
               "rdf": "www.w3.org/1999/02/22-rdf-syntax-ns"}
 
 
+def raw_xmp(im) -> bytes | str | None:
+    """The XMP packet of an open Pillow image (a JPEG's APP1 segment, a TIFF's tag 700), or None."""
+    return im.info.get("xmp") or (im.tag_v2.get(700) if hasattr(im, "tag_v2") else None)
+
+
+def xmpmeta_text(raw: bytes | str) -> str:
+    """The x:xmpmeta element's text of an XMP packet (the xpacket wrapper and padding left out)."""
+    text = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw
+    text = text[text.find("<x:xmpmeta"):] if "<x:xmpmeta" in text else text
+    end = text.rfind("</x:xmpmeta>")
+    text = text[:end + len("</x:xmpmeta>")] if end >= 0 else text
+    return text.strip().lstrip("\ufeff")
+
+
 def parse_xmp(raw: bytes | str | None) -> dict[str, dict[str, str]]:
     """An XMP packet's values by vendor (the keys of :data:`NAMESPACES`; "other" for the rest):
     {vendor: {name: text}}, from the rdf:Description attributes and leaf elements; a struct's fields
@@ -129,12 +143,8 @@ def parse_xmp(raw: bytes | str | None) -> dict[str, dict[str, str]]:
     out: dict[str, dict[str, str]] = {}
     if not raw:
         return out
-    text = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw
-    text = text[text.find("<x:xmpmeta"):] if "<x:xmpmeta" in text else text
-    end = text.rfind("</x:xmpmeta>")
-    text = text[:end + len("</x:xmpmeta>")] if end >= 0 else text
     try:
-        root = fromstring(text.strip().lstrip("\ufeff"))
+        root = fromstring(xmpmeta_text(raw))
     except (ParseError, ValueError) as exc:
         raise PhotoError(f"the XMP packet is not valid XML ({exc})") from None
 
@@ -211,7 +221,7 @@ def read_photo(path: str | Path, *, geoid=None, data: bytes | None = None) -> Ph
         with Image.open(path if data is None else io.BytesIO(data)) as im:
             width, height = im.size
             exif = im.getexif()
-            raw = im.info.get("xmp") or (im.tag_v2.get(700) if hasattr(im, "tag_v2") else None)
+            raw = raw_xmp(im)
     except FileNotFoundError:
         raise PhotoError(f"{path}: no such file") from None
     except UnidentifiedImageError:
@@ -406,7 +416,10 @@ def _version(v: str) -> tuple[int, ...]:
     return tuple(out)
 
 
-POSE_KEYS = ("camera_lat", "camera_lon", "camera_h", "camera_yaw", "camera_pitch", "camera_roll")
+#: eoloc photo --json's pose keys and the PhotoPose fields (= the photo telemetry table's columns) they are
+POSE_FIELDS = {"camera_lat": "lat_deg", "camera_lon": "lon_deg", "camera_h": "h_m", "camera_yaw": "yaw_deg",
+               "camera_pitch": "pitch_deg", "camera_roll": "roll_deg"}
+POSE_KEYS = tuple(POSE_FIELDS)
 
 
 def read_photo_poses(path: str | Path) -> dict[str, dict[str, float]]:

@@ -42,17 +42,13 @@ def refined_sidecar(photo_path: str | Path, yaw_deg: float, pitch_deg: float, ro
     from defusedxml.ElementTree import fromstring, iterparse
     from PIL import Image
 
-    from .photo import NAMESPACES, PhotoError
+    from .photo import NAMESPACES, PhotoError, raw_xmp, xmpmeta_text
 
     with Image.open(photo_path) as im:
-        raw = im.info.get("xmp") or (im.tag_v2.get(700) if hasattr(im, "tag_v2") else None)
-    if not raw:
-        raise PhotoError(f"{photo_path}: no XMP packet to write a sidecar of")
-    text = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
-    start, end = text.find("<x:xmpmeta"), text.rfind("</x:xmpmeta>")
-    if start < 0 or end < 0:
-        raise PhotoError(f"{photo_path}: its XMP has no x:xmpmeta element")
-    text = text[start:end + len("</x:xmpmeta>")]
+        raw = raw_xmp(im)
+    text = xmpmeta_text(raw) if raw else ""
+    if not text.startswith("<x:xmpmeta"):
+        raise PhotoError(f"{photo_path}: no XMP packet (x:xmpmeta) to write a sidecar of")
     prefixes = {uri: prefix for _, (prefix, uri) in iterparse(io.StringIO(text), events=("start-ns",))}
     root = fromstring(text)
 
@@ -90,17 +86,16 @@ def refined_sidecar(photo_path: str | Path, yaw_deg: float, pitch_deg: float, ro
     def key(name: str) -> str:
         return f"{struct}.{name}" if struct else name
 
-    def get(name: str) -> float:
-        el, attr = tags[key(name)]
-        return float(_number(el.text if attr is None else el.attrib[attr]))
+    def get(tag: str) -> float:
+        el, attr = tags[tag]
+        return _number(el.text if attr is None else el.attrib[attr])
 
-    def put(name: str, value: float, digits: int) -> None:
-        el, attr = tags[key(name)]
-        text = f"{value:+.{digits}f}"
+    def put(tag: str, value: float, digits: int) -> None:
+        el, attr = tags[tag]
         if attr is None:
-            el.text = text
+            el.text = f"{value:+.{digits}f}"
         else:
-            el.attrib[attr] = text
+            el.attrib[attr] = f"{value:+.{digits}f}"
 
     values = [yaw_deg, pitch_deg + pitch_offset, roll_deg]
     if vendor == "exif":  # Teal: the camera's angles on top of the platform's
@@ -110,25 +105,19 @@ def refined_sidecar(photo_path: str | Path, yaw_deg: float, pitch_deg: float, ro
     notes = []
     for name, value in zip(names, values, strict=True):
         if key(name) in tags:
-            put(name, value, 6)
+            put(key(name), value, 6)
         elif name != names[2]:
             raise PhotoError(f"{photo_path}: its XMP has no {name} to write the refined attitude into")
         elif abs(value) > 1e-9:
             notes.append(f"{photo_path}: its XMP has no {name}: the refined roll ({value:+.6f} deg) is not in the "
                          "sidecar (photos_refined.csv has it)")
     if shift is not None and any(abs(s) > 0 for s in shift):
-        if position is None or not all(key(n) in tags or n in tags for n in position):
+        if position is None or not all(n in tags for n in position):
             notes.append(f"{photo_path}: its position is in its EXIF, not its XMP: the refined position is in "
                          "photos_refined.csv and geo.txt, not in the sidecar")
         else:
             for name, delta, digits in zip(position, shift, (10, 10, 4), strict=True):
-                el, attr = tags[name]
-                old = float(_number(el.text if attr is None else el.attrib[attr]))
-                text = f"{old + delta:+.{digits}f}"
-                if attr is None:
-                    el.text = text
-                else:
-                    el.attrib[attr] = text
+                put(name, get(name) + delta, digits)
     for uri, prefix in prefixes.items():
         if prefix and not (prefix.startswith("ns") and prefix[2:].isdigit()):
             ET.register_namespace(prefix, uri)

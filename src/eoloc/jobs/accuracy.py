@@ -80,7 +80,7 @@ def flight_job(cfg, config_path, telemetry, detections, rule, *, samples: int, s
     if cfg.accuracy is None:
         raise InputError(f"{config_path}: the accuracy of a flight needs the config's [accuracy.budget] (the error "
                          "of every input, and how it behaves in time: see the README, Uncertainty)")
-    job = located_detections(cfg, config_path, telemetry, detections, rule, **pairing)
+    job = located_detections(cfg, telemetry, detections, rule, **pairing)
     located = job.located
     budget = error_budget(cfg, config_path)
     ok = located.fixes.ok

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.photo import PhotoPose, read_photo
+from ..io.photo import POSE_FIELDS, PhotoPose, read_photo
 from ..result import Status
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".tif", ".tiff", ".dng")
@@ -102,9 +102,8 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
             if q is None:
                 job.failed.append(f"{path}: not in {poses_from or 'the poses given'}: located with its own pose")
             else:
-                p = dataclasses.replace(p, lat_deg=q["camera_lat"], lon_deg=q["camera_lon"], h_m=q["camera_h"],
-                                        yaw_deg=q["camera_yaw"], pitch_deg=q["camera_pitch"],
-                                        roll_deg=q["camera_roll"], height_rule=f"from {poses_from or 'the poses'}",
+                p = dataclasses.replace(p, **{name: q[key] for key, name in POSE_FIELDS.items()},
+                                        height_rule=f"from {poses_from or 'the poses'}",
                                         notes=[*p.notes, f"pose from {poses_from or 'the poses given'}"])
         job.photos.append(p)
         rows = locate_photo(p, pixels=pixels, dem=dem, target_height_m=target_height_m, budget=budget)

@@ -35,7 +35,7 @@ from ..rules import OnDEM
 from ..sequence.calibration import GROUPS, TelemetryTrack, pose_with_biases
 from ..sequence.sync import poses_at_frames
 from ..terrain import DEM
-from .setup import error_budget
+from .setup import optional_budget
 
 
 @dataclass
@@ -102,7 +102,7 @@ def refine_video(video, telemetry, cfg, dem: DEM, *, config_path: str | Path | N
             raise InputError(f"{exc} -- without its own KLV a video needs its telemetry: --telemetry FILE "
                              "--config C.toml", exc.issues) from None
         sensor = None
-    budget = error_budget(cfg, config_path) if cfg is not None and cfg.accuracy is not None else None
+    budget = optional_budget(cfg)
     if budget is not None and priors_from_budget:
         settings = budget_settings(settings, budget, float(np.nanmedian(meta.pose.lat_deg)), priors_from_budget)
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
@@ -284,12 +284,12 @@ def write_refinement(job: RefineJob, out: Path, telemetry, cfg, config_path, key
     written = []
     records = job_inputs(cfg, telemetry).telemetry.columns if klv is None else None
     budget = None
-    if config_path is not None and cfg.accuracy is not None:  # what refinement left unknown
+    if config_path is not None and (given := optional_budget(cfg)) is not None:  # what refinement left unknown
         from ..refine.correct import refined_budget
 
         lat = records["lat_deg"] if records is not None else klv[0].pose.lat_deg
-        budget, job.report["budget"] = refined_budget(error_budget(cfg, config_path), ref, float(key_t[-1] - key_t[0]),
-                                                      float(np.nanmedian(lat)), job.report["frame_sigma_deg"])
+        budget, job.report["budget"] = refined_budget(given, ref, float(key_t[-1] - key_t[0]), float(np.nanmedian(lat)),
+                                                      job.report["frame_sigma_deg"])
     js = out / "refine.json"
     js.write_text(json.dumps(job.report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     written.append(js)

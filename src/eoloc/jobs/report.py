@@ -63,7 +63,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
     from ..accuracy import compensation as C
     from ..io.telemetry import read_observations
     from ..sequence.calibration import GROUPS, calibrate
-    from .setup import error_budget
+    from .setup import optional_budget
 
     step = progress or (lambda text: None)
     bad = [g for g in estimate if g not in GROUPS or g == "time"]
@@ -75,7 +75,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
     if len(t) == 0:
         raise InputError(f"{observations}: no usable observation", issues)
     sensor = cfg.sensor()
-    budget = error_budget(cfg, config_path) if cfg.accuracy is not None else None
+    budget = optional_budget(cfg)
     c = t.columns
     pose, uv = C.observation_pose(c)
     rule = C.observation_rule(c, dem=dem, height_m=target_height)

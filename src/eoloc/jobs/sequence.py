@@ -16,12 +16,12 @@ from .inputs import job_inputs
 from .locate import LocateJob, locate_files
 
 
-def located_detections(cfg, config_path, telemetry, detections, rule, **kw) -> LocateJob:
+def located_detections(cfg, telemetry, detections, rule, **kw) -> LocateJob:
     """Every detection located (with its covariance when the config has [accuracy.budget]); an
     InputError when none could be."""
-    from .setup import error_budget
+    from .setup import optional_budget
 
-    budget = error_budget(cfg, config_path) if cfg.accuracy is not None else None
+    budget = optional_budget(cfg)
     job = locate_files(cfg, telemetry, detections, rule, budget=budget, **kw)
     if not job.located.fixes.ok.any():
         why = next((n for n in job.notes if n.startswith("nothing was located")), None)

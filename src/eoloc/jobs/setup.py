@@ -40,6 +40,14 @@ def accuracy_scenario(cfg: Config, path: str | Path, *, rule=None, dem_crs: str 
                     pixels=None if a.pixels is None else a.pixels, velocity_ned_mps=a.velocity_ned_mps)
 
 
+def optional_budget(cfg: Config | None):
+    """The config's [accuracy.budget] as an ErrorBudget, None without a config or without the
+    section (the jobs where a budget only adds the uncertainty columns)."""
+    from ..accuracy.budget import ErrorBudget
+
+    return ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg is not None and cfg.accuracy is not None else None
+
+
 def error_budget(cfg: Config, path: str | Path):
     """The config's [accuracy.budget] as an ErrorBudget (for per-fix covariance)."""
     from ..accuracy.budget import ErrorBudget
@@ -71,10 +79,8 @@ def misb_setup(cfg: Config | None):
     and its [accuracy.budget]; (None, None) without a config (the defaults of the KLV jobs)."""
     if cfg is None:
         return None, None
-    from ..accuracy.budget import ErrorBudget
     from ..ground.frame import misb_sensor
 
     inst = cfg.installation
     sensor = misb_sensor(inst.mount_misalignment_deg, inst.boresight_misalignment_deg, inst.lever_arm_m)
-    budget = ErrorBudget.from_mapping(cfg.accuracy.budget) if cfg.accuracy is not None else None
-    return sensor, budget
+    return sensor, optional_budget(cfg)

@@ -374,12 +374,10 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
 
         motion = detect if isinstance(detect, MotionSettings) else None
         learned = None if motion is not None else detect
-        budget = None
-        if cfg is not None and cfg.accuracy is not None:  # each mover fix's absolute uncertainty
-            from ..accuracy.budget import ErrorBudget
+        from .setup import optional_budget
 
-            budget = ErrorBudget.from_mapping(cfg.accuracy.budget)
-        job.movers = detect_movers(frames, surface_rule(surface), motion, movers, learned=learned, budget=budget,
+        job.movers = detect_movers(frames, surface_rule(surface), motion, movers, learned=learned,
+                                   budget=optional_budget(cfg),  # each mover fix's absolute uncertainty
                                    total=int(times.size), progress=detect_progress)
         for r in job.movers.rows:  # the metadata's own clock (ST 0601 tag 2), where it has one
             u = unix.get(r["frame"], math.nan)

@@ -1,9 +1,10 @@
 """Bundle adjustment of what the telemetry gets wrong, from tie points and the DEM.
 
-Unknowns: the installation, heading bias and time offset of :mod:`eoloc.sequence.calibration`
-(any of its groups: ``mount``, ``boresight``, ``heading``, ``time``), shared by every frame, and
-the ground position of every tie-point track (three metres east, north, up from where the
-starting poses put it). Observations, each weighted by its standard deviation:
+Unknowns: the installation, heading bias and time offset of :mod:`eoloc.sequence.calibration` (any
+of its groups: ``mount``, ``boresight``, ``heading``, ``time``, ``position``), shared by every
+frame, each keyframe's own small attitude correction (``frame_sigma_deg``), and the ground position
+of every tie-point track (three metres east, north, up from where the starting poses put it).
+Observations, each weighted by its standard deviation:
 
 - every tie point's pixel (``pixel_sigma_px``): the sensor's own ground -> image projection at
   the frame's pose (the telemetry interpolated at the frame's time + the time offset, the
@@ -12,18 +13,19 @@ starting poses put it). Observations, each weighted by its standard deviation:
   accuracy): a soft constraint, the only thing that ties a relative solution to the ground;
 - a prior on every global unknown (its budget's 1-sigma: ``prior_sigma``).
 
-Solved by scipy's ``least_squares`` (trust-region reflective, LSMR inner solver) with the
-Jacobian's sparsity given (each pixel depends on the globals and its own track only: K frames and
-T tracks cost the globals + 3 function evaluations per Jacobian, not 3T), a robust soft-L1 pass
-first, then the observations whose residual exceeds ``outlier_sigma`` dropped (named by track; on
-the tie points' own noise where it is below ``pixel_sigma_px``: :func:`outlier_scale_px`) and a
-plain least-squares pass. The globals' covariance is the Schur complement of the tracks' blocks
-in J^T J, scaled by the a-posteriori variance factor when it exceeds 1.
+Solved by Levenberg-Marquardt on the reduced normal equations (each track's 3 x 3 block eliminated:
+the Schur complement; each pixel depends on the globals, its own keyframe's attitude correction and
+its own track only, so one Jacobian costs the globals + 3 + 3 function evaluations, not 3T; the sums
+as sparse products), a robust soft-L1 pass first, then the observations whose residual exceeds
+``outlier_sigma`` dropped (named by track; on the tie points' own noise where it is below
+``pixel_sigma_px``: :func:`outlier_scale_px`) and a plain least-squares pass. The globals'
+covariance is the Schur complement of the tracks' blocks in J^T J, scaled by the a-posteriori
+variance factor when it exceeds 1.
 
 What the geometry cannot separate is said, not hidden: a parameter whose posterior sigma is more
 than ``prior_share`` of its prior's has not been determined by the images (its value is the
-prior's), and pairs correlated beyond 0.95 are named (a straight pass over flat ground cannot tell
-a heading bias from a time offset or the mount's yaw).
+prior's), and pairs correlated beyond 0.95 are named (a straight pass over flat ground cannot tell a
+heading bias from a time offset or the mount's yaw).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from ..accuracy.budget import SOURCES, ErrorBudget
+from ..accuracy.budget import SOURCES, ErrorBudget, ErrorSource
 from ..accuracy.montecarlo import metres_per_degree
 from ..geodesy import WGS84
 from ..sensor.model import Pose, SensorModel
@@ -151,8 +151,7 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
         left = float(sigma) * unit.get(name, 1.0)
         was = given.get(source)
         if was is not None:
-            rest = {"bias": 0.0, "noise": 1.0}.get(was.kind, min(1.0, span_s / (3.0 * (was.tau_s or math.inf))))
-            left = math.hypot(left, was.sigma * math.sqrt(rest))
+            left = math.hypot(left, was.sigma * math.sqrt(unremoved_share(was, span_s)))
         out[source] = {"normal": float(f"{left:.3g}"), "kind": "bias"}
         said.append(f"{source}: {was.describe() if was is not None else 'not in the budget'} -> "
                     f"σ{out[source]['normal']:g} {SOURCES[source][0]} (bias): refined ({name})")
@@ -160,8 +159,7 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
         was = given.get(source)
         if was is None or mount not in ref.names or was.kind == "noise":
             continue
-        rest = 0.0 if was.kind == "bias" else min(1.0, span_s / (3.0 * (was.tau_s or math.inf)))
-        out[source] = {"normal": float(f"{was.sigma * math.sqrt(rest):.3g}"), "kind": "bias"}
+        out[source] = {"normal": float(f"{was.sigma * math.sqrt(unremoved_share(was, span_s)):.3g}"), "kind": "bias"}
         said.append(f"{source}: {was.describe()} -> σ{out[source]['normal']:g} {SOURCES[source][0]} (bias): its "
                     f"constant part is estimated with {mount}, only its wander over the pass is left")
     for source in VIBRATION if frame_sigma_deg > 0 else ():
@@ -170,6 +168,17 @@ def refined_budget(budget: ErrorBudget | None, ref: Refinement, span_s: float, l
             said.append(f"{source}: not in the budget -> σ{frame_sigma_deg:.3g} deg (noise): each keyframe's own "
                         "attitude error the refinement allowed for")
     return out, said
+
+
+def unremoved_share(source: ErrorSource, span_s: float) -> float:
+    """The share of ``source``'s variance a constant estimated over a pass of ``span_s`` seconds
+    leaves: none of a bias, all of a noise, of a Gauss-Markov error its wander about the pass's
+    mean, min(1, T / 3 tau) (the Ornstein-Uhlenbeck process' for T << tau)."""
+    if source.kind == "bias":
+        return 0.0
+    if source.kind == "noise":
+        return 1.0
+    return min(1.0, span_s / (3.0 * (source.tau_s or math.inf)))
 
 
 VIBRATION = ("vibration_roll_deg", "vibration_pitch_deg", "vibration_yaw_deg")

@@ -97,20 +97,17 @@ def read_photos(path: str | Path, *, geoid=None, dem=None) -> SourceData:
     return SourceData(table, DronePhotos.name, camera=camera, camera_attitude=True, notes=notes)
 
 
-POSE_COLUMNS = {"camera_lat": "lat_deg", "camera_lon": "lon_deg", "camera_h": "h_m", "camera_yaw": "yaw_deg",
-                "camera_pitch": "pitch_deg", "camera_roll": "roll_deg"}  # eoloc photo --json's keys: the table's
-
-
 def with_poses(table, poses: dict[str, dict[str, float]], poses_from: str) -> list:
     """The photos' records of ``table`` (read by :func:`read_photos`) given the poses of ``poses``
     ({file name: camera_lat ... camera_roll}, :func:`eoloc.io.photo.read_photo_poses`, read from
     ``poses_from``) in place of their own; returns an issue for each photo not among them (it keeps
     its own pose)."""
+    from ..photo import POSE_FIELDS
     from ..table import Issue
 
     names = [Path(str(f)).name for f in table.columns["file"]]
     found = np.array([n in poses for n in names], dtype=bool)
-    for key, column in POSE_COLUMNS.items():
+    for key, column in POSE_FIELDS.items():
         values = np.array(table.columns[column], dtype=np.float64)  # a copy: the reader's arrays stay as read
         values[found] = [poses[n][key] for n, ok in zip(names, found.tolist(), strict=True) if ok]
         table.columns[column] = values
