@@ -78,6 +78,7 @@ def klvdata_decode(data: bytes) -> int:
 
 def main(n: int = 3000) -> list[str]:
     from eoloc.io.klv import decode_klv_bytes, read_klv
+    from eoloc.io.klv.columnar import read_klv_columns
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -95,6 +96,7 @@ def main(n: int = 3000) -> list[str]:
                 t_k = best_time(lambda d=data: klvdata_decode(d), repeat=3)
                 rows.append(row(f"KLV decode, raw: {what}", f"{n / t_e:,.0f} packets/s", f"klvdata {n / t_k:,.0f}/s",
                                 t_k / t_e))
+            rows += columnar_rows(what, data, n, t_e, t_s, t_k if not vmti else None)
             ts = ts_file(Path(tmp) / f"s{int(vmti)}.ts", packets)
             raw = ts.read_bytes()
             assert read_klv(ts).n_good == n and stanag_ts(raw) == n
@@ -102,8 +104,33 @@ def main(n: int = 3000) -> list[str]:
             t_s = best_time(lambda d=raw: stanag_ts(d), repeat=3)
             rows.append(row(f"KLV decode, MPEG-TS: {what}", f"{n / t_e:,.0f} packets/s",
                             f"stanag4609 demux + decode {n / t_s:,.0f}/s", t_s / t_e))
+            t_c = best_time(lambda p=ts: read_klv_columns(p), repeat=3)
+            rows.append(row(f"KLV decode to columns, MPEG-TS: {what}", f"{n / t_c:,.0f} packets/s",
+                            f"stanag4609 demux + decode {n / t_s:,.0f}/s", t_s / t_c))
         rows.append(klv_out_row(pose_packets(n // 3)))
     return rows
+
+
+def columnar_rows(what: str, data: bytes, n: int, t_tolerant: float, t_stanag: float,
+                  t_klvdata: float | None) -> list[str]:
+    """The columnar reader (issue 54: compiled scanner, tolerant reader for what it declines) on
+    the same packets 10 times over (its rate is per packet; the peers' per-packet times come from
+    the n-packet stream above, where they take seconds), against the tolerant reader of today,
+    stanag4609 and klvdata."""
+    from eoloc.io.klv.columnar import decode_klv_columns
+
+    big = data * 10
+    cols = decode_klv_columns(big)  # (and compiles, or loads the cache)
+    assert len(cols) == 10 * n and cols.scanned == 10 * n
+    t_c = best_time(lambda: decode_klv_columns(big), repeat=3) / 10
+    out = [row(f"KLV decode to columns, raw: {what} (x10)", f"{n / t_c:,.0f} packets/s",
+               f"eoloc tolerant reader {n / t_tolerant:,.0f}/s", t_tolerant / t_c),
+           row(f"KLV decode to columns, raw: {what} (x10)", f"{n / t_c:,.0f} packets/s",
+               f"stanag4609 {n / t_stanag:,.0f}/s", t_stanag / t_c)]
+    if t_klvdata is not None:
+        out.append(row(f"KLV decode to columns, raw: {what} (x10)", f"{n / t_c:,.0f} packets/s",
+                       f"klvdata {n / t_klvdata:,.0f}/s", t_klvdata / t_c))
+    return out
 
 
 def klv_out_row(packets: list[bytes]) -> str:

@@ -131,7 +131,8 @@ MUTANTS = [
     Mutant("klv-alt", "io/klv/st0601.py", "_ALT = Mapped(2, F(-900), F(19000))",
            "_ALT = Mapped(2, F(-1000), F(19000))",
            ("tests/test_klv.py",), "ST 0601 altitudes offset by the wrong minimum"),
-    Mutant("vmti-imapb", "io/klv/st0903.py", "return s_r * (y - z) + lo", "return s_r * (y + z) + lo",
+    Mutant("vmti-imapb", "io/klv/st0903.py", "return self.s_r * (y - self.z) + self.lo",
+           "return self.s_r * (y + self.z) + self.lo",
            ("tests/test_klv.py", "tests/integration/test_independent_refs.py"),
            "ST 1201 IMAPB decoded with the zero offset's sign flipped"),
     # --- photos (issue 48)

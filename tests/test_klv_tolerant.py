@@ -33,12 +33,13 @@ from eoloc.io.klv import (
     frame_uas_packet,
     klv_telemetry,
     read_klv,
+    st0903,
     uas_items,
     vmti_detections,
 )
 from eoloc.io.klv.localset import encode_items
 from eoloc.io.klv.st0601 import FIELDS, Mapped, Special
-from eoloc.io.klv.st0903 import decode_vmti, encode_target, encode_vmti_set, imapb
+from eoloc.io.klv.st0903 import decode_vmti, encode_target, encode_vmti_set
 from eoloc.jobs.diagnose import diagnose_frames
 from eoloc.jobs.klv import klv_job
 from eoloc.rules import locate_ellipsoid
@@ -91,7 +92,7 @@ def test_imapb_decoder_equals_stanag4609s(spec, data):
     lo, hi, n = spec
     raw = data.draw(st.binary(min_size=n, max_size=n))
     ref = IMAPB(Fraction(str(lo)), Fraction(str(hi)), n).decode(raw)
-    ours = imapb(float(lo), float(hi), n)(raw)
+    ours = st0903.IMAPB(float(lo), float(hi), n)(raw)
     if isinstance(ref, IMAPSpecialValue):
         assert np.isnan(ours)
     else:

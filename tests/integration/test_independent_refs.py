@@ -128,13 +128,13 @@ def test_55_imapb_decodes_what_stanag4609_encodes(x, length, bounds):
     zero (where the zero offset matters) and ones that do not: within the format's resolution."""
     from stanag4609.imap import IMAPB
 
-    from eoloc.io.klv.st0903 import imapb
+    from eoloc.io.klv import st0903
 
     lo, hi = bounds
     x = min(max(x, lo), hi)
     codec = IMAPB(lo, hi, length)
     raw = codec.encode(x)
-    got = imapb(lo, hi, length)(raw)
+    got = st0903.IMAPB(lo, hi, length)(raw)
     want = codec.decode(raw)
     step = 2.0 ** (np.ceil(np.log2(hi - lo)) - (8 * length - 1))
     assert abs(got - float(want)) <= 1e-9 * max(1.0, abs(float(want))) and abs(got - x) <= step

@@ -1,6 +1,7 @@
 """MISB KLV in and out: ST 0601 / EG 0104 packets (raw KLV or MPEG-TS, one stream per KLV PID),
 ST 0903 VMTI targets and ST 1607 nested sets, decoded tolerantly (:mod:`.reader`), mapped into
-eoloc tables (:mod:`.tables`), and written back (:mod:`.encode`)."""
+eoloc tables (:mod:`.tables`), and written back (:mod:`.encode`); for archives, the same packets as
+column arrays at compiled speed (:mod:`.columnar`)."""
 
 from ...util.lazy import lazy_attributes
 
@@ -10,6 +11,7 @@ _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventio
     "frame_uas_packet": "encode", "uas_items": "encode", "with_target_location": "encode",
     "UAS_KEY": "reader", "KLVIssue": "reader", "KLVPacket": "reader", "KLVStream": "reader",
     "StreamNote": "reader", "decode_klv_bytes": "reader", "read_klv": "reader",
+    "KLVColumns": "columnar", "decode_klv_columns": "columnar", "read_klv_columns": "columnar",
     "TAGS": "tables", "klv_telemetry": "tables", "vmti_detections": "tables",
 }
 
@@ -17,6 +19,6 @@ _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventio
 __getattr__ = lazy_attributes(__name__, _WHERE)
 
 
-__all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote", "build_uas_packet",
-           "decode_klv_bytes", "encode_eg0104", "encode_uas_packet", "encode_vmti", "frame_uas_packet",
+__all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVColumns", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote",
+           "build_uas_packet", "decode_klv_bytes", "decode_klv_columns", "read_klv_columns", "encode_eg0104", "encode_uas_packet", "encode_vmti", "frame_uas_packet",
            "klv_telemetry", "read_klv", "uas_items", "vmti_detections", "with_target_location"]

@@ -13,6 +13,7 @@ it refuses the whole set on any of the above (README: "Real KLV").
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -42,6 +43,15 @@ class SetError(Exception):
     """The bytes cannot be read as a local set at all (raised only by :func:`ber_length`)."""
 
 
+def num(v: Any) -> float:
+    """A decoded value as a float; special values ('off earth', 'reserved', ...) become NaN."""
+    if isinstance(v, bool):
+        return float(v)
+    if isinstance(v, (int, float)):
+        return float(v) if math.isfinite(v) else math.nan
+    return math.nan
+
+
 def misb_time(raw: bytes) -> datetime:
     """A MISB precision time stamp (ST 0603: an 8-byte count of microseconds since 1970-01-01 UTC)
     as a UTC datetime. Every item time stamp (ST 0601 tag 2, ST 0903 tag 2, EG 0104's) is read
@@ -53,6 +63,36 @@ def misb_time(raw: bytes) -> datetime:
     if us > MAX_TIME_US:
         raise FieldError(f"time stamp {us} µs (0x{raw.hex().upper()}) is past the year 9999: not a time")
     return EPOCH + timedelta(microseconds=us)
+
+
+@dataclass(frozen=True, slots=True)
+class UInt:
+    """Decoder of an unsigned integer item of 1 to 8 bytes, within [lo, hi] where given."""
+
+    lo: int | None = None
+    hi: int | None = None
+
+    def __call__(self, raw: bytes) -> int:
+        if not raw or len(raw) > 8:
+            raise FieldError(f"1 to 8 bytes expected, {len(raw)} sent")
+        v = int.from_bytes(raw, "big")
+        if (self.lo is not None and v < self.lo) or (self.hi is not None and v > self.hi):
+            raise FieldError(f"value {v} outside {self.lo}..{self.hi}")
+        return v
+
+
+@dataclass(frozen=True, slots=True)
+class Text:
+    """Decoder of a text item: UTF-8 with trailing NULs cut; ``strict``: bytes that are not UTF-8
+    are a :class:`FieldError` (ST 0601), else replaced (ST 0903, which keeps the set)."""
+
+    strict: bool = True
+
+    def __call__(self, raw: bytes) -> str:
+        try:
+            return raw.decode("utf-8", errors="strict" if self.strict else "replace").rstrip("\x00")
+        except UnicodeDecodeError:
+            raise FieldError("not UTF-8 text") from None
 
 
 def ber_length(data: bytes, pos: int, end: int) -> tuple[int, int, bool]:

@@ -20,6 +20,7 @@ What is ours and what is not:
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections import Counter
 from dataclasses import dataclass, field
@@ -43,6 +44,8 @@ def restore_key_heads(data: bytes) -> tuple[bytes, int]:
     """The bytes with the first 5 bytes of the ST 0601 key (06 0E 2B 34 02) put back before every
     occurrence of its last 11 that lacks them (streams cut that way: sitrec's day/night samples),
     and how many were put back (0: the bytes unchanged)."""
+    if data.count(KEY_TAIL) == data.count(UAS_KEY):  # (neither overlaps itself: every tail has its head)
+        return data, 0
     at, pos = [], data.find(KEY_TAIL)
     while pos >= 0:
         if data[max(pos - 5, 0):pos] != KEY_HEAD:
@@ -115,6 +118,13 @@ class KLVStream:
     packets: list[KLVPacket]
     issues: list[KLVIssue] = field(default_factory=list)
     notes: list[StreamNote] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.packets)
+
+    @property
+    def first_packet(self) -> int:
+        return self.packets[0].index
 
     @property
     def n_good(self) -> int:
@@ -258,74 +268,101 @@ def decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int,
     Packets whose key lost its first 5 bytes are recovered when that gives more good packets (each
     must still pass its checksum), and a note says so.
     """
-    result = _decode_klv_bytes(data, path, pts=pts, container=container, stream=stream, first_index=first_index,
-                               strict=strict)
+    return with_repaired_keys(data, pts, stream, first_index, lambda d, marks: _decode_klv_bytes(
+        d, path, pts=marks, container=container, stream=stream, first_index=first_index, strict=strict))
+
+
+def with_repaired_keys(data: bytes, pts, stream: str, first_index: int, decode):
+    """``decode(data, pts)``, or ``decode`` of the bytes with the ST 0601 keys' lost heads put back
+    (:func:`restore_key_heads`) where that gives more good packets, with a note saying so (the
+    reader's rule for either kind of result: objects or columns)."""
+    result = decode(data, pts)
     repaired, count = restore_key_heads(data)
     if count and pts is None:  # (a transport stream's PTS marks are byte offsets of the unrepaired bytes)
-        again = _decode_klv_bytes(repaired, path, container=container, stream=stream, first_index=first_index,
-                                  strict=strict)
-        if again.n_good > result.n_good:
+        again = decode(repaired, None)
+        if len(again) > len(result):
             note = StreamNote(stream, "damaged key", "key", f"{count} packet key(s) lacked their first 5 bytes "
-                              f"({KEY_HEAD.hex(' ')}): put back, and {again.n_good - result.n_good} more packet(s) "
+                              f"({KEY_HEAD.hex(' ')}): put back, and {len(again) - len(result)} more packet(s) "
                               "then pass their checksum; byte offsets are those of the repaired stream",
-                              count, again.packets[0].index if again.packets else first_index)
-            return KLVStream(again.path, again.container, again.packets, again.issues, [note, *again.notes])
+                              count, again.first_packet if len(again) else first_index)
+            again.notes.insert(0, note)
+            return again
     return result
 
 
 def _decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int, float | None]] | None = None,
                       container: str = "klv", stream: str = "", first_index: int = 0,
                       strict: bool = False) -> KLVStream:
-    packets: list[KLVPacket] = []
-    issues: list[KLVIssue] = []
-    notes = _Notes()
-    marks = np.array([m[0] for m in pts], dtype=np.int64) if pts else None
-    keys = PacketKeys(data)
-    n = first_index
-    pos = 0
-    size = len(data)
-    after_bad = False  # bytes up to the next key after a bad packet belong to that packet: not reported twice
-    while pos < size:
-        k = keys.find(pos)
+    framer = Framer(data, path, stream=stream, first_index=first_index, strict=strict)
+    while framer.pos < len(data):
+        framer.step()
+    packets = framer.packets
+    if pts:
+        times = packet_pts([p.offset for p in packets], pts)
+        packets = [dataclasses.replace(p, pts_s=t) for p, t in zip(packets, times, strict=True)]
+    return KLVStream(path, container, packets, framer.issues, framer.notes.result())
+
+
+def packet_pts(offsets, pts: list[tuple[int, float | None]]) -> list[float | None]:
+    """Each packet's PTS: that of the last (byte offset, PTS) mark at or before its key."""
+    marks = np.array([m[0] for m in pts], dtype=np.int64)
+    at = np.maximum(np.searchsorted(marks, np.asarray(offsets, dtype=np.int64), side="right") - 1, 0)
+    return [pts[j][1] for j in at.tolist()]
+
+
+class Framer:
+    """The tolerant reader's framing, one step at a time (see the module notes): each
+    :meth:`step` reads the next packet (or reports the bytes before it) from ``pos`` and keeps
+    the good packet, the issue and the notes. The columnar reader steps it over what its compiled
+    scanner does not take."""
+
+    def __init__(self, data: bytes, path: str, *, stream: str = "", first_index: int = 0,
+                 strict: bool = False) -> None:
+        self.data, self.path, self.stream, self.strict = data, path, stream, strict
+        self.packets: list[KLVPacket] = []
+        self.issues: list[KLVIssue] = []
+        self.notes = _Notes()
+        self.keys: PacketKeys | None = None  # (made on the first step: the columnar reader may need none)
+        self.n = first_index  # the number of the next packet (good and bad counted)
+        self.pos = 0
+        self.after_bad = False  # bytes up to the next key after a bad packet belong to it: not reported twice
+
+    def step(self) -> None:
+        data, path, n, pos = self.data, self.path, self.n, self.pos
+        size = len(data)
+        if self.keys is None:
+            self.keys = PacketKeys(data)
+        k = self.keys.find(pos)
         if k < 0:
-            if size - pos and not after_bad:
-                issues.append(KLVIssue(path, None, pos, "skipped bytes", f"{size - pos} bytes after the last packet "
-                                       "are not a KLV packet"))
-            break
-        if k > pos and not after_bad:
-            issues.append(KLVIssue(path, None, pos, "skipped bytes",
-                                   f"{k - pos} bytes before the next packet key are not a packet"))
-        after_bad = True
+            if size - pos and not self.after_bad:
+                self.issues.append(KLVIssue(path, None, pos, "skipped bytes", f"{size - pos} bytes after the last "
+                                            "packet are not a KLV packet"))
+            self.pos = size
+            return
+        if k > pos and not self.after_bad:
+            self.issues.append(KLVIssue(path, None, pos, "skipped bytes",
+                                        f"{k - pos} bytes before the next packet key are not a packet"))
+        self.after_bad = True
+        self.n += 1
+        self.pos = k + 1  # after a bad packet: the next key may sit inside what its bad length claimed
         end, start, why = packet_end(data, k)
         if end is None:
-            issues.append(KLVIssue(path, n, k, "truncated", why))
-            n += 1
-            pos = k + 1  # the next key may sit inside what the bad length claimed
-            continue
+            self.issues.append(KLVIssue(path, n, k, "truncated", why))
+            return
         raw = data[k:end]
         vmti_sum = raw[:16] == VMTI_KEY and raw[-4:-2] == b"\x01\x02"  # ST 0903's checksum item is optional
         if (raw[:16] == UAS_KEY or vmti_sum) and (why := checksum_problem(raw)) is not None:
-            issues.append(KLVIssue(path, n, k, "checksum", why))
-            n += 1
-            pos = k + 1
-            continue
+            self.issues.append(KLVIssue(path, n, k, "checksum", why))
+            return
         standard, values, pnotes = decode_packet(raw, start - k)
-        if strict and (why := _strict_check(raw)) is not None:
-            issues.append(KLVIssue(path, n, k, "non-standard", why))
-            n += 1
-            pos = end
-            after_bad = False
-            continue
-        notes.add(stream, n, pnotes)
-        pts_s = None
-        if marks is not None:
-            j = int(np.searchsorted(marks, k, side="right")) - 1
-            pts_s = pts[max(j, 0)][1]
-        packets.append(KLVPacket(n, k, pts_s, raw, values, stream, standard))
-        n += 1
-        pos = end
-        after_bad = False
-    return KLVStream(path, container, packets, issues, notes.result())
+        self.pos = end
+        if self.strict and (why := _strict_check(raw)) is not None:
+            self.issues.append(KLVIssue(path, n, k, "non-standard", why))
+            self.after_bad = False
+            return
+        self.notes.add(self.stream, n, pnotes)
+        self.packets.append(KLVPacket(n, k, None, raw, values, self.stream, standard))
+        self.after_bad = False
 
 
 def split_klv(data: bytes, path: str = "<bytes>") -> list[tuple[bytes, float]]:
@@ -360,7 +397,21 @@ def looks_like_ts(data: bytes) -> bool:
 
 def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
     """KLV packets from every KLV elementary stream (PID) of an MPEG-TS file, with their PTS; each
-    PID is its own stream ("PID n").
+    PID is its own stream ("PID n"); see :func:`ts_klv_parts`."""
+    issues, parts = ts_klv_parts(data, path, strict=strict, decode=decode_klv_bytes)
+    packets: list[KLVPacket] = []
+    notes: list[StreamNote] = []
+    for s, arrival in parts:
+        packets += s.packets
+        issues += s.issues
+        notes += [arrival, *s.notes] if arrival else s.notes
+    return KLVStream(path, "mpegts", packets, issues, notes)
+
+
+def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode) -> tuple[list[KLVIssue], list[tuple[Any, Any]]]:
+    """The transport's issues, and each KLV PID's bytes decoded by ``decode`` (a reader of
+    :func:`decode_klv_bytes`'s signature: objects or columns) with the note on its timing by
+    arrival (or None), in PID order.
 
     Asynchronous carriage (stream_type 0x06, 'KLVA') and synchronous carriage (0x15, metadata
     access units) both end up as one byte stream per PID, framed like a raw KLV file. A packet's
@@ -405,18 +456,14 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
         buf.extend(payload)
     if not per_pid:
         raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
-    packets: list[KLVPacket] = []
-    notes: list[StreamNote] = []
+    parts = []
     n = 0
     for pid, (buf, marks) in sorted(per_pid.items()):
-        s = decode_klv_bytes(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
-                             first_index=n, strict=strict)
-        if by_arrival.get(pid):
-            notes.append(StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
-                                    "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
-                                    "before it in the stream", by_arrival[pid], n))
-        n += len(s.packets) + s.n_bad
-        packets += s.packets
-        issues += s.issues
-        notes += s.notes
-    return KLVStream(path, "mpegts", packets, issues, notes)
+        s = decode(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
+                   first_index=n, strict=strict)
+        arrival = (StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
+                              "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
+                              "before it in the stream", by_arrival[pid], n) if by_arrival.get(pid) else None)
+        n += len(s) + sum(1 for i in s.issues if i.packet is not None)
+        parts.append((s, arrival))
+    return issues, parts

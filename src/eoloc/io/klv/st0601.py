@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
 
-from .localset import FieldError, Note, decode_table, misb_time, parse_items
+from .localset import FieldError, Note, Text, UInt, decode_table, misb_time, parse_items
 from .st0903 import decode_vmti
 
 MULTIPLE = frozenset({100, 101})  # ST 1607 segment and amend sets may repeat
@@ -68,25 +68,7 @@ class Mapped:
         return decode
 
 
-def _uint(lo: int | None = None, hi: int | None = None):
-    def decode(raw: bytes) -> int:
-        if not raw or len(raw) > 8:
-            raise FieldError(f"1 to 8 bytes expected, {len(raw)} sent")
-        v = int.from_bytes(raw, "big")
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise FieldError(f"value {v} outside {lo}..{hi}")
-        return v
-    return decode
-
-
-
-def _text(raw: bytes) -> str:
-    try:
-        return raw.decode("utf-8").rstrip("\x00")
-    except UnicodeDecodeError:
-        raise FieldError("not UTF-8 text") from None
-
-
+_text = Text(strict=True)
 F = Fraction
 _LAT = Mapped(4, F(-90), F(90), True, Special.RESERVED)
 _LON = Mapped(4, F(-180), F(180), True, Special.RESERVED)
@@ -120,8 +102,8 @@ FIELDS: dict[int, tuple[str, Any]] = {
     42: ("Target Location Elevation", _ALT),
     45: ("Target Error Estimate - CE90", Mapped(2, F(0), F(4095))),
     46: ("Target Error Estimate - LE90", Mapped(2, F(0), F(4095))),
-    47: ("Generic Flag Data", _uint(0, 63)),
-    65: ("UAS Datalink LS Version Number", _uint()),
+    47: ("Generic Flag Data", UInt(0, 63)),
+    65: ("UAS Datalink LS Version Number", UInt()),
     75: ("Sensor Ellipsoid Height", _ALT), 78: ("Frame Center Height Above Ellipsoid", _ALT),
     **{t: (f"Corner {'Latitude' if t % 2 == 0 else 'Longitude'} Point {(t - 80) // 2} (Full)",
            _LAT_FC if t % 2 == 0 else _LON_FC) for t in range(82, 90)},

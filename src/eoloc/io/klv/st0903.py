@@ -18,6 +18,8 @@ from .localset import (
     FieldError,
     Note,
     SetError,
+    Text,
+    UInt,
     ber_length,
     ber_oid,
     decode_table,
@@ -29,41 +31,36 @@ from .localset import (
 )
 
 
-def imapb(lo: float, hi: float, length: int):
-    """ST 1201 IMAPB decoder for [lo, hi] in ``length`` bytes; special code words give NaN."""
-    b_pow = math.ceil(math.log2(hi - lo))
-    d_pow = 8 * length - 1
-    s_f = 2.0 ** (d_pow - b_pow)
-    s_r = 2.0 ** (b_pow - d_pow)
-    z = s_f * lo - math.floor(s_f * lo) if lo < 0 < hi else 0.0
-    top = 1 << d_pow
-    exact_top = (hi - lo) == 2.0 ** b_pow  # interval a power of two: the MSB-only word is the maximum
+class IMAPB:
+    """ST 1201 IMAPB decoder for [lo, hi] in ``length`` bytes; special code words give NaN.
+    Its constants (``s_r``, ``z``, ``top``, ``exact_top``) are read by the columnar decoder too."""
 
-    def decode(raw: bytes) -> float:
-        if len(raw) != length:
-            raise FieldError(f"{length} bytes expected, {len(raw)} sent")
+    def __init__(self, lo: float, hi: float, length: int) -> None:
+        b_pow = math.ceil(math.log2(hi - lo))
+        d_pow = 8 * length - 1
+        s_f = 2.0 ** (d_pow - b_pow)
+        self.lo, self.length = lo, length
+        self.s_r = 2.0 ** (b_pow - d_pow)
+        self.z = s_f * lo - math.floor(s_f * lo) if lo < 0 < hi else 0.0
+        self.top = 1 << d_pow
+        self.exact_top = (hi - lo) == 2.0 ** b_pow  # interval a power of two: the MSB-only word is the maximum
+
+    def __call__(self, raw: bytes) -> float:
+        if len(raw) != self.length:
+            raise FieldError(f"{self.length} bytes expected, {len(raw)} sent")
         y = int.from_bytes(raw, "big")
-        if y >= top and not (exact_top and y == top):
+        if y >= self.top and not (self.exact_top and y == self.top):
             return math.nan
-        return s_r * (y - z) + lo
-    return decode
+        return self.s_r * (y - self.z) + self.lo
 
 
-_FOV = imapb(0.0, 180.0, 2)
-_OFFSET = imapb(-19.2, 19.2, 3)
-_HAE = imapb(-900.0, 19000.0, 2)
-_LAT, _LON, _SIGMA = imapb(-90.0, 90.0, 4), imapb(-180.0, 180.0, 4), imapb(0.0, 650.0, 2)
+_FOV = IMAPB(0.0, 180.0, 2)
+_OFFSET = IMAPB(-19.2, 19.2, 3)
+_HAE = IMAPB(-900.0, 19000.0, 2)
+_LAT, _LON, _SIGMA = IMAPB(-90.0, 90.0, 4), IMAPB(-180.0, 180.0, 4), IMAPB(0.0, 650.0, 2)
 
 
-def _uint(raw: bytes) -> int:
-    if not raw or len(raw) > 8:
-        raise FieldError(f"1 to 8 bytes expected, {len(raw)} sent")
-    return int.from_bytes(raw, "big")
-
-
-def _text(raw: bytes) -> str:
-    return raw.decode("utf-8", errors="replace").rstrip("\x00")
-
+_uint, _text = UInt(), Text(strict=False)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..table import Issue, Table
+from .localset import num
 from .reader import KLVPacket, KLVStream
 
 # ST 0601 tags eoloc reads (name -> tag); see klv_telemetry for how they combine
@@ -36,15 +37,6 @@ OFFSET_CORNER_TAGS = tuple(range(26, 34))  # lat1, lon1, ..., lat4, lon4 as offs
 FULL_CORNER_TAGS = tuple(range(82, 90))  # lat1, lon1, ..., lat4, lon4
 SLANT_RANGE_MEASURED = 1 << 4  # tag 47 bit: slant range measured (laser) rather than computed
 POSE_TAGS = {"latitude (13)": (13,), "longitude (14)": (14,), "height (15 or 75)": (15, 75), "heading (5)": (5,)}
-
-
-def num(v: Any) -> float:
-    """A decoded value as a float; special values ('off earth', 'reserved', ...) become NaN."""
-    if isinstance(v, bool):
-        return float(v)
-    if isinstance(v, (int, float)):
-        return float(v) if math.isfinite(v) else math.nan
-    return math.nan
 
 
 def fill_forward(col: np.ndarray) -> np.ndarray:
