@@ -13,6 +13,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import eoloc
 from eoloc.cli import main
@@ -133,3 +135,56 @@ def test_resume_skips_what_is_done_and_redoes_a_changed_file(archive, tmp_path):
 def test_nothing_to_do_is_a_clear_message(tmp_path):
     r = _run([tmp_path / "nothing-here", "--out", tmp_path / "o"])
     assert r.exit_code == 2 and "no KLV stream" in r.output and "nothing-here" in r.output
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.data())
+def test_the_archives_footprint_table_is_the_footprint_features(data):
+    """`eoloc batch` builds the corner footprints as a table in vectorised calls
+    (`corner_footprint_table`); they are the GeoJSON features `eoloc klv` writes, polygon for
+    polygon (the same vertices, counter-clockwise by pyproj's geodesic area, cut at the
+    antimeridian), for footprints anywhere: small and large, across +-180, near the poles,
+    degenerate, with missing corners; and the properties are the same columns."""
+    import shapely
+    from pyproj import Geod
+    from shapely.geometry import shape
+
+    from eoloc.io.records import Records
+    from eoloc.io.table import Table
+    from eoloc.jobs.klvframes import corner_footprint_features, corner_footprint_table
+
+    n = data.draw(st.integers(1, 30))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    lat0 = rng.choice([rng.uniform(-60, 60, n), rng.uniform(-89.9, 89.9, n)])
+    lon0 = rng.choice([rng.uniform(-180, 180, n), rng.choice([-179.99, 179.99], n)])
+    size = rng.choice([1e-4, 0.01, 0.5, 5.0, 30.0])
+    c = {"time_s": np.where(rng.random(n) < 0.2, np.nan, 1.7e9 + np.arange(n)),
+         "fc_h_m": np.where(rng.random(n) < 0.2, np.nan, rng.uniform(-100, 4000, n)),
+         "stream": rng.choice(["", "PID 497", "PID 498"], n).astype(str)}
+    turn = rng.choice([-1.0, 1.0], n) * np.pi / 2  # corners round the centre, either way (image borders run
+    start = rng.uniform(0, 2 * np.pi, n)              # clockwise on the ground seen from above, or not)
+    for k in range(4):
+        a = start + k * turn + rng.uniform(-0.3, 0.3, n)
+        r = size * rng.uniform(0.5, 1.5, n)
+        c[f"corner{k + 1}_lat_deg"] = np.clip(lat0 + r * np.sin(a), -90, 90)
+        c[f"corner{k + 1}_lon_deg"] = (lon0 + r * np.cos(a) + 180) % 360 - 180
+    c["corner2_lat_deg"] = np.where(rng.random(n) < 0.1, c["corner1_lat_deg"], c["corner2_lat_deg"])  # degenerate
+    c["corner3_lon_deg"] = np.where(rng.random(n) < 0.1, np.nan, c["corner3_lon_deg"])  # a corner missing
+    tel = Table("t", c, np.arange(n) * 3)
+    every = data.draw(st.integers(1, 3))
+    feats = corner_footprint_features(tel, None, every=every)
+    props, geoms = corner_footprint_table(tel, None, every=every)
+    want = Records.from_rows([f["properties"] for f in feats])
+    assert list(props.columns) == list(want.columns)
+    for k in want.columns:
+        assert props[k].tolist() == want[k].tolist() or np.array_equal(props[k], want[k], equal_nan=True), k
+    geod = Geod(ellps="WGS84")
+    for f, g in zip(feats, geoms, strict=True):
+        assert (f["geometry"] is None) == (g is None)
+        if g is None:
+            continue
+        assert shapely.equals_exact(g, shape(f["geometry"]), tolerance=1e-9), (f["geometry"], g)
+        for poly in getattr(g, "geoms", [g]):
+            x, y = poly.exterior.coords.xy
+            if poly.is_valid and max(x) - min(x) < 90:  # (a ring round a pole has no inside to point to)
+                assert geod.polygon_area_perimeter(x, y)[0] >= -1e-3  # counter-clockwise (or degenerate)

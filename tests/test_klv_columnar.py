@@ -54,7 +54,7 @@ def assert_same(fast: KLVColumns, ref: KLVColumns) -> None:
     """Every column, issue and note equal; floats to 1e-6 of an LSB (the mapped values are
     computed in float64 by the scanner, exactly rounded from fractions by the reader)."""
     assert len(fast) == len(ref)
-    for name in ("index", "offset", "stream", "standard", "time_us", "present", "vmti_i", "target_i"):
+    for name in ("index", "offset", "stream", "standard", "time_us", "present", "has_vmti", "target_i"):
         np.testing.assert_array_equal(getattr(fast, name), getattr(ref, name), err_msg=name)
     np.testing.assert_array_equal(np.isnan(fast.pts_s), np.isnan(ref.pts_s))
     np.testing.assert_array_equal(np.nan_to_num(fast.pts_s), np.nan_to_num(ref.pts_s))

@@ -57,15 +57,19 @@ def point_geometries(records: Records):
     return geoms
 
 
-def feature_geometries(features: list[dict]):
-
+def feature_geometries(features):
+    """Shapely geometries (N,) of GeoJSON features, or the geometries themselves where
+    ``features`` is already an array of them (None: no geometry)."""
+    if isinstance(features, np.ndarray):
+        return features
     from shapely.geometry import shape
 
     return np.array([None if f.get("geometry") is None else shape(f["geometry"]) for f in features], dtype=object)
 
 
-def geo_table(records: Records, features: list[dict] | None = None):
-    """(pyarrow table with a WKB ``geometry`` column, the GeoParquet column metadata)."""
+def geo_table(records: Records, features: list[dict] | np.ndarray | None = None):
+    """(pyarrow table with a WKB ``geometry`` column, the GeoParquet column metadata); ``features``:
+    GeoJSON features or an array of shapely geometries, one per record (None: the records' points)."""
     import pyarrow as pa
     import shapely
     from pyproj import CRS
@@ -81,7 +85,8 @@ def geo_table(records: Records, features: list[dict] | None = None):
     wkb = np.full(geoms.shape, None, dtype=object)
     if sub.size:
         wkb[present] = shapely.to_wkb(sub, output_dimension=3 if has_z else 2, flavor="iso")
-    gtypes = sorted({GEOMETRY_TYPES[int(t)] + (" Z" if z else "") for t, z in zip(kinds, zs, strict=True)})
+    pairs = np.unique(np.asarray(kinds, dtype=np.int64) * 2 + np.asarray(zs, dtype=np.int64))
+    gtypes = sorted({GEOMETRY_TYPES[int(p) // 2] + (" Z" if p % 2 else "") for p in pairs})
     bounds = shapely.total_bounds(sub) if sub.size else [math.nan] * 4
     crs = CRS.from_epsg(4979 if has_z else 4326)
     meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": crs.to_json_dict(), "edges": "planar"}
@@ -106,7 +111,7 @@ def arrow_table(records: Records, *, labels: dict[str, np.ndarray] | None = None
     return pa.table({k: column(k, v) for k, v in records.columns.items() if k != "geometry"})
 
 
-def write_geoparquet(path: str | Path, records: Records, features: list[dict] | None = None) -> Path:
+def write_geoparquet(path: str | Path, records: Records, features: list[dict] | np.ndarray | None = None) -> Path:
     """One layer as a GeoParquet file (zstd)."""
     import pyarrow.parquet as pq
 

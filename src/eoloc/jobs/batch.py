@@ -227,15 +227,16 @@ def _layers_klv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Re
     sensor, budget = misb_setup(_config(settings.config_path))
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
     job = klv_job(task.path, dem=dem, sensor=sensor, budget=budget, footprint_every=settings.footprint_every,
-                  strict=settings.strict, assume=settings.assume, map_layers=False)
+                  strict=settings.strict, assume=settings.assume, map_layers=False, columnar=True)
     frames = frame_records(job.telemetry, job.check).columns
     frames = {"lat_deg": frames.pop("eoloc_lat_deg"), "lon_deg": frames.pop("eoloc_lon_deg"),
               "h_m": frames.pop("eoloc_h_m"), **frames}
     prints = job.layers["footprints"]
+    footprints = job.footprint_table or (Records.from_rows([f["properties"] for f in prints]), prints)
     issues = [str(i) for i in [*job.stream.issues, *job.issues]]
     layers = {"fixes": (job.records, None), "packets": (telemetry_records(job.telemetry), None),
               "frames": (Records(frames), None),
-              "footprints": (Records.from_rows([f["properties"] for f in prints]), prints),
+              "footprints": footprints,
               "issues": (_issue_records(issues), None)}
     return layers, len(job.telemetry)
 

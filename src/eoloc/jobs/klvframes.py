@@ -14,6 +14,7 @@ import numpy as np
 from ..geodesy import horizontal_distance_m
 from ..ground.footprint import polygon_geometry
 from ..ground.frame import FrameGeometry, frame_geometry, misb_sensor, packet_pose
+from ..io.records import Records
 from ..io.table import Table
 from ..result import Fixes, Status
 from ..rules import surface_rule
@@ -87,6 +88,49 @@ def corner_footprint_features(tel: Table, geom: FrameGeometry | None = None, eve
         feats.append({"type": "Feature", "geometry": geometry,
                       "properties": _frame_properties(tel, i)})
     return feats
+
+
+def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every: int = 1
+                           ) -> tuple[Records, np.ndarray]:
+    """:func:`corner_footprint_features` as a table for the archive: the properties as columns
+    (frame, time_s and stream where there is one, as the features carry them) and the polygons as
+    an array of shapely geometries (None where a corner is missing), built in vectorised calls.
+    The rings :func:`eoloc.ground.footprint.polygon_geometry` would build the same way (within
+    10 degrees of longitude, away from the poles and the antimeridian) are oriented by their
+    planar signed area; the others (and near-degenerate ones) go through it one by one."""
+    import shapely
+    from shapely.geometry import shape
+
+    c = tel.columns
+    rows = np.arange(0, len(tel), max(every, 1))
+    if geom is None:
+        lat = np.stack([c[f"corner{k + 1}_lat_deg"][rows] for k in range(4)], -1)
+        lon = np.stack([c[f"corner{k + 1}_lon_deg"][rows] for k in range(4)], -1)
+        h = np.repeat(c["fc_h_m"][rows][:, None], 4, axis=1)
+    else:
+        lat, lon, h = geom.corners.lat_deg[rows], geom.corners.lon_deg[rows], geom.corners.h_m[rows]
+    h = np.where(np.isfinite(h), h, 0.0)
+    ok = np.all(np.isfinite(lat) & np.isfinite(lon), axis=1)
+    with np.errstate(invalid="ignore"):
+        span_lon, span_lat = np.ptp(lon, axis=1), np.ptp(lat, axis=1)
+        twice_area = np.sum(lon * np.roll(lat, -1, axis=1) - np.roll(lon, -1, axis=1) * lat, axis=1)
+        simple = ok & (span_lon < 10.0) & (np.abs(lon).max(axis=1) < 170.0) & (np.abs(lat).max(axis=1) < 80.0) & \
+            (np.abs(twice_area) > 1e-6 * (span_lon ** 2 + span_lat ** 2))
+    ring = np.stack([lon, lat, h], -1)
+    ring = np.where((twice_area < 0)[:, None, None], ring[:, ::-1], ring)  # counter-clockwise, as RFC 7946 wants
+    ring = np.round(np.concatenate([ring, ring[:, :1]], axis=1), 10)  # closed; as the GeoJSON rings are rounded
+    geoms = np.full(rows.size, None, dtype=object)
+    if simple.any():
+        geoms[simple] = shapely.polygons(ring[simple])
+    for j in np.flatnonzero(ok & ~simple):
+        geoms[j] = shape(polygon_geometry(lon[j], lat[j], h[j]))
+    time_s = c["time_s"][rows]
+    props: dict[str, np.ndarray] = {"frame": np.asarray(tel.line)[rows].astype(np.int64),
+                                    "time_s": np.where(np.isfinite(time_s), time_s, np.nan)}
+    if "stream" in c and np.any(c["stream"][rows] != ""):
+        names = c["stream"][rows]
+        props["stream"] = np.where(names != "", names.astype(object), None)
+    return Records(props), geoms
 
 
 def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, every: int = 1,
@@ -173,6 +217,20 @@ def vmti_frames(tel: Table, det: Table):
     return row, found, hfov, vfov, usable
 
 
+def camera_groups(hfov: np.ndarray, vfov: np.ndarray, w: np.ndarray, h: np.ndarray, rows: np.ndarray
+                  ) -> list[tuple[tuple[float, float, int, int], np.ndarray]]:
+    """The ``rows`` (a mask) grouped by camera: ((hfov, vfov, width, height), their indices), groups
+    in order of their first row."""
+    idx = np.flatnonzero(rows)
+    if not idx.size:
+        return []
+    keys = np.stack([hfov[idx], vfov[idx], np.trunc(w[idx]), np.trunc(h[idx])], -1)
+    uniq, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    return [((float(uniq[g, 0]), float(uniq[g, 1]), int(uniq[g, 2]), int(uniq[g, 3])), idx[inverse == g])
+            for g in np.argsort(first, kind="stable")]
+
+
 def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
                 base: SensorModel | None = None) -> VMTIFixes:
     """Geolocate VMTI detections with their own packet's pose and field of view.
@@ -192,12 +250,8 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
     unc: dict[str, np.ndarray] = {}
     cov_enu = effects = tau = None
     pose_all = packet_pose(tel).take(row) if n else None
-    groups = {}
     status[found & ~usable] = int(Status.INVALID_INPUT)
-    for i in np.flatnonzero(usable):
-        groups.setdefault((float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])), []).append(i)
-    for (hf, vf, wi, hi), idx in groups.items():
-        idx = np.asarray(idx)
+    for (hf, vf, wi, hi), idx in camera_groups(hfov, vfov, w, h, usable):
         cam = Camera.from_hfov(hf, wi, hi, vfov_deg=vf)
         sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
                              base.lever_arm_m)

@@ -31,11 +31,12 @@ SPEC_LO, SPEC_STEP, SPEC_ZERO = 0, 1, 2
 N_SPEC_F = 3
 N_TAGS = 128  # tags of one BER-OID byte have table rows; longer tags are unknown items
 MAX_TAG = 16384  # tags of at most 2 BER-OID bytes are checked for repeats; longer ones make a packet unclean
-# target columns: integers (packet row, target id, centroid, box corners, centroid row and column; -1: absent)
-T_ROW, T_ID = 0, 1
-N_TARGET_I, N_TARGET_F = 7, 6  # floats: offset lat/lon, HAE, location lat/lon/HAE (NaN: absent)
-# per-packet VMTI columns: integers (has a VMTI set, frame width, frame height), floats (fields of view)
-N_VMTI_I, N_VMTI_F = 3, 2
+# target columns: integers (packet row, target id, centroid, box corners, centroid row and column, 1 where
+# a location pack is sent; -1: absent)
+T_ROW, T_ID, T_LOC = 0, 1, 7
+N_TARGET_I, N_TARGET_F = 8, 6  # floats: offset lat/lon, HAE, location lat/lon/HAE (NaN: absent)
+# per-packet VMTI columns (floats: the items the VMTI table gives a column; NaN absent)
+N_VMTI_F = 4
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -236,6 +237,7 @@ def decode_targets(buf, p, end, tables, row, tg_i, tg_f, ntg, stamp, serial, max
                 if n != 10 and n != 16 and n != 22:
                     return False, ntg, serial
                 # lat, lon, HAE: rows 0, 1, 2 of the location pack's own IMAPB table
+                tg_i[ntg, T_LOC] = 1
                 tg_f[ntg, col] = imapb(buf, q, 4, lspec_i, lspec_f, 0)
                 tg_f[ntg, col + 1] = imapb(buf, q + 4, 4, lspec_i, lspec_f, 1)
                 tg_f[ntg, col + 2] = imapb(buf, q + 8, 2, lspec_i, lspec_f, 2)
@@ -258,7 +260,7 @@ def decode_targets(buf, p, end, tables, row, tg_i, tg_f, ntg, stamp, serial, max
 
 
 @njit(**_JIT)
-def decode_vmti(buf, p, end, tables, row, vm_i, vm_f, tg_i, tg_f, ntg, stamp, serial, max_time_us, min_version):
+def decode_vmti(buf, p, end, tables, row, has_vmti, vm_f, tg_i, tg_f, ntg, stamp, serial, max_time_us, min_version):
     """A VMTI set (ST 0601 tag 74's value) into the packet's VMTI columns and target rows:
     (clean, target rows after, serial after)."""
     vspec_i, vspec_f = tables[2], tables[3]
@@ -266,9 +268,8 @@ def decode_vmti(buf, p, end, tables, row, vm_i, vm_f, tg_i, tg_f, ntg, stamp, se
     ok, _ = scan_set(buf, p, end, stamp, serial)
     if not ok:
         return False, ntg, serial
-    vm_i[row, :] = -1
     vm_f[row, :] = np.nan
-    vm_i[row, 0] = 1
+    has_vmti[row] = True
     version = np.int64(-1)
     reported = np.int64(-1)
     series_p = np.int64(-1)
@@ -290,10 +291,7 @@ def decode_vmti(buf, p, end, tables, row, vm_i, vm_f, tg_i, tg_f, ntg, stamp, se
             elif tag == 6:
                 reported = iv
             if col >= 0:
-                if kind == K_UINT:
-                    vm_i[row, col] = iv
-                else:
-                    vm_f[row, col] = fv
+                vm_f[row, col] = fv
         q += n
     if version < min_version:  # missing (a note) or ST 0903.3's mappings: the tolerant reader's
         return False, ntg, serial
@@ -310,7 +308,7 @@ def decode_vmti(buf, p, end, tables, row, vm_i, vm_f, tg_i, tg_f, ntg, stamp, se
 
 @njit(**_JIT)
 def decode_run(buf, vstarts, ends, n, tables, n_cols, max_time_us, min_version, time_tag):
-    """Decode ``n`` framed ST 0601 packets into columns: (clean, values, present, time_us, vm_i, vm_f,
+    """Decode ``n`` framed ST 0601 packets into columns: (clean, values, present, time_us, has_vmti, vm_f,
     target count, tg_i, tg_f). An unclean packet's row is left for the caller to fill. ``tables``:
     (integer, float) tables of ST 0601, the VMTI set, the VTarget pack, the location pack."""
     spec_i, spec_f = tables[0], tables[1]
@@ -318,8 +316,7 @@ def decode_run(buf, vstarts, ends, n, tables, n_cols, max_time_us, min_version, 
     present = np.zeros((n, n_cols), np.bool_)
     time_us = np.full(n, -1, np.int64)
     clean = np.ones(n, np.bool_)
-    vm_i = np.full((n, N_VMTI_I), -1, np.int64)
-    vm_i[:, 0] = 0
+    has_vmti = np.zeros(n, np.bool_)
     vm_f = np.full((n, N_VMTI_F), np.nan)
     tg_i = np.empty((max(16, n), N_TARGET_I), np.int64)
     tg_f = np.empty((max(16, n), N_TARGET_F), np.float64)
@@ -363,14 +360,13 @@ def decode_run(buf, vstarts, ends, n, tables, n_cols, max_time_us, min_version, 
         if ok and vmti_p >= 0:
             tg_i = grow(tg_i, ntg + (vmti_end - vmti_p) // 2 + 1)
             tg_f = grow(tg_f, tg_i.shape[0])
-            ok, ntg, serial = decode_vmti(buf, vmti_p, vmti_end, tables, k, vm_i, vm_f, tg_i, tg_f, ntg, stamp, serial,
-                                          max_time_us, min_version)
+            ok, ntg, serial = decode_vmti(buf, vmti_p, vmti_end, tables, k, has_vmti, vm_f, tg_i, tg_f, ntg, stamp,
+                                          serial, max_time_us, min_version)
         if not ok:
             clean[k] = False
             values[k, :] = np.nan
             present[k, :] = False
             time_us[k] = -1
-            vm_i[k, :] = -1
-            vm_i[k, 0] = 0
+            has_vmti[k] = False
             vm_f[k, :] = np.nan
-    return clean, values, present, time_us, vm_i, vm_f, ntg, tg_i[:ntg], tg_f[:ntg]
+    return clean, values, present, time_us, has_vmti, vm_f, ntg, tg_i[:ntg], tg_f[:ntg]

@@ -20,5 +20,6 @@ __getattr__ = lazy_attributes(__name__, _WHERE)
 
 
 __all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVColumns", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote",
-           "build_uas_packet", "decode_klv_bytes", "decode_klv_columns", "read_klv_columns", "encode_eg0104", "encode_uas_packet", "encode_vmti", "frame_uas_packet",
-           "klv_telemetry", "read_klv", "uas_items", "vmti_detections", "with_target_location"]
+           "build_uas_packet", "decode_klv_bytes", "decode_klv_columns", "encode_eg0104", "encode_uas_packet",
+           "encode_vmti", "frame_uas_packet", "klv_telemetry", "read_klv", "read_klv_columns", "uas_items",
+           "vmti_detections", "with_target_location"]

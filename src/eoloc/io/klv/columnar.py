@@ -46,8 +46,8 @@ from .st0903 import _HAE, _LAT, _LON, IMAPB, LEGACY_VERSION, VMTI_FIELDS, VTARGE
 COLUMN_TAGS: tuple[int, ...] = tuple(t for t, (_, spec) in FIELDS.items() if isinstance(spec, (Mapped, UInt)))
 COLUMN = {tag: i for i, tag in enumerate(COLUMN_TAGS)}
 #: ST 0903 output columns: set level (integers after "has a set"; floats), target level
-VMTI_INT_COLUMNS, VMTI_FLOAT_COLUMNS = {8: 1, 9: 2}, {11: 0, 12: 1}
-TARGET_INT_COLUMNS = {1: 2, 2: 3, 3: 4, 19: 5, 20: 6}  # after (row, target id)
+VMTI_COLUMNS = {11: 0, 12: 1, 8: 2, 9: 3}  # fields of view, frame width and height
+TARGET_INT_COLUMNS = {1: 2, 2: 3, 3: 4, 19: 5, 20: 6}  # after (row, target id); then 7: 1 where a location is sent
 TARGET_FLOAT_COLUMNS = {10: 0, 11: 1, 12: 2, 17: 3}  # 17: location lat, lon, HAE in 3, 4, 5
 RUN = 1 << 16  # packets framed per call of the scanner (bounds its arrays)
 MAX_INT = (1 << 63) - 1
@@ -95,7 +95,7 @@ def scan_tables() -> tuple[np.ndarray, ...]:
         return spec_i, spec_f
 
     st0601 = table(FIELDS, {}, COLUMN, {74: S.K_VMTI, 100: S.K_IRREGULAR, 101: S.K_IRREGULAR, 65: S.K_VERSION})
-    vmti = table(VMTI_FIELDS, VMTI_INT_COLUMNS, VMTI_FLOAT_COLUMNS, {101: S.K_SERIES, 1: S.K_IGNORE})
+    vmti = table(VMTI_FIELDS, {}, VMTI_COLUMNS, {101: S.K_SERIES, 1: S.K_IGNORE})
     target = table(VTARGET_FIELDS, TARGET_INT_COLUMNS, TARGET_FLOAT_COLUMNS, {})
     loc_i = np.zeros((3, S.N_SPEC_I), np.int64)
     loc_f = np.zeros((3, S.N_SPEC_F), np.float64)
@@ -117,10 +117,11 @@ class KLVColumns:
 
     ``values[:, COLUMN[tag]]``: ST 0601 item ``tag`` as a float (NaN where absent or a special
     value), ``present``: the packet carries the item; ``time_us``: tag 2 in µs since 1970 (-1:
-    none); ``vmti_i``: (has a VMTI set, frame width, frame height; -1 absent), ``vmti_f``: (VMTI
-    horizontal and vertical field of view, deg); ``target_i``: per VMTI target (row, target id,
-    centroid, box top-left, box bottom-right pixel numbers, centroid row, column; -1 absent),
-    ``target_f``: (location offsets lat, lon, HAE; location lat, lon, HAE; NaN absent)."""
+    none); ``has_vmti``: the packet carries a VMTI set, ``vmti_f``: its horizontal and vertical
+    field of view (deg), frame width and height (px; NaN absent); ``target_i``: one row per VMTI
+    target (packet row, target id, centroid, box top-left and bottom-right pixel numbers, centroid
+    row and column, 1 where a location pack is sent; -1 absent), ``target_f``: (location offsets
+    lat, lon, HAE; location lat, lon, HAE; NaN absent)."""
 
     path: str
     container: str
@@ -132,7 +133,7 @@ class KLVColumns:
     time_us: np.ndarray
     values: np.ndarray
     present: np.ndarray
-    vmti_i: np.ndarray
+    has_vmti: np.ndarray
     vmti_f: np.ndarray
     target_i: np.ndarray
     target_f: np.ndarray
@@ -161,8 +162,8 @@ class KLVColumns:
 def empty_chunk(n: int = 0) -> dict[str, np.ndarray]:
     return {"index": np.zeros(n, np.int64), "offset": np.zeros(n, np.int64), "standard": np.full(n, "ST 0601"),
             "time_us": np.full(n, -1, np.int64), "values": np.full((n, len(COLUMN_TAGS)), np.nan),
-            "present": np.zeros((n, len(COLUMN_TAGS)), bool), "vmti_i": np.tile([0, -1, -1], (n, 1)),
-            "vmti_f": np.full((n, 2), np.nan), "target_i": np.zeros((0, 7), np.int64),
+            "present": np.zeros((n, len(COLUMN_TAGS)), bool), "has_vmti": np.zeros(n, bool),
+            "vmti_f": np.full((n, 4), np.nan), "target_i": np.zeros((0, 8), np.int64),
             "target_f": np.zeros((0, 6))}
 
 
@@ -188,15 +189,16 @@ def put_packet(chunk: dict[str, np.ndarray], row: int, p: KLVPacket, targets: li
             pres[c], vals[c] = False, math.nan
     vm = f.get(74)
     if vm is None or not hasattr(vm, "targets"):
-        chunk["vmti_i"][row], chunk["vmti_f"][row] = (0, -1, -1), (math.nan, math.nan)
+        chunk["has_vmti"][row], chunk["vmti_f"][row] = False, math.nan
         return
-    chunk["vmti_i"][row] = (1, *(_int_or_absent(vm.value(t)) for t in VMTI_INT_COLUMNS))
-    chunk["vmti_f"][row] = [num(vm.value(t)) for t in VMTI_FLOAT_COLUMNS]
+    chunk["has_vmti"][row] = True
+    chunk["vmti_f"][row] = [num(vm.value(t)) for t in VMTI_COLUMNS]
     for tg in vm.targets:
         loc = tg.value(17)
-        where = (loc.lat_deg, loc.lon_deg, loc.h_m) if hasattr(loc, "lat_deg") else (math.nan,) * 3
-        targets.append(((row, _int_or_absent(tg.target_id), *(_int_or_absent(tg.value(t)) for t in TARGET_INT_COLUMNS)),
-                        (*(num(tg.value(t)) for t in (10, 11, 12)), *where)))
+        sent = hasattr(loc, "lat_deg")
+        where = (loc.lat_deg, loc.lon_deg, loc.h_m) if sent else (math.nan,) * 3
+        targets.append(((row, _int_or_absent(tg.target_id), *(_int_or_absent(tg.value(t)) for t in TARGET_INT_COLUMNS),
+                         1 if sent else -1), (*(num(tg.value(t)) for t in (10, 11, 12)), *where)))
 
 
 def chunk_from_packets(packets: list[KLVPacket]) -> dict[str, np.ndarray]:
@@ -212,7 +214,7 @@ def add_targets(chunk: dict[str, np.ndarray], targets: list) -> None:
     """Append target rows (int row, float row) to a chunk's, keeping the rows in packet order."""
     if not targets:
         return
-    ti = np.array([t[0] for t in targets], np.int64).reshape(-1, 7)
+    ti = np.array([t[0] for t in targets], np.int64).reshape(-1, 8)
     tf = np.array([t[1] for t in targets], np.float64).reshape(-1, 6)
     ti_all = np.concatenate([chunk["target_i"], ti])
     order = np.argsort(ti_all[:, 0], kind="stable")
@@ -235,7 +237,7 @@ def _assemble(path, container, chunks, pts, names, issues, notes, scanned: int =
     cat = (chunks[0] if len(chunks) == 1 else {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
            if chunks else empty_chunk())
     return KLVColumns(path, container, cat["index"], cat["offset"], pts, names, cat["standard"].astype(str),
-                      cat["time_us"], cat["values"], cat["present"], cat["vmti_i"], cat["vmti_f"], cat["target_i"],
+                      cat["time_us"], cat["values"], cat["present"], cat["has_vmti"], cat["vmti_f"], cat["target_i"],
                       cat["target_f"], list(issues), list(notes), scanned)
 
 
@@ -269,11 +271,11 @@ def _decode_columns(data: bytes, path: str, *, pts, container: str, stream: str,
         if framer.packets:
             chunks.append(chunk_from_packets(framer.packets))
             framer.packets = []
-        clean, values, present, time_us, vm_i, vm_f, _, tg_i, tg_f = S.decode_run(
+        clean, values, present, time_us, has_vmti, vm_f, _, tg_i, tg_f = S.decode_run(
             buf, vstarts, ends, count, tables, len(COLUMN_TAGS), MAX_TIME_US, LEGACY_VERSION + 1, 2)
         chunk = {"index": framer.n + np.arange(count), "offset": starts[:count].copy(),
                  "standard": np.full(count, "ST 0601"), "time_us": time_us, "values": values, "present": present,
-                 "vmti_i": vm_i, "vmti_f": vm_f, "target_i": tg_i, "target_f": tg_f}
+                 "has_vmti": has_vmti, "vmti_f": vm_f, "target_i": tg_i, "target_f": tg_f}
         targets: list = []
         for row in np.flatnonzero(~clean).tolist():  # the tolerant reader's decoding, notes and all
             k, end = int(starts[row]), int(ends[row])
@@ -323,7 +325,7 @@ def concat_columns(path: str, container: str, parts: list[KLVColumns], issues: l
     """Columns of several streams one after the other (a transport stream's PIDs), with the
     transport's issues first and every stream's after them, as :func:`.reader.read_ts_bytes`."""
     chunks = [{"index": c.index, "offset": c.offset, "standard": c.standard, "time_us": c.time_us,
-               "values": c.values, "present": c.present, "vmti_i": c.vmti_i, "vmti_f": c.vmti_f,
+               "values": c.values, "present": c.present, "has_vmti": c.has_vmti, "vmti_f": c.vmti_f,
                "target_i": c.target_i, "target_f": c.target_f} for c in parts]
     pts = np.concatenate([c.pts_s for c in parts]) if parts else np.zeros(0)
     names = np.concatenate([c.stream for c in parts]) if parts else np.zeros(0, str)

@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from ..table import Issue, Table
+from .columnar import KLVColumns
 from .localset import num
-from .reader import KLVPacket, KLVStream
+from .reader import KLVStream
 
 # ST 0601 tags eoloc reads (name -> tag); see klv_telemetry for how they combine
 TAGS = {
@@ -51,44 +52,56 @@ def packet_time_s(values: dict[int, Any]) -> float:
     return t.timestamp() if isinstance(t, datetime) else math.nan
 
 
-def stream_order(packets: list[KLVPacket], path: str) -> tuple[list[KLVPacket], list[Issue]]:
-    """A stream's packets in the order of their own time stamps (stable; untimed packets stay after
+def as_columns(source: KLVStream | KLVColumns) -> KLVColumns:
+    """The packets of a read stream as columns (they may be so already)."""
+    from .columnar import columns_from_stream
+
+    return source if isinstance(source, KLVColumns) else columns_from_stream(source)
+
+
+def stream_groups(cols: KLVColumns) -> dict[str, np.ndarray]:
+    """Stream name -> its rows, streams in order of their first packet."""
+    names, first, inverse = np.unique(cols.stream, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    return {str(names[g]): np.flatnonzero(inverse == g) for g in order}
+
+
+def stream_order(cols: KLVColumns, rows: np.ndarray, where: str) -> tuple[np.ndarray, list[Issue]]:
+    """A stream's rows in the order of their own time stamps (stable; untimed packets stay after
     their predecessor), with an issue for packets that came out of order and for jumps in time."""
-    t = np.array([packet_time_s(p.fields) for p in packets])
+    t = cols.time_s[rows]
     issues: list[Issue] = []
     if t.size < 2 or not np.isfinite(t).any():
-        return packets, issues
+        return rows, issues
     key = fill_forward(t)
     key = np.where(np.isfinite(key), key, -np.inf)
     order = np.argsort(key, kind="stable")
-    name = packets[0].stream
-    where = f"{path}{f' [{name}]' if name else ''}"
+    index = cols.index[rows]
     late = np.flatnonzero(np.diff(key) < 0)
     if late.size:
-        issues.append(Issue(where, int(packets[late[0] + 1].index),
+        issues.append(Issue(where, int(index[late[0] + 1]),
                             f"{late.size} packet(s) with a time stamp earlier than the packet before them, first "
-                            f"packet {packets[late[0] + 1].index}; rows put in time order"))
+                            f"packet {index[late[0] + 1]}; rows put in time order"))
     ts = np.sort(t[np.isfinite(t)])
     dt = np.diff(ts)
     if dt.size >= 4:
         step = float(np.median(dt[dt > 0])) if (dt > 0).any() else 0.0
         jumps = np.flatnonzero(dt > max(20 * step, 1.0))
         if jumps.size:
-            issues.append(Issue(where, int(packets[0].index),
+            issues.append(Issue(where, int(index[0]),
                                 f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
                                 f"{dt[jumps].max():.1f} s, typical interval {step:.3f} s)"))
-    return [packets[i] for i in order], issues
+    return rows[order], issues
 
 
-def missing_pose(packets: list[KLVPacket]) -> list[str]:
+def missing_pose(cols: KLVColumns, rows: np.ndarray) -> list[str]:
     """The pose items (position, height, heading) a stream never sends."""
-    sent = set().union(*(p.fields for p in packets)) if packets else set()
-    return [name for name, tags in POSE_TAGS.items() if not sent.intersection(tags)]
+    return [name for name, tags in POSE_TAGS.items() if not any(cols.has(t)[rows].any() for t in tags)]
 
 
-def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = True) -> Table:
-    """Decoded packets -> an eoloc telemetry :class:`Table` (one row per good packet, grouped by
-    stream, each stream in time order).
+def klv_telemetry(stream: KLVStream | KLVColumns, *, geoid=None, report_on_change: bool = True) -> Table:
+    """Decoded packets (objects or columns) -> an eoloc telemetry :class:`Table` (one row per good
+    packet, grouped by stream, each stream in time order).
 
     Columns (degrees, metres, ellipsoidal heights): stream, time_s (UNIX, from tag 2), frame
     (packet number), lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, gimbal1_deg (relative
@@ -103,45 +116,39 @@ def klv_telemetry(stream: KLVStream, *, geoid=None, report_on_change: bool = Tru
     from ...terrain.geoid import default_geoid
 
     geoid = geoid or default_geoid()
-    groups: dict[str, list[KLVPacket]] = {}
-    for p in stream.packets:
-        groups.setdefault(p.stream, []).append(p)
+    cols = as_columns(stream)
     parts, issues = [], []
-    for name, pk in groups.items():
-        ordered, found = stream_order(pk, stream.path)
+    for name, rows in stream_groups(cols).items():
+        where = f"{cols.path}{f' [{name}]' if name else ''}"
+        ordered, found = stream_order(cols, rows, where)
         issues += found
-        lacking = missing_pose(pk)
+        lacking = missing_pose(cols, rows)
         if lacking:
-            issues.append(Issue(f"{stream.path}{f' [{name}]' if name else ''}", pk[0].index,
+            issues.append(Issue(where, int(cols.index[rows[0]]),
                                 f"this stream never sends {', '.join(lacking)}: it carries no pose, so its "
-                                f"{len(pk)} packet(s) give no frame centre, footprint or fix"))
-        parts.append(_stream_columns(ordered, geoid, report_on_change))
+                                f"{rows.size} packet(s) give no frame centre, footprint or fix"))
+        parts.append(_stream_columns(cols, ordered, geoid, report_on_change))
     if not parts:
-        parts = [_stream_columns([], geoid, report_on_change)]
-    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    return Table(stream.path, cols, cols["frame"].astype(np.int64), issues)
+        parts = [_stream_columns(cols, np.zeros(0, np.intp), geoid, report_on_change)]
+    table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return Table(cols.path, table, table["frame"].astype(np.int64), issues)
 
 
-def _stream_columns(packets: list[KLVPacket], geoid, report_on_change: bool) -> dict[str, np.ndarray]:
-    rows = [p.fields for p in packets]
-    n = len(rows)
-
-    def col(tag: int) -> np.ndarray:
-        return np.array([num(r.get(tag)) for r in rows], dtype=np.float64)
+def _stream_columns(cols: KLVColumns, rows: np.ndarray, geoid, report_on_change: bool) -> dict[str, np.ndarray]:
+    n = rows.size
 
     def seen(tag: int) -> np.ndarray:
         """True from the first packet that carries ``tag`` (the receiver-current state)."""
-        return np.maximum.accumulate(np.array([tag in r for r in rows], dtype=bool)) if n else np.zeros(0, bool)
+        return np.maximum.accumulate(cols.has(tag)[rows]) if n else np.zeros(0, bool)
 
-    raw = {tag: col(tag) for tag in (*set(TAGS.values()) - {2, 74}, *OFFSET_CORNER_TAGS, *FULL_CORNER_TAGS)}
     fill = fill_forward if report_on_change else (lambda c: c)
-    v = {tag: fill(c) for tag, c in raw.items()}
+    v = {tag: fill(cols.col(tag)[rows])
+         for tag in (*set(TAGS.values()) - {2, 74}, *OFFSET_CORNER_TAGS, *FULL_CORNER_TAGS)}
 
     def prefer(a: int, b: int) -> np.ndarray:
         """Tag a where the packet state has it, else tag b."""
         return np.where(np.isfinite(v[a]), v[a], v[b])
 
-    time_s = np.array([packet_time_s(r) for r in rows], dtype=np.float64)
     lat, lon = v[13], v[14]
     n_sensor = geoid.undulation(lat, lon) if n else np.zeros(0)
     h = np.where(np.isfinite(v[75]), v[75], v[15] + n_sensor)
@@ -154,10 +161,9 @@ def _stream_columns(packets: list[KLVPacket], geoid, report_on_change: bool) -> 
     flags = v[47]
     measured = np.where(np.isfinite(flags), (np.nan_to_num(flags).astype(np.int64) & SLANT_RANGE_MEASURED) > 0,
                         np.nan)
-    cols: dict[str, np.ndarray] = {
-        "stream": np.array([p.stream for p in packets], dtype=object).astype(str),
-        "time_s": time_s, "frame": np.array([p.index for p in packets], dtype=np.float64),
-        "pts_s": np.array([math.nan if p.pts_s is None else p.pts_s for p in packets], dtype=np.float64),
+    out: dict[str, np.ndarray] = {
+        "stream": cols.stream[rows].astype(str),
+        "time_s": cols.time_s[rows], "frame": cols.index[rows].astype(np.float64), "pts_s": cols.pts_s[rows],
         "lat_deg": lat, "lon_deg": lon, "h_m": h, "h_msl_m": v[15],
         "yaw_deg": v[5], "pitch_deg": prefer(90, 6), "roll_deg": prefer(91, 7),
         "gimbal1_deg": v[18], "gimbal2_deg": v[19], "sensor_roll_deg": v[20],
@@ -170,9 +176,9 @@ def _stream_columns(packets: list[KLVPacket], geoid, report_on_change: bool) -> 
     for k in range(4):
         full_lat, full_lon = v[FULL_CORNER_TAGS[2 * k]], v[FULL_CORNER_TAGS[2 * k + 1]]
         off_lat, off_lon = v[OFFSET_CORNER_TAGS[2 * k]], v[OFFSET_CORNER_TAGS[2 * k + 1]]
-        cols[f"corner{k + 1}_lat_deg"] = np.where(np.isfinite(full_lat), full_lat, fc_lat + off_lat)
-        cols[f"corner{k + 1}_lon_deg"] = np.where(np.isfinite(full_lon), full_lon, fc_lon + off_lon)
-    return cols
+        out[f"corner{k + 1}_lat_deg"] = np.where(np.isfinite(full_lat), full_lat, fc_lat + off_lat)
+        out[f"corner{k + 1}_lon_deg"] = np.where(np.isfinite(full_lon), full_lon, fc_lon + off_lon)
+    return out
 
 
 def packet_view(fields: dict[int, Any], geoid=None) -> dict[str, float]:
@@ -210,7 +216,7 @@ DETECTION_COLUMNS = ("stream", "frame", "time_s", "target_id", "u_px", "v_px", "
                      "encoder_lat_deg", "encoder_lon_deg", "encoder_h_m")
 
 
-def vmti_detections(stream: KLVStream, *, pixels_from: int = 1) -> Table:
+def vmti_detections(stream: KLVStream | KLVColumns, *, pixels_from: int = 1) -> Table:
     """Target detections from the VMTI local sets (ST 0601 tag 74) -> a detections :class:`Table`.
 
     Columns: stream, frame (the packet number, so each detection pairs with its own packet's
@@ -223,64 +229,67 @@ def vmti_detections(stream: KLVStream, *, pixels_from: int = 1) -> Table:
     standard). ST 0903 pixel numbers are 1-based (row - 1) x width + column, rows/columns (tags
     19/20) 1-based; ``pixels_from=0`` reads them as 0-based (an encoder that numbers from 0).
     """
-    rows: list[tuple] = []  # one tuple per detection, in DETECTION_COLUMNS order
-    issues = []
-    size: dict[str, tuple[float, float]] = {}
-    fc: dict[str, tuple[float, float]] = {}
-    for p in stream.packets:
-        vals = p.fields
-        if 23 in vals or 24 in vals:
-            fc[p.stream] = (num(vals.get(23)), num(vals.get(24)))
-        vm = vals.get(74)
-        if vm is None or not hasattr(vm, "targets"):
-            continue
-        last_w, last_h = size.get(p.stream, (math.nan, math.nan))
-        w = num(vm.value(8)) if vm.value(8) is not None else last_w
-        hgt = num(vm.value(9)) if vm.value(9) is not None else last_h
-        size[p.stream] = (w, hgt)
-        t = packet_time_s(vals)
-        fc_lat, fc_lon = fc.get(p.stream, (math.nan, math.nan))
-        vm_hfov, vm_vfov = num(vm.value(11)), num(vm.value(12))
-        for tg in vm.targets:
-            u, v = vmti_centroid(tg, w, pixels_from)
-            if not (math.isfinite(u) and math.isfinite(v)):
-                issues.append(f"packet {p.index}: VMTI target {tg.target_id} has no usable centroid "
-                              f"(frame width {w}); skipped")
-                continue
-            u0, v0 = pixel_number(tg.value(2), w, pixels_from)
-            u1, v1 = pixel_number(tg.value(3), w, pixels_from)
-            loc = tg.value(17)
-            if loc is not None and hasattr(loc, "lat_deg"):
-                elat, elon, eh = loc.lat_deg, loc.lon_deg, loc.h_m
-            else:
-                elat, elon = fc_lat + num(tg.value(10)), fc_lon + num(tg.value(11))
-                eh = num(tg.value(12))
-            rows.append((p.stream, p.index, t, str(tg.target_id), u, v, u0, v0, u1, v1, w, hgt, vm_hfov, vm_vfov,
-                         elat, elon, eh))
-    columns = list(zip(*rows, strict=True)) if rows else [()] * len(DETECTION_COLUMNS)
-    cols = {k: np.array(val, dtype=object if k in ("target_id", "stream") else np.float64)
-            for k, val in zip(DETECTION_COLUMNS, columns, strict=True)}
-    cols["target_id"] = cols["target_id"].astype(str)
-    cols["stream"] = cols["stream"].astype(str)
-    return Table(stream.path, cols, cols["frame"].astype(np.int64), [Issue(stream.path, 0, m) for m in issues])
+    cols = as_columns(stream)
+    n = len(cols)
+    has_vmti = cols.has_vmti
+    width, height = cols.vmti_f[:, 2].copy(), cols.vmti_f[:, 3].copy()
+    fc_sent = cols.has(23) | cols.has(24)
+    fc_lat, fc_lon = np.full(n, np.nan), np.full(n, np.nan)
+    for rows in stream_groups(cols).values():  # the frame size and centre carried within each stream
+        for value, sent in ((width, has_vmti), (height, has_vmti)):
+            value[rows] = _carried(np.where(sent[rows], value[rows], np.nan), sent[rows] & np.isfinite(value[rows]))
+        fc_lat[rows] = _carried(cols.col(23)[rows], fc_sent[rows])
+        fc_lon[rows] = _carried(cols.col(24)[rows], fc_sent[rows])
+    ti, tf = cols.target_i, cols.target_f
+    r = ti[:, 0]
+    w = width[r]
+    u, v = _centroids(ti, w, pixels_from)
+    bad = ~(np.isfinite(u) & np.isfinite(v))
+    issues = [Issue(cols.path, 0, f"packet {cols.index[r[k]]}: VMTI target {ti[k, 1]} has no usable centroid "
+                    f"(frame width {float(w[k])}); skipped") for k in np.flatnonzero(bad)]
+    keep = ~bad
+    r, w, ti, tf, u, v = r[keep], w[keep], ti[keep], tf[keep], u[keep], v[keep]
+    u0, v0 = _pixel_numbers(ti[:, 3], w, pixels_from)
+    u1, v1 = _pixel_numbers(ti[:, 4], w, pixels_from)
+    sent = ti[:, 7] == 1
+    out = {
+        "stream": cols.stream[r].astype(str), "frame": cols.index[r].astype(np.float64), "time_s": cols.time_s[r],
+        "target_id": ti[:, 1].astype(str), "u_px": u, "v_px": v, "bbox_u0": u0, "bbox_v0": v0, "bbox_u1": u1,
+        "bbox_v1": v1, "frame_width": w, "frame_height": height[r], "vmti_hfov_deg": cols.vmti_f[r, 0],
+        "vmti_vfov_deg": cols.vmti_f[r, 1],
+        "encoder_lat_deg": np.where(sent, tf[:, 3], fc_lat[r] + tf[:, 0]),
+        "encoder_lon_deg": np.where(sent, tf[:, 4], fc_lon[r] + tf[:, 1]),
+        "encoder_h_m": np.where(sent, tf[:, 5], tf[:, 2]),
+    }
+    table = {k: out[k] for k in DETECTION_COLUMNS}
+    return Table(cols.path, table, table["frame"].astype(np.int64), issues)
 
 
-def pixel_number(value: Any, width: float, pixels_from: int = 1) -> tuple[float, float]:
-    """ST 0903 pixel number -> (u, v) in eoloc's 0-based convention (1-based numbers by the standard)."""
-    if not isinstance(value, int) or isinstance(value, bool) or not (np.isfinite(width) and width > 0) or \
-            value < pixels_from:
-        return math.nan, math.nan
-    row, col = divmod(value - pixels_from, int(width))
-    return float(col), float(row)
+def _carried(value: np.ndarray, sent: np.ndarray) -> np.ndarray:
+    """Each row's value from the last row at or before it where ``sent`` (NaN before the first)."""
+    idx = np.where(sent, np.arange(value.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, value[np.maximum(idx, 0)], np.nan)
 
 
-def vmti_centroid(target, width: float, pixels_from: int = 1) -> tuple[float, float]:
-    row, col = target.value(19), target.value(20)
-    if isinstance(row, int) and isinstance(col, int) and row >= pixels_from and col >= pixels_from:
-        return float(col - pixels_from), float(row - pixels_from)
-    u, v = pixel_number(target.value(1), width, pixels_from)
-    if np.isfinite(u):
-        return u, v
-    (u0, v0), (u1, v1) = pixel_number(target.value(2), width, pixels_from), pixel_number(target.value(3), width,
-                                                                                          pixels_from)
-    return (u0 + u1) / 2.0, (v0 + v1) / 2.0
+def _pixel_numbers(value: np.ndarray, width: np.ndarray, pixels_from: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """ST 0903 pixel numbers (-1: none) -> (u, v) in eoloc's 0-based convention (1-based numbers by
+    the standard); NaN where there is no number or no usable frame width."""
+    ok = (value >= pixels_from) & np.isfinite(width) & (width > 0)
+    # (a width past 2^62 is wider than any pixel number: one row, as Python's divmod would say)
+    wi = np.maximum(np.where(ok, np.minimum(np.nan_to_num(width, nan=1.0), 2.0 ** 62), 1.0).astype(np.int64), 1)
+    row, col = np.divmod(np.where(ok, value - pixels_from, 0), wi)
+    return np.where(ok, col, np.nan), np.where(ok, row, np.nan)
+
+
+def _centroids(ti: np.ndarray, width: np.ndarray, pixels_from: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each target's centroid pixel: its row and column (tags 19/20) where both are sent, else its
+    centroid pixel number (tag 1), else the middle of its box (tags 2/3)."""
+    row, col = ti[:, 5], ti[:, 6]
+    by_rc = (row >= pixels_from) & (col >= pixels_from)
+    u1, v1 = _pixel_numbers(ti[:, 2], width, pixels_from)
+    (a0, b0), (a1, b1) = _pixel_numbers(ti[:, 3], width, pixels_from), _pixel_numbers(ti[:, 4], width, pixels_from)
+    by_number = np.isfinite(u1)
+    u = np.where(by_rc, col - pixels_from, np.where(by_number, u1, (a0 + a1) / 2.0))
+    v = np.where(by_rc, row - pixels_from, np.where(by_number, v1, (b0 + b1) / 2.0))
+    return u.astype(np.float64), v.astype(np.float64)
