@@ -260,3 +260,134 @@ def test_the_control_packets_of_the_departures_are_scanned():
     base = [(t, v) for t, v in uas_items(packets[1]) if t != 1]
     fast = check(packets[0] + build_uas_packet([*base, (74, _vmti())]) + packets[2])
     assert fast.scanned == 3 and fast.target_i[:, [1, 2, 5]].tolist() == [[1, 641, 2]]
+
+
+# -- a clean transport stream read in vectorised passes (demux.clean_klv_payloads) ------------------
+
+
+def _same_ts_reading(data: bytes, path: str = "x.ts") -> bool:
+    """Read the transport both ways (the vectorised path where it is clean, KLVDemux always):
+    the same packets, values, issues and notes (or the same error). Returns whether the
+    vectorised path was taken."""
+    from eoloc.errors import KLVError
+    from eoloc.io.klv.demux import clean_klv_payloads
+    from eoloc.io.klv.reader import ts_klv_parts
+
+    def read(fast: bool):
+        try:
+            issues, parts = ts_klv_parts(data, path, strict=False, decode=decode_klv_bytes, fast=fast)
+        except KLVError as exc:
+            return str(exc)
+        return issues, [(s.packets, s.issues, s.notes, arrival) for s, arrival in parts]
+
+    assert read(True) == read(False)
+    whole = data[:len(data) - len(data) % 188]
+    return clean_klv_payloads(whole) is not None
+
+
+@pytest.fixture(scope="module")
+def transport_streams(tmp_path_factory):
+    """A video TS with two KLV PIDs (PTS, libavformat), ST 1402 asynchronous carriage without PTS
+    and synchronous carriage added by stanag4609's transformer (`eoloc mux`'s way)."""
+    from eoloc.io.klv.mux import add_klv
+
+    d = tmp_path_factory.mktemp("ts")
+    a, b = pose_packets(40, vmti=2, seed=11), pose_packets(25, seed=12)
+    two = write_klv_ts(d / "two.ts", [[(p, k / 10) for k, p in enumerate(a)], [(p, k / 5) for k, p in enumerate(b)]],
+                       video_fps=10)
+    plain = write_klv_ts(d / "plain.ts", [], video_fps=10, duration_s=3.0)
+    made = {"two": two}
+    for carriage in ("async", "sync"):
+        made[carriage] = add_klv(plain, d / f"{carriage}.ts", lambda n, t: a[n % len(a)], carriage=carriage)
+    return {k: v.read_bytes() for k, v in made.items()}
+
+
+def test_a_clean_transport_stream_is_read_in_vectorised_passes_to_the_same_packets(transport_streams):
+    assert _same_ts_reading(transport_streams["two"])  # PTS on every PES: the vectorised path
+    assert _same_ts_reading(transport_streams["async"])  # ST 1402 without PTS: timed by arrival, the same
+    assert not _same_ts_reading(transport_streams["sync"])  # synchronous carriage: KLVDemux's, as before
+    cols = read_klv_columns_bytes(transport_streams["async"])
+    assert any(n.kind == "timed by arrival" for n in cols.notes) and np.isfinite(cols.pts_s).all()
+
+
+def read_klv_columns_bytes(data: bytes) -> KLVColumns:
+    import tempfile
+
+    with tempfile.NamedTemporaryFile(suffix=".ts") as f:
+        f.write(data)
+        f.flush()
+        return read_klv_columns(f.name)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.data())
+def test_a_damaged_transport_stream_reads_the_same_either_way(data):
+    """Bytes changed, cut or put in anywhere in a TS (a header, a table, a PES, a KLV packet, the
+    video): the vectorised path declines what it cannot vouch for, and the result is KLVDemux's."""
+    which = data.draw(st.sampled_from(["two", "async", "sync"]))
+    ts = bytearray(_TS_CACHE.setdefault(which, _ts_bytes(which)))
+    for _ in range(data.draw(st.integers(1, 4))):
+        at = data.draw(st.integers(0, len(ts) - 1))
+        op = data.draw(st.sampled_from(["flip", "flip", "cut", "insert", "cell"]))
+        if op == "flip":
+            ts[at] ^= data.draw(st.integers(1, 255))
+        elif op == "cut":
+            del ts[at:at + data.draw(st.integers(1, 400))]
+        elif op == "insert":
+            ts[at:at] = data.draw(st.binary(min_size=1, max_size=200))
+        else:  # a whole cell lost
+            k = at // 188 * 188
+            del ts[k:k + 188]
+    _same_ts_reading(bytes(ts))
+
+
+_TS_CACHE: dict[str, bytes] = {}
+
+
+def _ts_bytes(which: str) -> bytes:
+    import tempfile
+
+    from eoloc.io.klv.mux import add_klv
+
+    a = pose_packets(12, vmti=2, seed=21)
+    with tempfile.TemporaryDirectory() as d:
+        if which == "two":
+            p = write_klv_ts(Path(d) / "two.ts", [[(x, k / 10) for k, x in enumerate(a)], [(x, k / 5) for k, x in
+                                                                                        enumerate(a[:5])]],
+                             video_fps=10)
+        else:
+            plain = write_klv_ts(Path(d) / "plain.ts", [], video_fps=10, duration_s=1.2)
+            p = add_klv(plain, Path(d) / f"{which}.ts", lambda n, t: a[n % len(a)], carriage=which)
+        return p.read_bytes()
+
+
+def _klv_cells(ts: bytes) -> list[int]:
+    """Offsets of the transport packets that start a KLV PES (PUSI set, PES start code, private
+    stream 1 or metadata stream 0xFC), read from the bytes by hand."""
+    out = []
+    for k in range(0, len(ts) - 187, 188):
+        c = ts[k:k + 188]
+        start = 4 + (1 + c[4] if (c[3] >> 4) & 3 == 3 else 0)
+        if c[1] & 0x40 and c[start:start + 3] == b"\x00\x00\x01" and c[start + 3] in (0xBD, 0xFC):
+            out.append(k)
+    return out
+
+
+@pytest.mark.parametrize("which", ["two", "async"])
+@pytest.mark.parametrize("damage", ["sync byte", "error flag", "PES length", "PTS marker"])
+def test_each_transport_damage_reads_the_same_either_way(which, damage):
+    """Each kind of damage the vectorised path must leave to KLVDemux, on a KLV PES's first cell."""
+    ts = bytearray(_TS_CACHE.setdefault(which, _ts_bytes(which)))
+    k = _klv_cells(bytes(ts))[3]
+    start = k + 4 + (1 + ts[k + 4] if (ts[k + 3] >> 4) & 3 == 3 else 0)
+    if damage == "sync byte":
+        ts[k] = 0x46
+    elif damage == "error flag":
+        ts[k + 1] |= 0x80
+    elif damage == "PES length":
+        ts[start + 5] ^= 0x01
+    elif which == "two":  # the PTS's first marker bit
+        ts[start + 9] &= 0xFE
+    else:  # (no PTS in asynchronous carriage: its header's marker bits '10' instead)
+        ts[start + 6] &= 0x7F
+    assert not _same_ts_reading(bytes(ts))

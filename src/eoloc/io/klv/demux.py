@@ -196,3 +196,155 @@ def cell_pes_pts(cell: bytes) -> int | None:
     control = cell[3] >> 4 & 0x3
     start = 4 + (1 + cell[4] if control == 0x3 else 0)
     return pes_start_pts(cell[start:]) if control & 0x1 and start < TS_PACKET else None
+
+
+SPECIAL_STREAM_IDS = frozenset({0xBC, 0xBE, 0xBF, 0xF0, 0xF1, 0xF2, 0xF8, 0xFF})  # PES without the optional header
+
+
+def clean_klv_payloads(data: bytes, *, max_pes_bytes: int = MAX_PES_BYTES
+                       ) -> tuple[dict[int, tuple[bytes, list]], dict[int, int]] | None:
+    """Each asynchronous KLV PID's PES payloads joined, with (byte offset in them, PTS seconds) per
+    PES, and per PID the PES timed by arrival (no PTS: the PTS of the video PES begun before it, as
+    :class:`KLVDemux` with ``arrival`` times them), read from a whole transport stream in
+    vectorised passes; or None where the stream is not clean enough for that (:class:`KLVDemux`
+    then reads it, damage and all).
+
+    Clean: every 188-byte packet in sync and readable, the program tables read without damage and
+    unchanged once metadata has begun, every metadata PES whole (its declared length met) with the
+    standard header and a PTS or none (not a DTS), no transport error flag on a metadata packet, no
+    synchronous (0x15) metadata. Then :class:`KLVDemux` would give exactly this and no damage (the same
+    tables, read by the same code; ``tests/test_klv_columnar.py`` compares the two), at the cost
+    of a few numpy passes instead of a Python object per transport packet."""
+    import numpy as np
+    from stanag4609.transport.demux import StreamKind
+    from stanag4609.transport.mpegts import parse_transport_packet
+
+    n = len(data) // TS_PACKET
+    if not n or len(data) % TS_PACKET:
+        return None
+    cells = np.frombuffer(data, np.uint8).reshape(n, TS_PACKET)
+    control = (cells[:, 3] >> 4) & 0x3
+    if (cells[:, 0] != 0x47).any() or (control == 0).any():
+        return None
+    alen = cells[:, 4].astype(np.int64)
+    adapted = control >= 2
+    if ((control == 2) & (alen != TS_PACKET - 5)).any() or (adapted & (alen > TS_PACKET - 5)).any():
+        return None
+    if not _adaptation_fields_read(data, cells, adapted & (alen > 0), alen):
+        return None
+    pid = ((cells[:, 1].astype(np.int64) & 0x1F) << 8) | cells[:, 2]
+    demux = KLVDemux(max_pes_bytes=max_pes_bytes)
+    events: list = []
+    damage: list[Damage] = []
+    metadata: dict[int, list[int]] = {}  # metadata PID -> its packets, from when a table names it
+    arrival: dict[int, int | None] = {}  # a metadata packet that starts a PES -> the video PTS before it
+    video_pts = None
+    starts = (cells[:, 1] & 0x40) != 0
+    for k, (p, start) in enumerate(zip(pid.tolist(), starts.tolist(), strict=True)):
+        if p == 0 or p in demux.pmt_pids:
+            before = dict(demux.streams)
+            demux._packet(parse_transport_packet(data[k * TS_PACKET:(k + 1) * TS_PACKET], offset=k * TS_PACKET),
+                          events, damage)
+            if damage or (metadata and demux.streams != before):
+                return None
+        elif p in demux.streams:
+            metadata.setdefault(p, []).append(k)
+            if start:
+                arrival[k] = video_pts
+        elif start and p in demux.video_pids:
+            video_pts = cell_pes_pts(data[k * TS_PACKET:(k + 1) * TS_PACKET])
+    out: dict[int, tuple[bytes, list]] = {}
+    by_arrival: dict[int, int] = {}
+    for p, ks in metadata.items():
+        _, info, kind, _ = demux.streams[p]
+        if info.stream_type == 0x15:
+            return None
+        read = _clean_pes(cells, np.asarray(ks), control, alen, max_pes_bytes, arrival)
+        if read is None:
+            return None
+        if kind is StreamKind.KLV and read[1]:  # (a PID without a whole PES gives nothing, as in KLVDemux)
+            out[p] = read[:2]
+            if read[2]:
+                by_arrival[p] = read[2]
+    return (out, by_arrival) if out else None
+
+
+def _adaptation_fields_read(data: bytes, cells, rows, alen) -> bool:
+    """Whether stanag4609 reads the adaptation fields of the ``rows`` (a mask) without an error:
+    the common ones (flags, a PCR, 0xFF stuffing) checked in vectorised passes by its rules, the
+    others (OPCR, splice countdown, private data, extension) by its own parser."""
+    import numpy as np
+    from stanag4609.transport.mpegts import parse_transport_packet
+
+    idx = np.flatnonzero(rows)
+    flags = cells[idx, 5]
+    rare = (flags & 0x0F) != 0
+    for k in idx[rare].tolist():
+        try:
+            parse_transport_packet(data[k * TS_PACKET:(k + 1) * TS_PACKET], offset=k * TS_PACKET)
+        except Exception:
+            return False
+    idx, flags, n = idx[~rare], flags[~rare], alen[idx[~rare]]
+    pcr = (flags & 0x10) != 0
+    v = cells[idx, 6:12].astype(np.int64)
+    if (pcr & ((n < 7) | ((v[:, 4] & 0x7E) != 0x7E) | ((((v[:, 4] & 1) << 8) | v[:, 5]) > 299))).any():
+        return False
+    first = 5 + np.where(pcr, 7, 1)  # the stuffing: every byte after the fields to the field's end is 0xFF
+    col = np.arange(TS_PACKET)
+    stuffing = (col >= first[:, None]) & (col < (5 + n)[:, None])
+    return bool((cells[idx] == 0xFF)[stuffing].all()) if idx.size else True
+
+
+def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: dict[int, int | None]
+               ) -> tuple[bytes, list, int] | None:
+    """One metadata PID's packets (``ks``, in order) as its PES payloads joined, (offset, PTS s)
+    marks and the count of PES timed by ``arrival``; or None where the PES assembler would meet
+    anything but whole PES packets with the standard header and a PTS or none."""
+    import numpy as np
+
+    if (cells[ks, 1] & 0x80).any():  # the transport error flag
+        return None
+    start = np.where(control[ks] == 1, 4, 5 + alen[ks])
+    size = np.where(control[ks] & 1, TS_PACKET - start, 0)
+    pusi = (cells[ks, 1] & 0x40) != 0
+    keep = size > 0  # (a packet without payload adds nothing)
+    ks, start, size, pusi = ks[keep], start[keep], size[keep], pusi[keep]
+    first = np.flatnonzero(pusi)
+    if not first.size:
+        return b"", []
+    ks, start, size, pusi = ks[first[0]:], start[first[0]:], size[first[0]:], pusi[first[0]:]
+    total = int(size.sum())
+    at = np.cumsum(size) - size  # each packet's payload's place in the joined bytes
+    pos = np.repeat(ks * TS_PACKET + start - at, size) + np.arange(total)
+    joined = cells.reshape(-1)[pos]
+    s = at[pusi]  # PES starts
+    e = np.append(s[1:], total)
+    length = e - s
+    if (length < 14).any() or (length > max_pes_bytes).any():
+        return None
+    h = joined[s[:, None] + np.arange(14)].astype(np.int64)  # each PES's first 14 bytes
+    declared = (h[:, 4] << 8) | h[:, 5]
+    flags = h[:, 7] >> 6
+    hdl = h[:, 8]
+    timed = flags == 2
+    ok = ((h[:, 0] == 0) & (h[:, 1] == 0) & (h[:, 2] == 1) & ~np.isin(h[:, 3], list(SPECIAL_STREAM_IDS))
+          & ((declared == 0) | (declared + 6 == length)) & ((h[:, 6] & 0xC0) == 0x80) & (timed | (flags == 0))
+          & (9 + hdl <= length)
+          & (~timed | ((hdl >= 5) & ((h[:, 9] >> 4) == 2) & ((h[:, 9] & 1) == 1) & ((h[:, 11] & 1) == 1)
+                       & ((h[:, 13] & 1) == 1))))
+    if not ok.all():  # (a DTS too, a damaged header: the assembler's own way)
+        return None
+    pts = ((h[:, 9] >> 1) & 0x7) << 30 | h[:, 10] << 22 | (h[:, 11] >> 1) << 15 | h[:, 12] << 7 | h[:, 13] >> 1
+    times: list[float | None] = [t if ok_t else None for t, ok_t in zip((pts / PTS_HZ).tolist(), timed.tolist(),
+                                                                       strict=True)]
+    by_arrival = 0
+    for j in np.flatnonzero(~timed).tolist():  # no PTS: the video frame before it in the stream (ST 1402)
+        video = arrival.get(int(ks[pusi][j]))
+        if video is not None:
+            times[j] = video / PTS_HZ
+            by_arrival += 1
+    p0 = s + 9 + hdl
+    plen = e - p0
+    mark = np.cumsum(plen) - plen
+    body = joined[np.repeat(p0 - mark, plen) + np.arange(int(plen.sum()))]
+    return body.tobytes(), list(zip(mark.tolist(), times, strict=True)), by_arrival

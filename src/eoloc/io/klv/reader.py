@@ -408,7 +408,8 @@ def read_ts_bytes(data: bytes, path: str, *, strict: bool = False) -> KLVStream:
     return KLVStream(path, "mpegts", packets, issues, notes)
 
 
-def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode) -> tuple[list[KLVIssue], list[tuple[Any, Any]]]:
+def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode, fast: bool = True
+                 ) -> tuple[list[KLVIssue], list[tuple[Any, Any]]]:
     """The transport's issues, and each KLV PID's bytes decoded by ``decode`` (a reader of
     :func:`decode_klv_bytes`'s signature: objects or columns) with the note on its timing by
     arrival (or None), in PID order.
@@ -420,20 +421,46 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode) -> tuple[list[
     errors (lost sync, a damaged packet, a PES packet that does not add up) cost the packets they
     touch, and are reported with their byte offsets in the file (:class:`.demux.KLVDemux`).
     """
+    from .demux import clean_klv_payloads
+
+    issues: list[KLVIssue] = []
+    by_arrival: dict[int, int] = {}  # PID -> PES timed by the video frame before them
+    torn = len(data) % TS_PACKET
+    if torn:  # a recording cut off mid-packet: the whole packets before it are kept
+        issues.append(KLVIssue(path, None, len(data) - torn, "skipped bytes",
+                               f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)"))
+        data = data[:len(data) - torn]
+    clean = clean_klv_payloads(data) if fast else None  # (a clean stream: vectorised, the same result)
+    if clean is not None:
+        per_pid, by_arrival = clean
+    else:
+        per_pid = _demux_klv(data, path, issues, by_arrival)
+    if not per_pid:
+        raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
+    parts = []
+    n = 0
+    for pid, (buf, marks) in sorted(per_pid.items()):
+        s = decode(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
+                   first_index=n, strict=strict)
+        arrival = (StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
+                              "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
+                              "before it in the stream", by_arrival[pid], n) if by_arrival.get(pid) else None)
+        n += len(s) + sum(1 for i in s.issues if i.packet is not None)
+        parts.append((s, arrival))
+    return issues, parts
+
+
+def _demux_klv(data: bytes, path: str, issues: list[KLVIssue], by_arrival: dict[int, int]
+               ) -> dict[int, tuple[bytearray, list]]:
+    """Each KLV PID's bytes and (offset, PTS s) marks by :class:`.demux.KLVDemux`, its damage added
+    to ``issues`` and the PES timed by arrival counted per PID in ``by_arrival``."""
     from stanag4609.transport.demux import PESStreamEvent, StreamKind
     from stanag4609.transport.metadata import parse_metadata_au_cells
 
     from .demux import PTS_HZ, KLVDemux
 
     demux = KLVDemux(arrival=True)
-    issues: list[KLVIssue] = []
-    by_arrival: dict[int, int] = {}  # PID -> packets timed by the video frame before them
     per_pid: dict[int, tuple[bytearray, list]] = {}
-    torn = len(data) % TS_PACKET
-    if torn:  # a recording cut off mid-packet: the whole packets before it are kept
-        issues.append(KLVIssue(path, None, len(data) - torn, "skipped bytes",
-                               f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)"))
-        data = data[:len(data) - torn]
     events, damage = demux.feed_stream(data)
     issues += [KLVIssue(path, None, d.offset, "malformed", f"MPEG-TS: {d.message}") for d in damage]
     for ev in events:
@@ -454,16 +481,4 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode) -> tuple[list[
             by_arrival[ev.pid] = by_arrival.get(ev.pid, 0) + 1
         marks.append((len(buf), t))
         buf.extend(payload)
-    if not per_pid:
-        raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
-    parts = []
-    n = 0
-    for pid, (buf, marks) in sorted(per_pid.items()):
-        s = decode(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
-                   first_index=n, strict=strict)
-        arrival = (StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
-                              "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
-                              "before it in the stream", by_arrival[pid], n) if by_arrival.get(pid) else None)
-        n += len(s) + sum(1 for i in s.issues if i.packet is not None)
-        parts.append((s, arrival))
-    return issues, parts
+    return per_pid
