@@ -72,10 +72,12 @@ def geo_table(records: Records, features: list[dict] | np.ndarray | None = None)
     GeoJSON features or an array of shapely geometries, one per record (None: the records' points)."""
     import pyarrow as pa
     import shapely
-    from pyproj import CRS
 
-    geoms = point_geometries(records) if features is None else feature_geometries(features)
-    if features is not None and len(records) != len(features):
+    if features is None:
+        column, gtypes, has_z, bounds = point_wkb(records)
+        return _with_geometry(records, column, gtypes, has_z, bounds)
+    geoms = feature_geometries(features)
+    if len(records) != len(features):
         raise ValueError(f"geo_table: {len(records)} records for {len(features)} features")
     present = ~shapely.is_missing(geoms)
     sub = geoms[present]
@@ -88,12 +90,57 @@ def geo_table(records: Records, features: list[dict] | np.ndarray | None = None)
     pairs = np.unique(np.asarray(kinds, dtype=np.int64) * 2 + np.asarray(zs, dtype=np.int64))
     gtypes = sorted({GEOMETRY_TYPES[int(p) // 2] + (" Z" if p % 2 else "") for p in pairs})
     bounds = shapely.total_bounds(sub) if sub.size else [math.nan] * 4
+    return _with_geometry(records, pa.array(wkb.tolist(), type=pa.binary()), gtypes, has_z, bounds)
+
+
+def _with_geometry(records: Records, column, gtypes: list[str], has_z: bool, bounds):
+    from pyproj import CRS
+
     crs = CRS.from_epsg(4979 if has_z else 4326)
     meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": crs.to_json_dict(), "edges": "planar"}
     if np.all(np.isfinite(bounds)):
         meta["bbox"] = [float(b) for b in bounds]
-    table = arrow_table(records)
-    return table.append_column("geometry", pa.array(wkb.tolist(), type=pa.binary())), meta
+    return arrow_table(records).append_column("geometry", column), meta
+
+
+_POINT_2D = np.dtype([("order", "u1"), ("kind", "<u4"), ("x", "<f8"), ("y", "<f8")])  # packed: 21 bytes
+_POINT_Z = np.dtype([("order", "u1"), ("kind", "<u4"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8")])  # 29 bytes
+
+
+def point_wkb(records: Records):
+    """The records' points as an Arrow binary column of ISO WKB (little-endian ``Point Z`` where
+    h_m is known, ``Point`` where only the horizontal position is, null where there is none: what
+    shapely's ``to_wkb`` writes for :func:`point_geometries`, byte for byte), built with numpy
+    without a Python object per point; and (geometry types, has Z, 2-D bounds)."""
+    import pyarrow as pa
+
+    lon = np.asarray(records["lon_deg"], dtype=np.float64)
+    lat = np.asarray(records["lat_deg"], dtype=np.float64)
+    h = np.asarray(records["h_m"], dtype=np.float64) if "h_m" in records.columns else np.full(lon.shape, np.nan)
+    where = np.isfinite(lon) & np.isfinite(lat)
+    z = where & np.isfinite(h)
+    flat = where & ~z
+    size = np.where(z, _POINT_Z.itemsize, np.where(flat, _POINT_2D.itemsize, 0))
+    offsets = np.zeros(lon.size + 1, np.int64)
+    np.cumsum(size, out=offsets[1:])
+    data = np.zeros(int(offsets[-1]), np.uint8)
+    for rows, dtype, kind in ((z, _POINT_Z, 1001), (flat, _POINT_2D, 1)):
+        if not rows.any():
+            continue
+        rec = np.zeros(int(rows.sum()), dtype)
+        rec["order"], rec["kind"], rec["x"], rec["y"] = 1, kind, lon[rows], lat[rows]
+        if kind == 1001:
+            rec["z"] = h[rows]
+        data[offsets[:-1][rows][:, None] + np.arange(dtype.itemsize)] = rec.view(np.uint8).reshape(-1, dtype.itemsize)
+    kind = pa.large_binary() if offsets[-1] >= 2**31 else pa.binary()
+    width = np.int64 if kind == pa.large_binary() else np.int32
+    column = pa.Array.from_buffers(kind, lon.size, [pa.py_buffer(np.packbits(where, bitorder="little")),
+                                                    pa.py_buffer(offsets.astype(width)), pa.py_buffer(data)],
+                                   null_count=int((~where).sum()))
+    gtypes = sorted({"Point"} if flat.any() else set()) + (["Point Z"] if z.any() else [])
+    bounds = ([float(lon[where].min()), float(lat[where].min()), float(lon[where].max()), float(lat[where].max())]
+              if where.any() else [math.nan] * 4)
+    return column, gtypes, bool(z.any()), bounds
 
 
 def arrow_table(records: Records, *, labels: dict[str, np.ndarray] | None = None):
