@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import KLVError
 from .localset import EPOCH, MAX_TIME_US, Text, UInt, misb_time, num
 from .reader import (
     UAS_KEY,
@@ -34,8 +33,8 @@ from .reader import (
     StreamNote,
     decode_klv_bytes,
     decode_packet,
-    looks_like_ts,
     packet_pts,
+    read_klv_file,
     ts_klv_parts,
     with_repaired_keys,
 )
@@ -301,23 +300,14 @@ def _decode_columns(data: bytes, path: str, *, pts, container: str, stream: str,
 
 def read_klv_columns(path: str | Path, *, strict: bool = False) -> KLVColumns:
     """:func:`.reader.read_klv` as columns (raw KLV or MPEG-TS; the same errors)."""
-    p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise KLVError(f"cannot read {path}: {exc.strerror or exc}") from None
-    if not data:
-        raise KLVError(f"{path} is empty")
-    if looks_like_ts(data):
-        issues, parts = ts_klv_parts(data, str(path), strict=strict, decode=decode_klv_columns)
-        notes = [n for s, arrival in parts for n in ([arrival, *s.notes] if arrival else s.notes)]
-        cols = concat_columns(str(path), "mpegts", [s for s, _ in parts], issues, notes)
-    else:
-        cols = decode_klv_columns(data, str(path), strict=strict)
-    if not len(cols) and not any(i.packet is not None for i in cols.issues):
-        raise KLVError(f"{path}: no MISB ST 0601 packet found (key {UAS_KEY.hex(' ')}), nor an EG 0104 one; is this "
-                       "a KLV stream or an MPEG-TS file with a KLV data stream?")
-    return cols
+    return read_klv_file(path, strict=strict, from_ts=ts_columns, from_klv=decode_klv_columns)
+
+
+def ts_columns(data: bytes, path: str, *, strict: bool = False) -> KLVColumns:
+    """:func:`.reader.read_ts_bytes` as columns."""
+    issues, parts = ts_klv_parts(data, path, strict=strict, decode=decode_klv_columns)
+    notes = [n for s, arrival in parts for n in ([arrival, *s.notes] if arrival else s.notes)]
+    return concat_columns(path, "mpegts", [s for s, _ in parts], issues, notes)
 
 
 def concat_columns(path: str, container: str, parts: list[KLVColumns], issues: list[KLVIssue],

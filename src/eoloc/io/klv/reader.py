@@ -163,6 +163,13 @@ def read_klv(path: str | Path, *, strict: bool = False) -> KLVStream:
     Raises :class:`KLVError` only when nothing can be read; bad packets are reported in
     ``issues``, departures from the standard in ``notes``, and every good packet kept.
     """
+    return read_klv_file(path, strict=strict, from_ts=read_ts_bytes, from_klv=decode_klv_bytes)
+
+
+def read_klv_file(path: str | Path, *, strict: bool, from_ts, from_klv):
+    """A KLV file read by ``from_ts`` (an MPEG-TS, told by its content) or ``from_klv`` (raw KLV),
+    readers of (bytes, path, strict=) giving objects or columns; :class:`KLVError` when the file
+    cannot be read or holds no packet, good or bad."""
     p = Path(path)
     try:
         data = p.read_bytes()
@@ -170,14 +177,11 @@ def read_klv(path: str | Path, *, strict: bool = False) -> KLVStream:
         raise KLVError(f"cannot read {path}: {exc.strerror or exc}") from None
     if not data:
         raise KLVError(f"{path} is empty")
-    if looks_like_ts(data):
-        stream = read_ts_bytes(data, str(path), strict=strict)
-    else:
-        stream = decode_klv_bytes(data, str(path), strict=strict)
-    if not stream.packets and stream.n_bad == 0:
+    result = (from_ts if looks_like_ts(data) else from_klv)(data, str(path), strict=strict)
+    if not len(result) and not any(i.packet is not None for i in result.issues):
         raise KLVError(f"{path}: no MISB ST 0601 packet found (key {UAS_KEY.hex(' ')}), nor an EG 0104 one; is this "
                        "a KLV stream or an MPEG-TS file with a KLV data stream?")
-    return stream
+    return result
 
 
 class _Notes:
