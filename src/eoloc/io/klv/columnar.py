@@ -39,7 +39,16 @@ from .reader import (
     with_repaired_keys,
 )
 from .st0601 import FIELDS, Mapped
-from .st0903 import _HAE, _LAT, _LON, IMAPB, LEGACY_VERSION, VMTI_FIELDS, VTARGET_FIELDS, _location
+from .st0903 import (
+    IMAPB,
+    LEGACY_VERSION,
+    LOCATION_HAE,
+    LOCATION_LAT,
+    LOCATION_LON,
+    VMTI_FIELDS,
+    VTARGET_FIELDS,
+    decode_location,
+)
 
 #: ST 0601 tags with a numeric column (every mapped or integer item of :data:`.st0601.FIELDS`)
 COLUMN_TAGS: tuple[int, ...] = tuple(t for t, (_, spec) in FIELDS.items() if isinstance(spec, (Mapped, UInt)))
@@ -87,7 +96,7 @@ def scan_tables() -> tuple[np.ndarray, ...]:
                 spec_f[tag, S.SPEC_STEP] = float((dec.hi - dec.lo) / Fraction(rmax - rmin))
             elif isinstance(dec, IMAPB):
                 imapb_row(S, spec_i, spec_f, tag, dec)
-            elif dec is _location:
+            elif dec is decode_location:
                 row[S.SPEC_KIND] = S.K_LOCATION
             else:
                 raise TypeError(f"tag {tag}: no scanner kind for decoder {dec!r}")
@@ -98,7 +107,7 @@ def scan_tables() -> tuple[np.ndarray, ...]:
     target = table(VTARGET_FIELDS, TARGET_INT_COLUMNS, TARGET_FLOAT_COLUMNS, {})
     loc_i = np.zeros((3, S.N_SPEC_I), np.int64)
     loc_f = np.zeros((3, S.N_SPEC_F), np.float64)
-    for k, dec in enumerate((_LAT, _LON, _HAE)):
+    for k, dec in enumerate((LOCATION_LAT, LOCATION_LON, LOCATION_HAE)):
         imapb_row(S, loc_i, loc_f, k, dec)
     return (*st0601, *vmti, *target, loc_i, loc_f)
 

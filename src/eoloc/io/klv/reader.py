@@ -3,7 +3,9 @@ per KLV PID, every decodable value kept.
 
 What is ours and what is not:
 
-- **MPEG-TS demultiplexing** is stanag4609's transport layer (README: why it).
+- **MPEG-TS demultiplexing** is stanag4609's transport layer (README: why it), made to survive damage
+  (:class:`.demux.KLVDemux`); a clean stream is read in vectorised passes to the same result
+  (:func:`.demux.clean_klv_payloads`).
 - **Framing** is ours: the bytes are scanned for the ST 0601 and EG 0104 keys, every packet is
   decoded on its own, and after a corrupt or truncated packet the scan resumes at the next key
   *inside* the bad bytes, so a truncated packet never swallows the good packet that follows it.

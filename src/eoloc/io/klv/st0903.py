@@ -56,8 +56,8 @@ class IMAPB:
 
 _FOV = IMAPB(0.0, 180.0, 2)
 _OFFSET = IMAPB(-19.2, 19.2, 3)
-_HAE = IMAPB(-900.0, 19000.0, 2)
-_LAT, _LON, _SIGMA = IMAPB(-90.0, 90.0, 4), IMAPB(-180.0, 180.0, 4), IMAPB(0.0, 650.0, 2)
+LOCATION_HAE = IMAPB(-900.0, 19000.0, 2)  # (the VTarget's own HAE, tag 12, too)
+LOCATION_LAT, LOCATION_LON, _SIGMA = IMAPB(-90.0, 90.0, 4), IMAPB(-180.0, 180.0, 4), IMAPB(0.0, 650.0, 2)
 
 
 _uint, _text = UInt(), Text(strict=False)
@@ -76,11 +76,11 @@ class Location:
     sigma_up_m: float = math.nan
 
 
-def _location(raw: bytes) -> Location:
+def decode_location(raw: bytes) -> Location:
     if len(raw) not in (10, 16, 22):
         raise FieldError(f"10, 16 or 22 bytes expected, {len(raw)} sent")
     sig = [_SIGMA(raw[i:i + 2]) for i in range(10, 16, 2)] if len(raw) >= 16 else []
-    return Location(_LAT(raw[0:4]), _LON(raw[4:8]), _HAE(raw[8:10]), *sig)
+    return Location(LOCATION_LAT(raw[0:4]), LOCATION_LON(raw[4:8]), LOCATION_HAE(raw[8:10]), *sig)
 
 
 # -- ST 0903.3 and older (VMTI LS version <= 3): linear mappings, not ST 1201 IMAPB -------------------
@@ -130,10 +130,10 @@ VTARGET_FIELDS: dict[int, tuple[str, Any]] = {
     1: ("targetCentroid", _uint), 2: ("boundingBoxTopLeft", _uint), 3: ("boundingBoxBottomRight", _uint),
     4: ("targetPriority", _uint), 5: ("targetConfidenceLevel", _uint), 6: ("targetHistory", _uint),
     7: ("percentageOfTargetPixels", _uint), 9: ("targetIntensity", _uint),
-    10: ("targetLocationOffsetLat", _OFFSET), 11: ("targetLocationOffsetLon", _OFFSET), 12: ("targetHae", _HAE),
+    10: ("targetLocationOffsetLat", _OFFSET), 11: ("targetLocationOffsetLon", _OFFSET), 12: ("targetHae", LOCATION_HAE),
     13: ("boundingBoxTopLeftLatOffset", _OFFSET), 14: ("boundingBoxTopLeftLonOffset", _OFFSET),
     15: ("boundingBoxBottomRightLatOffset", _OFFSET), 16: ("boundingBoxBottomRightLonOffset", _OFFSET),
-    17: ("targetLocation", _location), 19: ("centroidPixRow", _uint), 20: ("centroidPixCol", _uint),
+    17: ("targetLocation", decode_location), 19: ("centroidPixRow", _uint), 20: ("centroidPixCol", _uint),
     22: ("algorithmId", _uint), 23: ("detectionStatus", _uint),
 }
 
