@@ -38,9 +38,7 @@ class KLVJob:
     @property
     def has_footprint(self) -> bool:
         """At least one frame's footprint was drawn."""
-        if self.footprint_table is not None:
-            return any(g is not None for g in self.footprint_table[1])
-        return any(f.get("geometry") for f in self.layers["footprints"])
+        return footprint_drawn(self.layers["footprints"], self.footprint_table)
 
     @property
     def located_nothing(self) -> bool:
@@ -54,6 +52,14 @@ class KLVJob:
     @property
     def surface(self) -> str:
         return "the DEM" if self.dem is not None else "the frame-centre elevation"
+
+
+def footprint_drawn(features: list[dict], table: tuple | None = None) -> bool:
+    """At least one footprint has a geometry: among GeoJSON ``features``, or the polygons of a
+    (properties, geometries) ``table`` where there is one."""
+    if table is not None:
+        return any(g is not None for g in table[1])
+    return any(f.get("geometry") for f in features)
 
 
 def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, strict: bool = False,
@@ -120,8 +126,7 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
 
             diagnoses += diagnose_vmti(det, v.fixes, other_numbering, assume=assume)
     notes = []
-    drawn = any(g is not None for g in table[1]) if table is not None else any(f.get("geometry") for f in prints)
-    if len(tel) and not drawn:
+    if len(tel) and not footprint_drawn(prints, table):
         notes.append("no footprint could be drawn: " + (
             "the DEM is not under any frame" if dem is not None else
             "no packet gives the frame-centre elevation (tag 78, or 25 + geoid) that the corners stop at: give --dem"))

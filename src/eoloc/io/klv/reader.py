@@ -22,7 +22,6 @@ What is ours and what is not:
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 from collections import Counter
 from dataclasses import dataclass, field
@@ -299,19 +298,17 @@ def with_repaired_keys(data: bytes, pts, stream: str, first_index: int, decode):
 def _decode_klv_bytes(data: bytes, path: str = "<bytes>", *, pts: list[tuple[int, float | None]] | None = None,
                       container: str = "klv", stream: str = "", first_index: int = 0,
                       strict: bool = False) -> KLVStream:
-    framer = Framer(data, path, stream=stream, first_index=first_index, strict=strict)
+    framer = Framer(data, path, stream=stream, first_index=first_index, strict=strict, pts=pts)
     while framer.pos < len(data):
         framer.step()
-    packets = framer.packets
-    if pts:
-        times = packet_pts([p.offset for p in packets], pts)
-        packets = [dataclasses.replace(p, pts_s=t) for p, t in zip(packets, times, strict=True)]
-    return KLVStream(path, container, packets, framer.issues, framer.notes.result())
+    return KLVStream(path, container, framer.packets, framer.issues, framer.notes.result())
 
 
-def packet_pts(offsets, pts: list[tuple[int, float | None]]) -> list[float | None]:
-    """Each packet's PTS: that of the last (byte offset, PTS) mark at or before its key."""
-    marks = np.array([m[0] for m in pts], dtype=np.int64)
+def packet_pts(offsets, pts: list[tuple[int, float | None]], marks: np.ndarray | None = None
+               ) -> list[float | None]:
+    """Each packet's PTS: that of the last (byte offset, PTS) mark at or before its key (``marks``:
+    the marks' offsets as an array, where the caller keeps them)."""
+    marks = np.array([m[0] for m in pts], dtype=np.int64) if marks is None else marks
     at = np.maximum(np.searchsorted(marks, np.asarray(offsets, dtype=np.int64), side="right") - 1, 0)
     return [pts[j][1] for j in at.tolist()]
 
@@ -319,12 +316,13 @@ def packet_pts(offsets, pts: list[tuple[int, float | None]]) -> list[float | Non
 class Framer:
     """The tolerant reader's framing, one step at a time (see the module notes): each
     :meth:`step` reads the next packet (or reports the bytes before it) from ``pos`` and keeps
-    the good packet, the issue and the notes. The columnar reader steps it over what its compiled
-    scanner does not take."""
+    the good packet (with its PTS where ``pts`` marks are given), the issue and the notes. The
+    columnar reader steps it over what its compiled scanner does not take."""
 
     def __init__(self, data: bytes, path: str, *, stream: str = "", first_index: int = 0,
-                 strict: bool = False) -> None:
-        self.data, self.path, self.stream, self.strict = data, path, stream, strict
+                 strict: bool = False, pts: list[tuple[int, float | None]] | None = None) -> None:
+        self.data, self.path, self.stream, self.strict, self.pts = data, path, stream, strict, pts
+        self.marks = np.array([m[0] for m in pts], dtype=np.int64) if pts else None
         self.packets: list[KLVPacket] = []
         self.issues: list[KLVIssue] = []
         self.notes = _Notes()
@@ -367,7 +365,8 @@ class Framer:
             self.after_bad = False
             return
         self.notes.add(self.stream, n, pnotes)
-        self.packets.append(KLVPacket(n, k, None, raw, values, self.stream, standard))
+        pts_s = packet_pts([k], self.pts, self.marks)[0] if self.pts else None
+        self.packets.append(KLVPacket(n, k, pts_s, raw, values, self.stream, standard))
         self.after_bad = False
 
 

@@ -243,14 +243,13 @@ def vmti_detections(stream: KLVStream | KLVColumns, *, pixels_from: int = 1) -> 
     ti, tf = cols.target_i, cols.target_f
     r = ti[:, 0]
     w = width[r]
-    u, v = _centroids(ti, w, pixels_from)
+    (u0, v0), (u1, v1) = _pixel_numbers(ti[:, 3], w, pixels_from), _pixel_numbers(ti[:, 4], w, pixels_from)
+    u, v = _centroids(ti, w, pixels_from, (u0 + u1) / 2.0, (v0 + v1) / 2.0)
     bad = ~(np.isfinite(u) & np.isfinite(v))
     issues = [Issue(cols.path, 0, f"packet {cols.index[r[k]]}: VMTI target {ti[k, 1]} has no usable centroid "
                     f"(frame width {float(w[k])}); skipped") for k in np.flatnonzero(bad)]
     keep = ~bad
-    r, w, ti, tf, u, v = r[keep], w[keep], ti[keep], tf[keep], u[keep], v[keep]
-    u0, v0 = _pixel_numbers(ti[:, 3], w, pixels_from)
-    u1, v1 = _pixel_numbers(ti[:, 4], w, pixels_from)
+    r, w, ti, tf, u, v, u0, v0, u1, v1 = (x[keep] for x in (r, w, ti, tf, u, v, u0, v0, u1, v1))
     sent = ti[:, 7] == 1
     out = {
         "stream": cols.stream[r].astype(str), "frame": cols.index[r].astype(np.float64), "time_s": cols.time_s[r],
@@ -282,14 +281,14 @@ def _pixel_numbers(value: np.ndarray, width: np.ndarray, pixels_from: int = 1) -
     return np.where(ok, col, np.nan), np.where(ok, row, np.nan)
 
 
-def _centroids(ti: np.ndarray, width: np.ndarray, pixels_from: int) -> tuple[np.ndarray, np.ndarray]:
+def _centroids(ti: np.ndarray, width: np.ndarray, pixels_from: int, box_u: np.ndarray, box_v: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Each target's centroid pixel: its row and column (tags 19/20) where both are sent, else its
-    centroid pixel number (tag 1), else the middle of its box (tags 2/3)."""
+    centroid pixel number (tag 1), else the middle of its box (``box_u``, ``box_v``: tags 2/3)."""
     row, col = ti[:, 5], ti[:, 6]
     by_rc = (row >= pixels_from) & (col >= pixels_from)
     u1, v1 = _pixel_numbers(ti[:, 2], width, pixels_from)
-    (a0, b0), (a1, b1) = _pixel_numbers(ti[:, 3], width, pixels_from), _pixel_numbers(ti[:, 4], width, pixels_from)
     by_number = np.isfinite(u1)
-    u = np.where(by_rc, col - pixels_from, np.where(by_number, u1, (a0 + a1) / 2.0))
-    v = np.where(by_rc, row - pixels_from, np.where(by_number, v1, (b0 + b1) / 2.0))
+    u = np.where(by_rc, col - pixels_from, np.where(by_number, u1, box_u))
+    v = np.where(by_rc, row - pixels_from, np.where(by_number, v1, box_v))
     return u.astype(np.float64), v.astype(np.float64)
