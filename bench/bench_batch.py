@@ -3,6 +3,10 @@ LocalCluster on the same generated archive (circling flights, 5 VMTI targets per
 the frame-centre elevation), each writing the five GeoParquet layers; the two runs must give the
 same partitions (checked). The baseline is the same work file by file in one process.
 
+Memory: `eoloc batch` on one long file in a child process (its own peak resident size, VmHWM):
+a file of n/2 packets and one 10x longer, read in segments of 1 MB of KLV (the default) and, for
+the baseline, whole (one segment as large as the file: what the batch did before it streamed).
+
     python bench/bench_batch.py [--n 12000]     # n: packets in the archive (600 per file)
 """
 
@@ -24,6 +28,55 @@ def _run(folder: Path, out: Path, mapper) -> tuple[float, list]:
     t0 = time.perf_counter()
     job = batch_job([str(folder)], BatchSettings(str(out)), mapper=mapper, redo=True)
     return time.perf_counter() - t0, job.results
+
+
+_PEAK = """
+import sys, time
+from pathlib import Path
+from eoloc.jobs.batch import BatchSettings, batch_job
+t0 = time.perf_counter()
+job = batch_job([sys.argv[1]], BatchSettings(sys.argv[2], segment_bytes=int(sys.argv[3])), redo=True)
+assert [r.status for r in job.results] == ["done"], job.results
+seconds = time.perf_counter() - t0
+peak = [int(x.split()[1]) for x in Path("/proc/self/status").read_text().splitlines() if x.startswith("VmHWM:")][0]
+print(peak / 1024, seconds, job.results[0].packets)
+"""
+
+
+def long_flight(path: Path, packets: int) -> Path:
+    """One long recording: circling flights of 6 000 packets one after the other in time."""
+    from eoloc.io.klv.synthetic import START_UNIX_S, circling_flight_klv
+
+    with path.open("wb") as fh:
+        for k in range(0, packets, 6_000):
+            fh.write(circling_flight_klv(min(6_000, packets - k), seed=k, start_unix_s=START_UNIX_S + k / 10.0))
+    return path
+
+
+def peak_mb(path: Path, out: Path, segment_bytes: int) -> tuple[float, float, int]:
+    """(peak resident MB, seconds, packets) of a child process running the batch on ``path``."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _PEAK, str(path), str(out), str(segment_bytes)], check=True,
+                          capture_output=True, text=True)
+    mb, seconds, packets = done.stdout.split()
+    return float(mb), float(seconds), int(packets)
+
+
+def memory_rows(n: int) -> list[str]:
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        short, long = long_flight(root / "short.klv", n // 2), long_flight(root / "long.klv", 5 * n)
+        rows = []
+        for path in (short, long):
+            whole = peak_mb(path, root / "whole", 1 << 40)
+            seg = peak_mb(path, root / "seg", 1_000_000)
+            size = path.stat().st_size / 1e6
+            rows.append(row(f"`eoloc batch`, one file of {seg[2]:,} packets ({size:.0f} MB), peak memory, segments of "
+                            "1 MB", f"{seg[0]:.0f} MB ({seg[1]:.1f} s)",
+                            f"read whole: {whole[0]:.0f} MB ({whole[1]:.1f} s)", whole[0] / seg[0]))
+    return rows
 
 
 def main(n: int = 12_000) -> list[str]:
@@ -53,7 +106,8 @@ def main(n: int = 12_000) -> list[str]:
                 "", None),
             row("the same on a Dask LocalCluster, 2 workers x 1 thread (same partitions: True)",
                 f"{files / t_dask:.1f} files/s, {packets / t_dask:,.0f} packets/s ({t_dask:.1f} s)",
-                f"one process {t_one:.1f} s", t_one / t_dask)]
+                f"one process {t_one:.1f} s", t_one / t_dask),
+            *memory_rows(n)]
 
 
 if __name__ == "__main__":

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -94,13 +96,23 @@ def geo_table(records: Records, features: list[dict] | np.ndarray | None = None)
 
 
 def _with_geometry(records: Records, column, gtypes: list[str], has_z: bool, bounds):
+    return arrow_table(records).append_column("geometry", column), column_metadata(gtypes, has_z, bounds)
+
+
+@cache
+def _crs_json(has_z: bool) -> dict:
     from pyproj import CRS
 
-    crs = CRS.from_epsg(4979 if has_z else 4326)
-    meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": crs.to_json_dict(), "edges": "planar"}
+    return CRS.from_epsg(4979 if has_z else 4326).to_json_dict()
+
+
+def column_metadata(gtypes: list[str], has_z: bool, bounds) -> dict:
+    """GeoParquet column metadata: WKB of ``gtypes``, EPSG:4979 (with heights) or 4326, the 2-D
+    ``bounds`` as bbox where they are finite."""
+    meta = {"encoding": "WKB", "geometry_types": gtypes, "crs": _crs_json(has_z), "edges": "planar"}
     if np.all(np.isfinite(bounds)):
         meta["bbox"] = [float(b) for b in bounds]
-    return arrow_table(records).append_column("geometry", column), meta
+    return meta
 
 
 _POINT_2D = np.dtype([("order", "u1"), ("kind", "<u4"), ("x", "<f8"), ("y", "<f8")])  # packed: 21 bytes
@@ -165,10 +177,84 @@ def write_geoparquet(path: str | Path, records: Records, features: list[dict] | 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     table, meta = geo_table(records, features)
-    geo = {"version": GEOPARQUET_VERSION, "primary_column": "geometry", "columns": {"geometry": meta}}
-    table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"geo": json.dumps(geo).encode()})
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"geo": geo_metadata(meta)})
     pq.write_table(table, path, compression="zstd")
     return path
+
+
+def geo_metadata(column: dict) -> bytes:
+    """The GeoParquet file metadata (the ``geo`` key) of a file whose geometry column is ``column``."""
+    return json.dumps({"version": GEOPARQUET_VERSION, "primary_column": "geometry",
+                       "columns": {"geometry": column}}).encode()
+
+
+class ParquetLayer:
+    """One layer written a chunk at a time (a long file read in segments), each chunk a row group
+    of ``folder/part-0.parquet``: GeoParquet where the chunks have geometries (its ``geo``
+    metadata, geometry types, CRS and bbox over every chunk, written when it is closed), plain
+    Parquet (zstd) otherwise. A chunk whose columns differ from the file's in name or type, or
+    that has geometries where the file has none (or the reverse), starts the next file,
+    ``part-1.parquet`` ...: every row kept, each file valid on its own. Files are written under a
+    temporary name and given theirs when :meth:`close`d; memory holds one chunk."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.parts: list[Path] = []
+        self._writer = None
+        self._tmp: Path | None = None
+        self._schema = None
+        self._geo: dict | None = None
+
+    def write(self, records: Records, features: list[dict] | np.ndarray | None = None) -> None:
+        import pyarrow.parquet as pq
+
+        if not len(records):
+            return
+        geo = None
+        if records.has_points or features is not None:
+            table, geo = geo_table(records, features)
+        else:
+            table = arrow_table(records)
+        table = table.replace_schema_metadata(None)
+        if self._writer is not None and (table.schema != self._schema or (geo is None) != (self._geo is None)):
+            self._finish()
+        if self._writer is None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self._tmp = self.folder / f".part-{len(self.parts)}.parquet.tmp"
+            self._writer = pq.ParquetWriter(self._tmp, table.schema, compression="zstd", store_schema=False)
+            self._schema, self._geo = table.schema, None if geo is None else {"types": set(), "z": False,
+                                                                              "bounds": []}
+        self._writer.write_table(table)
+        if geo is not None:
+            self._geo["types"] |= set(geo["geometry_types"])
+            self._geo["z"] |= geo["crs"] == _crs_json(True)
+            if "bbox" in geo:
+                self._geo["bounds"].append(geo["bbox"])
+
+    def _finish(self) -> None:
+        if self._geo is not None:
+            b = np.array(self._geo["bounds"], dtype=np.float64).reshape(-1, 4)
+            bbox = [*b[:, :2].min(axis=0), *b[:, 2:].max(axis=0)] if len(b) else [math.nan] * 4
+            meta = column_metadata(sorted(self._geo["types"]), self._geo["z"], bbox)
+            self._writer.add_key_value_metadata({"geo": geo_metadata(meta).decode()})
+        self._writer.close()
+        final = self.folder / f"part-{len(self.parts)}.parquet"
+        os.replace(self._tmp, final)
+        self.parts.append(final)
+        self._writer = None
+
+    def close(self) -> list[Path]:
+        """Finish the files; their paths (none for a layer that had no row)."""
+        if self._writer is not None:
+            self._finish()
+        return self.parts
+
+    def abort(self) -> None:
+        """Drop the file being written (an error before :meth:`close`)."""
+        if self._writer is not None:
+            self._writer.close()
+            self._tmp.unlink(missing_ok=True)
+            self._writer = None
 
 
 def _without_nul(table):

@@ -29,14 +29,16 @@ import os
 import shutil
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import EolocError, InputError
+from ..io.geotable import ParquetLayer
 from ..io.records import Records
 
 KLV_SUFFIXES = (".klv", ".bin", ".ts", ".m2ts", ".mpg", ".mpeg")
@@ -62,6 +64,7 @@ class BatchSettings:
     grid: tuple[str, ...] = ()
     strict: bool = False
     assume: tuple[str, ...] = ()
+    segment_bytes: int | None = None  # a KLV file's bytes read at a time (None: eoloc.io.klv.segments.SEGMENT_BYTES)
 
     def __post_init__(self) -> None:
         def absolute(p: str | None) -> str | None:
@@ -220,28 +223,33 @@ def is_done(task: Task, settings: BatchSettings, fingerprint: str) -> FileResult
     return FileResult(**{**m["result"], "status": "skipped"})
 
 
-def _layers_klv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Records, list | None]], int]:
-    from .klv import frame_records, klv_job, telemetry_records
+def _layers_klv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str, tuple[Records, Any]], int]]:
+    """The layers of a KLV file a segment at a time (:func:`.klv.klv_segment_jobs`), with the
+    segment's packet count."""
+    from .klv import frame_records, klv_segment_jobs, telemetry_records
     from .setup import misb_setup
 
     sensor, budget = misb_setup(_config(settings.config_path))
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
-    job = klv_job(task.path, dem=dem, sensor=sensor, budget=budget, footprint_every=settings.footprint_every,
-                  strict=settings.strict, assume=settings.assume, map_layers=False, columnar=True)
-    frames = frame_records(job.telemetry, job.check).columns
-    frames = {"lat_deg": frames.pop("eoloc_lat_deg"), "lon_deg": frames.pop("eoloc_lon_deg"),
-              "h_m": frames.pop("eoloc_h_m"), **frames}
-    prints = job.layers["footprints"]
-    footprints = job.footprint_table or (Records.from_rows([f["properties"] for f in prints]), prints)
-    issues = [str(i) for i in [*job.stream.issues, *job.issues]]
-    layers = {"fixes": (job.records, None), "packets": (telemetry_records(job.telemetry), None),
-              "frames": (Records(frames), None),
-              "footprints": footprints,
-              "issues": (_issue_records(issues), None)}
-    return layers, len(job.telemetry)
+    for seg, job in klv_segment_jobs(task.path, segment_bytes=settings.segment_bytes, dem=dem, sensor=sensor,
+                                     budget=budget, footprint_every=settings.footprint_every,
+                                     strict=settings.strict, assume=settings.assume):
+        if job is None:
+            yield {"issues": (_issue_records([str(i) for i in seg.issues]), None)}, 0
+            continue
+        frames = frame_records(job.telemetry, job.check).columns
+        frames = {"lat_deg": frames.pop("eoloc_lat_deg"), "lon_deg": frames.pop("eoloc_lon_deg"),
+                  "h_m": frames.pop("eoloc_h_m"), **frames}
+        prints = job.layers["footprints"]
+        footprints = job.footprint_table or (Records.from_rows([f["properties"] for f in prints]), prints)
+        issues = [str(i) for i in [*seg.issues, *job.issues]]
+        yield {"fixes": (job.records, None), "packets": (telemetry_records(job.telemetry), None),
+               "frames": (Records(frames), None), "footprints": footprints,
+               "issues": (_issue_records(issues), None)}, len(job.telemetry)
 
 
-def _layers_csv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Records, list | None]], int]:
+def _layers_csv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str, tuple[Records, Any]], int]]:
+    """The layers of a telemetry CSV (and its detections), read whole."""
     from ..rules import rule_from_options
     from .klv import telemetry_records
     from .locate import locate_files
@@ -254,37 +262,20 @@ def _layers_csv(task: Task, settings: BatchSettings) -> tuple[dict[str, tuple[Re
         raise InputError(f"{task.path}: a telemetry CSV needs the ground: --target-height H or --dem FILE")
     rule = rule_from_options(height_m=settings.target_height_m, dem=dem)
     job = locate_files(cfg, task.path, task.detections, rule)
-    layers = {"fixes": (job.records, None),
-              "packets": (telemetry_records(job.telemetry, cfg.telemetry.time_origin), None),
-              "issues": (_issue_records([*map(str, job.issues), *job.notes]), None)}
-    return layers, len(job.telemetry)
+    yield {"fixes": (job.records, None),
+           "packets": (telemetry_records(job.telemetry, cfg.telemetry.time_origin), None),
+           "issues": (_issue_records([*map(str, job.issues), *job.notes]), None)}, len(job.telemetry)
 
 
 def _issue_records(messages: list[str]) -> Records:
     return Records({"message": np.array(messages, dtype=object)})
 
 
-def _write_partition(out_dir: Path, layer: str, key: str, records: Records, features: list | None,
-                     source: str, grid: tuple[str, ...]) -> None:
-    from ..io.geotable import write_geoparquet
+def _partition_records(records: Records, source: str, grid: tuple[str, ...]) -> Records:
     from ..io.gridref import with_grid_columns
 
-    if not len(records):
-        return
     cols = {"source_file": np.full(len(records), source, dtype=object), **records.columns}
-    records = with_grid_columns(Records(cols), grid)
-    folder = out_dir / layer / f"file={key}"
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / ".part-0.parquet.tmp"
-    if records.has_points or features is not None:
-        write_geoparquet(tmp, records, features)
-    else:
-        import pyarrow.parquet as pq
-
-        from ..io.geotable import arrow_table
-
-        pq.write_table(arrow_table(records), tmp, compression="zstd")
-    os.replace(tmp, folder / "part-0.parquet")
+    return with_grid_columns(Records(cols), grid)
 
 
 def remove_partitions(out_dir: Path, key: str) -> None:
@@ -298,16 +289,20 @@ def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileR
     out_dir = Path(settings.out_dir)
     t0 = time.perf_counter()
     result = FileResult(task.key, task.path, "done")
+    writers: dict[str, ParquetLayer] = {}
     try:
         inputs = {q: _stamp(q) for q in (task.path, task.detections) if q}
         remove_partitions(out_dir, task.key)
-        layers, n = (_layers_klv if task.kind == "klv" else _layers_csv)(task, settings)
-        for layer, (records, features) in layers.items():
-            _write_partition(out_dir, layer, task.key, records, features, task.path, settings.grid)
-        fixes = layers["fixes"][0]
-        status = fixes["status"] if len(fixes) else np.zeros(0, dtype=object)
-        result.packets, result.fixes = n, len(fixes)
-        result.fixes_ok, result.issues = int(np.sum(status == "OK")), len(layers["issues"][0])
+        writers.update({layer: ParquetLayer(out_dir / layer / f"file={task.key}") for layer in LAYERS})
+        for layers, n in (_layers_klv if task.kind == "klv" else _layers_csv)(task, settings):
+            for layer, (records, features) in layers.items():
+                writers[layer].write(_partition_records(records, task.path, settings.grid), features)
+            fixes = layers.get("fixes", (Records({}), None))[0]
+            result.packets, result.fixes = result.packets + n, result.fixes + len(fixes)
+            result.fixes_ok += int(np.sum(fixes["status"] == "OK")) if len(fixes) else 0
+            result.issues += len(layers["issues"][0])
+        for w in writers.values():
+            w.close()
     except EolocError as exc:
         result.status, result.message = "failed", str(exc)
         inputs = None
@@ -322,7 +317,12 @@ def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileR
         result.message = f"{type(exc).__name__}: {exc} (traceback in {log})"
         inputs = None
     result.seconds = round(time.perf_counter() - t0, 3)
-    if inputs is not None:
+    if inputs is None:  # (no partial partitions: a failed file has none)
+        for w in writers.values():
+            w.abort()
+        remove_partitions(out_dir, task.key)
+        result.packets = result.fixes = result.fixes_ok = result.issues = 0
+    else:
         m = manifest_path(out_dir, task.key)
         m.parent.mkdir(parents=True, exist_ok=True)
         tmp = m.with_suffix(".tmp")

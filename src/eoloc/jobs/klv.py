@@ -3,6 +3,7 @@ geometry, its ST 0903 VMTI targets located; and the writer of its products."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,9 +76,53 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     on the frame-centre elevation as a table (``footprint_table``, built in vectorised calls)
     instead of GeoJSON features: the archive's form. The job's ``stream`` is then a
     :class:`eoloc.io.klv.KLVColumns`, which has no packet bytes to write back (``--klv-out``)."""
+    from ..io.klv import read_klv, read_klv_columns
+
+    stream = (read_klv_columns if columnar else read_klv)(path, strict=strict)
+    return stream_job(path, stream, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every,
+                      assume=assume, map_layers=map_layers)
+
+
+def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor=None, budget=None,
+                     footprint_every: int = 1, strict: bool = False, assume=()
+                     ) -> Iterator[tuple[object, KLVJob | None]]:
+    """:func:`klv_job` (columnar, without the map's layers or the convention checks) a segment of
+    the file at a time (:func:`eoloc.io.klv.segments.klv_segments`: memory bounded by
+    ``segment_bytes``, whatever the file's size): (the segment's columns, its job) in file order,
+    the job None for a segment with no good packet (its issues are the columns'). Report-on-change,
+    the VMTI frame size and the footprints' every-n-th count are carried from segment to segment,
+    so the rows are those of the whole file's job wherever the stream's time runs forward across
+    the cuts. Raises :class:`KLVError` as :func:`klv_job` does, once the file is read, when no
+    packet was good."""
+    from ..io.klv.segments import SEGMENT_BYTES, klv_segments
+    from ..io.klv.tables import carried_state, with_state
+
+    state, rows, good, issues = None, 0, 0, []
+    every = max(footprint_every, 1)
+    for seg in klv_segments(path, segment_bytes=segment_bytes or SEGMENT_BYTES, strict=strict):
+        if not len(seg):
+            issues += seg.issues
+            yield seg, None
+            continue
+        job = stream_job(path, seg, dem=dem, sensor=sensor, budget=budget, footprint_every=every, assume=assume,
+                         map_layers=False, state=state, first_footprint=(-rows) % every, diagnose=False)
+        state = carried_state(with_state(seg, state))
+        rows, good = rows + len(job.telemetry), good + len(seg)
+        yield seg, job
+    if not good:
+        raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate", [str(i) for i in issues])
+
+
+def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, assume=(),
+               map_layers: bool = True, state=None, first_footprint: int = 0, diagnose: bool = True) -> KLVJob:
+    """:func:`klv_job` of a stream already read (objects or columns); ``state``: what the packets
+    before it left (:func:`eoloc.io.klv.tables.carried_state`, a segment of a longer file),
+    ``first_footprint``: the first row whose footprint is drawn; ``diagnose=False`` leaves the
+    convention checks out (an archive's saving)."""
     from ..ground.frame import misb_sensor
-    from ..io.klv import klv_telemetry, read_klv, read_klv_columns, vmti_detections
+    from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.conventions import apply_to_telemetry
+    from ..io.klv.tables import with_state
     from .diagnose import diagnose_frames, diagnose_vmti
     from .klvframes import (
         aircraft_features,
@@ -90,28 +135,31 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
     )
 
     assume = tuple(dict.fromkeys(assume))
-    stream = (read_klv_columns if columnar else read_klv)(path, strict=strict)
     if not len(stream):
         raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate",
                        [str(i) for i in stream.issues])
+    columnar = not hasattr(stream, "packets")
     sensor = sensor or misb_sensor()
-    raw_tel = klv_telemetry(stream)
+    carried = with_state(stream, state)
+    raw_tel = klv_telemetry(carried)
+    if carried is not stream:  # (the carried state's rows left out)
+        raw_tel = raw_tel.keep(raw_tel.line >= 0)
     tel = apply_to_telemetry(raw_tel, assume)
     check = check_frames(tel, dem, sensor=sensor)
     from_0 = "vmti-pixels-from-0" in assume
-    det = vmti_detections(stream, pixels_from=0 if from_0 else 1)
+    det = vmti_detections(carried, pixels_from=0 if from_0 else 1)
     table = None
     if dem is None and columnar:
-        table, prints = corner_footprint_table(tel, check.geometry, every=footprint_every), []
+        table, prints = corner_footprint_table(tel, check.geometry, every=footprint_every, first=first_footprint), []
     else:
-        prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every) if dem is not None else
-                  corner_footprint_features(tel, check.geometry, every=footprint_every))
+        prints = (dem_footprint_features(tel, dem, sensor, every=footprint_every, first=first_footprint)
+                  if dem is not None else corner_footprint_features(tel, check.geometry, every=footprint_every))
     layers = {"footprints": prints}
     if map_layers:
         layers |= {"aircraft": aircraft_features(tel),
                    "encoder footprints": corner_footprint_features(tel, None, every=footprint_every)}
     records = Records({})
-    diagnoses = [diagnose_frames(raw_tel, sensor)]
+    diagnoses = [diagnose_frames(raw_tel, sensor)] if diagnose else []
     v = None
     if len(det):
         v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
@@ -119,9 +167,9 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
         records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
         if map_layers:
             layers["fixes"] = fix_features(records)
-        if np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's own locations: check conventions
+        if diagnose and np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's locations: conventions
             def other_numbering():
-                d = vmti_detections(stream, pixels_from=1 if from_0 else 0)
+                d = vmti_detections(carried, pixels_from=1 if from_0 else 0)
                 return d, locate_vmti(tel, d, dem, base=sensor).fixes
 
             diagnoses += diagnose_vmti(det, v.fixes, other_numbering, assume=assume)

@@ -90,19 +90,20 @@ def corner_footprint_features(tel: Table, geom: FrameGeometry | None = None, eve
     return feats
 
 
-def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every: int = 1
+def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every: int = 1, first: int = 0
                            ) -> tuple[Records, np.ndarray]:
     """:func:`corner_footprint_features` as a table for the archive: the properties as columns
     (frame, time_s and stream where there is one, as the features carry them) and the polygons as
     an array of shapely geometries (None where a corner is missing), built in vectorised calls.
     The rings :func:`eoloc.ground.footprint.polygon_geometry` would build the same way (within
     10 degrees of longitude, away from the poles and the antimeridian) are oriented by their
-    planar signed area; the others (and near-degenerate ones) go through it one by one."""
+    planar signed area; the others (and near-degenerate ones) go through it one by one. ``first``:
+    the first row drawn (every ``every``-th from it: a segment of a longer stream)."""
     import shapely
     from shapely.geometry import shape
 
     c = tel.columns
-    rows = np.arange(0, len(tel), max(every, 1))
+    rows = np.arange(first, len(tel), max(every, 1))
     if geom is None:
         lat = np.stack([c[f"corner{k + 1}_lat_deg"][rows] for k in range(4)], -1)
         lon = np.stack([c[f"corner{k + 1}_lon_deg"][rows] for k in range(4)], -1)
@@ -134,14 +135,15 @@ def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every:
 
 
 def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, every: int = 1,
-                           edge_samples: int = 8) -> list[dict]:
+                           edge_samples: int = 8, first: int = 0) -> list[dict]:
     """Frame footprints on a DEM (image border traced and clipped at the DEM's edge or the horizon,
-    :func:`eoloc.ground.footprint.footprints`), one batched call per distinct field of view."""
+    :func:`eoloc.ground.footprint.footprints`), one batched call per distinct field of view; every
+    ``every``-th row from row ``first``."""
     from ..ground.footprint import footprints
 
     base = sensor or misb_sensor()
     c = tel.columns
-    rows = np.arange(0, len(tel), max(every, 1))
+    rows = np.arange(first, len(tel), max(every, 1))
     feats: dict[int, dict] = {}
     groups: dict[tuple[float, float], list[int]] = {}
     for i in rows:

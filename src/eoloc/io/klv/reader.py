@@ -179,10 +179,15 @@ def read_klv_file(path: str | Path, *, strict: bool, from_ts, from_klv):
     if not data:
         raise KLVError(f"{path} is empty")
     result = (from_ts if looks_like_ts(data) else from_klv)(data, str(path), strict=strict)
-    if not len(result) and not any(i.packet is not None for i in result.issues):
+    check_found(path, len(result), sum(1 for i in result.issues if i.packet is not None))
+    return result
+
+
+def check_found(path, good: int, bad: int) -> None:
+    """:class:`KLVError` for a file in which no packet, good or bad, was found."""
+    if not good and not bad:
         raise KLVError(f"{path}: no MISB ST 0601 packet found (key {UAS_KEY.hex(' ')}), nor an EG 0104 one; is this "
                        "a KLV stream or an MPEG-TS file with a KLV data stream?")
-    return result
 
 
 class _Notes:

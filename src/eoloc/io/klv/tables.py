@@ -88,7 +88,7 @@ def stream_order(cols: KLVColumns, rows: np.ndarray, where: str) -> tuple[np.nda
         step = float(np.median(dt[dt > 0])) if (dt > 0).any() else 0.0
         jumps = np.flatnonzero(dt > max(20 * step, 1.0))
         if jumps.size:
-            issues.append(Issue(where, int(index[0]),
+            issues.append(Issue(where, int(index[np.argmax(index >= 0)]),  # (not a carried state's row)
                                 f"{jumps.size} gap(s) in time longer than 20 packet intervals (largest "
                                 f"{dt[jumps].max():.1f} s, typical interval {step:.3f} s)"))
     return rows[order], issues
@@ -123,10 +123,11 @@ def klv_telemetry(stream: KLVStream | KLVColumns, *, geoid=None, report_on_chang
         ordered, found = stream_order(cols, rows, where)
         issues += found
         lacking = missing_pose(cols, rows)
-        if lacking:
-            issues.append(Issue(where, int(cols.index[rows[0]]),
+        packets = rows[cols.index[rows] >= 0]  # (not a carried state's row)
+        if lacking and packets.size:
+            issues.append(Issue(where, int(cols.index[packets[0]]),
                                 f"this stream never sends {', '.join(lacking)}: it carries no pose, so its "
-                                f"{rows.size} packet(s) give no frame centre, footprint or fix"))
+                                f"{packets.size} packet(s) give no frame centre, footprint or fix"))
         parts.append(_stream_columns(cols, ordered, geoid, report_on_change))
     if not parts:
         parts = [_stream_columns(cols, np.zeros(0, np.intp), geoid, report_on_change)]
@@ -292,3 +293,44 @@ def _centroids(ti: np.ndarray, width: np.ndarray, pixels_from: int, box_u: np.nd
     u = np.where(by_rc, col - pixels_from, np.where(by_number, u1, box_u))
     v = np.where(by_rc, row - pixels_from, np.where(by_number, v1, box_v))
     return u.astype(np.float64), v.astype(np.float64)
+
+
+# -- report-on-change across segments (the archive's streaming reader) -----------------------------
+
+def carried_state(cols: KLVColumns) -> KLVColumns:
+    """What a receiver knows after the last packet of each stream of ``cols`` (one row per stream,
+    packet number -1): every ST 0601 item's last value in the stream's time order, the items ever
+    sent, the VMTI frame size last sent. Put before the next segment's packets
+    (:func:`with_state`), it carries report-on-change across the cut as one reading of the
+    whole file would (see :mod:`.segments`)."""
+    from .columnar import KLVColumns, empty_chunk
+
+    groups = stream_groups(cols)
+    k = len(groups)
+    state = empty_chunk(k)
+    state["index"][:], state["offset"][:] = -1, -1
+    for s, rows in enumerate(groups.values()):
+        ordered, _ = stream_order(cols, rows, "")
+        vals = cols.values[ordered]
+        last = np.where(np.isfinite(vals), np.arange(vals.shape[0])[:, None], -1).max(axis=0)
+        state["values"][s] = np.where(last >= 0, vals[np.maximum(last, 0), np.arange(vals.shape[1])], np.nan)
+        state["present"][s] = cols.present[rows].any(axis=0)
+        sent = np.flatnonzero(cols.has_vmti[rows])
+        state["has_vmti"][s] = sent.size > 0
+        for c in (2, 3):  # the frame width and height, carried where a set sends them
+            given = sent[np.isfinite(cols.vmti_f[rows[sent], c])]
+            state["vmti_f"][s, c] = cols.vmti_f[rows[given[-1]], c] if given.size else np.nan
+    names = np.array(list(groups), dtype=str) if k else np.zeros(0, str)
+    return KLVColumns(cols.path, cols.container, state["index"], state["offset"], np.full(k, np.nan), names,
+                      state["standard"], state["time_us"], state["values"], state["present"], state["has_vmti"],
+                      state["vmti_f"], state["target_i"], state["target_f"])
+
+
+def with_state(cols: KLVColumns, state: KLVColumns | None) -> KLVColumns:
+    """``cols`` with the rows of ``state`` (:func:`carried_state`) before its packets, its issues
+    and notes unchanged; rows of packet number -1 are the state's, to be left out of tables."""
+    from .columnar import concat_columns
+
+    if state is None or not len(state):
+        return cols
+    return concat_columns(cols.path, cols.container, [state, cols], [], cols.notes)

@@ -1,0 +1,223 @@
+"""A KLV file read and located in bounded segments (issue 54, the streaming batch): the segments
+together are the whole file's reading, packet for packet, issue for issue (the reference: the
+tolerant reader on the whole file); report-on-change, the VMTI frame size and every-n-th
+footprints carry across the cuts; `eoloc batch` in small segments writes the same rows as in one
+(row groups of one GeoParquet file per layer, read back by pyarrow and geopandas)."""
+
+from __future__ import annotations
+
+import random
+import shutil
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+import eoloc
+from eoloc.io.klv import encode_uas_packet, encode_vmti
+from eoloc.io.klv.columnar import columns_from_stream
+from eoloc.io.klv.reader import read_klv
+from eoloc.io.klv.segments import klv_segments, merge_notes
+from eoloc.io.klv.synthetic import circling_flight_klv
+from eoloc.jobs.batch import LAYERS, BatchSettings, batch_job
+from eoloc.jobs.klv import klv_job, klv_segment_jobs
+
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+
+
+def sparse_flight(n: int, seed: int = 0) -> bytes:
+    """A circling flight as an encoder that reports on change sends it: the slow items (height,
+    fields of view, frame centre, the VMTI frame size) only every 7th or 11th packet, some items in
+    no packet until late in the stream."""
+    rng = np.random.default_rng(seed)
+    t0 = datetime(2026, 3, 1, tzinfo=UTC)
+    out = []
+    for k in range(n):
+        phase = k / 300
+        v = {2: t0 + timedelta(seconds=k / 30), 5: float((np.degrees(phase) + 90) % 360),
+             6: float(rng.normal(0, 1)), 7: -8.0, 13: 40.0 + 0.03 * np.cos(phase), 14: -105.0 + 0.04 * np.sin(phase),
+             18: 270.0, 19: -45.0 + float(rng.normal(0, 0.3)), 20: 0.0}
+        if k % 7 == 0:
+            v |= {15: 3000.0, 16: 20.0, 17: 11.3}
+        if k % 11 == 0 and k > 40:
+            v |= {23: 40.0 + 0.03 * np.cos(phase) - 0.02, 24: -105.0 + 0.04 * np.sin(phase), 25: 1600.0}
+        targets = [(j + 1, float(rng.uniform(50, 1200)), float(rng.uniform(50, 650))) for j in range(3)]
+        vset = encode_vmti(targets, 1280, 720)
+        v[74] = vset if k % 5 == 0 else _without_frame_size(targets)
+        out.append(encode_uas_packet(v))
+    return b"".join(out)
+
+
+def _without_frame_size(targets) -> bytes:
+    """A VMTI set whose targets are given by row and column only (no frame width, tags 8/9)."""
+    from stanag4609.st0903 import VTargetData, encode_vmti_local_set
+
+    packs = [VTargetData(tid, {19: round(v) + 1, 20: round(u) + 1}) for tid, u, v in targets]
+    return encode_vmti_local_set({4: 5}, targets=packs)
+
+
+def damaged(data: bytes, seed: int) -> bytes:
+    """Bytes flipped, cut out and put in at a few places."""
+    rng = random.Random(seed)
+    b = bytearray(data)
+    for _ in range(8):
+        at = rng.randrange(len(b))
+        op = rng.choice(["flip", "cut", "insert"])
+        if op == "flip":
+            b[at] ^= rng.randrange(1, 256)
+        elif op == "cut":
+            del b[at:at + rng.randrange(1, 300)]
+        else:
+            b[at:at] = rng.randbytes(rng.randrange(1, 60))
+    return bytes(b)
+
+
+def assert_segments_are_the_file(path: Path, segment_bytes: int) -> list:
+    ref = columns_from_stream(read_klv(path))
+    segs = list(klv_segments(path, segment_bytes=segment_bytes))
+    for name in ("index", "offset", "time_us", "present", "has_vmti", "stream", "standard"):
+        np.testing.assert_array_equal(np.concatenate([getattr(s, name) for s in segs]), getattr(ref, name), name)
+    for name in ("values", "vmti_f"):
+        got = np.concatenate([getattr(s, name) for s in segs])
+        np.testing.assert_allclose(got, getattr(ref, name), rtol=0, atol=1e-9, equal_nan=True, err_msg=name)
+    rows = np.cumsum([0] + [len(s) for s in segs])
+    ti = np.concatenate([s.target_i + np.array([r] + [0] * 7) for s, r in zip(segs, rows, strict=False)])
+    np.testing.assert_array_equal(ti, ref.target_i)
+    assert [i for s in segs for i in s.issues] == ref.issues
+    assert merge_notes([s.notes for s in segs]) == ref.notes
+    return segs
+
+
+@pytest.mark.parametrize("segment_bytes", [3_000, 40_000, 10 ** 9])
+def test_the_segments_are_the_whole_files_packets_issues_and_notes(tmp_path, segment_bytes):
+    path = tmp_path / "f.klv"
+    path.write_bytes(circling_flight_klv(700, seed=3) + b"\x00trailing")
+    segs = assert_segments_are_the_file(path, segment_bytes)
+    assert (len(segs) > 10) == (segment_bytes == 3_000)
+    assert max(len(s) for s in segs) <= (20 if segment_bytes == 3_000 else 700)  # (~200 bytes a packet)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), segment_bytes=st.sampled_from([700, 2_500, 9_000]))
+def test_damage_anywhere_gives_the_whole_files_reading(tmp_path_factory, seed, segment_bytes):
+    """Cuts come only after a good packet, so a damaged packet is judged as in one reading:
+    flipped, cut and inserted bytes give the same packets, issues (kinds, byte offsets) and notes.
+    (Not where the whole file's reading put back the lost heads of keys: each segment decides that
+    for itself, as the module says.)"""
+    path = tmp_path_factory.mktemp("d") / "d.klv"
+    path.write_bytes(damaged(sparse_flight(150, seed % 7), seed))
+    assume(not any(n.kind == "damaged key" for n in read_klv(path).notes))
+    assert_segments_are_the_file(path, segment_bytes)
+
+
+def test_a_file_of_nothing_is_refused_as_the_reader_refuses_it(tmp_path):
+    from eoloc.errors import KLVError
+
+    (tmp_path / "e.klv").write_bytes(b"")
+    (tmp_path / "n.klv").write_bytes(b"no key here " * 1000)
+    for name in ("e.klv", "n.klv"):
+        with pytest.raises(KLVError) as want:
+            read_klv(tmp_path / name)
+        with pytest.raises(KLVError) as got:
+            list(klv_segments(tmp_path / name, segment_bytes=500))
+        assert str(got.value) == str(want.value)
+
+
+def _job_tables(job) -> dict[str, dict]:
+    from eoloc.jobs.klv import frame_records, telemetry_records
+
+    props, geoms = job.footprint_table
+    return {"telemetry": telemetry_records(job.telemetry).columns, "fixes": job.records.columns,
+            "frames": frame_records(job.telemetry, job.check).columns,
+            "footprints": {**props.columns, "wkb": np.array([None if g is None else g.wkb for g in geoms], object)}}
+
+
+def _same(a: dict, b: dict, what: str) -> None:
+    assert list(a) == list(b), what
+    for k in a:
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        if x.dtype.kind == "f":
+            np.testing.assert_array_equal(x, y, err_msg=f"{what}.{k}")  # (NaN equal to NaN)
+        else:
+            assert x.tolist() == y.tolist(), f"{what}.{k}"
+
+
+@pytest.mark.parametrize("every", [1, 3])
+def test_the_segment_jobs_are_the_whole_files_job(tmp_path, every):
+    """Report-on-change items sent every 7th/11th packet, VMTI frame sizes every 5th: the rows,
+    fixes (located on the frame-centre elevation carried from packets of earlier segments) and
+    every-3rd footprints of 29 segments are those of the job on the whole file."""
+    path = tmp_path / "sparse.klv"
+    path.write_bytes(sparse_flight(900))
+    whole = klv_job(path, columnar=True, map_layers=False, footprint_every=every)
+    parts = list(klv_segment_jobs(path, segment_bytes=4_000, footprint_every=every))
+    assert len(parts) > 25 and all(job is not None for _, job in parts)
+    for name, ref in _job_tables(whole).items():
+        got = [_job_tables(job)[name] for _, job in parts]
+        _same({k: np.concatenate([g[k] for g in got]) for k in ref}, ref, name)
+    assert whole.records["status"].tolist().count("OK") > 2000  # (the carried frame centre and size at work)
+    assert [str(i) for _, j in parts for i in j.issues] == [str(i) for i in whole.issues]
+
+
+def _dataset(out: Path, layer: str) -> dict[str, pa.Table]:
+    return {p.parent.name: pq.read_table(p) for p in sorted((out / layer).glob("file=*/part-*.parquet"))}
+
+
+def test_the_batch_in_small_segments_writes_the_same_rows_as_in_one(tmp_path):
+    import geopandas
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(MOUNTAIN / "flight.klv", src / "mountain.klv")
+    (src / "sparse.klv").write_bytes(sparse_flight(600, seed=2))
+    (src / "circling.klv").write_bytes(circling_flight_klv(500, seed=5))
+    (src / "damaged.klv").write_bytes(damaged(circling_flight_klv(400, seed=6), 11))
+    one = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), footprint_every=2))
+    small = batch_job([str(src)], BatchSettings(str(tmp_path / "small"), footprint_every=2, segment_bytes=5_000))
+    assert [r.status for r in one.results] == ["done"] * 4
+    assert [(r.packets, r.fixes, r.fixes_ok, r.issues) for r in small.results] == \
+        [(r.packets, r.fixes, r.fixes_ok, r.issues) for r in one.results]
+    for layer in LAYERS:
+        a, b = _dataset(tmp_path / "one", layer), _dataset(tmp_path / "small", layer)
+        assert a.keys() == b.keys()
+        for key in a:
+            assert a[key].equals(b[key]), (layer, key)
+    many = next((tmp_path / "small" / "fixes").glob("file=sparse-*/part-0.parquet"))
+    meta = pq.read_metadata(many)
+    assert meta.num_row_groups > 5  # written as the segments came
+    frame = geopandas.read_parquet(many)
+    ref = geopandas.read_parquet(next((tmp_path / "one" / "fixes").glob("file=sparse-*/part-0.parquet")))
+    assert frame.crs == ref.crs and frame.crs.to_epsg() == 4979
+    np.testing.assert_allclose(frame.total_bounds, ref.total_bounds, rtol=0, atol=0)
+    assert frame.geometry.equals(ref.geometry)
+    for layer in ("fixes", "packets", "frames", "footprints"):  # types, CRS, bbox over every row group
+        for key in _dataset(tmp_path / "one", layer):
+            geo = [pq.read_schema(next((tmp_path / run / layer / key).glob("part-0.parquet"))).metadata[b"geo"]
+                   for run in ("one", "small")]
+            assert geo[0] == geo[1], (layer, key)
+
+
+def test_a_layer_whose_columns_change_goes_on_in_a_second_file(tmp_path):
+    import geopandas
+
+    from eoloc.io.geotable import ParquetLayer
+    from eoloc.io.records import Records
+
+    layer = ParquetLayer(tmp_path / "fixes")
+    layer.write(Records({"lat_deg": np.array([1.0, 2.0]), "lon_deg": np.array([3.0, 4.0]), "h_m": np.array([5.0, 6])}))
+    layer.write(Records({"lat_deg": np.array([7.0]), "lon_deg": np.array([8.0]), "h_m": np.array([np.nan])}))
+    layer.write(Records({"lat_deg": np.array([9.0]), "lon_deg": np.array([10.0]), "h_m": np.array([11.0]),
+                         "id": np.array(["a"], dtype=object)}))
+    parts = layer.close()
+    assert [p.name for p in parts] == ["part-0.parquet", "part-1.parquet"]
+    first = geopandas.read_parquet(parts[0])
+    assert first["lat_deg"].tolist() == [1.0, 2.0, 7.0]
+    assert [g.has_z for g in first.geometry] == [True, True, False]
+    assert first.crs.to_epsg() == 4979 and list(first.total_bounds) == [3.0, 1.0, 8.0, 7.0]
+    assert geopandas.read_parquet(parts[1])["id"].tolist() == ["a"]
+    assert not list(tmp_path.glob("fixes/.*"))  # no temporary file left
