@@ -190,3 +190,36 @@ def test_point_wkb_is_shapelys_byte_for_byte(data):
     ref, ref_meta = geo_table(recs, point_geometries(recs))  # (an array of shapely points: shapely's to_wkb)
     assert ours.column("geometry").to_pylist() == ref.column("geometry").to_pylist()
     assert meta == ref_meta
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.data())
+def test_ring_wkb_is_shapelys_byte_for_byte(data):
+    """The archive's footprint polygons, built with numpy (`ring_wkb`), against shapely's `to_wkb`
+    of `shapely.polygons` of the same rings, the other rows (an antimeridian MultiPolygon, a 2-D
+    polygon, none) through shapely; and the same metadata (geometry types, CRS, bbox)."""
+    import shapely
+    from shapely.geometry import MultiPolygon, Polygon
+
+    from eoloc.io.geotable import geo_table, ring_wkb
+
+    n = data.draw(st.integers(1, 30))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    ring = np.stack([rng.uniform(-180, 180, (n, 4)), rng.uniform(-90, 90, (n, 4)), rng.uniform(-500, 9000, (n, 4))], -1)
+    ring = np.concatenate([ring, ring[:, :1]], axis=1)
+    simple = rng.random(n) < 0.7
+    pick = rng.integers(0, 3, n)
+    others = np.array([None if simple[i] else
+                       [None, Polygon([(0, 0), (1, 0), (1, 1)]),
+                        MultiPolygon([Polygon([(179, 0, 5), (180, 0, 5), (180, 1, 5)]),
+                                      Polygon([(-180, 0, 5), (-179, 0, 5), (-180, 1, 5)])])][pick[i]]
+                       for i in range(n)], dtype=object)
+    ours = ring_wkb(ring, simple, others)
+    geoms = np.where(simple, None, others)
+    geoms[simple] = shapely.polygons(ring[simple]) if simple.any() else geoms[simple]
+    recs = Records({"frame": np.arange(n)})
+    table, meta = geo_table(recs, ours)
+    ref, ref_meta = geo_table(recs, geoms)
+    assert table.column("geometry").to_pylist() == ref.column("geometry").to_pylist()
+    assert meta == ref_meta
+    assert ours.drawn == any(g is not None for g in geoms)

@@ -134,7 +134,7 @@ def _job_tables(job) -> dict[str, dict]:
     props, geoms = job.footprint_table
     return {"telemetry": telemetry_records(job.telemetry).columns, "fixes": job.records.columns,
             "frames": frame_records(job.telemetry, job.check).columns,
-            "footprints": {**props.columns, "wkb": np.array([None if g is None else g.wkb for g in geoms], object)}}
+            "footprints": {**props.columns, "wkb": np.array(geoms.column.to_pylist(), object)}}
 
 
 def _same(a: dict, b: dict, what: str) -> None:

@@ -55,7 +55,12 @@ def utc_times(time_s, origin: str | None) -> np.ndarray | None:
     t = np.asarray(time_s, dtype=np.float64)
     ok = np.isfinite(t) & (np.abs(t) < 1e13)
     ms = np.where(ok, np.floor(np.where(ok, t, 0.0) * 1000.0 + 1e-6), 0).astype(np.int64) + t0_ms
-    out = (np.datetime_as_string(ms.astype("datetime64[ms]"), unit="ms").astype(object) + "Z")
+    if not ms.size:
+        return np.zeros(ms.shape, dtype=object)
+    flat = ms.ravel()
+    first = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])  # one string per run of one instant (a packet's targets)
+    text = np.datetime_as_string(flat[first].astype("datetime64[ms]"), unit="ms", timezone="UTC").astype(object)
+    out = np.repeat(text, np.diff(np.r_[first, flat.size])).reshape(ms.shape)
     out[~ok] = None
     return out
 

@@ -16,8 +16,10 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +71,7 @@ def feature_geometries(features):
     return np.array([None if f.get("geometry") is None else shape(f["geometry"]) for f in features], dtype=object)
 
 
-def geo_table(records: Records, features: list[dict] | np.ndarray | None = None):
+def geo_table(records: Records, features: list[dict] | np.ndarray | WKBColumn | None = None):
     """(pyarrow table with a WKB ``geometry`` column, the GeoParquet column metadata); ``features``:
     GeoJSON features or an array of shapely geometries, one per record (None: the records' points)."""
     import pyarrow as pa
@@ -78,6 +80,10 @@ def geo_table(records: Records, features: list[dict] | np.ndarray | None = None)
     if features is None:
         column, gtypes, has_z, bounds = point_wkb(records)
         return _with_geometry(records, column, gtypes, has_z, bounds)
+    if isinstance(features, WKBColumn):
+        if len(records) != len(features):
+            raise ValueError(f"geo_table: {len(records)} records for {len(features)} geometries")
+        return _with_geometry(records, features.column, features.gtypes, features.has_z, features.bounds)
     geoms = feature_geometries(features)
     if len(records) != len(features):
         raise ValueError(f"geo_table: {len(records)} records for {len(features)} features")
@@ -119,13 +125,59 @@ _POINT_2D = np.dtype([("order", "u1"), ("kind", "<u4"), ("x", "<f8"), ("y", "<f8
 _POINT_Z = np.dtype([("order", "u1"), ("kind", "<u4"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8")])  # 29 bytes
 
 
+@dataclass
+class WKBColumn:
+    """Geometries already written as an Arrow binary column of ISO WKB (null: no geometry), with
+    what GeoParquet's metadata needs: geometry types, has Z, 2-D bounds. :func:`geo_table` takes
+    it as it is, without a shapely object per row."""
+
+    column: Any
+    gtypes: list[str]
+    has_z: bool
+    bounds: list[float]
+
+    def __len__(self) -> int:
+        return len(self.column)
+
+    @property
+    def drawn(self) -> bool:
+        """At least one row has a geometry."""
+        return self.column.null_count < len(self.column)
+
+    def geometries(self) -> np.ndarray:
+        """As shapely geometries (None where null)."""
+        import shapely
+
+        return shapely.from_wkb(np.array(self.column.to_pylist(), dtype=object))
+
+
+def _binary_column(size: np.ndarray, groups: list[tuple[np.ndarray, np.ndarray]], loose: dict[int, bytes]):
+    """An Arrow binary column of ``size[i]`` bytes per row (null where 0): rows ``mask`` of each
+    group from its packed records (one per row, in order), the ``loose`` rows from their bytes."""
+    import pyarrow as pa
+
+    offsets = np.zeros(size.size + 1, np.int64)
+    np.cumsum(size, out=offsets[1:])
+    data = np.zeros(int(offsets[-1]), np.uint8)
+    for rows, rec in groups:
+        if rows.any():
+            width = rec.dtype.itemsize
+            data[offsets[:-1][rows][:, None] + np.arange(width)] = rec.view(np.uint8).reshape(-1, width)
+    for i, b in loose.items():
+        data[offsets[i]:offsets[i + 1]] = np.frombuffer(b, np.uint8)
+    where = size > 0
+    kind = pa.large_binary() if offsets[-1] >= 2**31 else pa.binary()
+    width = np.int64 if kind == pa.large_binary() else np.int32
+    return pa.Array.from_buffers(kind, size.size, [pa.py_buffer(np.packbits(where, bitorder="little")),
+                                                   pa.py_buffer(offsets.astype(width)), pa.py_buffer(data)],
+                                 null_count=int((~where).sum()))
+
+
 def point_wkb(records: Records):
     """The records' points as an Arrow binary column of ISO WKB (little-endian ``Point Z`` where
     h_m is known, ``Point`` where only the horizontal position is, null where there is none: what
     shapely's ``to_wkb`` writes for :func:`point_geometries`, byte for byte), built with numpy
     without a Python object per point; and (geometry types, has Z, 2-D bounds)."""
-    import pyarrow as pa
-
     lon = np.asarray(records["lon_deg"], dtype=np.float64)
     lat = np.asarray(records["lat_deg"], dtype=np.float64)
     h = np.asarray(records["h_m"], dtype=np.float64) if "h_m" in records.columns else np.full(lon.shape, np.nan)
@@ -133,38 +185,72 @@ def point_wkb(records: Records):
     z = where & np.isfinite(h)
     flat = where & ~z
     size = np.where(z, _POINT_Z.itemsize, np.where(flat, _POINT_2D.itemsize, 0))
-    offsets = np.zeros(lon.size + 1, np.int64)
-    np.cumsum(size, out=offsets[1:])
-    data = np.zeros(int(offsets[-1]), np.uint8)
+    groups = []
     for rows, dtype, kind in ((z, _POINT_Z, 1001), (flat, _POINT_2D, 1)):
-        if not rows.any():
-            continue
         rec = np.zeros(int(rows.sum()), dtype)
         rec["order"], rec["kind"], rec["x"], rec["y"] = 1, kind, lon[rows], lat[rows]
         if kind == 1001:
             rec["z"] = h[rows]
-        data[offsets[:-1][rows][:, None] + np.arange(dtype.itemsize)] = rec.view(np.uint8).reshape(-1, dtype.itemsize)
-    kind = pa.large_binary() if offsets[-1] >= 2**31 else pa.binary()
-    width = np.int64 if kind == pa.large_binary() else np.int32
-    column = pa.Array.from_buffers(kind, lon.size, [pa.py_buffer(np.packbits(where, bitorder="little")),
-                                                    pa.py_buffer(offsets.astype(width)), pa.py_buffer(data)],
-                                   null_count=int((~where).sum()))
+        groups.append((rows, rec))
+    column = _binary_column(size, groups, {})
     gtypes = sorted({"Point"} if flat.any() else set()) + (["Point Z"] if z.any() else [])
     bounds = ([float(lon[where].min()), float(lat[where].min()), float(lon[where].max()), float(lat[where].max())]
               if where.any() else [math.nan] * 4)
     return column, gtypes, bool(z.any()), bounds
 
 
+def ring_wkb(rings: np.ndarray, simple: np.ndarray, others: np.ndarray) -> WKBColumn:
+    """Polygons as ISO WKB: rows ``simple`` from ``rings`` (m, k, 3): one closed ring of k points
+    (lon, lat, h) each, written as little-endian ``Polygon Z`` with numpy (what shapely writes for
+    ``shapely.polygons(rings)``, byte for byte); the other rows from the shapely geometries
+    ``others`` (None: no geometry)."""
+    import shapely
+
+    m, k = rings.shape[:2]
+    dtype = np.dtype([("order", "u1"), ("kind", "<u4"), ("rings", "<u4"), ("points", "<u4"), ("xyz", "<f8", (k, 3))])
+    rec = np.zeros(int(simple.sum()), dtype)
+    rec["order"], rec["kind"], rec["rings"], rec["points"], rec["xyz"] = 1, 1003, 1, k, rings[simple]
+    rest = np.flatnonzero(~simple & ~shapely.is_missing(others))
+    loose = {}
+    if rest.size:
+        geoms = others[rest]
+        zs = shapely.has_z(geoms)
+        loose = dict(zip(rest.tolist(), shapely.to_wkb(geoms, output_dimension=3, flavor="iso").tolist(),
+                         strict=True))
+    size = np.zeros(m, np.int64)
+    size[simple] = dtype.itemsize
+    size[rest] = [len(b) for b in loose.values()]
+    types = {"Polygon Z"} if simple.any() else set()
+    bounds = np.full((0, 4), np.nan)
+    if simple.any():
+        lon, lat = rings[simple][..., 0], rings[simple][..., 1]
+        bounds = np.array([[lon.min(), lat.min(), lon.max(), lat.max()]])
+    if rest.size:
+        kinds = shapely.get_type_id(geoms)
+        types |= {GEOMETRY_TYPES[int(t)] + (" Z" if z else "") for t, z in zip(kinds, zs, strict=True)}
+        bounds = np.vstack([bounds, shapely.total_bounds(geoms)[None]])
+    box = ([float(bounds[:, 0].min()), float(bounds[:, 1].min()), float(bounds[:, 2].max()),
+            float(bounds[:, 3].max())] if len(bounds) else [math.nan] * 4)
+    has_z = simple.any() or bool(rest.size and zs.any())
+    return WKBColumn(_binary_column(size, [(simple, rec)], loose), sorted(types), bool(has_z), box)
+
+
 def arrow_table(records: Records, *, labels: dict[str, np.ndarray] | None = None):
     """The records as a pyarrow table (no geometry): floats with nulls, integers, booleans, text.
-    ``labels``: columns held as integer codes, written as the text ``labels[name][code]`` (by
-    Arrow's dictionary cast, without a Python string per row)."""
+    ``labels``: columns held as integer codes, written as the text ``labels[name][code]``; text
+    columns the records also hold as codes (:attr:`Records.coded`) are written from their codes
+    the same way (by Arrow's dictionary cast, without a Python string per row)."""
     import pyarrow as pa
+
+    def from_codes(codes: np.ndarray, names) -> pa.Array:
+        names = pa.array(list(names), type=pa.string())
+        return pa.DictionaryArray.from_arrays(pa.array(np.asarray(codes).astype(np.int32)), names).cast(pa.string())
 
     def column(k: str, v: np.ndarray):
         if labels and k in labels:
-            names = pa.array(list(labels[k]), type=pa.string())
-            return pa.DictionaryArray.from_arrays(pa.array(v.astype(np.int32)), names).cast(pa.string())
+            return from_codes(v, labels[k])
+        if k in records.coded:
+            return from_codes(records.coded[k].codes, records.coded[k].names)
         return _column(v)
 
     return pa.table({k: column(k, v) for k, v in records.columns.items() if k != "geometry"})
@@ -178,8 +264,17 @@ def write_geoparquet(path: str | Path, records: Records, features: list[dict] | 
     path.parent.mkdir(parents=True, exist_ok=True)
     table, meta = geo_table(records, features)
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"geo": geo_metadata(meta)})
-    pq.write_table(table, path, compression="zstd")
+    pq.write_table(table, path, **parquet_options(table.schema))
     return path
+
+
+def parquet_options(schema) -> dict:
+    """How eoloc writes Parquet: zstd, dictionary encoding for the text columns only (ids, statuses,
+    streams, times: few distinct values; on floats and WKB it costs time and gives larger files)."""
+    import pyarrow as pa
+
+    text = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
+    return {"compression": "zstd", "use_dictionary": text}
 
 
 def geo_metadata(column: dict) -> bytes:
@@ -221,7 +316,8 @@ class ParquetLayer:
         if self._writer is None:
             self.folder.mkdir(parents=True, exist_ok=True)
             self._tmp = self.folder / f".part-{len(self.parts)}.parquet.tmp"
-            self._writer = pq.ParquetWriter(self._tmp, table.schema, compression="zstd", store_schema=False)
+            self._writer = pq.ParquetWriter(self._tmp, table.schema, store_schema=False,
+                                            **parquet_options(table.schema))
             self._schema, self._geo = table.schema, None if geo is None else {"types": set(), "z": False,
                                                                               "bounds": []}
         self._writer.write_table(table)

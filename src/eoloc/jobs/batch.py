@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import EolocError, InputError
 from ..io.geotable import ParquetLayer
-from ..io.records import Records
+from ..io.records import Coded, Records
 
 KLV_SUFFIXES = (".klv", ".bin", ".ts", ".m2ts", ".mpg", ".mpeg")
 LAYERS = ("fixes", "packets", "frames", "footprints", "issues")
@@ -274,8 +274,10 @@ def _issue_records(messages: list[str]) -> Records:
 def _partition_records(records: Records, source: str, grid: tuple[str, ...]) -> Records:
     from ..io.gridref import with_grid_columns
 
-    cols = {"source_file": np.full(len(records), source, dtype=object), **records.columns}
-    return with_grid_columns(Records(cols), grid)
+    n = len(records)
+    cols = {"source_file": np.full(n, source, dtype=object), **records.columns}
+    coded = {**records.coded, "source_file": Coded(np.zeros(n, np.int8), np.array([source], dtype=object))}
+    return with_grid_columns(Records(cols, coded), grid)
 
 
 def remove_partitions(out_dir: Path, key: str) -> None:

@@ -34,7 +34,7 @@ class KLVJob:
     diagnoses: list = field(default_factory=list)
     assume: tuple[str, ...] = ()
     notes: list[str] = field(default_factory=list)  # why most targets or every footprint failed
-    footprint_table: tuple[Records, object] | None = None  # (properties, shapely polygons): the archive's form
+    footprint_table: tuple[Records, object] | None = None  # (properties, WKBColumn of polygons): the archive's form
 
     @property
     def has_footprint(self) -> bool:
@@ -59,7 +59,7 @@ def footprint_drawn(features: list[dict], table: tuple | None = None) -> bool:
     """At least one footprint has a geometry: among GeoJSON ``features``, or the polygons of a
     (properties, geometries) ``table`` where there is one."""
     if table is not None:
-        return any(g is not None for g in table[1])
+        return table[1].drawn
     return any(f.get("geometry") for f in features)
 
 

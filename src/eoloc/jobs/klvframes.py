@@ -24,6 +24,7 @@ from .tables import locate_by_rule
 
 if TYPE_CHECKING:
     from ..accuracy.budget import ErrorBudget
+    from ..io.geotable import WKBColumn
 
 
 @dataclass(frozen=True)
@@ -91,16 +92,18 @@ def corner_footprint_features(tel: Table, geom: FrameGeometry | None = None, eve
 
 
 def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every: int = 1, first: int = 0
-                           ) -> tuple[Records, np.ndarray]:
+                           ) -> tuple[Records, WKBColumn]:
     """:func:`corner_footprint_features` as a table for the archive: the properties as columns
     (frame, time_s and stream where there is one, as the features carry them) and the polygons as
-    an array of shapely geometries (None where a corner is missing), built in vectorised calls.
+    a column of WKB (:class:`eoloc.io.geotable.WKBColumn`, null where a corner is missing), built
+    with numpy.
     The rings :func:`eoloc.ground.footprint.polygon_geometry` would build the same way (within
     10 degrees of longitude, away from the poles and the antimeridian) are oriented by their
     planar signed area; the others (and near-degenerate ones) go through it one by one. ``first``:
     the first row drawn (every ``every``-th from it: a segment of a longer stream)."""
-    import shapely
     from shapely.geometry import shape
+
+    from ..io.geotable import ring_wkb
 
     c = tel.columns
     rows = np.arange(first, len(tel), max(every, 1))
@@ -120,11 +123,10 @@ def corner_footprint_table(tel: Table, geom: FrameGeometry | None = None, every:
     ring = np.stack([lon, lat, h], -1)
     ring = np.where((twice_area < 0)[:, None, None], ring[:, ::-1], ring)  # counter-clockwise, as RFC 7946 wants
     ring = np.round(np.concatenate([ring, ring[:, :1]], axis=1), 10)  # closed; as the GeoJSON rings are rounded
-    geoms = np.full(rows.size, None, dtype=object)
-    if simple.any():
-        geoms[simple] = shapely.polygons(ring[simple])
+    others = np.full(rows.size, None, dtype=object)
     for j in np.flatnonzero(ok & ~simple):
-        geoms[j] = shape(polygon_geometry(lon[j], lat[j], h[j]))
+        others[j] = shape(polygon_geometry(lon[j], lat[j], h[j]))
+    geoms = ring_wkb(ring, simple, others)
     time_s = c["time_s"][rows]
     props: dict[str, np.ndarray] = {"frame": np.asarray(tel.line)[rows].astype(np.int64),
                                     "time_s": np.where(np.isfinite(time_s), time_s, np.nan)}
