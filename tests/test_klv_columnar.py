@@ -391,3 +391,44 @@ def test_each_transport_damage_reads_the_same_either_way(which, damage):
     else:  # (no PTS in asynchronous carriage: its header's marker bits '10' instead)
         ts[start + 6] &= 0x7F
     assert not _same_ts_reading(bytes(ts))
+
+
+def _table_cells(ts: bytes, pid: int) -> list[int]:
+    return [k for k in range(0, len(ts) - 187, 188) if ((ts[k + 1] & 0x1F) << 8 | ts[k + 2]) == pid]
+
+
+@pytest.mark.parametrize("change", ["none", "counter jump", "duplicate", "table byte", "pmt byte", "pat dropped"])
+def test_repeated_program_tables_read_once_give_the_same_either_way(change):
+    """The vectorised path hands a repeated PAT/PMT packet to the table reader only once (its
+    continuity counters renumbered to match): the same reading as KLVDemux's, packet by packet,
+    when a table packet's counter jumps, a packet is sent twice, a table byte (CRC then wrong)
+    changes, or a PAT is lost; and on a clean stream most table packets are left out."""
+    import numpy as np
+
+    from eoloc.io.klv.demux import TableRepeats
+
+    ts = bytearray(_TS_CACHE.setdefault("two", _ts_bytes("two")))
+    pats = _table_cells(bytes(ts), 0)
+    pmt_pid = ((ts[pats[0] + 15] & 0x1F) << 8) | ts[pats[0] + 16]  # the first program's PMT PID in the PAT
+    pmts = _table_cells(bytes(ts), pmt_pid)
+    assert len(pats) > 5 and len(pmts) > 5
+    if change == "counter jump":
+        ts[pats[4] + 3] = (ts[pats[4] + 3] & 0xF0) | ((ts[pats[4] + 3] + 5) & 0x0F)
+    elif change == "duplicate":
+        k = pmts[3]
+        ts[k + 188:k + 188] = ts[k:k + 188]
+    elif change == "table byte":
+        ts[pats[5] + 12] ^= 0x01
+    elif change == "pmt byte":
+        ts[pmts[4] + 20] ^= 0x10
+    elif change == "pat dropped":
+        del ts[pats[2]:pats[2] + 188]
+    data = bytes(ts)
+    fast = _same_ts_reading(data)
+    if change == "none":
+        assert fast
+        cells = np.frombuffer(data, np.uint8).reshape(-1, 188)
+        pid = ((cells[:, 1].astype(np.int64) & 0x1F) << 8) | cells[:, 2]
+        rows = np.flatnonzero((pid == 0) | (pid == pmt_pid))
+        repeats = TableRepeats(data, cells, pid, rows)
+        assert sum(repeats.repeat) >= len(rows) - 4  # each table read once (and the rest left out)

@@ -233,33 +233,45 @@ def clean_klv_payloads(data: bytes, *, max_pes_bytes: int = MAX_PES_BYTES
     if not _adaptation_fields_read(data, cells, adapted & (alen > 0), alen):
         return None
     pid = ((cells[:, 1].astype(np.int64) & 0x1F) << 8) | cells[:, 2]
+    starts = (cells[:, 1] & 0x40) != 0
+    named = _pmt_pids_named(data, cells, pid, max_pes_bytes)  # every PID a PAT names as a PMT's
+    if named is None:
+        return None
     demux = KLVDemux(max_pes_bytes=max_pes_bytes)
     events: list = []
     damage: list[Damage] = []
-    metadata: dict[int, list[int]] = {}  # metadata PID -> its packets, from when a table names it
-    arrival: dict[int, int | None] = {}  # a metadata packet that starts a PES -> the video PTS before it
-    video_pts = None
-    starts = (cells[:, 1] & 0x40) != 0
-    for k, (p, start) in enumerate(zip(pid.tolist(), starts.tolist(), strict=True)):
+    tables = TableRepeats(data, cells, pid, np.flatnonzero((pid == 0) | np.isin(pid, list(named))))
+    states = [(-1, {}, frozenset())]  # (from the packet after k: the metadata streams, the video PIDs)
+    for k, p, prev, repeat in tables:  # the program tables, in order
         if p == 0 or p in demux.pmt_pids:
-            before = dict(demux.streams)
-            demux._packet(parse_transport_packet(data[k * TS_PACKET:(k + 1) * TS_PACKET], offset=k * TS_PACKET),
-                          events, damage)
-            if damage or (metadata and demux.streams != before):
+            raw = tables.fed(k, p, prev, repeat)
+            if raw is None:  # the table packet before it again: nothing the program tables say changes
+                continue
+            demux._packet(parse_transport_packet(raw, offset=k * TS_PACKET), events, damage)
+            if damage:
                 return None
-        elif p in demux.streams:
-            metadata.setdefault(p, []).append(k)
-            if start:
-                arrival[k] = video_pts
-        elif start and p in demux.video_pids:
-            video_pts = cell_pes_pts(data[k * TS_PACKET:(k + 1) * TS_PACKET])
+            if demux.streams != states[-1][1] or demux.video_pids != states[-1][2]:
+                states.append((k, dict(demux.streams), frozenset(demux.video_pids)))
+    if any(set(s) & named or v & named for _, s, v in states):
+        return None  # (a PID both a table's and a stream's: KLVDemux's packet-by-packet way)
+    ends = [k for k, _, _ in states[1:]] + [n]
+    begun = False  # a metadata packet has come
+    for (k0, streams, _), k1, later in zip(states, ends, [*states[1:], None], strict=True):
+        begun = begun or bool(streams and np.isin(pid[k0 + 1:k1], list(streams)).any())
+        if begun and later is not None and later[1] != streams:
+            return None  # the tables changed once metadata had begun
+    k_last, streams, _ = states[-1]
+    metadata = {p: k_last + 1 + np.flatnonzero(pid[k_last + 1:] == p) for p in streams}
+    arrival = ArrivalTimes(data, pid, starts, states, ends)
     out: dict[int, tuple[bytes, list]] = {}
     by_arrival: dict[int, int] = {}
     for p, ks in metadata.items():
+        if not ks.size:
+            continue
         _, info, kind, _ = demux.streams[p]
         if info.stream_type == 0x15:
             return None
-        read = _clean_pes(cells, np.asarray(ks), control, alen, max_pes_bytes, arrival)
+        read = _clean_pes(cells, ks, control, alen, max_pes_bytes, arrival)
         if read is None:
             return None
         if kind is StreamKind.KLV and read[1]:  # (a PID without a whole PES gives nothing, as in KLVDemux)
@@ -267,6 +279,97 @@ def clean_klv_payloads(data: bytes, *, max_pes_bytes: int = MAX_PES_BYTES
             if read[2]:
                 by_arrival[p] = read[2]
     return (out, by_arrival) if out else None
+
+
+def _pmt_pids_named(data: bytes, cells, pid, max_pes_bytes: int) -> set[int] | None:
+    """Every PID that a PAT of the stream names as a program map's (its PAT packets read alone),
+    or None where they cannot be read without damage."""
+    import numpy as np
+    from stanag4609.transport.mpegts import parse_transport_packet
+
+    demux, events, damage, named = KLVDemux(max_pes_bytes=max_pes_bytes), [], [], set()
+    tables = TableRepeats(data, cells, pid, np.flatnonzero(pid == 0))
+    for k, p, prev, repeat in tables:
+        raw = tables.fed(k, p, prev, repeat)
+        if raw is not None:
+            demux._packet(parse_transport_packet(raw, offset=k * TS_PACKET), events, damage)
+            named |= demux.pmt_pids
+    return None if damage else named
+
+
+class ArrivalTimes:
+    """The PTS of the video PES begun last before a packet (what :class:`KLVDemux` with
+    ``arrival`` times a metadata PES without a PTS by), found when asked: the video PIDs' PES
+    starts as the program tables then stood (``states``: from the packet after k, the metadata
+    streams and the video PIDs, until the next one's k, ``ends``)."""
+
+    def __init__(self, data: bytes, pid, starts, states, ends) -> None:
+        import numpy as np
+
+        self.data = data
+        video = [k0 + 1 + np.flatnonzero(starts[k0 + 1:k1] & np.isin(pid[k0 + 1:k1], list(v - set(s))))
+                 for (k0, s, v), k1 in zip(states, ends, strict=True) if v]
+        self.video = np.concatenate(video) if video else np.zeros(0, np.int64)
+
+    def get(self, k: int) -> int | None:
+        import numpy as np
+
+        j = int(np.searchsorted(self.video, k)) - 1
+        if j < 0:
+            return None
+        v = int(self.video[j])
+        return cell_pes_pts(self.data[v * TS_PACKET:(v + 1) * TS_PACKET])
+
+
+class TableRepeats:
+    """Program-table packets a clean read need not hand to the table reader: a packet that is the
+    one before it on its PID again (every byte but the continuity counter), one on from it, one
+    whole table section in it (stuffing after), no adaptation field. Transmitters repeat their PAT
+    and PMT every ~0.1 s; read once, a repeat changes nothing the tables say. The packets that are
+    read carry the continuity counter they would have had without the repeats, so that the table
+    reader sees the same continuity (and any break in it) as in the whole stream (stanag4609's
+    does not judge a table PID's continuity today; a repeat must also be one on from the packet
+    before, in case it does). ``rows``: the
+    candidate table packets, in order; the repeats are found in vectorised passes, and a repeat is
+    left out only when the packet before it on its PID was itself handed on or left out."""
+
+    def __init__(self, data: bytes, cells, pid, rows) -> None:
+        import numpy as np
+
+        self.data = data
+        p = pid[rows]
+        order = np.lexsort((rows, p))  # grouped by PID, in stream order within each
+        prev = np.full(rows.size, -1, np.int64)
+        same_pid = p[order[1:]] == p[order[:-1]]
+        prev[order[1:][same_pid]] = rows[order[:-1][same_pid]]
+        c, q = cells[rows], cells[np.maximum(prev, 0)]
+        end = 8 + (((c[:, 6].astype(np.int64) & 0x0F) << 8) | c[:, 7])  # a section starting at byte 5 ends
+        tail = c[np.arange(rows.size), np.minimum(end, TS_PACKET - 1)]
+        repeat = ((prev >= 0) & (c[:, 3] >> 4 == 1) & (q[:, 3] >> 4 == 1) & ((c[:, 1] & 0x40) != 0) & (c[:, 4] == 0)
+                  & ((c[:, 3] & 0x0F) == ((q[:, 3] + 1) & 0x0F)) & (c[:, :3] == q[:, :3]).all(axis=1)
+                  & (c[:, 4:] == q[:, 4:]).all(axis=1) & ((end == TS_PACKET) | ((end < TS_PACKET) & (tail == 0xFF))))
+        self.rows, self.pid, self.prev, self.repeat = rows.tolist(), p.tolist(), prev.tolist(), repeat.tolist()
+        self.last: dict[int, int] = {}  # PID -> its last packet handed on or left out
+        self.skipped: dict[int, int] = {}  # PID -> repeats left out
+
+    def __iter__(self):
+        """(packet index, PID, the packet before it on its PID or -1, whether it repeats that one)
+        per candidate, in order: what :meth:`fed` takes."""
+        return zip(self.rows, self.pid, self.prev, self.repeat, strict=True)
+
+    def fed(self, k: int, p: int, prev: int, repeat: bool) -> bytes | None:
+        """Packet ``k`` (PID ``p``, about to be read as a table) as the table reader is to get it,
+        or None to leave it out."""
+        last = self.last.get(p)
+        self.last[p] = k
+        if repeat and last == prev:
+            self.skipped[p] = self.skipped.get(p, 0) + 1
+            return None
+        raw = self.data[k * TS_PACKET:(k + 1) * TS_PACKET]
+        shift = self.skipped.get(p, 0)
+        if not shift & 0x0F:
+            return raw
+        return raw[:3] + bytes([(raw[3] & 0xF0) | ((raw[3] - shift) & 0x0F)]) + raw[4:]
 
 
 def _adaptation_fields_read(data: bytes, cells, rows, alen) -> bool:
@@ -290,12 +393,16 @@ def _adaptation_fields_read(data: bytes, cells, rows, alen) -> bool:
     if (pcr & ((n < 7) | ((v[:, 4] & 0x7E) != 0x7E) | ((((v[:, 4] & 1) << 8) | v[:, 5]) > 299))).any():
         return False
     first = 5 + np.where(pcr, 7, 1)  # the stuffing: every byte after the fields to the field's end is 0xFF
+    some = first < 5 + n
+    idx, first, n = idx[some], first[some], n[some]
+    if not idx.size:
+        return True
     col = np.arange(TS_PACKET)
     stuffing = (col >= first[:, None]) & (col < (5 + n)[:, None])
-    return bool((cells[idx] == 0xFF)[stuffing].all()) if idx.size else True
+    return bool((cells[idx] == 0xFF)[stuffing].all())
 
 
-def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: dict[int, int | None]
+def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: ArrivalTimes
                ) -> tuple[bytes, list, int] | None:
     """One metadata PID's packets (``ks``, in order) as its PES payloads joined, (offset, PTS s)
     marks and the count of PES timed by ``arrival``; or None where the PES assembler would meet
@@ -315,8 +422,7 @@ def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: dict[int, 
     ks, start, size, pusi = ks[first[0]:], start[first[0]:], size[first[0]:], pusi[first[0]:]
     total = int(size.sum())
     at = np.cumsum(size) - size  # each packet's payload's place in the joined bytes
-    pos = np.repeat(ks * TS_PACKET + start - at, size) + np.arange(total)
-    joined = cells.reshape(-1)[pos]
+    joined = cells[ks][np.arange(TS_PACKET) >= start[:, None]]  # each packet's payload, in order
     s = at[pusi]  # PES starts
     e = np.append(s[1:], total)
     length = e - s
@@ -346,5 +452,6 @@ def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: dict[int, 
     p0 = s + 9 + hdl
     plen = e - p0
     mark = np.cumsum(plen) - plen
-    body = joined[np.repeat(p0 - mark, plen) + np.arange(int(plen.sum()))]
-    return body.tobytes(), list(zip(mark.tolist(), times, strict=True)), by_arrival
+    view = memoryview(joined)
+    body = b"".join([view[a:b] for a, b in zip(p0.tolist(), e.tolist(), strict=True)])  # each PES's payload
+    return body, list(zip(mark.tolist(), times, strict=True)), by_arrival
