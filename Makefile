@@ -6,12 +6,12 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench bytecode clean browser tak streams mutants geoconvert ffmpeg
+.PHONY: demo test test-fast lint bench bytecode clean browser tak streams mutants geoconvert ffmpeg
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -e ".[all,test]"
 	# orthority, the peer of the ortho test and bench: without its deps (it asks for opencv-python,
 	# which clashes with our opencv-python-headless; its other deps are in the test extra)
 	$(BIN)/python -m pip install --quiet --no-deps "orthority==0.7.0"
@@ -83,6 +83,10 @@ tak: $(TAK_STAMP)
 
 test: $(STAMP) lint browser tak streams geoconvert ffmpeg
 	$(BIN)/python -m pytest -n 2 -q
+
+# the inner loop: no browser, no fresh virtual environments (markers in pyproject.toml); the rest as in test
+test-fast: $(STAMP) lint tak streams geoconvert ffmpeg
+	$(BIN)/python -m pytest -n 2 -q -m "not slow and not browser"
 
 bench: $(STAMP) bytecode
 	$(BIN)/python bench/run_all.py

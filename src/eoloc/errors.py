@@ -51,3 +51,8 @@ def one_line(exc: BaseException) -> str:
     """An exception as one line, with its type: for a message that quotes what a library said."""
     text = str(exc).strip().replace("\n", " ")
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+class MissingExtraError(EolocError):
+    """A command or function needs an optional part of eoloc that is not installed (the message
+    names the package and the ``pip install 'eoloc[extra]'`` that brings it)."""

@@ -72,10 +72,11 @@ def compiled_item(fn: Callable, *args) -> Any:
 def dask_mapper(address: str) -> Iterator[DaskMapper]:
     """A DaskMapper on the scheduler at ``address`` (e.g. tcp://10.0.0.5:8786), or on a new local
     cluster for ``"local"`` / ``"local:N"`` (N worker processes, one thread each; default 2)."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - distributed is a dependency
-        raise RuntimeError("--dask needs dask.distributed: pip install 'dask[distributed]'") from exc
+    from ..util.extras import require
+
+    require("distributed")  # (the batch extra)
+    from distributed import Client, LocalCluster
+
     if address == "local" or address.startswith("local:"):
         workers = int(address.split(":", 1)[1]) if ":" in address else 2
         # the worker processes are the parallelism: their kernels stay on one thread each

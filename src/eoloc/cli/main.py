@@ -64,8 +64,9 @@ def warn(message: str, label: str = "warning") -> None:
 
 class Main(click.Group):
     """The command group: a user's mistake (an EolocError: a file or configuration that cannot be
-    used; an OSError: a path that cannot be read or written) becomes a message and exit code 2;
-    anything else is a bug in eoloc and keeps its traceback, with a line asking to report it."""
+    used; an OSError: a path that cannot be read or written; an optional part of eoloc the command
+    needs and the install lacks) becomes a message and exit code 2; anything else is a bug in eoloc
+    and keeps its traceback, with a line asking to report it."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -101,6 +102,13 @@ class Main(click.Group):
             fail(f"{where}{exc.strerror or exc}")
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
+        except ModuleNotFoundError as exc:
+            from ..util.extras import missing_extra
+
+            missing = missing_extra(exc)
+            if missing is None:
+                raise
+            fail(str(missing))
         except Exception:
             err_console.print("[bold red]internal error:[/] this is a bug in eoloc, not in your input. Please report "
                               "it with the command line and the traceback below.")

@@ -38,10 +38,11 @@ class LearnedDetector:
 
     def __init__(self, path: str | Path, rule: StopRule, *, score: float = 0.35, iou: float = 0.5,
                  classes: set[str] | None = None, point: str = "bottom") -> None:
-        try:
-            import onnxruntime as ort
-        except ImportError as exc:  # an optional part: say how to get it
-            raise InputError("a learned detector needs onnxruntime: pip install 'eoloc[onnx]'") from exc
+        from ..util.extras import require
+
+        require("onnxruntime")  # (an optional part: the message says how to get it)
+        import onnxruntime as ort
+
         if point not in POINTS:
             raise ValueError(f"point must be one of {POINTS}, got {point!r}")
         path = Path(path)

@@ -227,6 +227,7 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
     from ..io.kml import write_kml
     from ..io.mapview import drawable, write_map
     from ..io.writers import write_layer
+    from ..util.extras import installed
 
     out = Path(out)
     written = [*write_layer(out, "telemetry", telemetry_records(job.telemetry), ["csv"]),
@@ -268,7 +269,10 @@ def write_klv_products(job: KLVJob, out: str | Path, *, formats=("csv", "geojson
                                 for f, t in zip(feats, utc, strict=True)]
     written.append(write_kml(out / "eoloc.kml", kml_layers, name=job.path.name))
     lay = job.layers
-    if make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
+    if make_map and not all(installed(m) for m in ("folium", "matplotlib")):
+        notes.append("no map.html: the map needs folium and matplotlib, the report extra of eoloc (pip install "
+                     "'eoloc[report]'); --no-map does without it")
+    elif make_map and not drawable(lay["aircraft"], prints, lay["encoder footprints"], lay.get("fixes")):
         notes.append("no map: the stream has no aircraft position, footprint or fix to draw")
     elif make_map:
         written.append(write_map(out / "map.html", aircraft=lay["aircraft"], footprints=prints,
