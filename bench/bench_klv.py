@@ -2,7 +2,8 @@
 library eoloc's encoder and --strict use) and klvdata (0.0.3, the other pure-Python decoder), on
 the same bytes in one run. Two streams: pose packets as a real encoder sends them (the tags of
 the Esri Truck clip: 2, 5-7, 13-33, 47, 65) and the same packets with a 20-target ST 0903 VMTI set;
-raw KLV and the same packets in an MPEG-TS written by libavformat.
+raw KLV and the same packets in an MPEG-TS written by libavformat. jMISB (Java) is measured on
+the raw streams where it is built (`sh bench/jmisb/build.sh JMISB_CHECKOUT`; a JDK from Debian).
 
     python bench/bench_klv.py [--n 3000]
 """
@@ -131,7 +132,33 @@ def columnar_rows(what: str, data: bytes, n: int, t_tolerant: float, t_stanag: f
     if t_klvdata is not None:
         out.append(row(f"KLV decode to columns, raw: {what} (x10)", f"{n / t_c:,.0f} packets/s",
                        f"klvdata {n / t_klvdata:,.0f}/s", t_klvdata / t_c))
+    t_j = jmisb_seconds(big, 10 * n)
+    if t_j is not None:
+        out.append(row(f"KLV decode to columns, raw: {what} (x10)", f"{n / t_c:,.0f} packets/s",
+                       f"jMISB {n / (t_j / 10):,.0f}/s (Java, JIT-warmed)", (t_j / 10) / t_c))
     return out
+
+
+JMISB = Path(__file__).parent / "jmisb" / "build" / "classes"
+
+
+def jmisb_seconds(data: bytes, n: int) -> float | None:
+    """jMISB's best time (s) to parse ``data`` (``n`` raw KLV packets), in a JVM after a JIT
+    warm-up (`bench/jmisb/Bench.java`); None where it is not built (`sh bench/jmisb/build.sh
+    JMISB_CHECKOUT`) or no JVM is installed."""
+    import shutil
+    import subprocess
+
+    if not JMISB.is_dir() or shutil.which("java") is None:
+        return None
+    with tempfile.NamedTemporaryFile(suffix=".klv") as f:
+        f.write(data)
+        f.flush()
+        cp = f"{JMISB}:/usr/share/java/slf4j-api.jar:/usr/share/java/slf4j-nop.jar"
+        done = subprocess.run(["java", "-cp", cp, "Bench", f.name, "5"], capture_output=True, text=True, check=True)
+    count, seconds, _ = done.stdout.split()
+    assert int(count) == n, (count, n)  # every packet parsed
+    return float(seconds)
 
 
 def video_ts_row(tmp: Path, packets: list[bytes]) -> str:
