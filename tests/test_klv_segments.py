@@ -1,8 +1,9 @@
 """A KLV file read and located in bounded segments (issue 54, the streaming batch): the segments
 together are the whole file's reading, packet for packet, issue for issue (the reference: the
 tolerant reader on the whole file); report-on-change, the VMTI frame size and every-n-th
-footprints carry across the cuts; `eoloc batch` in small segments writes the same rows as in one
-(row groups of one GeoParquet file per layer, read back by pyarrow and geopandas)."""
+footprints carry across the cuts; an MPEG-TS is read from its mapped file and given in slices;
+`eoloc batch` in small segments writes the same rows as in one (row groups of one GeoParquet file
+per layer, read back by pyarrow and geopandas)."""
 
 from __future__ import annotations
 
@@ -115,6 +116,30 @@ def test_damage_anywhere_gives_the_whole_files_reading(tmp_path_factory, seed, s
     assert_segments_are_the_file(path, segment_bytes)
 
 
+def transport_stream(path: Path, packets: list[bytes], torn: bytes = b"") -> Path:
+    """A video TS with two KLV PIDs (libavformat) carrying ``packets``, and ``torn`` after it."""
+    from eoloc.io.klv.mux import write_klv_ts
+
+    write_klv_ts(path, [[(p, k / 10) for k, p in enumerate(packets)],
+                        [(p, k / 5) for k, p in enumerate(packets[: len(packets) // 3])]], video_fps=10)
+    path.write_bytes(path.read_bytes() + torn)
+    return path
+
+
+@pytest.mark.parametrize("torn", [b"", b"\x47\x01\x02 cut off"])
+def test_a_transport_stream_is_read_from_its_mapped_file_and_given_in_slices(tmp_path, torn):
+    """An MPEG-TS (two KLV PIDs, video, maybe ending mid-packet) read whole from the mapped file and
+    given in slices: together the whole reading of the tolerant reader, the cut-off tail named."""
+    data = circling_flight_klv(90, seed=4)
+    from eoloc.io.klv.reader import split_klv
+
+    path = transport_stream(tmp_path / "two.ts", [p for p, _ in split_klv(data)], torn)
+    segs = assert_segments_are_the_file(path, 2_000)
+    assert len(segs) > 5 and {s.container for s in segs} == {"mpegts"}
+    assert any("cut short" in i.message for i in segs[0].issues) == bool(torn)
+    assert not any(s.issues for s in segs[1:])
+
+
 def test_a_file_of_nothing_is_refused_as_the_reader_refuses_it(tmp_path):
     from eoloc.errors import KLVError
 
@@ -177,9 +202,12 @@ def test_the_batch_in_small_segments_writes_the_same_rows_as_in_one(tmp_path):
     (src / "sparse.klv").write_bytes(sparse_flight(600, seed=2))
     (src / "circling.klv").write_bytes(circling_flight_klv(500, seed=5))
     (src / "damaged.klv").write_bytes(damaged(circling_flight_klv(400, seed=6), 11))
+    from eoloc.io.klv.reader import split_klv
+
+    transport_stream(src / "two.ts", [p for p, _ in split_klv(sparse_flight(120, seed=3))], b"\x47 cut")
     one = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), footprint_every=2))
     small = batch_job([str(src)], BatchSettings(str(tmp_path / "small"), footprint_every=2, segment_bytes=5_000))
-    assert [r.status for r in one.results] == ["done"] * 4
+    assert [r.status for r in one.results] == ["done"] * 5
     assert [(r.packets, r.fixes, r.fixes_ok, r.issues) for r in small.results] == \
         [(r.packets, r.fixes, r.fixes_ok, r.issues) for r in one.results]
     for layer in LAYERS:

@@ -437,8 +437,7 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode, fast: bool = T
     by_arrival: dict[int, int] = {}  # PID -> PES timed by the video frame before them
     torn = len(data) % TS_PACKET
     if torn:  # a recording cut off mid-packet: the whole packets before it are kept
-        issues.append(KLVIssue(path, None, len(data) - torn, "skipped bytes",
-                               f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)"))
+        issues.append(torn_issue(path, len(data)))
         data = data[:len(data) - torn]
     clean = clean_klv_payloads(data) if fast else None  # (a clean stream: vectorised, the same result)
     if clean is not None:
@@ -458,6 +457,13 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode, fast: bool = T
         n += len(s) + sum(1 for i in s.issues if i.packet is not None)
         parts.append((s, arrival))
     return issues, parts
+
+
+def torn_issue(path: str, size: int) -> KLVIssue:
+    """The issue of a transport stream of ``size`` bytes that ends mid-packet."""
+    torn = size % TS_PACKET
+    return KLVIssue(path, None, size - torn, "skipped bytes",
+                    f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)")
 
 
 def _demux_klv(data: bytes, path: str, issues: list[KLVIssue], by_arrival: dict[int, int]

@@ -10,12 +10,14 @@ whole file's). Memory is bounded by the segment size, whatever the file's size.
 What a segment cannot know: whether keys that lost their first 5 bytes are repaired is decided per
 segment (the whole file's reading decides once), and a block with no such cut in its second half
 (a long stretch of damage, or a file of EG 0104 packets only) is read on until one comes. An MPEG-TS
-file is demultiplexed whole (its tables and PES packets run across any cut) and given as one segment.
+file is demultiplexed whole (its tables and PES packets run across any cut) from the file mapped
+into memory, and its packets given in slices.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import mmap
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,7 +26,16 @@ import numpy as np
 
 from ...errors import KLVError
 from .columnar import KLVColumns, decode_klv_columns, ts_columns
-from .reader import TS_PACKET, UAS_KEY, StreamNote, check_found, checksum_problem, looks_like_ts, packet_end
+from .reader import (
+    TS_PACKET,
+    UAS_KEY,
+    StreamNote,
+    check_found,
+    checksum_problem,
+    looks_like_ts,
+    packet_end,
+    torn_issue,
+)
 
 #: bytes of KLV per segment (about 5 000 packets with 5 VMTI targets, some 40 MB at work; `eoloc batch
 #: --segment-mb`)
@@ -65,9 +76,7 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
         if not head:
             raise KLVError(f"{path} is empty")
         if looks_like_ts(head):
-            whole = ts_columns(head + f.read(), str(path), strict=strict)
-            check_found(path, len(whole), sum(1 for i in whole.issues if i.packet is not None))
-            yield whole
+            yield from _ts_segments(f, str(path), segment_bytes, strict)
             return
         block, base, n, good, bad = head, 0, 0, 0, 0
         want = max(int(segment_bytes), 1)
@@ -91,6 +100,37 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
             if eof:
                 break
         check_found(path, good, bad)
+
+
+def _ts_segments(f, path: str, segment_bytes: int, strict: bool) -> Iterator[KLVColumns]:
+    """An MPEG-TS file's packets: the file mapped into memory rather than copied into it (its
+    pages are the system's file cache, which it can drop and read again; the demultiplexer's own
+    arrays take some 25 bytes per transport packet, and the KLV streams are copied out), read
+    whole, then given in slices of about ``segment_bytes`` of KLV (the transport's issues and the
+    notes with the first), so that the job's memory is bounded as for raw KLV."""
+    size = os.fstat(f.fileno()).st_size
+    torn = size % TS_PACKET
+    with mmap.mmap(f.fileno(), size - torn, access=mmap.ACCESS_READ) as whole:
+        cols = ts_columns(whole, path, strict=strict)
+    if torn:
+        cols.issues.insert(0, torn_issue(path, size))
+    check_found(path, len(cols), sum(1 for i in cols.issues if i.packet is not None))
+    per = max(int(segment_bytes) // 200, 1)  # (rows: ~200 bytes of KLV a packet)
+    for a in range(0, max(len(cols), 1), per):
+        yield row_slice(cols, a, min(a + per, len(cols)), first=a == 0)
+
+
+def row_slice(cols: KLVColumns, a: int, b: int, *, first: bool) -> KLVColumns:
+    """Rows ``a`` to ``b`` of ``cols`` (their VMTI targets with them); its issues and notes only
+    where ``first``."""
+    t = (cols.target_i[:, 0] >= a) & (cols.target_i[:, 0] < b)
+    target_i = cols.target_i[t].copy()
+    target_i[:, 0] -= a
+    return KLVColumns(cols.path, cols.container, cols.index[a:b], cols.offset[a:b], cols.pts_s[a:b],
+                      cols.stream[a:b], cols.standard[a:b], cols.time_us[a:b], cols.values[a:b], cols.present[a:b],
+                      cols.has_vmti[a:b], cols.vmti_f[a:b], target_i, cols.target_f[t],
+                      list(cols.issues) if first else [], list(cols.notes) if first else [],
+                      cols.scanned if first else 0)
 
 
 def shifted(cols: KLVColumns, base: int) -> KLVColumns:
