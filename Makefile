@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench bytecode clean browser tak streams mutants geoconvert ffmpeg
+.PHONY: demo test test-fast docs lint bench bytecode clean browser tak streams mutants geoconvert ffmpeg
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -88,6 +88,10 @@ test: $(STAMP) lint browser tak streams geoconvert ffmpeg
 test-fast: $(STAMP) lint tak streams geoconvert ffmpeg
 	$(BIN)/python -m pytest -n 2 -q -m "not slow and not browser"
 
+# the documentation site (MkDocs, mkdocs.yml): site/index.html
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict
+
 bench: $(STAMP) bytecode
 	$(BIN)/python bench/run_all.py
 
@@ -96,4 +100,4 @@ mutants: $(STAMP) browser tak streams
 	$(BIN)/python bench/mutants.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) out site .pytest_cache .ruff_cache .hypothesis

@@ -7,7 +7,7 @@ the sizes of the README's reliability section, and the floods that need a real p
     python bench/bench_hostile.py csv   [--n 4000]    fuzzed CSV files, every good line kept
     python bench/bench_hostile.py http  [--n 2000]    hostile HTTP bodies
 
-Each prints a markdown table (the README's "Reliability" and bench/RESULTS.md take it).
+Each prints a markdown table (the docs/reliability.md's "Reliability" and bench/RESULTS.md take it).
 """
 
 from __future__ import annotations

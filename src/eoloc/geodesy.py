@@ -70,6 +70,7 @@ class Ellipsoid:
 
 
 WGS84 = Ellipsoid(6378137.0, 1.0 / 298.257223563, "WGS-84")
+"""The WGS-84 ellipsoid (a = 6 378 137 m, f = 1/298.257223563): every function's default."""
 
 
 def _out(values: tuple[np.ndarray, ...]):

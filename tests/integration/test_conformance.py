@@ -252,7 +252,7 @@ def test_49_6_a_footprint_across_the_antimeridian_is_cut(tmp_path):
 
 
 def test_49_9_two_st0601_leniencies_are_decided_and_said():
-    """Where jMISB refuses and eoloc reads, as decided (README "Conformance"): tag 47 with a zero
+    """Where jMISB refuses and eoloc reads, as decided (docs/reliability.md "Conformance"): tag 47 with a zero
     length is ST 0601 §6.2's "no longer known" (read as such, no note: the standard allows it);
     tag 65 sent as two bytes 00 00 is read as version 0, with a note naming the length."""
     from eoloc.io.klv.encode import build_uas_packet

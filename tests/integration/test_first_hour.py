@@ -731,12 +731,13 @@ def test_50_11_the_gis_layers_an_analyst_expects(tmp_path):
 
 
 def _walkthrough_blocks() -> list[tuple[str, str]]:
-    """The README's persona walk-through: (persona, shell block) in order."""
+    """The persona walk-throughs of docs/tutorials.md: (persona, shell block) in order."""
     import re
 
-    text = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    text = (Path(__file__).resolve().parents[2] / "docs" / "tutorials.md").read_text(encoding="utf-8")
     start = text.index("## Four ways in")
-    section = text[start:text.index("\n## ", start + 10)]
+    end = text.find("\n## ", start + 10)
+    section = text[start:end if end >= 0 else len(text)]
     blocks = []
     for m in re.finditer(r"\*\*([^*]+)\*\*[^`]*?```sh\n(.*?)```", section, re.S):
         blocks.append((m.group(1), m.group(2)))
@@ -744,7 +745,7 @@ def _walkthrough_blocks() -> list[tuple[str, str]]:
 
 
 def test_50_readme_walkthrough_runs_as_written(tmp_path):
-    """Every command of the README's four persona walk-throughs, run in a shell exactly as written
+    """Every command of the four persona walk-throughs (docs/tutorials.md), run in a shell exactly as written
     (from a folder that has the repository's src/ and tests/, as the root has), each block must end
     with exit status 0; then what they wrote is checked: the drone photo's laser fix against DJI's
     own target in its XMP (SOURCES.md: 22.5960255 N, 114.0066452 E), the HTTP answer, the live

@@ -33,7 +33,7 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
   sigma per detection; empty where not known yet) and prints a table per track.
   With a budget, each fix is weighed by its random part and the estimate's uncertainty keeps what
   does not average: a source with kind = "bias" counts once, "noise" averages down, "markov"
-  (Gauss–Markov, tau_s) by its correlation over the frames' times (see README "Uncertainty").
+  (Gauss–Markov, tau_s) by its correlation over the frames' times (see docs/uncertainty.md "Uncertainty").
   --static: recursive least squares per target_id (--forgetting 1 = all frames alike); writes
   static_targets.csv / .geojson with the estimate, its sigma, CEP50, CE90, LE90 and the frame
   where it converged. A target whose fixes do not agree with one point (a chi-square test: it

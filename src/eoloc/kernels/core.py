@@ -540,7 +540,7 @@ def distort(kind, dp, x, y):
 # ---------------------------------------------------------------- stop rules
 
 
-# Validity domain shared by the stop rules (README "Validity domains"): outside it the input is
+# Validity domain shared by the stop rules (docs/uncertainty.md "Validity domains"): outside it the input is
 # INVALID_INPUT, never a point. Beyond these magnitudes squares and products in the kernels lose
 # the precision a millimetre needs, and no airborne sensor is there.
 MAX_ORIGIN_M = 1.0e8  # |camera origin| (ECEF m): 100 000 km from the Earth's centre

@@ -1,6 +1,6 @@
 """M4 ray ∩ DEM: the first crossing of a ray with the bilinear terrain surface.
 
-The algorithm, per ray (see README "M4"):
+The algorithm, per ray (see docs/SPEC.md "M4"):
 
 1. Band: the ray can only meet the terrain between the DEM's lowest and highest (ellipsoidal)
    heights. March from where it enters the top of the band (or from the camera, if the camera is
@@ -233,7 +233,7 @@ def _knot(ox, oy, oz, dx, dy, dz, t, a, b, e2, ep2, lat0, lon0, dlat, dlon, fc_n
 
 @compiled()
 def _knot_length(p):
-    """Knot spacing (m): cubic Hermite between exact knots is then < 1 µm off (README "M4")."""
+    """Knot spacing (m): cubic Hermite between exact knots is then < 1 µm off (docs/SPEC.md "M4")."""
     return min(_KNOT_M, max(0.002 * p, 1.0))
 
 

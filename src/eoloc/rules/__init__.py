@@ -12,7 +12,7 @@ OnDEM          at its first crossing with a DEM                   M4 ([Q])
 MultiView      at the intersection of several rays                M8
 =============  =================================================  =====================
 
-Each rule states its validity domain in its docstring (README "Validity domains"); outside it
+Each rule states its validity domain in its docstring (docs/uncertainty.md "Validity domains"); outside it
 the status says why and the coordinates are NaN. ``locate_range`` & co. are thin wrappers.
 """
 

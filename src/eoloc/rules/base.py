@@ -8,7 +8,7 @@ them in ``errors``). Every caller (pipeline, Monte Carlo, covariance, compensati
 rectification, KLV, CLI) holds a rule object and calls it, never branching on its kind.
 
 Adding a rule: one file here with a ``StopRule`` subclass and its kernel in ``eoloc.kernels.core``,
-plus its name in :data:`eoloc.rules.RULES` (README "Architecture").
+plus its name in :data:`eoloc.rules.RULES` (docs/architecture.md "Architecture").
 """
 
 from __future__ import annotations

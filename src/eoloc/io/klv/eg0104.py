@@ -3,7 +3,7 @@
 EG 0104 items carry 16-byte SMPTE universal labels instead of ST 0601's one-byte tags; ST 0601
 gives each of its tags the universal label of the same EG 0104 element, so every EG 0104 item
 below lands on the ST 0601 tag with that label and the rest of eoloc reads it like ST 0601
-(README "Real KLV" has the table). Labels are matched without their version byte (byte 8), as
+(docs/formats.md "Real KLV" has the table). Labels are matched without their version byte (byte 8), as
 SMPTE ST 336 says. Values: latitudes/longitudes are 8-byte IEEE doubles, angles, heights, ranges
 and widths 4-byte IEEE floats, the user-defined time stamp 8 bytes of microseconds since 1970,
 text in ASCII. Platform pitch and roll are full-range, so they go to the full-range tags 90/91.
