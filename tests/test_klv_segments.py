@@ -249,3 +249,31 @@ def test_a_layer_whose_columns_change_goes_on_in_a_second_file(tmp_path):
     assert first.crs.to_epsg() == 4979 and list(first.total_bounds) == [3.0, 1.0, 8.0, 7.0]
     assert geopandas.read_parquet(parts[1])["id"].tolist() == ["a"]
     assert not list(tmp_path.glob("fixes/.*"))  # no temporary file left
+
+
+def test_a_long_stretch_without_a_packet_is_cut_anyway_and_every_good_packet_kept(tmp_path):
+    """20 MB of noise between good packets, read in 1 kB segments: the block is read on for a cut
+    up to 16 MB, then cut anyway (memory bounded); every good packet kept with its file offset, the
+    noise reported as skipped bytes, every byte of it, in more than one issue."""
+    import numpy as np
+
+    rng = np.random.default_rng(9)
+    flight = circling_flight_klv(40, seed=8)
+    noise = rng.integers(0, 256, 20_000_000, dtype=np.uint8).tobytes().replace(b"\x06\x0e", b"\x00\x00")
+    path = tmp_path / "noisy.klv"
+    path.write_bytes(flight + noise + flight)
+    segs = list(klv_segments(path, segment_bytes=1_000))
+    ref = read_klv(path)
+    assert sum(len(s) for s in segs) == len(ref) == 80
+    np.testing.assert_array_equal(np.concatenate([s.offset for s in segs]), [p.offset for p in ref.packets])
+    skipped = [i for s in segs for i in s.issues if i.kind == "skipped bytes"]
+    assert len(skipped) >= 2 and sum(int(i.message.split()[0]) for i in skipped) == len(noise)
+
+
+def test_the_forced_cut_splits_no_key():
+    from eoloc.io.klv.reader import UAS_KEY
+    from eoloc.io.klv.segments import forced_cut
+
+    block = b"\x00" * 1000 + UAS_KEY + b"\x01" * 500
+    assert forced_cut(block) == 1000
+    assert forced_cut(b"\x00" * 100) == 84  # (no key in it: 16 bytes before the end)

@@ -9,7 +9,9 @@ whole file's). Memory is bounded by the segment size, whatever the file's size.
 
 What a segment cannot know: whether keys that lost their first 5 bytes are repaired is decided per
 segment (the whole file's reading decides once), and a block with no such cut in its second half
-(a long stretch of damage, or a file of EG 0104 packets only) is read on until one comes. An MPEG-TS
+(a long stretch of damage, or a file of EG 0104 packets only) is read on until one comes, up to
+16 segments (at least 16 MB): then it is cut at its last packet key, or anywhere that splits no key,
+and the stretch's skipped bytes are reported in two issues rather than one. An MPEG-TS
 file is demultiplexed whole (its tables and PES packets run across any cut) from the file mapped
 into memory, and its packets given in slices.
 """
@@ -26,9 +28,11 @@ import numpy as np
 
 from ...errors import KLVError
 from .columnar import KLVColumns, decode_klv_columns, ts_columns
+from .eg0104 import EG0104_KEY
 from .reader import (
     TS_PACKET,
     UAS_KEY,
+    VMTI_KEY,
     StreamNote,
     check_found,
     checksum_problem,
@@ -41,6 +45,15 @@ from .reader import (
 #: --segment-mb`)
 SEGMENT_BYTES = 1_000_000
 _CUT_TRIES = 256  # keys looked at, from the end of a block back, for a place to cut
+MAX_BLOCKS = 16  # a block is read on to find a cut up to this many segments (at least 1 MB each), then cut anyway
+
+
+def forced_cut(block: bytes) -> int:
+    """Where to cut a block that has no :func:`safe_cut`: at the last packet key in its second half
+    (the packet there then starts the next segment), else where no key can be split (16 bytes
+    before the end)."""
+    last = max(block.rfind(k, len(block) // 2) for k in (UAS_KEY, EG0104_KEY, VMTI_KEY))
+    return last if last > 0 else len(block) - 16
 
 
 def safe_cut(block: bytes, lo: int) -> int | None:
@@ -80,6 +93,7 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
             return
         block, base, n, good, bad = head, 0, 0, 0, 0
         want = max(int(segment_bytes), 1)
+        limit = MAX_BLOCKS * max(want, 1 << 20)
         while True:
             ask = want - len(block) if want > len(block) else want
             ask = min(ask, max(os.fstat(f.fileno()).st_size - f.tell(), 0) + 1)  # (no buffer past the file's end)
@@ -87,8 +101,10 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
             block += more
             eof = len(more) < ask  # (a file: a short read is its end)
             cut = len(block) if eof else safe_cut(block, len(block) // 2)
-            if cut is None:  # no place to cut in the second half: read on
-                want = len(block) + max(int(segment_bytes), 1)
+            if cut is None and len(block) >= limit:
+                cut = forced_cut(block)  # (a long stretch without a good packet: memory stays bounded)
+            if cut is None:  # no place to cut in the second half: read on (twice as much, to the limit)
+                want = min(2 * len(block), limit)
                 continue
             seg = shifted(decode_klv_columns(block[:cut], str(path), first_index=n, strict=strict), base)
             bad_here = sum(1 for i in seg.issues if i.packet is not None)
