@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..table import Issue, Table
-from .columnar import KLVColumns
+from .columnar import KLVColumns, concat_columns, empty_chunk
 from .localset import num
 from .reader import KLVStream
 
@@ -303,8 +303,6 @@ def carried_state(cols: KLVColumns) -> KLVColumns:
     sent, the VMTI frame size last sent. Put before the next segment's packets
     (:func:`with_state`), it carries report-on-change across the cut as one reading of the
     whole file would (see :mod:`.segments`)."""
-    from .columnar import KLVColumns, empty_chunk
-
     groups = stream_groups(cols)
     k = len(groups)
     state = empty_chunk(k)
@@ -329,8 +327,6 @@ def carried_state(cols: KLVColumns) -> KLVColumns:
 def with_state(cols: KLVColumns, state: KLVColumns | None) -> KLVColumns:
     """``cols`` with the rows of ``state`` (:func:`carried_state`) before its packets, its issues
     and notes unchanged; rows of packet number -1 are the state's, to be left out of tables."""
-    from .columnar import concat_columns
-
     if state is None or not len(state):
         return cols
     return concat_columns(cols.path, cols.container, [state, cols], [], cols.notes)
