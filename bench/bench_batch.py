@@ -3,6 +3,7 @@ LocalCluster on the same generated archive (circling flights, 5 VMTI targets per
 the frame-centre elevation), each writing the five GeoParquet layers; the two runs must give the
 same partitions (checked). The baseline is the same work file by file in one process.
 
+One long file (5n packets) on one process: the rate where the per-file costs are amortised.
 Memory: `eoloc batch` on one long file in a child process (its own peak resident size, VmHWM):
 a file of n/2 packets and one 10x longer, read in segments of 1 MB of KLV (the default) and, for
 the baseline, whole (one segment as large as the file: what the batch did before it streamed).
@@ -68,7 +69,11 @@ def memory_rows(n: int) -> list[str]:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         short, long = long_flight(root / "short.klv", n // 2), long_flight(root / "long.klv", 5 * n)
-        rows = []
+        _run_file(long, root / "warm")
+        t = min(_run_file(long, root / f"o{k}") for k in range(3))
+        rows = [row(f"`eoloc batch`, one recording of {5 * n:,} packets (a long file: the per-file costs "
+                    "amortised), one process, best of 3", f"{5 * n / t:,.0f} packets/s ({t:.2f} s)",
+                    "(target >= 50,000 per process)", None)]
         for path in (short, long):
             whole = peak_mb(path, root / "whole", 1 << 40)
             seg = peak_mb(path, root / "seg", 1_000_000)
@@ -77,6 +82,15 @@ def memory_rows(n: int) -> list[str]:
                             "1 MB", f"{seg[0]:.0f} MB ({seg[1]:.1f} s)",
                             f"read whole: {whole[0]:.0f} MB ({whole[1]:.1f} s)", whole[0] / seg[0]))
     return rows
+
+
+def _run_file(path: Path, out: Path) -> float:
+    from eoloc.jobs.batch import BatchSettings, batch_job
+
+    t0 = time.perf_counter()
+    job = batch_job([str(path)], BatchSettings(str(out)), redo=True)
+    assert job.results[0].status == "done"
+    return time.perf_counter() - t0
 
 
 def main(n: int = 12_000) -> list[str]:
