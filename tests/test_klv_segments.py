@@ -21,12 +21,12 @@ from hypothesis import strategies as st
 
 import eoloc
 from eoloc.io.klv import encode_uas_packet, encode_vmti
-from eoloc.io.klv.columnar import columns_from_stream
+from eoloc.io.klv.columnar import columns_from_stream, read_klv_columns
 from eoloc.io.klv.reader import read_klv
 from eoloc.io.klv.segments import klv_segments, merge_notes
 from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.batch import LAYERS, BatchSettings, batch_job
-from eoloc.jobs.klv import klv_job, klv_segment_jobs
+from eoloc.jobs.klv import klv_segment_jobs, stream_job
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 
@@ -179,7 +179,7 @@ def test_the_segment_jobs_are_the_whole_files_job(tmp_path, every):
     every-3rd footprints of 29 segments are those of the job on the whole file."""
     path = tmp_path / "sparse.klv"
     path.write_bytes(sparse_flight(900))
-    whole = klv_job(path, columnar=True, map_layers=False, footprint_every=every)
+    whole = stream_job(path, read_klv_columns(path), map_layers=False, footprint_every=every)
     parts = list(klv_segment_jobs(path, segment_bytes=4_000, footprint_every=every))
     assert len(parts) > 25 and all(job is not None for _, job in parts)
     for name, ref in _job_tables(whole).items():

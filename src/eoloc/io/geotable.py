@@ -323,7 +323,7 @@ class ParquetLayer:
         self._writer.write_table(table)
         if geo is not None:
             self._geo["types"] |= set(geo["geometry_types"])
-            self._geo["z"] |= geo["crs"] == _crs_json(True)
+            self._geo["z"] |= any(t.endswith(" Z") for t in geo["geometry_types"])
             if "bbox" in geo:
                 self._geo["bounds"].append(geo["bbox"])
 

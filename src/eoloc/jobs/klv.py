@@ -64,21 +64,17 @@ def footprint_drawn(features: list[dict], table: tuple | None = None) -> bool:
 
 
 def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, strict: bool = False,
-            assume=(), map_layers: bool = True, columnar: bool = False) -> KLVJob:
+            assume=(), map_layers: bool = True) -> KLVJob:
     """Decode ``path`` (raw KLV or MPEG-TS), recompute every frame's centre and corners, locate the
     VMTI detections on ``dem`` or the frame-centre elevation (with uncertainty from ``budget``),
     and check which conventions the encoder follows. strict: packets that break ST 0601 are
     dropped (named); assume: convention names (:data:`eoloc.io.klv.conventions.CONVENTIONS`)
     applied to the stream before anything is computed. map_layers=False leaves out the GeoJSON
     layers only the map and KML draw (aircraft, encoder footprints, fixes): an archive job's saving.
-    columnar: the stream read into columns (:func:`eoloc.io.klv.read_klv_columns`: the same
-    values, issues and notes, 20x faster to decode) instead of packet objects, and the footprints
-    on the frame-centre elevation as a table (``footprint_table``, built in vectorised calls)
-    instead of GeoJSON features: the archive's form. The job's ``stream`` is then a
-    :class:`eoloc.io.klv.KLVColumns`, which has no packet bytes to write back (``--klv-out``)."""
-    from ..io.klv import read_klv, read_klv_columns
+    (The archive's form, on columns, a segment at a time: :func:`klv_segment_jobs`.)"""
+    from ..io.klv import read_klv
 
-    stream = (read_klv_columns if columnar else read_klv)(path, strict=strict)
+    stream = read_klv(path, strict=strict)
     return stream_job(path, stream, dem=dem, sensor=sensor, budget=budget, footprint_every=footprint_every,
                       assume=assume, map_layers=map_layers)
 
@@ -104,9 +100,10 @@ def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor
             issues += seg.issues
             yield seg, None
             continue
+        carried = with_state(seg, state)
         job = stream_job(path, seg, dem=dem, sensor=sensor, budget=budget, footprint_every=every, assume=assume,
-                         map_layers=False, state=state, first_footprint=(-rows) % every, diagnose=False)
-        state = carried_state(with_state(seg, state))
+                         map_layers=False, carried=carried, first_footprint=(-rows) % every, diagnose=False)
+        state = carried_state(carried)
         rows, good = rows + len(job.telemetry), good + len(seg)
         yield seg, job
     if not good:
@@ -114,15 +111,15 @@ def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor
 
 
 def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_every: int = 1, assume=(),
-               map_layers: bool = True, state=None, first_footprint: int = 0, diagnose: bool = True) -> KLVJob:
-    """:func:`klv_job` of a stream already read (objects or columns); ``state``: what the packets
-    before it left (:func:`eoloc.io.klv.tables.carried_state`, a segment of a longer file),
-    ``first_footprint``: the first row whose footprint is drawn; ``diagnose=False`` leaves the
-    convention checks out (an archive's saving)."""
+               map_layers: bool = True, carried=None, first_footprint: int = 0, diagnose: bool = True) -> KLVJob:
+    """:func:`klv_job` of a stream already read (objects, or columns: then its footprints on the
+    frame-centre elevation as a table, ``footprint_table``, the archive's form); ``carried``: a
+    segment of a longer file, the stream's columns with what the packets before it left put in front
+    (:func:`eoloc.io.klv.tables.with_state`); ``first_footprint``: the first row whose footprint is
+    drawn; ``diagnose=False`` leaves the convention checks out (an archive's saving)."""
     from ..ground.frame import misb_sensor
-    from ..io.klv import klv_telemetry, vmti_detections
+    from ..io.klv import KLVColumns, klv_telemetry, vmti_detections
     from ..io.klv.conventions import apply_to_telemetry
-    from ..io.klv.tables import with_state
     from .diagnose import diagnose_frames, diagnose_vmti
     from .klvframes import (
         aircraft_features,
@@ -138,9 +135,9 @@ def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_ev
     if not len(stream):
         raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate",
                        [str(i) for i in stream.issues])
-    columnar = not hasattr(stream, "packets")
+    columnar = isinstance(stream, KLVColumns)
     sensor = sensor or misb_sensor()
-    carried = with_state(stream, state)
+    carried = stream if carried is None else carried
     raw_tel = klv_telemetry(carried)
     if carried is not stream:  # (the carried state's rows left out)
         raw_tel = raw_tel.keep(raw_tel.line >= 0)

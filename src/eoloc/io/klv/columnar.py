@@ -153,6 +153,11 @@ class KLVColumns:
         return int(self.index.size)
 
     @property
+    def n_bad(self) -> int:
+        """Packets that could not be used (counted in the file's packet numbers, not in the rows)."""
+        return sum(1 for i in self.issues if i.packet is not None)
+
+    @property
     def first_packet(self) -> int:
         return int(self.index[0])
 

@@ -179,7 +179,7 @@ def read_klv_file(path: str | Path, *, strict: bool, from_ts, from_klv):
     if not data:
         raise KLVError(f"{path} is empty")
     result = (from_ts if looks_like_ts(data) else from_klv)(data, str(path), strict=strict)
-    check_found(path, len(result), sum(1 for i in result.issues if i.packet is not None))
+    check_found(path, len(result), result.n_bad)
     return result
 
 
@@ -454,7 +454,7 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode, fast: bool = T
         arrival = (StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
                               "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
                               "before it in the stream", by_arrival[pid], n) if by_arrival.get(pid) else None)
-        n += len(s) + sum(1 for i in s.issues if i.packet is not None)
+        n += len(s) + s.n_bad
         parts.append((s, arrival))
     return issues, parts
 

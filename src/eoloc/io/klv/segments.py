@@ -75,10 +75,11 @@ def safe_cut(block: bytes, lo: int) -> int | None:
 
 def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict: bool = False
                  ) -> Iterator[KLVColumns]:
-    """The packets of a KLV file (raw KLV, or MPEG-TS: one segment) as columns, a segment of about
-    ``segment_bytes`` at a time, in file order: packet numbers and byte offsets are the file's;
-    issues are each segment's, notes count each segment's packets (see the module notes). Raises
-    :class:`KLVError` as :func:`.reader.read_klv` does (the last only after the segments read)."""
+    """The packets of a KLV file (raw KLV, or MPEG-TS: demultiplexed whole, then given in slices)
+    as columns, a segment of about ``segment_bytes`` at a time, in file order: packet numbers and
+    byte offsets are the file's; issues are each segment's, notes count each segment's packets (see
+    the module notes). Raises :class:`KLVError` as :func:`.reader.read_klv` does (the last only
+    after the segments read)."""
     p = Path(path)
     try:
         f = p.open("rb")
@@ -107,7 +108,7 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
                 want = min(2 * len(block), limit)
                 continue
             seg = shifted(decode_klv_columns(block[:cut], str(path), first_index=n, strict=strict), base)
-            bad_here = sum(1 for i in seg.issues if i.packet is not None)
+            bad_here = seg.n_bad
             n += len(seg) + bad_here
             good, bad = good + len(seg), bad + bad_here
             yield seg
@@ -130,7 +131,7 @@ def _ts_segments(f, path: str, segment_bytes: int, strict: bool) -> Iterator[KLV
         cols = ts_columns(whole, path, strict=strict)
     if torn:
         cols.issues.insert(0, torn_issue(path, size))
-    check_found(path, len(cols), sum(1 for i in cols.issues if i.packet is not None))
+    check_found(path, len(cols), cols.n_bad)
     per = max(int(segment_bytes) // 200, 1)  # (rows: ~200 bytes of KLV a packet)
     for a in range(0, max(len(cols), 1), per):
         yield row_slice(cols, a, min(a + per, len(cols)), first=a == 0)
