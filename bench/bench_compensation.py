@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from _common import best_time, row, script
-from eoloc import AzElGimbal, Camera, Pose, SensorModel, locate_ellipsoid
+from eoloc import AzElGimbal, Camera, OnDEM, Pose, SensorModel, locate_ellipsoid
 from eoloc.accuracy import compensation as C
 from eoloc.accuracy.calflight import calibration_flights
 
@@ -21,7 +21,7 @@ from eoloc.accuracy.calflight import calibration_flights
 def main(n: int) -> list[str]:
     sensor = SensorModel(Camera.from_focal_mm(50.0, 5.5, 1024, 768), AzElGimbal())
     tr = calibration_flights(sensor, n_flights=8, looks_per_flight=400, seed=0)
-    obs = C.locate_observations(sensor, tr.columns, dem=tr.dem)
+    obs = C.locate_observations(sensor, tr.columns, OnDEM(tr.dem))
     model = C.fit(obs.features, obs.errors_enu, groups=obs.groups)
     rng = np.random.default_rng(1)
     pose = Pose(35.1 + rng.uniform(-0.1, 0.1, n), 112.7, 400.0 + rng.uniform(1000, 4500, n), rng.uniform(0, 360, n),

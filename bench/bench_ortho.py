@@ -39,7 +39,7 @@ import numpy as np
 
 import eoloc
 from _common import best_time, row, script
-from eoloc import AzElGimbal, Camera, Pose, SensorModel, open_dem
+from eoloc import AzElGimbal, Camera, OnDEM, Pose, SensorModel, open_dem
 from eoloc.ground import rectify
 
 DEM_PATH = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"
@@ -49,7 +49,7 @@ POSE = Pose(40.255, -105.55, 6000.0, 0.0, 0.0, 0.0, (-90.0, -30.0))
 
 def scene(gsd_m: float):
     dem = open_dem(DEM_PATH)
-    grid = rectify.output_grid(SENSOR, POSE, dem, gsd_m=gsd_m)
+    grid = rectify.output_grid(SENSOR, POSE, OnDEM(dem), gsd_m=gsd_m)
     img = np.random.default_rng(0).integers(0, 256, (3, 720, 1280), dtype=np.uint8)
     return dem, grid, img
 
@@ -121,14 +121,15 @@ def main(gsd_m: float) -> list[str]:
     cv2.setNumThreads(1)
     dem, grid, img = scene(gsd_m)
     cells = grid.shape[0] * grid.shape[1]
-    px = rectify.frame_pixels(SENSOR, POSE, dem, grid)
+    px = rectify.frame_pixels(SENSOR, POSE, OnDEM(dem), grid)
     x, y, z = cell_world(grid, dem)
     fc, rms = orthority_camera(px, x, y, z)
     lines = []
 
     # -- core: one frame onto a given grid, in memory -------------------------------------------
-    t_eg = best_time(lambda: rectify.orthorectify(img, SENSOR, POSE, dem, grid=grid), repeat=7)  # the grid given
-    t_e = best_time(lambda: rectify.orthorectify(img, SENSOR, POSE, dem, gsd_m=gsd_m), repeat=7)  # footprint + grid too
+    t_eg = best_time(lambda: rectify.orthorectify(img, SENSOR, POSE, OnDEM(dem), grid=grid), repeat=7)  # the grid given
+    # footprint + grid too:
+    t_e = best_time(lambda: rectify.orthorectify(img, SENSOR, POSE, OnDEM(dem), gsd_m=gsd_m), repeat=7)
     from orthority.enums import Interp
 
     t_o = best_time(lambda: fc.remap(img, x, y, z, nodata=0, interp=Interp.bilinear), repeat=3)
@@ -144,7 +145,7 @@ def main(gsd_m: float) -> list[str]:
         dem_tif = write_dem(dem, tmp / "dem.tif")
 
         def eoloc_file():
-            write_ortho(rectify.orthorectify(img, SENSOR, POSE, dem, gsd_m=gsd_m), tmp / "eoloc.tif", threads=1)
+            write_ortho(rectify.orthorectify(img, SENSOR, POSE, OnDEM(dem), gsd_m=gsd_m), tmp / "eoloc.tif", threads=1)
 
         def orthority_file():
             with warnings.catch_warnings():
@@ -191,7 +192,7 @@ def main(gsd_m: float) -> list[str]:
                      t_of / t_ef))
 
     # -- GDAL's GCP warp, no terrain -----------------------------------------------------------------
-    gg = rectify.ground_grid(SENSOR, POSE, dem, step_px=80)
+    gg = rectify.ground_grid(SENSOR, POSE, OnDEM(dem), step_px=80)
     f = gg.fixes.flat()
     gcps = [GroundControlPoint(row=float(v), col=float(u), x=float(lo), y=float(la))
             for u, v, lo, la, ok in zip(gg.u_px.ravel(), gg.v_px.ravel(), f.lon_deg, f.lat_deg, f.ok, strict=True)

@@ -17,7 +17,7 @@ from scipy.ndimage import zoom
 
 import eoloc
 from _common import best_time, row, script
-from eoloc import DEM, Camera, DistortionRatio, Pose, SensorModel
+from eoloc import DEM, Camera, DistortionRatio, OnDEM, Pose, SensorModel
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,8 +90,8 @@ def main(n: int) -> list[str]:
     from eoloc.ground.footprint import footprints
 
     fp_pose = Pose(39.58, 40.42, 5500.0, 0.0, 0.0, 0.0, (0.0, -8.0))  # the top of the image sees past the DEM
-    t_fp = best_time(lambda: footprints(sensor, fp_pose, dem, edge_samples=16), repeat=3)
-    n_clip = int(footprints(sensor, fp_pose, dem, edge_samples=16)[0].clipped.sum())
+    t_fp = best_time(lambda: footprints(sensor, fp_pose, OnDEM(dem), edge_samples=16), repeat=3)
+    n_clip = int(footprints(sensor, fp_pose, OnDEM(dem), edge_samples=16)[0].clipped.sum())
     lines.append(row(f"footprint of one frame on the 30 m DEM, 64 border rays ({n_clip} clipped by bisection)",
                      f"{t_fp * 1e3:.1f} ms/frame", "", None))
     return lines

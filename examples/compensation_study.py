@@ -15,7 +15,7 @@ import argparse
 
 import numpy as np
 
-from eoloc import AzElGimbal, Camera, SensorModel
+from eoloc import AzElGimbal, Camera, OnDEM, SensorModel
 from eoloc.accuracy import compensation as C
 from eoloc.accuracy.calflight import InstallationErrors, calibration_flights
 from eoloc.cli.render import print_bands
@@ -32,8 +32,8 @@ def main() -> None:
     tr = calibration_flights(sensor, n_flights=a.flights, looks_per_flight=a.looks, seed=a.seed)
     te = calibration_flights(sensor, n_flights=a.test_flights, looks_per_flight=a.looks, seed=a.seed + 1000,
                              first_flight=a.flights)
-    o_tr = C.locate_observations(sensor, tr.columns, dem=tr.dem)
-    o_te = C.locate_observations(sensor, te.columns, dem=te.dem)
+    o_tr = C.locate_observations(sensor, tr.columns, OnDEM(tr.dem))
+    o_te = C.locate_observations(sensor, te.columns, OnDEM(te.dem))
     print(f"{len(tr)} training looks on {a.flights} flights, {len(te)} test looks on {a.test_flights} other flights; "
           f"installation errors {InstallationErrors()}")
 
@@ -61,7 +61,7 @@ def main() -> None:
 
     zero = InstallationErrors((0, 0), (0, 0, 0), (0, 0, 0), 0.0, 0.0, 0.0)
     z = calibration_flights(sensor, n_flights=a.flights, looks_per_flight=a.looks, errors=zero, seed=a.seed + 7)
-    oz = C.locate_observations(sensor, z.columns, dem=z.dem)
+    oz = C.locate_observations(sensor, z.columns, OnDEM(z.dem))
     cv = C.cross_validate(oz.features, oz.errors_enu, oz.groups, by="flight", trees=False)
     print_bands(cv.table(), "control, no installation error (held-out flights): nothing to learn")
 

@@ -24,10 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from eoloc.ground.frame import frame_geometry, misb_sensor
+from eoloc.ground.frame import frame_geometry, misb_sensor, packet_heights
 from eoloc.io.config import load_config
 from eoloc.io.klv import encode_uas_packet, encode_vmti
 from eoloc.io.telemetry import read_detections, read_telemetry, telemetry_pose
+from eoloc.rules import OnDEM
 from eoloc.terrain import open_dem
 from eoloc.terrain.geoid import default_geoid
 
@@ -48,8 +49,8 @@ def main() -> None:
     pose = telemetry_pose(tel)
     hfov, vfov = cam.hfov_deg, cam.vfov_deg
     n = len(tel)
-    geom = frame_geometry(misb_sensor(), pose, np.full(n, hfov), np.full(n, vfov), dem)
-    level = frame_geometry(misb_sensor(), pose, np.full(n, hfov), np.full(n, vfov), geom.centre.h_m)
+    geom = frame_geometry(misb_sensor(), pose, np.full(n, hfov), np.full(n, vfov), OnDEM(dem))
+    level = frame_geometry(misb_sensor(), pose, np.full(n, hfov), np.full(n, vfov), packet_heights(geom.centre.h_m))
     ids = sorted(set(det.columns["target_id"]))
     packets = []
     for i in range(n):

@@ -20,7 +20,7 @@ import argparse
 
 import numpy as np
 
-from eoloc import AzElGimbal, Camera, SensorModel, geodesy
+from eoloc import AtHeight, AzElGimbal, Camera, SensorModel, geodesy
 from eoloc.accuracy import locate_with_covariance
 from eoloc.accuracy.budget import ErrorBudget
 from eoloc.sequence import TelemetryNoise, rls_static, synthetic_flight
@@ -37,7 +37,7 @@ def experiment(bias_fraction: float, flights: int, seed: int = 0) -> dict[str, f
     single, filtered, predicted, conv = [], [], [], []
     for ss in np.random.SeedSequence(seed).spawn(flights):
         fl = synthetic_flight(sensor, targets_px=Z15_PIXELS, noise=noise, seed=ss, duration_s=5.0, fps=30.0)
-        fixes, cov = locate_with_covariance(sensor, fl.frame_pose(), budget, fl.pixels, height_m=fl.ground_h_m,
+        fixes, cov = locate_with_covariance(sensor, fl.frame_pose(), budget, fl.pixels, AtHeight(fl.ground_h_m),
                                             check_linearity=False)
         e = geodesy.ecef_to_enu(fixes.p_ecef(), *fl.origin) - fl.target_enu
         single.append(np.hypot(e[..., 0], e[..., 1]).ravel())

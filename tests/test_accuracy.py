@@ -151,7 +151,7 @@ def test_cli_accuracy_from_a_config_file_and_builtin(tmp_path):
     cfg = tmp_path / "acc.toml"
     cfg.write_text(
         "[camera]\nwidth = 1000\nheight = 800\nhfov_deg = 20\n[gimbal]\nmodel = \"az-el\"\n"
-        "[accuracy]\nstop = \"range\"\nrange_m = 10200\nsamples = 20000\nseed = 1\n"
+        "[accuracy]\nstop = {range_m = 10200}\nsamples = 20000\nseed = 1\n"
         "pixels = [[499.5, 399.5], [100, 700]]\n"
         "pose = {lat_deg = 42, lon_deg = 125, h_m = 10000, yaw_deg = 10, pitch_deg = 5, roll_deg = -2, "
         "gimbal_deg = [45, -75]}\n"

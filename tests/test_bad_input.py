@@ -66,8 +66,7 @@ roll_deg = 0.0
 gimbal_deg = [20.0, -60.0]
 
 [accuracy]
-stop = "height"
-height_m = 600.0
+stop = {target_height_m = 600.0}
 """
 
 

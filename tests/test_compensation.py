@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eoloc import AzElGimbal, Camera, Pose, SensorModel, locate_ellipsoid
+from eoloc import AzElGimbal, Camera, OnDEM, Pose, SensorModel, locate_ellipsoid
 from eoloc.accuracy import compensation as C
 from eoloc.accuracy.calflight import FlightNoise, InstallationErrors, calibration_flights
 from eoloc.cli import main
@@ -44,8 +44,8 @@ def _flights():
     """8 training flights and 4 independent test flights (other seed), located on the station DEM."""
     tr = calibration_flights(SENSOR, n_flights=8, looks_per_flight=400, seed=11)
     te = calibration_flights(SENSOR, n_flights=4, looks_per_flight=400, seed=12, first_flight=8)
-    return tr, te, C.locate_observations(SENSOR, tr.columns, dem=tr.dem), C.locate_observations(SENSOR, te.columns,
-                                                                                                   dem=te.dem)
+    return tr, te, C.locate_observations(SENSOR, tr.columns, OnDEM(tr.dem)), C.locate_observations(SENSOR, te.columns,
+                                                                                                   OnDEM(te.dem))
 
 
 # -- features ------------------------------------------------------------------------------------
@@ -137,7 +137,7 @@ def test_nothing_to_learn_costs_nothing():
     model must not make any band more than 5 % worse on held-out flights."""
     zero = InstallationErrors((0, 0), (0, 0, 0), (0, 0, 0), 0.0, 0.0, 0.0)
     fl = calibration_flights(SENSOR, n_flights=6, looks_per_flight=300, errors=zero, seed=5)
-    obs = C.locate_observations(SENSOR, fl.columns, dem=fl.dem)
+    obs = C.locate_observations(SENSOR, fl.columns, OnDEM(fl.dem))
     cv = C.cross_validate(obs.features, obs.errors_enu, obs.groups, feature_sets=("p+bearing",), trees=False)
     for r in cv.table():
         assert r.cep_after_m["p+bearing"] <= 1.05 * r.cep_before_m, r
@@ -257,7 +257,7 @@ def test_cli_simulate_train_evaluate_and_locate_compensate(tmp_path):
 
     rows = list(csv.DictReader((tmp_path / "l" / "fixes.csv").open()))
     model = C.CompensationModel.load(tmp_path / "m.json")
-    o = C.locate_observations(SENSOR, c, dem=open_dem(cal / "dem.tif", vertical="ellipsoid"))
+    o = C.locate_observations(SENSOR, c, OnDEM(open_dem(cal / "dem.tif", vertical="ellipsoid")))
     pred = model.predict(o.features)
     got_e = np.array([float(x["comp_e_m"]) if x["comp_e_m"] else 0.0 for x in rows])
     np.testing.assert_allclose(got_e, pred.correction_enu[:, 0], atol=6e-5)  # the CSV keeps 0.1 mm

@@ -9,7 +9,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import eoloc
-from eoloc import DEM, AzElGimbal, Camera, OnDEM, Pose, SensorModel, Status, geodesy, locate_range
+from eoloc import DEM, AtHeight, AtRange, AzElGimbal, Camera, OnDEM, Pose, SensorModel, Status, geodesy, locate_range
 from eoloc.accuracy import (
     ErrorBudget,
     ErrorSource,
@@ -21,6 +21,7 @@ from eoloc.accuracy import (
     monte_carlo,
     scenarios,
 )
+from eoloc.errors import InputError
 
 
 @pytest.mark.parametrize("name, n", [("s13", 100_000), ("q-ellipsoid", 100_000), ("q-dem", 40_000)])
@@ -53,14 +54,14 @@ def test_fixes_are_those_of_the_locate_functions_and_broadcast():
     px = np.array([[0.0, 0.0], [320.0, 240.0], [639.0, 100.0]])
     budget = (*scn.budget.sources, ErrorSource("u_px", "normal", 1.0), ErrorSource("range_m", "uniform", 10.0))
     budget = ErrorBudget(budget)
-    fixes, cov = locate_with_covariance(sensor, pose, budget, px, range_m=10_200.0)
+    fixes, cov = locate_with_covariance(sensor, pose, budget, px, AtRange(10_200.0))
     ref = locate_range(sensor, pose, 10_200.0, px)
     assert fixes.shape == (frames, 3) and cov.shape == (frames, 3)
     np.testing.assert_array_equal(fixes.status, ref.status)
     np.testing.assert_allclose(fixes.lat_deg, ref.lat_deg, rtol=0, atol=1e-12)
     np.testing.assert_allclose(fixes.h_m, ref.h_m, rtol=0, atol=1e-6)
     one = Pose(42.02, 125.0, 10_000.0, 10.0, 5.0, -2.0, (51.0, -75.0))
-    _, c1 = locate_with_covariance(sensor, one, budget, px[2], range_m=10_200.0)
+    _, c1 = locate_with_covariance(sensor, one, budget, px[2], AtRange(10_200.0))
     np.testing.assert_allclose(cov.cov_enu[2, 2], c1.cov_enu, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(cov.contributions().sum(-1), 1.0, rtol=1e-12)
 
@@ -72,7 +73,7 @@ def test_nadir_pixel_error_closed_form():
     sensor = SensorModel(cam, AzElGimbal())
     pose = Pose(10.0, 20.0, 1000.0, 0.0, 0.0, 0.0, (0.0, -90.0))
     budget = ErrorBudget((ErrorSource("u_px", "normal", 3.0),))
-    _, cov = locate_with_covariance(sensor, pose, budget, height_m=0.0)
+    _, cov = locate_with_covariance(sensor, pose, budget, None, AtHeight(0.0))
     assert float(cov.drms) == pytest.approx(1000.0 / cam.fx * 3.0, rel=1e-4)
     assert float(cov.sigma_h_m) < 1e-6
     assert float(cov.ellipse()[..., 1]) < 1e-6  # a line: one source, one direction
@@ -82,17 +83,17 @@ def test_failed_and_invalid_targets_get_no_covariance():
     scn = scenarios.q_ellipsoid()
     sky = (scn.sensor.camera.cx, -1e6)  # far above the top of the image (its ray would miss the Earth)
     px = np.array([scn.sensor.camera.centre_px, sky])
-    fixes, cov = locate_with_covariance(scn.sensor, scn.pose, scn.budget, px, height_m=5083.0)
+    fixes, cov = locate_with_covariance(scn.sensor, scn.pose, scn.budget, px, AtHeight(5083.0))
     # outside the image: OUT_OF_IMAGE, as eoloc.locate says (it was NO_INTERSECTION, a point's status, before)
     assert list(fixes.status) == [Status.OK, Status.OUT_OF_IMAGE]
     assert list(fixes.status) == list(eoloc.rules.AtHeight(5083.0).locate(scn.sensor, scn.pose, px).status)
     assert np.all(np.isfinite(cov.cov_enu[0])) and np.all(np.isnan(cov.cov_enu[1]))
     assert np.isinf(cov.nonlinearity[1]) and not cov.linear()[1]
     bad = Pose(np.nan, 80.97, 18_000.0, 45.0, 3.5, 0.0, (50.0, -2.6))
-    fixes, cov = locate_with_covariance(scn.sensor, bad, scn.budget, height_m=5083.0)
+    fixes, cov = locate_with_covariance(scn.sensor, bad, scn.budget, None, AtHeight(5083.0))
     assert fixes.status == Status.INVALID_INPUT and np.all(np.isnan(cov.cov_enu))
-    with pytest.raises(ValueError, match="one stop rule"):
-        locate_with_covariance(scn.sensor, scn.pose, scn.budget, height_m=1.0, range_m=2.0)
+    with pytest.raises(InputError, match="needs a stop rule"):  # a bare number is no rule: which would it be?
+        locate_with_covariance(scn.sensor, scn.pose, scn.budget, None, 5083.0)
 
 
 def _ridge_scene(clearance_m: float):
@@ -118,14 +119,14 @@ def test_linearisation_breaks_on_a_grazed_ridge_and_says_so():
     0.02 deg moves the ray ~3 m at the crest): half the samples stop on the ridge, km away; the
     first-order sigma is badly wrong and the nonlinearity figure flags it."""
     far = _ridge_scene(200.0)
-    fx, cov = locate_with_covariance(far.sensor, far.pose, far.budget, rule=far.rule)
+    fx, cov = locate_with_covariance(far.sensor, far.pose, far.budget, None, far.rule)
     mc = monte_carlo(far, 20_000, seed=3).stats[0]
     assert cov.linear()[()] and float(cov.nonlinearity) < 1e-3
     np.testing.assert_allclose(cov.sigma_enu[:2], mc.sigma_enu[:2], rtol=0.02)
     assert float(fx.range_m) == pytest.approx(float(eoloc.locate(far.sensor, far.pose, far.rule).range_m), abs=1e-6)
 
     near = _ridge_scene(2.0)
-    _, cov = locate_with_covariance(near.sensor, near.pose, near.budget, rule=near.rule)
+    _, cov = locate_with_covariance(near.sensor, near.pose, near.budget, None, near.rule)
     mc = monte_carlo(near, 20_000, seed=3).stats[0]
     assert float(cov.nonlinearity) > 1.0 and not cov.linear()[()]
     assert mc.sigma_enu[1] > 10.0 * float(cov.sigma_enu[1])

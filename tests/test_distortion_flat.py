@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import eoloc
-from eoloc import BrownConrady, Camera, DistortionRatio, Pose, SensorModel, Status
+from eoloc import AtHeight, BrownConrady, Camera, DistortionRatio, Pose, SensorModel, Status
 from eoloc.sensor.distortion import Z15_D_PERCENT, Z15_FIELD
 
 cv2 = pytest.importorskip("cv2")
@@ -95,7 +95,7 @@ def test_every_stop_rule_sees_undistorted_rays(backend):
     u2, v2 = dist.ground_to_image(pose, a.p_ecef())  # and back through the distortion
     assert np.max(np.abs(u2 - u)) < 1e-3 and np.max(np.abs(v2 - v)) < 1e-3
     one = dist.locate_one(40.0, -105.0, 2000.0, 30.0, 1.0, -2.0, 20.0, -50.0, float(u[0]), float(v[0]),
-                          height_m=1500.0)
+                          rule=AtHeight(1500.0))
     assert one[0] == pytest.approx(float(a.lat_deg[0]), abs=1e-11)
 
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eoloc import AzElGimbal, Camera, Fixes, SensorModel, Status, geodesy, locate_ellipsoid
+from eoloc import AtHeight, AzElGimbal, Camera, Fixes, SensorModel, Status, geodesy, locate_ellipsoid
 from eoloc.accuracy import locate_with_covariance
 from eoloc.accuracy.budget import ErrorBudget
 from eoloc.sequence import TelemetryNoise, rls_static, synthetic_flight
@@ -134,7 +134,7 @@ def moving_scene(seed, bias=INS_BIAS, duration_s=6.0):
                           pitch_deg=2.0, roll_deg=-1.8, speed_mps=50.0, duration_s=duration_s, fps=30.0,
                           noise=TelemetryNoise(bias=bias, white=JITTER), seed=seed)
     budget = ErrorBudget.from_mapping({k: {"normal": v} for k, v in JITTER.items()})
-    fixes, cov = locate_with_covariance(sensor, fl.frame_pose(), budget, fl.pixels, height_m=fl.ground_h_m,
+    fixes, cov = locate_with_covariance(sensor, fl.frame_pose(), budget, fl.pixels, AtHeight(fl.ground_h_m),
                                         check_linearity=False)
     f, k = fixes.status.shape
     return fl, fixes.flat(), cov.cov_enu.reshape(-1, 3, 3), np.repeat(fl.time_s, k), np.tile(np.arange(k), f)

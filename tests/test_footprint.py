@@ -9,7 +9,7 @@ import pyproj
 import pytest
 
 import eoloc
-from eoloc import DEM, Camera, Pose, SensorModel, Status, geodesy
+from eoloc import DEM, AtHeight, Camera, OnDEM, Pose, SensorModel, Status, geodesy
 from eoloc.ground.footprint import border_pixels, footprint_features, footprints
 from eoloc.io.writers import write_layer
 
@@ -19,7 +19,7 @@ GEOD = pyproj.Geod(ellps="WGS84")
 
 def test_nadir_footprint_is_the_image_border_on_the_ground_both_ways():
     pose = Pose(40.0, 10.0, 3000.0, 30.0, 0.0, 0.0, (0.0, -90.0))
-    fp = footprints(SENSOR, pose, 200.0, edge_samples=8)[0]
+    fp = footprints(SENSOR, pose, AtHeight(200.0), edge_samples=8)[0]
     assert fp.status == Status.OK and len(fp) == 32 and not fp.clipped.any()
     np.testing.assert_allclose(fp.h_m, 200.0, atol=1e-6)
     # independent way back: project the vertices into the camera, they are the border pixels
@@ -37,7 +37,7 @@ def test_horizon_clips_the_outline_at_grazing_rays(elevation):
     """Looking at the horizon: the sky part of the border is replaced by the rays that graze the
     ellipsoid, found by bisection: they are tangent there (ray . up ~ 0) at the horizon distance."""
     pose = Pose(40.0, 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, elevation))
-    fp = footprints(SENSOR, pose, 0.0)[0]
+    fp = footprints(SENSOR, pose, AtHeight(0.0))[0]
     assert fp.status == Status.OK and fp.clipped.any() and (~fp.clipped).any()
     assert set(fp.clip_status[fp.clipped].tolist()) == {Status.NO_INTERSECTION}
     k = fp.clipped
@@ -57,9 +57,9 @@ def test_horizon_clips_the_outline_at_grazing_rays(elevation):
 
 
 def test_nothing_in_view_and_bad_pose_get_a_status_not_a_polygon():
-    up = footprints(SENSOR, Pose(40.0, 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, 60.0)), 0.0)[0]
+    up = footprints(SENSOR, Pose(40.0, 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, 60.0)), AtHeight(0.0))[0]
     assert up.status == Status.NO_INTERSECTION and len(up) == 0 and up.geojson_geometry() is None
-    bad = footprints(SENSOR, Pose(np.nan, 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, -60.0)), 0.0)[0]
+    bad = footprints(SENSOR, Pose(np.nan, 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, -60.0)), AtHeight(0.0))[0]
     assert bad.status == Status.INVALID_INPUT and len(bad) == 0
 
 
@@ -69,7 +69,7 @@ def test_dem_footprint_is_clipped_at_the_dem_edge(backend):
     dem = DEM.from_function(hills, (7.0, 45.0, 7.05, 45.05), 1.0 / 3600.0, source="hills")  # W, S, E, N
     # 2 km over the middle of a 5.6 x 3.9 km DEM, 35 deg off nadir: the far edge is off the DEM
     pose = Pose(45.025, 7.025, 2500.0, 0.0, 0.0, 0.0, (0.0, -55.0))
-    fp = footprints(SENSOR, pose, dem, edge_samples=8)[0]
+    fp = footprints(SENSOR, pose, OnDEM(dem), edge_samples=8)[0]
     assert fp.status == Status.OK and fp.clipped.any() and (~fp.clipped).any()
     assert Status.OUT_OF_COVERAGE in set(fp.clip_status[fp.clipped].tolist())
     # every vertex is on the DEM surface, inside the DEM, and the clipped ones at its edge (< 1 cell)
@@ -83,7 +83,7 @@ def test_dem_footprint_is_clipped_at_the_dem_edge(backend):
 
 def test_several_frames_and_geojson(tmp_path):
     pose = Pose(np.array([40.0, 40.01, np.nan]), 10.0, 3000.0, 0.0, 0.0, 0.0, (0.0, np.array([-90.0, -2.0, -90.0])))
-    prints = footprints(SENSOR, pose, 0.0, edge_samples=4)
+    prints = footprints(SENSOR, pose, AtHeight(0.0), edge_samples=4)
     assert [p.status for p in prints] == [Status.OK, Status.OK, Status.INVALID_INPUT]
     feats = footprint_features(prints, [{"frame": k} for k in range(3)])
     (path,) = write_layer(tmp_path, "fp", [f["properties"] for f in feats], ["geojson"], features=feats)

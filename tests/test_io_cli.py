@@ -59,7 +59,7 @@ def test_malformed_lines_are_reported_with_line_numbers_and_the_rest_kept(tmp_pa
     assert "outside [-90, 90]" in msgs[6]
     assert "no usable time_s or frame" in msgs[7]
     assert str(t.issues[0]).startswith(str(p) + ":4: ")
-    located = locate_tables(eoloc.SensorModel(eoloc.Camera(1, 1, 1, 1, 0, 0)), t, range_m=10_200.0)
+    located = locate_tables(eoloc.SensorModel(eoloc.Camera(1, 1, 1, 1, 0, 0)), t, None, eoloc.AtRange(10_200.0))
     assert located.fixes.status.tolist() == [0, 4, 4, 4, 0]  # bad records end INVALID_INPUT, never a point
     assert np.isnan(located.fixes.lat_deg[1:4]).all()
 

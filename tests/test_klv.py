@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 import eoloc
 from eoloc.geodesy import horizontal_distance_m
-from eoloc.ground.frame import frame_geometry, misb_sensor, packet_pose
+from eoloc.ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
 from eoloc.io.klv import (
     UAS_KEY,
     decode_klv_bytes,
@@ -230,7 +230,8 @@ def test_frame_centre_matches_an_independent_chain(lat, lon, h, heading, pitch, 
     ref_lat, ref_lon, _ = _independent_frame_centre(*(float(c[k][0]) for k in (
         "lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "gimbal1_deg", "gimbal2_deg",
         "sensor_roll_deg")))
-    g = frame_geometry(misb_sensor(), packet_pose(tel), c["hfov_deg"], c["vfov_deg"], np.zeros(1))  # h = 0 exactly
+    g = frame_geometry(misb_sensor(), packet_pose(tel), c["hfov_deg"], c["vfov_deg"],
+                       packet_heights(np.zeros(1)))  # h = 0 exactly
     if np.isnan(ref_lat):  # above the horizon (a roll can lift a -25 deg turret over it): both say so
         assert g.centre.status[0] == eoloc.Status.NO_INTERSECTION
         return

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import eoloc
-from eoloc import AzElGimbal, Camera, FixedMount, Pose, RollPitchGimbal, SensorModel, Status, geodesy
+from eoloc import AtHeight, AtRange, AzElGimbal, Camera, FixedMount, Pose, RollPitchGimbal, SensorModel, Status, geodesy
 from eoloc.rotation import R_ned_body
 
 TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
@@ -40,7 +40,7 @@ def test_S13_table3_ranged_within_1cm(backend):
 
 
 def test_S13_table3_single_call_path(backend):
-    lat, lon, h, rng, status = AZEL.locate_one(42, 125, 10_000, 10, 5, -2, 45, -75, range_m=10_200)
+    lat, lon, h, rng, status = AZEL.locate_one(42, 125, 10_000, 10, 5, -2, 45, -75, rule=AtRange(10_200))
     assert status == Status.OK and rng == 10_200
     assert horizontal_m(lat, lon, S13_TARGET[0], S13_TARGET[1]) < 0.01
     assert abs(h - S13_TARGET[2]) < 0.01
@@ -289,7 +289,7 @@ def test_nan_and_bad_inputs_are_flagged_not_located(backend):
     assert np.isnan(f.lat_deg[1:]).all()
     r = eoloc.locate_range(AZEL, Pose(10.0, 20.0, 3000.0, 0, 0, 0, (0, -60)), np.array([100.0, -5.0, 0.0, np.nan]))
     assert r.status.tolist() == [Status.OK] + [Status.INVALID_INPUT] * 3
-    lat, *_, status = AZEL.locate_one(95.0, 0, 1000, 0, 0, 0, 0, -90, height_m=0.0)
+    lat, *_, status = AZEL.locate_one(95.0, 0, 1000, 0, 0, 0, 0, -90, rule=AtHeight(0.0))
     assert status == Status.INVALID_INPUT and np.isnan(lat)
 
 
@@ -311,7 +311,7 @@ def test_single_call_agrees_with_array_path(backend):
         args = (rng.uniform(-60, 60), rng.uniform(-180, 180), rng.uniform(500, 9000), rng.uniform(0, 360),
                 rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-180, 180), rng.uniform(-80, -30))
         u, v = rng.uniform(0, 1023), rng.uniform(0, 767)
-        one = AZEL.locate_one(*args, u, v, height_m=100.0)
+        one = AZEL.locate_one(*args, u, v, rule=AtHeight(100.0))
         arr = eoloc.locate_ellipsoid(AZEL, Pose(*args[:6], args[6:]), 100.0, (u, v))
         np.testing.assert_allclose(one[:4], [arr.lat_deg, arr.lon_deg, arr.h_m, arr.range_m], rtol=0, atol=1e-9)
         assert one[4] == arr.status

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import eoloc
-from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, geodesy, locate_dem, open_dem
+from eoloc import DEM, AtHeight, AzElGimbal, Camera, OnDEM, Pose, SensorModel, geodesy, locate_dem, open_dem
 from eoloc.accuracy.calflight import relief
 from eoloc.ground import rectify
 from eoloc.kernels import compiled
@@ -33,10 +33,10 @@ def _longs_peak() -> DEM:
     return open_dem(DEMO / "mountain" / "longs_peak_srtmgl3.tif")
 
 
-def _both(sensor, pose, surface, grid, occlusion=True):
-    fast = rectify.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+def _both(sensor, pose, ground, grid, occlusion=True):
+    fast = rectify.frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
     with use_backend("numpy"):
-        ref = rectify.frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+        ref = rectify.frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
     return fast, ref
 
 
@@ -47,8 +47,8 @@ def test_every_cell_lands_on_the_reference_pixel(crs, lens):
     SensorModel.ground_to_image per cell): the nodes' bilinear interpolation costs nothing
     measurable. Cells without ground agree too (NaN on both sides)."""
     sensor = SensorModel(CAM.with_distortion(lens), AzElGimbal())
-    grid = rectify.output_grid(sensor, POSE, _hills(), crs=crs, gsd_m=3.0)
-    fast, ref = _both(sensor, POSE, _hills(), grid, occlusion=False)
+    grid = rectify.output_grid(sensor, POSE, OnDEM(_hills()), crs=crs, gsd_m=3.0)
+    fast, ref = _both(sensor, POSE, OnDEM(_hills()), grid, occlusion=False)
     both = np.isfinite(ref.u_px) & np.isfinite(fast.u_px)
     # the reference projects every cell in front of the camera; the kernel stops past the lens
     # model's field (2 % beyond the image's corners), so it may have fewer, never more
@@ -98,9 +98,9 @@ def test_hidden_cells_agree_with_the_rays_except_on_a_silhouette(scene):
         dem, pose, gsd = _longs_peak(), Pose(40.255, -105.55, 6000.0, 0.0, 0.0, 0.0, (-90.0, -30.0)), 6.0
         cam = Camera.from_hfov(25.0, 1280, 720)
     sensor = SensorModel(cam, AzElGimbal())
-    grid = rectify.output_grid(sensor, pose, dem, gsd_m=gsd)
-    fast, ref = _both(sensor, pose, dem, grid)
-    no_occ = rectify.frame_pixels(sensor, pose, dem, grid, occlusion=False)
+    grid = rectify.output_grid(sensor, pose, OnDEM(dem), gsd_m=gsd)
+    fast, ref = _both(sensor, pose, OnDEM(dem), grid)
+    no_occ = rectify.frame_pixels(sensor, pose, OnDEM(dem), grid, occlusion=False)
     hidden = no_occ.valid & ~fast.valid
     assert hidden.sum() > 1000  # the scene does hide terrain
     differ = fast.valid != ref.valid
@@ -116,9 +116,9 @@ def test_no_fold_means_no_hiding_and_the_camera_position_is_the_range_origin():
     camera (the lever arm's origin) to the cell's ground point."""
     sensor = SensorModel(CAM, AzElGimbal())
     steep = Pose(35.09, 112.7, 1900.0, 10.0, 1.0, -2.0, (5.0, -85.0))
-    grid = rectify.output_grid(sensor, steep, _hills(), gsd_m=4.0)
-    on = rectify.frame_pixels(sensor, steep, _hills(), grid)
-    off = rectify.frame_pixels(sensor, steep, _hills(), grid, occlusion=False)
+    grid = rectify.output_grid(sensor, steep, OnDEM(_hills()), gsd_m=4.0)
+    on = rectify.frame_pixels(sensor, steep, OnDEM(_hills()), grid)
+    off = rectify.frame_pixels(sensor, steep, OnDEM(_hills()), grid, occlusion=False)
     tiles = np.zeros((19, 25), np.uint8)
     n_front, n_back = compiled.ortho_fold_tiles(on.u_px, on.v_px, rectify.FOLD_TILE_PX, 1.0, tiles)
     assert n_front > 10_000 and n_back == 0 and not tiles.any()  # no fold: the z-buffer pass is skipped
@@ -150,8 +150,8 @@ def test_resampling_matches_scipy():
     counts off on this noise, as OpenCV's int16 path is: int16 takes eoloc's sampler)."""
     sensor = SensorModel(CAM, AzElGimbal())
     rng = np.random.default_rng(4)
-    grid = rectify.output_grid(sensor, POSE, _hills(), gsd_m=3.0)
-    px = rectify.frame_pixels(sensor, POSE, _hills(), grid)
+    grid = rectify.output_grid(sensor, POSE, OnDEM(_hills()), gsd_m=3.0)
+    px = rectify.frame_pixels(sensor, POSE, OnDEM(_hills()), grid)
     for img in (rng.integers(0, 65535, (1, 300, 400), dtype=np.uint16),
                 rng.integers(0, 255, (3, 300, 400), dtype=np.uint8), rng.random((2, 300, 400)).astype(np.float32),
                 rng.integers(-30000, 30000, (5, 300, 400), dtype=np.int16)):
@@ -177,7 +177,7 @@ def test_orthority_agrees_where_both_see_the_ground():
     import bench_ortho as B
 
     dem, grid, _ = B.scene(2.25)
-    px = rectify.frame_pixels(B.SENSOR, B.POSE, dem, grid)
+    px = rectify.frame_pixels(B.SENSOR, B.POSE, OnDEM(dem), grid)
     x, y, z = B.cell_world(grid, dem)
     fc, rms = B.orthority_camera(px, x, y, z)
     assert rms < 0.1
@@ -205,7 +205,7 @@ def test_every_cell_holds_the_value_an_independent_projection_reads(surface):
     import oracle_lib as O
 
     sensor = SensorModel(CAM, AzElGimbal())
-    ground = 300.0 if surface == "height" else _hills()
+    ground = AtHeight(300.0) if surface == "height" else OnDEM(_hills())
     w, h = CAM.width, CAM.height
     vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
     ramp = (3.0 * uu + 7.0 * vv).astype(np.float32)

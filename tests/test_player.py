@@ -295,7 +295,7 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
     from eoloc.ground import rectify
     from eoloc.jobs.player import grid_step_px, offline_grid
     from eoloc.jobs.video import frame_visibility
-    from eoloc.rules import surface_rule
+    from eoloc.rules import AtHeight, OnDEM
 
     sys.path.insert(0, str(EXAMPLES))
     import video_demo as V
@@ -304,14 +304,14 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
     sensor = SensorModel(Camera.from_hfov(V.HFOV_DEG, V.WIDTH, V.HEIGHT, vfov_deg=V.vfov_deg()), AzElGimbal())
     rng = np.random.default_rng(7)
     rel, refused, total = [], 0, 0
-    for t, ground in ((0.0, dem), (5.0, dem), (9.0, dem), (3.0, 3500.0)):
+    for t, ground in ((0.0, OnDEM(dem)), (5.0, OnDEM(dem)), (9.0, OnDEM(dem)), (3.0, AtHeight(3500.0))):
         pose = V.truth_pose(np.array(t))
         grid = rectify.output_grid(sensor, pose, ground, gsd_m=3.0)
         px = rectify.frame_pixels(sensor, pose, ground, grid)
         hidden = frame_visibility(px, V.WIDTH, V.HEIGHT) == 1
         g = offline_grid(sensor, pose, ground, grid_step_px(V.WIDTH, V.HEIGHT), (px.u_px[hidden], px.v_px[hidden]))
         u, v = rng.uniform(-0.5, V.WIDTH - 0.5, 4000), rng.uniform(-0.5, V.HEIGHT - 0.5, 4000)
-        rule = surface_rule(ground)
+        rule = ground
         exact, right, down = (rule.locate(sensor, pose, (u + du, v + dv)) for du, dv in ((0, 0), (1, 0), (0, 1)))
         C, Rn = len(g.u_px), len(g.v_px)
         j = np.clip(np.searchsorted(g.u_px, u, side="right") - 1, 0, C - 2)
@@ -330,7 +330,7 @@ def test_offline_grids_refuse_terrain_edges_and_keep_to_a_pixel(demo):
         err = np.hypot((at(g.lat_deg) - exact.lat_deg) * 111_030, (at(g.lon_deg) - exact.lon_deg) * 85_200)
         size = np.maximum(*(np.hypot((n.lat_deg - exact.lat_deg) * 111_030, (n.lon_deg - exact.lon_deg) * 85_200)
                             for n in (right, down)))  # the pixel's ground extent
-        if ground is not dem:  # a plane: a homography, smooth everywhere
+        if ground.terrain is None:  # a plane: a homography, smooth everywhere
             assert kept[exact.ok].all() and (err[m] / size[m]).max() < 0.05, (err[m] / size[m]).max()
             continue
         rel.append(err[m] / size[m])

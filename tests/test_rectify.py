@@ -12,7 +12,7 @@ import pytest
 import rasterio
 from click.testing import CliRunner
 
-from eoloc import DEM, AzElGimbal, Camera, Pose, SensorModel, geodesy, locate_dem, locate_ellipsoid
+from eoloc import DEM, AtHeight, AzElGimbal, Camera, OnDEM, Pose, SensorModel, geodesy, locate_dem, locate_ellipsoid
 from eoloc.accuracy.calflight import relief
 from eoloc.cli import main
 from eoloc.ground import rectify
@@ -82,7 +82,7 @@ def test_checkerboard_over_a_dem_in_utm_within_one_output_pixel(tmp_path):
     crs = rectify.output_crs("utm", 35.1, 112.7)
     assert crs.to_epsg() == 32649
     img, x0, y0 = _render(_dem(), crs)
-    ortho = rectify.orthorectify(img, SENSOR, POSE, _dem(), crs="utm", gsd_m=1.0)
+    ortho = rectify.orthorectify(img, SENSOR, POSE, OnDEM(_dem()), crs="utm", gsd_m=1.0)
     err = _corner_errors(ortho, x0, y0)
     assert err.max() < 0.5, err
     path = write_ortho(ortho, tmp_path / "o.tif")
@@ -101,7 +101,7 @@ def test_checkerboard_on_the_ellipsoid_in_gauss_kruger():
     p = _tm(crs)
     assert p["Longitude of natural origin"] == 114 and p["False easting"] == 38_500_000
     img, x0, y0 = _render(400.0, crs)
-    ortho = rectify.orthorectify(img, SENSOR, POSE, 400.0, crs="gk3", gsd_m=1.0)
+    ortho = rectify.orthorectify(img, SENSOR, POSE, AtHeight(400.0), crs="gk3", gsd_m=1.0)
     assert _corner_errors(ortho, x0, y0).max() < 0.5  # measured 0.19 px
 
 
@@ -111,20 +111,20 @@ def test_any_band_count_and_dtype():
     rng = np.random.default_rng(0)
     ir = rng.integers(0, 65535, (CAM.height, CAM.width), dtype=np.uint16)
     rgb = rng.integers(0, 255, (CAM.height, CAM.width, 3), dtype=np.uint8)
-    o_ir = rectify.orthorectify(ir, SENSOR, POSE, 400.0, gsd_m=4.0, nodata=0)
-    o_rgb = rectify.orthorectify(rgb, SENSOR, POSE, 400.0, gsd_m=4.0, resampling="nearest")
+    o_ir = rectify.orthorectify(ir, SENSOR, POSE, AtHeight(400.0), gsd_m=4.0, nodata=0)
+    o_rgb = rectify.orthorectify(rgb, SENSOR, POSE, AtHeight(400.0), gsd_m=4.0, resampling="nearest")
     assert o_ir.data.dtype == np.uint16 and o_ir.data.shape[0] == 1
     assert o_rgb.data.dtype == np.uint8 and o_rgb.data.shape[0] == 3
-    g = rectify.orthorectify(rgb[..., 1], SENSOR, POSE, 400.0, gsd_m=4.0, resampling="nearest")
+    g = rectify.orthorectify(rgb[..., 1], SENSOR, POSE, AtHeight(400.0), gsd_m=4.0, resampling="nearest")
     np.testing.assert_array_equal(o_rgb.data[1], g.data[0])
     with pytest.raises(ValueError, match="does not match the camera"):
-        rectify.orthorectify(ir[:-1], SENSOR, POSE, 400.0)
+        rectify.orthorectify(ir[:-1], SENSOR, POSE, AtHeight(400.0))
 
 
 def test_cells_map_back_through_their_own_rays():
     """Both ways: a seen cell's ground point projects to pixel (u, v); the ray through (u, v) meets
     the DEM at that same ground point (< 5 cm) - collinearity checked by the stop rule."""
-    ortho = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, _dem(), gsd_m=5.0)
+    ortho = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, OnDEM(_dem()), gsd_m=5.0)
     rows, cols = np.nonzero(ortho.valid)
     pick = np.random.default_rng(1).choice(rows.size, 300, replace=False)
     x, y = ortho.cell_xy(rows[pick] + 0.5, cols[pick] + 0.5)
@@ -147,8 +147,8 @@ def test_occlusion_blanks_cells_hidden_behind_a_ridge():
 
     dem = DEM.from_function(wall, (112.6, 35.0, 112.8, 35.2), 0.0002)
     img = np.full((CAM.height, CAM.width), 200, np.uint8)
-    on = rectify.orthorectify(img, SENSOR, POSE, dem, gsd_m=5.0)
-    off = rectify.orthorectify(img, SENSOR, POSE, dem, gsd_m=5.0, occlusion=False)
+    on = rectify.orthorectify(img, SENSOR, POSE, OnDEM(dem), gsd_m=5.0)
+    off = rectify.orthorectify(img, SENSOR, POSE, OnDEM(dem), gsd_m=5.0, occlusion=False)
     hidden = off.valid & ~on.valid
     assert hidden.sum() > 100 and not (on.valid & ~off.valid).any()
     rows, cols = np.nonzero(hidden)
@@ -167,18 +167,18 @@ def test_bounds_shortcut_exact_in_lat_lon_and_not_in_utm():
     1.7° east of the zone's meridian the grid is turned by about 1° against the meridians, so the
     shortcut errs by metres; reading at cell centres adds at most half a cell diagonal."""
     px = np.c_[np.random.default_rng(2).uniform(0, CAM.width - 1, 200), np.random.default_rng(3).uniform(0, 299, 200)]
-    geo = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, _dem(),
+    geo = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, OnDEM(_dem()),
                                crs="EPSG:4326", gsd_m=2.0)
-    e = rectify.shortcut_error(geo, SENSOR, POSE, _dem(), px)
+    e = rectify.shortcut_error(geo, SENSOR, POSE, OnDEM(_dem()), px)
     assert np.nanmax(e.exact_m) < 1e-3
-    utm = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, _dem(), gsd_m=2.0)
-    e = rectify.shortcut_error(utm, SENSOR, POSE, _dem(), px)
+    utm = rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, POSE, OnDEM(_dem()), gsd_m=2.0)
+    e = rectify.shortcut_error(utm, SENSOR, POSE, OnDEM(_dem()), px)
     assert np.nanmedian(e.exact_m) > 1.0
     assert np.all(e.cell_m <= e.exact_m + np.sqrt(2.0) + 1e-6)
 
 
 def test_ground_grid_and_crs_names():
-    g = rectify.ground_grid(SENSOR, POSE, 400.0, step_px=50)
+    g = rectify.ground_grid(SENSOR, POSE, AtHeight(400.0), step_px=50)
     assert g.u_px[0, -1] == CAM.width - 1 and g.v_px[-1, 0] == CAM.height - 1
     f = locate_ellipsoid(SENSOR, POSE, 400.0, (g.u_px, g.v_px))
     np.testing.assert_array_equal(g.fixes.lat_deg, f.lat_deg)
@@ -191,7 +191,7 @@ def test_ground_grid_and_crs_names():
         rectify.output_crs("mercator-ish", 0, 0)
     sky = Pose(35.09, 112.7, 1900.0, 0.0, 0.0, 0.0, (0.0, 20.0))
     with pytest.raises(ValueError, match="sees no ground"):
-        rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, sky, 400.0)
+        rectify.orthorectify(np.zeros((CAM.height, CAM.width), np.uint8), SENSOR, sky, AtHeight(400.0))
 
 
 def test_cli_rectify(tmp_path):

@@ -109,8 +109,8 @@ def test_negative_range_is_refused_by_name_in_both_spellings():
     one = ["locate", "--lat", 45, "--lon", 7, "--aircraft-height", 1000, "--gimbal-angles", 0, -90]
     for spelling in (["--range=-5"], ["--range", "-5"]):
         r = _run(*one, *spelling)
-        assert r.exit_code == 2 and "slant range is a finite distance > 0" in r.output and "No such option" not in \
-            r.output
+        assert r.exit_code == 2 and "--range (the laser slant range along every ray, metres) must be > 0" in r.output \
+            and "No such option" not in r.output
     r = _run(*one, "--range", "500", "--json")
     assert r.exit_code == 0 and json.loads(r.output)["range"] == pytest.approx(500.0)
 

@@ -50,7 +50,7 @@ def test_sweep_points_agree_with_first_order_propagation(q_sweep):
         pose = replace(scn.pose, gimbal_deg=(a, scn.pose.gimbal_deg[1]))
         budget = replace(scn.budget, sources=tuple(s if s.name != "terrain_m" else replace(s, value=100.0)
                                                    for s in scn.budget))
-        _, cov = locate_with_covariance(scn.sensor, pose, budget, rule=scn.rule)
+        _, cov = locate_with_covariance(scn.sensor, pose, budget, None, scn.rule)
         assert p.cep50_m == pytest.approx(float(cov.cep()), rel=0.05)
         assert p.drms_m == pytest.approx(float(cov.drms), rel=0.05)
 

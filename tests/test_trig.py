@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import eoloc
 from eoloc.kernels import core as K
+from eoloc.rules import AtRange
 
 HAS_NUMBA = "numba" in eoloc.available_backends()
 
@@ -165,5 +166,5 @@ def test_an_angle_of_a_million_radians_is_invalid_input_on_both_backends(backend
     f = eoloc.locate_range(sensor, pose, 10_200.0)
     assert f.status.tolist() == [eoloc.Status.OK, eoloc.Status.INVALID_INPUT, eoloc.Status.INVALID_INPUT]
     assert np.isfinite(f.lat_deg[0]) and np.all(np.isnan(f.lat_deg[1:]))
-    one = sensor.locate_one(42.0, 125.0, 10_000.0, 1e9, 5.0, -2.0, 45.0, -75.0, range_m=10_200.0)
+    one = sensor.locate_one(42.0, 125.0, 10_000.0, 1e9, 5.0, -2.0, 45.0, -75.0, rule=AtRange(10_200.0))
     assert one[4] == eoloc.Status.INVALID_INPUT and np.isnan(one[0])

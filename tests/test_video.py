@@ -102,7 +102,7 @@ def test_every_frame_gets_its_own_metadata(carriages, carriage, tmp_path):
     shown = {f.index: shown_index(f.image) for f in iter_frames(video)}
     # 4 s of frames (the async stream's video reaches its last packet at 4.0 s: one more)
     assert len(shown) == 4 * FPS + (carriage == "async") and all(shown[i] == i for i in shown)
-    job = video_job(video, out=tmp_path, surface=0.0, write_frames=False, mosaic=False, **kw)
+    job = video_job(video, out=tmp_path, ground=AtHeight(0.0), write_frames=False, mosaic=False, **kw)
     assert len(job.rows) == len(shown)
     for r in job.rows:
         n = shown[r["frame"]]
@@ -115,7 +115,7 @@ def test_every_frame_gets_its_own_metadata(carriages, carriage, tmp_path):
 
 def test_frames_outside_the_metadata_have_no_pose_and_say_why(carriages, tmp_path):
     _, plain, _, _, side, _ = carriages
-    job = video_job(plain, out=tmp_path, klv=side, surface=0.0, time_offset_s=UNIX0 + 2.0, write_frames=False,
+    job = video_job(plain, out=tmp_path, klv=side, ground=AtHeight(0.0), time_offset_s=UNIX0 + 2.0, write_frames=False,
                     mosaic=False)  # the first frame is at 2 s into the KLV: the last 2 s of video have none
     late = [r for r in job.rows if r["video_time_s"] > 2.0 + 1e-6]
     assert late and all(r["status"] == "NO_TELEMETRY" and "outside" in r["note"] for r in late)
@@ -126,7 +126,7 @@ def test_frames_outside_the_metadata_have_no_pose_and_say_why(carriages, tmp_pat
 
 def test_frame_cogs_validate_and_mask_what_is_seen(carriages, tmp_path):
     _, _, sync, _, _, _ = carriages
-    job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=20), tiles=False)
+    job = video_job(sync, out=tmp_path, ground=AtHeight(0.0), select=FrameSelection(every=20), tiles=False)
     assert [r["frame"] for r in job.rows] == [0, 20, 40, 60, 80]
     files = sorted((tmp_path / "frames").glob("*.tif"))
     assert len(files) == 5
@@ -161,7 +161,7 @@ def test_mosaic_keeps_the_finest_frame_and_names_it(carriages, tmp_path):
     """Every mosaic cell equals its source frame's own COG at that cell, and that frame had the
     finest GSD there of all the frames that saw it."""
     _, _, sync, _, _, _ = carriages
-    job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=25), tiles=False)
+    job = video_job(sync, out=tmp_path, ground=AtHeight(0.0), select=FrameSelection(every=25), tiles=False)
     m = job.mosaic
     with rasterio.open(tmp_path / "mosaic_source.tif") as ds:
         src = ds.read(1)
@@ -219,8 +219,8 @@ def test_ground_sample_distance_of_a_nadir_view_is_height_over_focal_length():
     cam = Camera.from_hfov(30.0, 640, 480)
     sensor = SensorModel(cam, AzElGimbal())
     pose = Pose(40.0, -105.0, 1500.0, 0.0, 0.0, 0.0, (0.0, -90.0))
-    grid = output_grid(sensor, pose, 0.0, gsd_m=2.0)
-    px = frame_pixels(sensor, pose, 0.0, grid)
+    grid = output_grid(sensor, pose, AtHeight(0.0), gsd_m=2.0)
+    px = frame_pixels(sensor, pose, AtHeight(0.0), grid)
     gsd = ground_sample_m(px, grid)
     rows, cols = grid.shape
     centre = gsd[rows // 2 - 2:rows // 2 + 2, cols // 2 - 2:cols // 2 + 2]
@@ -242,7 +242,7 @@ def test_round_gsd():
 
 def test_xyz_tiles_show_the_mosaic_where_it_is(carriages, tmp_path):
     _, _, sync, _, _, _ = carriages
-    job = video_job(sync, out=tmp_path, surface=0.0, select=FrameSelection(every=50), write_frames=False)
+    job = video_job(sync, out=tmp_path, ground=AtHeight(0.0), select=FrameSelection(every=50), write_frames=False)
     ts, m = job.tiles, job.mosaic
     assert ts.count > 0 and ts.min_zoom <= ts.max_zoom
     to_ll = pyproj.Transformer.from_crs(m.grid.crs, "EPSG:4326", always_xy=True)

@@ -252,8 +252,7 @@ hfov_deg = 25.0
 [gimbal]
 model = "az-el"
 [accuracy]
-stop = "dem"
-dem = ["{MOUNTAIN / 'longs_peak_srtmgl3.tif'}"]
+stop = {{dem = ["{MOUNTAIN / 'longs_peak_srtmgl3.tif'}"]}}
 samples = 4000
 pose = {{lat_deg = 40.2549, lon_deg = -105.51, h_m = 6000.0, gimbal_deg = [270.0, -20.0]}}
 [accuracy.budget]

@@ -217,9 +217,10 @@ height = 720
 hfov_deg = 25.0
 
 [accuracy]
-stop = "dem"
-dem = ["front.asc"]
 samples = 500
+
+[accuracy.stop]
+dem = ["front.asc"]
 {extra}
 [accuracy.pose]
 lat_deg = 40.25

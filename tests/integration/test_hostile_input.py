@@ -23,6 +23,7 @@ from eoloc.cli import main
 from eoloc.io.klv import build_uas_packet, decode_klv_bytes, klv_telemetry, uas_items, vmti_detections
 from eoloc.io.klv.localset import encode_items, parse_items
 from eoloc.io.klv.reader import split_klv
+from eoloc.rules import AtHeight
 from livecmd import free_udp_port, until_listening, wait_for_packets
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
@@ -671,7 +672,7 @@ def test_46_10_locate_one_refuses_pixels_outside_the_image():
     for backend in eoloc.available_backends():
         with eoloc.use_backend(backend):
             one = np.array([sensor.locate_one(42.0, 125.0, 10_000.0, 10.0, 5.0, -2.0, 45.0, -60.0, a, b,
-                                              height_m=100.0)[4] for a, b in zip(u, v, strict=True)])
+                                              rule=AtHeight(100.0))[4] for a, b in zip(u, v, strict=True)])
         assert np.array_equal(one == Status.OUT_OF_IMAGE, outside), backend
         assert np.array_equal(one, array), backend
 

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 import eoloc
 import oracle_lib as O
+from eoloc.rules import AtRange
 
 ANGLE = st.floats(-179.0, 179.0)
 
@@ -40,10 +41,10 @@ def test_55_compiled_camera_rotation_equals_scipy(kind, lat, lon, h, yaw, pitch,
     origin = O.to_ecef(lat, lon, h)
     for u, v in pix:
         if kind == "fixed":
-            out = sensor.locate_one(lat, lon, h, yaw, pitch, roll, angles[0], 0.0, u, v, range_m=1000.0)
+            out = sensor.locate_one(lat, lon, h, yaw, pitch, roll, angles[0], 0.0, u, v, rule=AtRange(1000.0))
         else:
             out = sensor.locate_one(lat, lon, h, yaw, pitch, roll, angles[0], angles[1], u, v, g3_deg=angles[2],
-                                    range_m=1000.0)
+                                    rule=AtRange(1000.0))
         assert out[4] == 0
         got = (O.to_ecef(out[0], out[1], out[2]) - origin) / 1000.0
         o, d, _ = O.rays(O.CAMERA, kind, lat, lon, h, yaw, pitch, roll, g1, g2, g3, np.array(u), np.array(v),

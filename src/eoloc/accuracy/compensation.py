@@ -130,28 +130,21 @@ def observation_truth(columns: dict[str, np.ndarray]) -> np.ndarray:
     return np.stack([columns["gcp_lat_deg"], columns["gcp_lon_deg"], columns["gcp_h_m"]], -1)
 
 
-def observation_rule(columns: dict[str, np.ndarray], *, dem=None, height_m: float | None = None,
-                     range_m: float | None = None):
-    """The stop rule observations are located with: ``dem`` (M4), ``height_m`` (M3), ``range_m``
-    (M1), or none of them: each point's own surveyed height (M3)."""
-    from ..rules import AtHeight, rule_from_options
+def observation_rule(columns: dict[str, np.ndarray], rule: StopRule | None = None) -> StopRule:
+    """The stop rule observations are located with: ``rule`` as given (the one used in operation),
+    or None: each point's own surveyed height (M3)."""
+    from ..rules import AtHeight
 
-    if sum(x is not None for x in (dem, height_m, range_m)) > 1:
-        raise ValueError("give at most one stop rule (dem, height_m or range_m)")
-    if dem is None and height_m is None and range_m is None:
-        return AtHeight(columns["gcp_h_m"])
-    return rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
+    return AtHeight(columns["gcp_h_m"]) if rule is None else rule
 
 
-def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], *, dem=None,
-                        height_m: float | None = None, range_m: float | None = None) -> Observed:
+def locate_observations(sensor: SensorModel, columns: dict[str, np.ndarray], rule: StopRule | None = None) -> Observed:
     """Locate every calibration observation (columns of the observations CSV: pose, pixel,
-    gcp_lat/lon/h) with one stop rule: ``dem`` (M4), ``height_m`` (M3) or ``range_m`` (M1), or
-    none: each GCP's own surveyed height (M3), which isolates the angular errors."""
+    gcp_lat/lon/h) with stop ``rule`` (the one used in operation, e.g. ``OnDEM(dem)``), or None:
+    each GCP's own surveyed height (M3), which isolates the angular errors."""
     c = columns
     pose, uv = observation_pose(c)
-    rule = observation_rule(c, dem=dem, height_m=height_m, range_m=range_m)
-    fixes = rule.locate(sensor, pose, uv)
+    fixes = observation_rule(c, rule).locate(sensor, pose, uv)
     truth = observation_truth(c)
     groups = c.get("flight", np.full(c["u_px"].shape, "all", dtype=object))
     return Observed(fixes, error_features(sensor, pose, fixes, uv), error_enu(fixes, truth), np.asarray(groups))

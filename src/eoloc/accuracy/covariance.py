@@ -26,9 +26,8 @@ from numpy.typing import ArrayLike
 
 from .. import geodesy
 from ..result import Fixes, Status
-from ..rules import StopRule, rule_from_options
+from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel, split_pixels
-from ..terrain.dem import DEM
 from .budget import ErrorBudget
 from .cep import LE90_PER_SIGMA, cep_zero_mean, error_ellipses
 from .montecarlo import chain_fixes, metres_per_degree, usable_rule
@@ -141,17 +140,15 @@ class FixCovariance:
         return self.nonlinearity <= tol
 
 
-def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget, pixels: ArrayLike | None = None,
-                           rule: StopRule | None = None, *, range_m: ArrayLike | None = None,
-                           height_m: ArrayLike | None = None, dem: DEM | None = None,
-                           velocity_ned_mps: ArrayLike = (0.0, 0.0, 0.0), rel_step: float = DEFAULT_REL_STEP,
+def locate_with_covariance(sensor: SensorModel, pose: Pose, budget: ErrorBudget, pixels: ArrayLike | None,
+                           rule: StopRule, *, velocity_ned_mps: ArrayLike = (0.0, 0.0, 0.0),
+                           rel_step: float = DEFAULT_REL_STEP,
                            check_linearity: bool = True) -> tuple[Fixes, FixCovariance]:
-    """Fixes and their first-order covariance under ``budget`` by stop ``rule`` (or one of the
-    keywords range_m, height_m, dem naming it). Pose fields, pixels and the rule's range/height
-    broadcast to the targets' shape; velocity_ned_mps (m/s) is used by a ``time_s`` source. The
-    fixes are those of :func:`eoloc.locate` with the same rule.
+    """Fixes and their first-order covariance under ``budget`` by stop ``rule``. Pose fields,
+    pixels and the rule's range/height broadcast to the targets' shape; velocity_ned_mps (m/s)
+    is used by a ``time_s`` source. The fixes are those of :func:`eoloc.locate` with the same rule.
     """
-    rule = usable_rule(rule if rule is not None else rule_from_options(range_m=range_m, height_m=height_m, dem=dem))
+    rule = usable_rule(rule)
     if not rel_step > 0:
         raise ValueError(f"rel_step must be > 0, got {rel_step!r}")
     u, v = split_pixels(pixels, sensor.camera)

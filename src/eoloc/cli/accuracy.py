@@ -25,7 +25,7 @@ eoloc accuracy CONFIG.toml            the config's [accuracy] section (pose, sto
 eoloc accuracy --scenario s13         built-in: s13 (Sun et al. 2013, Table 1), q-ellipsoid, q-dem
                                       (Qiao et al., Table 1)
   --range R, --target-height H or --dem F replace the scenario's stop rule; the config's DEM
-  files are relative to it, read with its dem_vertical and dem_crs (or --dem-crs).
+  files are relative to it, read with its [accuracy.stop] dem_vertical and dem_crs (or --dem-crs).
   Prints per target: sigma of lat/lon/h, bias and sigma east/north/up (m), CEP50 (empirical and
   parametric bivariate normal), CE90, LE90, DRMS (a radial RMS, not a CEP); then the sensitivity
   of each source alone (mu = sigma_out / sigma_in, as Sun et al. define it). Writes accuracy.csv,
@@ -71,26 +71,25 @@ SCENARIOS = ("s13", "q-ellipsoid", "q-dem")
 @click.option("--plots/--no-plots", default=True, show_default=True, help="Write the error scatter plots (PNG).")
 @dask_option
 @out_option("accuracy.csv, sensitivity.csv and the plots")
-def accuracy(inputs, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, time_tolerance,
+def accuracy(inputs, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, time_tolerance,
              interpolate, max_gap, time_offset, formats, scenario, samples, seed, sensitivity, sensitivity_samples,
              plots, dask_address, out_dir) -> None:
     from ..jobs.accuracy import accuracy_job, mapper, scenario_from
 
     if len(inputs) == 2:
-        return _flight(inputs, config_path, stop_rule(range_opt, target_height,
+        return _flight(inputs, config_path, stop_rule(rule_values,
                                                       open_dem(dem_paths, vertical, geoid, dem_crs)),
                        dict(time_tolerance_s=time_tolerance, interpolate=interpolate, max_gap_s=max_gap,
                             time_offset_s=time_offset), formats, samples or 1000, seed or 0, plots, out_dir)
     if len(inputs) == 1 and config_path is not None:  # a KLV or MPEG-TS file's VMTI targets
-        if range_opt is not None or target_height is not None:
+        if any(v is not None for v in rule_values.values()):
             raise click.UsageError("a KLV flight's targets stop on --dem F or on each packet's frame-centre elevation")
         return _flight(inputs, config_path, open_dem(dem_paths, vertical, geoid, dem_crs), None, formats,
                        samples or 1000, seed or 0, plots, out_dir)
     if len(inputs) > 2 or config_path is not None:
         raise click.UsageError("give CONFIG.toml (a scenario), or TELEMETRY DETECTIONS --config CAMERA.toml (a flight)")
     config_path = inputs[0] if inputs else None
-    given = any(x is not None for x in (range_opt, target_height)) or bool(dem_paths)
-    rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs)) if given else None
+    rule = stop_rule(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs), required=False)
     from ..rules import RangeFromRecords
 
     if isinstance(rule, RangeFromRecords):

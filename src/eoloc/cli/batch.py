@@ -8,7 +8,7 @@ import click
 
 from .common import progress
 from .main import console, err_console, warn
-from .options import config_option, dask_option, dem_options, grid_option, out_option
+from .options import config_option, dask_option, grid_option, out_option, rule_options
 
 BATCH_HELP = """Process many recordings, each file an independent task, into one GeoParquet dataset per layer.
 
@@ -43,11 +43,10 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
 @click.command(help=BATCH_HELP)
 @click.argument("patterns", nargs=-1, required=True)
 @out_option("the datasets")
-@dem_options("Terrain for every file: DEM file(s); repeat for several tiles.")
+@rule_options(dem_help="DEM file(s) (repeat for tiles): the terrain of every file (KLV: the targets' ground; default: "
+                        "each packet's frame-centre elevation). Telemetry CSVs take one stop rule; KLV the DEM only.")
 @config_option(required=False, help_text="TOML: the camera (needed for telemetry CSVs), [installation] and "
                                          "[accuracy.budget] (uncertainty columns).")
-@click.option("--target-height", "target_height", type=float, default=None, metavar="H",
-              help="Telemetry CSVs: stop the rays at this ellipsoidal height (m) instead of a DEM.")
 @grid_option()
 @click.option("--footprint-every", type=click.IntRange(1), default=1, show_default=True,
               help="KLV: one footprint every N packets.")
@@ -61,15 +60,16 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
                                                     "--out but are not among the inputs now (default: removed, so "
                                                     "that the dataset holds each input file once).")
 @dask_option
-def batch(patterns, out_dir, dem_paths, vertical, geoid, dem_crs, config_path, target_height, grid,
+def batch(patterns, out_dir, rule_values, dem_paths, vertical, geoid, dem_crs, config_path, grid,
           footprint_every, strict, segment_mb, redo, keep_missing, dask_address) -> None:
     from ..io.writers import write_layer
     from ..jobs.accuracy import mapper
     from ..jobs.batch import BatchSettings, batch_job, find_tasks, status_records
     from .render import batch_table
 
-    settings = BatchSettings(out_dir, tuple(dem_paths), vertical, geoid, dem_crs, config_path, target_height,
-                             footprint_every, tuple(grid), strict, segment_bytes=int(segment_mb * 1e6))
+    settings = BatchSettings(out_dir, tuple(dem_paths), vertical, geoid, dem_crs, config_path,
+                             tuple((k, v) for k, v in rule_values.items() if v is not None), footprint_every,
+                             tuple(grid), strict, segment_bytes=int(segment_mb * 1e6))
     tasks = find_tasks(patterns)
     if dem_paths:  # open it once here, so that a DEM that cannot be read is one message, not one per file
         from .common import open_dem

@@ -32,26 +32,30 @@ def open_dem(paths, vertical, geoid, dem_crs):
         return open_(list(paths), vertical=vertical, geoid=geoid, assume_crs=dem_crs)
 
 
-def stop_rule(range_opt, target_height, dem=None) -> StopRule:
-    """The command line's stop rule, parsed once into a rule object (``--range`` without a value:
-    :class:`eoloc.rules.RangeFromRecords`, M1 with each target's range_m column)."""
-    if sum(x is not None for x in (range_opt, target_height, dem)) != 1:
-        raise click.UsageError("choose one stop rule: --range [R] (laser slant range), --target-height H "
-                               "(ellipsoidal metres) or --dem FILE (terrain)")
-    from ..rules import RangeFromRecords, rule_from_options
-    from .options import FROM_RECORDS
+def stop_rule(rule_values: dict, dem=None, *, required: bool = True, what: str = "one stop rule") -> StopRule | None:
+    """The command line's stop rule (:func:`eoloc.cli.options.rule_options`), parsed once into a
+    rule object: the one rule given a value, or the DEM; a flag given without a value takes each
+    target's value from the files (:class:`eoloc.rules.RangeFromRecords`). None when nothing is
+    given and the rule is not ``required``; a usage error naming the flags otherwise."""
+    from ..errors import InputError
+    from ..rules.spec import SPECS, chosen, rule_from_values
 
-    if range_opt == FROM_RECORDS:
-        return RangeFromRecords()
+    values = {**rule_values, "dem": dem}
+    if not required and all(v is None for v in values.values()):
+        return None
+    specs = [s for s in SPECS if s.key in values]
+    try:
+        chosen(values, specs)
+    except InputError:
+        flags = [f"{s.flag} {s.metavar} ({s.help})" for s in specs]
+        raise click.UsageError(f"choose {what}: {', '.join(flags[:-1])} or {flags[-1]}") from None
+    return rule_from_values(values, specs)
 
-    return rule_from_options(range_m=range_opt, height_m=target_height, dem=dem)
 
-
-def ground(target_height, dem):
-    """Commands that need a surface (footprint, rectify): exactly one of --target-height or --dem."""
-    if (target_height is None) == (dem is None):
-        raise click.UsageError("choose the ground: --target-height H (ellipsoidal metres) or --dem FILE")
-    return dem if dem is not None else target_height
+def ground(rule_values: dict, dem=None, *, required: bool = True) -> StopRule | None:
+    """The ground of the commands that need a surface (footprint, rectify, video, mux, photo):
+    the one surface rule given (:func:`eoloc.cli.options.rule_options` with ``ground=True``)."""
+    return stop_rule(rule_values, dem, required=required, what="the ground")
 
 
 class LineProgress:

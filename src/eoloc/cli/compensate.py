@@ -11,9 +11,9 @@ import click
 import numpy as np
 
 from ..errors import InputError
-from .common import load_config, open_dem, progress, working
+from .common import load_config, open_dem, progress, stop_rule, working
 from .main import console, err_console, fail, report_issues, warn
-from .options import config_option, dem_options, json_option, out_option, target_height_option
+from .options import config_option, json_option, out_option, rule_options
 from .render import print_bands
 
 COMPENSATE_HELP = """Learned error prediction and compensation at large oblique angles (after Peng et al.'s
@@ -99,7 +99,7 @@ def _write_obs(path: Path, cols: dict[str, np.ndarray]) -> Path:
     return write_layer(path.parent, path.stem, Records(dict(cols)), ["csv"])[0]
 
 
-def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, dem_crs):
+def _observed(obs_path, config_path, rule_values, dem_paths, vertical, geoid, dem_crs):
     """(sensor, observations table, Observed) with the issues of the file reported."""
     from ..accuracy.compensation import locate_observations
     from ..io.telemetry import read_observations
@@ -109,22 +109,20 @@ def _observed(obs_path, config_path, target_height, dem_paths, vertical, geoid, 
     report_issues(t.issues)
     if len(t) == 0:
         fail(f"{obs_path}: no usable observation")
-    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    if dem is not None and target_height is not None:
-        fail("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
+    rule = stop_rule(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs), required=False)
     with working(f"locating {len(t)} observations..."):
-        obs = locate_observations(sensor, t.columns, dem=dem, height_m=target_height)
+        obs = locate_observations(sensor, t.columns, rule)
     bad = np.flatnonzero(~obs.fixes.ok)
     if bad.size:
         err_console.print(f"[yellow]warning:[/] {bad.size} observations could not be located "
                           f"({obs.fixes.status_counts()}), e.g. line {int(t.line[bad[0]])}; they are left out")
-    return sensor, t, obs, dem
+    return sensor, t, obs, rule
 
 
 def stop_options(fn):
-    fn = dem_options("Stop rule M4: the DEM the fixes are located on (as in operation).")(fn)
-    fn = target_height_option("Stop rule M3: this ellipsoidal height for every point (default: each point's own "
-                              "surveyed height).")(fn)
+    """The stop rule the observations are located with (as in operation; none: each point's own
+    surveyed height) and the config."""
+    fn = rule_options(records=False)(fn)
     return config_option()(fn)
 
 
@@ -149,13 +147,13 @@ def stop_options(fn):
 @click.option("-o", "--model", "model_path", type=click.Path(dir_okay=False), default=None,
               help="Model file to write (default: compensation.json in --out).")
 @out_option("compensation.json, the PNG and the cross-validation CSV")
-def train(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, feature_set, up, per_bin,
+def train(observations, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, feature_set, up, per_bin,
           height_bins, bands, compare, model_path, out_dir) -> None:
     from ..accuracy import compensation as C
     from ..accuracy.plots import plot_compensation
 
     edges = _bands(bands)
-    _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
+    _, table, obs, rule = _observed(observations, config_path, rule_values, dem_paths, vertical, geoid, dem_crs)
     keep = np.flatnonzero(obs.fixes.ok)
     if per_bin is not None:
         sel, counts = C.select_bins(obs.features.take(keep), height_edges=[float(x) for x in height_bins.split(",")],
@@ -176,7 +174,7 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
             cv_b, why_no_bands = None, str(exc)
         bar.advance(task)
         model = C.fit(f, e, feature_set=feature_set, up=up, groups=g, oblique_edges=edges,
-                      info={"observations": str(observations), "stop": _stop_label(dem_paths, target_height)})
+                      info={"observations": str(observations), "stop": _stop_label(rule, dem_paths)})
         bar.advance(task)
     n_flights = len(np.unique(g))
     print_bands(cv_f.table(edges), f"held-out flights ({cv_f.n_folds} folds over {n_flights} flights): CEP50")
@@ -203,10 +201,10 @@ def train(observations, config_path, target_height, dem_paths, vertical, geoid, 
     console.print(f"wrote [bold]{path}[/], [bold]{png}[/] and [bold]{csv_path}[/]")
 
 
-def _stop_label(dem_paths, target_height) -> str:
+def _stop_label(rule, dem_paths) -> str:
     if dem_paths:
         return "dem: " + ", ".join(str(p) for p in dem_paths)
-    return f"height {target_height} m" if target_height is not None else "each point's surveyed height"
+    return rule.describe() if rule is not None else "each point's surveyed height"
 
 
 def _table_dict(rows) -> list[dict]:
@@ -233,14 +231,14 @@ def _write_table(path: Path, rows, kinds) -> Path:
 @click.option("--bands", default="0,30,45,60,70,90", show_default=True, help=BANDS_HELP)
 @json_option("Print the band table as JSON on stdout (tables go to stderr).")
 @out_option("the PNG and the per-fix CSV")
-def evaluate(model_path, observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs, bands,
+def evaluate(model_path, observations, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, bands,
              as_json, out_dir) -> None:
     from ..accuracy import compensation as C
     from ..accuracy.plots import plot_compensation
 
     edges = _bands(bands)
     model = C.CompensationModel.load(model_path)
-    _, table, obs, _ = _observed(observations, config_path, target_height, dem_paths, vertical, geoid, dem_crs)
+    _, table, obs, _ = _observed(observations, config_path, rule_values, dem_paths, vertical, geoid, dem_crs)
     pred = model.predict(obs.features)
     e0 = obs.errors_enu[:, :2]
     e1 = e0 + pred.correction_enu[:, :2]

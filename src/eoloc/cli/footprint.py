@@ -9,12 +9,11 @@ from .main import console, err_console, report_issues
 from .options import (
     CONVENTIONS,
     config_option,
-    dem_options,
     flight_log_option,
     formats_option,
     grid_option,
     out_option,
-    target_height_option,
+    rule_options,
     with_flight_log,
 )
 
@@ -35,25 +34,24 @@ eoloc footprint TELEMETRY.csv --config CAMERA.toml (--target-height H | --dem FI
 @click.argument("telemetry", type=click.Path())
 @config_option(required=False, help_text="Camera/gimbal/installation TOML (see the README; optional for drone "
                                          "photos, which carry their camera).")
-@target_height_option("Ground: this ellipsoidal height (m).")
-@dem_options("Ground: DEM file(s); repeat for several tiles.")
+@rule_options(ground=True, role="Ground")
 @click.option("--edge-samples", type=click.IntRange(1, 1000), default=16, show_default=True,
               help="Points per image side.")
 @out_option("footprints.*")
 @formats_option()
 @grid_option()
 @flight_log_option
-def footprint(telemetry, config_path, target_height, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir,
+def footprint(telemetry, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, edge_samples, out_dir,
               formats, grid, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.writers import write_layer
     from ..jobs.footprints import footprint_job
 
-    surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
+    rule = ground(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path) if config_path else None  # drone photos carry their camera
     with progress() as bar:
         task = bar.add_task("footprints", total=None)
-        job = footprint_job(cfg, telemetry, surface, edge_samples=edge_samples,
+        job = footprint_job(cfg, telemetry, rule, edge_samples=edge_samples,
                             progress=lambda k: bar.advance(task, k))
     report_issues(job.issues)
     written = write_layer(out_dir, "footprints", job.rows, formats, features=job.features, grid=grid)

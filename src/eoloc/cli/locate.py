@@ -106,7 +106,7 @@ ONE OBSERVATION:  eoloc locate --lat 42 --lon 125 --aircraft-height 10000 --yaw 
 @refine_option("TELEMETRY from its own images (eoloc refine, its defaults, into OUT/refine/; needs --dem): an MPEG-TS "
                "with its video (then located from OUT/refine/NAME_refined.ts, with --config NAME_refined.toml) or "
                "overlapping drone photos (located with their refined poses).")
-def locate(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs, height,
+def locate(telemetry, detections, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, height,
            lat, lon, yaw, pitch, roll, gimbal, gimbal_angles, sensor_roll, pixel, as_json, out_dir, formats,
            grid, time_tolerance, interpolate, max_gap, time_offset, covariance, compensate_path, flight_log, poses_path,
            refine_first) -> None:
@@ -132,7 +132,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
         from ..kernels.backend import few_targets
 
         with few_targets():
-            _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal,
+            _locate_one(config_path, rule_values, height, lat, lon, yaw, pitch, roll, gimbal,
                         gimbal_angles, sensor_roll, pixel, as_json, dem, budget)
         return
     if lat is not None or lon is not None or height is not None or pixel is not None or gimbal_angles is not None:
@@ -140,7 +140,7 @@ def locate(telemetry, detections, config_path, range_opt, target_height, dem_pat
              "observation, not both")
     if interpolate and detections is None:
         fail("--interpolate needs a DETECTIONS file (the image centres are located at the records themselves)")
-    rule = stop_rule(range_opt, target_height, dem)
+    rule = stop_rule(rule_values, dem)
     poses = None
     if refine_first:
         telemetry, config_path, poses, poses_path = _refined(telemetry, config_path, dem, time_offset, max_gap,
@@ -208,14 +208,14 @@ def _refined(telemetry, config_path, dem, time_offset, max_gap: float, out: Path
     return ts_path, ts_config, None, None
 
 
-def _locate_one(config_path, range_opt, target_height, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
+def _locate_one(config_path, rule_values, height, lat, lon, yaw, pitch, roll, gimbal, gimbal_angles,
                 sensor_roll, pixel, as_json, dem=None, budget=None) -> None:
     from ..jobs.tables import locate_by_rule
     from ..sensor import Camera, GimbalKind, Pose, SensorModel, gimbal_from_name
 
     if lat is None or lon is None or height is None:
         fail("one observation needs --lat, --lon and --aircraft-height (ellipsoidal m), or give a TELEMETRY file")
-    rule = stop_rule(range_opt, target_height, dem)
+    rule = stop_rule(rule_values, dem)
     from ..rules import RangeFromRecords
 
     if isinstance(rule, RangeFromRecords):

@@ -8,7 +8,7 @@ import click
 
 from .common import ground, load_config, open_dem, working
 from .main import console, err_console, report_issues, warn
-from .options import CONVENTIONS, config_option, dem_options, flight_log_option, target_height_option, with_flight_log
+from .options import CONVENTIONS, config_option, flight_log_option, rule_options, with_flight_log
 
 MUX_HELP = """A drone video with its telemetry, as MISB: an MPEG-TS with an ST 0601 KLV stream.
 
@@ -44,10 +44,9 @@ eoloc mux VIDEO --telemetry FILE [--flight-log LOG.csv] --config CAMERA.toml -o 
               help="KLV carriage (ST 1402): asynchronous (KLVA, no PTS) or synchronous (access units with PTS).")
 @click.option("--start-utc", "start_utc", default=None, metavar="ISO",
               help="UTC time of the first frame, ISO 8601 (e.g. 2024-01-04T22:23:10.5Z); default: the SRT's dates.")
-@dem_options("Ground for the frame centre (tags 21, 23-25): a DEM; repeat for tiles.")
-@target_height_option("Ground for the frame centre: this ellipsoidal height (m).")
-def mux(video, telemetry, flight_log, config_path, output, carriage, start_utc, dem_paths, vertical, geoid, dem_crs,
-        target_height) -> None:
+@rule_options(ground=True, role="Ground for the frame centre (tags 21, 23-25)")
+def mux(video, telemetry, flight_log, config_path, output, carriage, start_utc, rule_values, dem_paths, vertical, geoid,
+        dem_crs) -> None:
     from ..jobs.mux import mux_job
 
     start = None
@@ -58,14 +57,11 @@ def mux(video, telemetry, flight_log, config_path, output, carriage, start_utc, 
             raise click.BadParameter(f"{start_utc!r} is not an ISO 8601 time (e.g. 2024-01-04T22:23:10Z)",
                                      param_hint="--start-utc") from None
         start = start if start.tzinfo else start.replace(tzinfo=UTC)
-    if dem_paths and target_height is not None:
-        raise click.UsageError("give --dem or --target-height, not both")
-    surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs)) if (dem_paths or target_height
-                                                                                       is not None) else None
+    rule = ground(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs), required=False)
     cfg = load_config(config_path)
     with working("muxing..."):
         job = mux_job(video, with_flight_log(telemetry, flight_log), cfg, output, carriage=carriage, start_utc=start,
-                      surface=surface)
+                      ground=rule)
     report_issues(job.issues)
     for note in job.notes:
         warn(note, "note")

@@ -1,12 +1,15 @@
-"""The options every command shares, declared once: the stop rule (--range [R], --target-height,
---dem and its datum options), the config, the output folder and formats, pose matching, Dask,
+"""The options every command shares, declared once: the stop rule (one option per rule of
+:data:`eoloc.rules.spec.SPECS`: --range [R], --target-height H, --dem and its datum options), the
+config, the output folder and formats, pose matching, Dask,
 --json; and the conventions text. A command module takes what it needs from here."""
 
 from __future__ import annotations
 
-import math
+import functools
 
 import click
+
+from ..rules.spec import FROM_RECORDS, SPECS, RuleSpec
 
 CONVENTIONS = """
 \b
@@ -29,7 +32,10 @@ Units and conventions (the same everywhere in eoloc):
 MINUS = "\u2212"  # a negative --range value travels as U+2212 past click's "looks like an option" test
 
 
-def negative_values_kept(args: list[str], options: tuple[str, ...] = ("--range",)) -> list[str]:
+RECORDS_FLAGS = tuple(s.flag for s in SPECS if s.records)  # the optional-value options
+
+
+def negative_values_kept(args: list[str], options: tuple[str, ...] = RECORDS_FLAGS) -> list[str]:
     """``--range -5`` / ``--range=-5``: click reads an optional-value option's "-5" as an option
     ("No such option '-5'"); the value is passed on with a Unicode minus so the option's own type
     refuses it by name."""
@@ -51,25 +57,30 @@ def _is_number(text: str) -> bool:
     return text.startswith("-")
 
 
-FROM_RECORDS = "from records"  # --range without a value: each target's range_m column (RangeFromRecords)
 
 
-class RangeMetres(click.ParamType):
-    """--range: a slant range in metres (> 0, finite), or no value (each target's range_m column)."""
+class RuleValue(click.ParamType):
+    """A stop rule's number in metres, checked against the rule's domain (:class:`RuleSpec`), or
+    (a rule with ``records``) no value: each target's own from the files."""
 
     name = "metres"
+
+    def __init__(self, spec: RuleSpec) -> None:
+        self.spec = spec
 
     def convert(self, value, param, ctx):
         if value == FROM_RECORDS or isinstance(value, float):
             return value
+        s = self.spec
         try:
-            r = float(str(value).replace(MINUS, "-"))
+            x = float(str(value).replace(MINUS, "-"))
         except ValueError:
-            self.fail(f"takes metres (e.g. --range 1200) or nothing (then range_m from the files), got {value!r}",
-                      param, ctx)
-        if not (math.isfinite(r) and r > 0):
-            self.fail(f"a slant range is a finite distance > 0 metres, got {value.replace(MINUS, '-')!r}", param, ctx)
-        return r
+            alone = f" or nothing (then {s.records_help})" if s.records else ""
+            self.fail(f"takes metres (e.g. {s.flag} 1200){alone}, got {value!r}", param, ctx)
+        why = s.check(x)
+        if why is not None:
+            self.fail(why.replace(s.key, s.flag, 1), param, ctx)
+        return x
 
 
 def _apply(opts):
@@ -79,12 +90,6 @@ def _apply(opts):
         return fn
 
     return apply
-
-
-def range_option(help_text: str = "Stop rule M1 (laser range): R metres along every ray, or --range alone to take "
-                                  "each target's range_m column from the files."):
-    return click.option("--range", "range_opt", type=RangeMetres(), is_flag=False, flag_value=FROM_RECORDS,
-                        default=None, metavar="[R]", help=help_text)
 
 
 def dem_options(dem_help: str):
@@ -112,15 +117,40 @@ def basemap_options(fn):
     ])(fn)
 
 
-def target_height_option(help_text: str = "Stop the rays on the surface of this ellipsoidal height (m)."):
-    """--target-height H, the same flag on every command where a height surface stops the rays; the
-    old --height (which meant the aircraft's height in one place and the target's in another) is
-    refused with a message naming the flag to use."""
-    return _apply([
-        click.option("--target-height", "target_height", type=float, default=None, metavar="H", help=help_text),
-        click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
-                     callback=_refuse_height),
-    ])
+def rule_options(*, ground: bool = False, role: str = "Stop rule", records: bool = True,
+                 dem_help: str = "DEM file(s) (GeoTIFF, DTED, SRTM .hgt/.zip, ESRI ASCII); repeat for tiles."):
+    """One option per stop rule of :data:`eoloc.rules.spec.SPECS` (``ground``: only the rules that
+    stop rays on a surface), read from the table: the command receives their values as one
+    argument, ``rule_values`` (key -> value or None; :func:`eoloc.cli.common.stop_rule` makes the
+    rule), and the DEM's files with their datum options as ``dem_paths, vertical, geoid, dem_crs``
+    (the command may use the DEM for more than the rule). ``records``: a rule's flag may be given
+    without a value (each target's value from the files). The old --height is refused by name."""
+    opts, keys = [], []
+    for s in SPECS:
+        if ground and not s.ground:
+            continue
+        if s.value == "dem":
+            opts.append(dem_options(f"{role} {s.method}: {dem_help}"))
+            continue
+        keys.append(s.key)
+        text = f"{role} {s.method}: {s.help}."
+        alone = {}
+        if records and s.records:
+            alone = {"is_flag": False, "flag_value": FROM_RECORDS}
+            text += f" {s.flag} alone: {s.records_help}."
+        metavar = f"[{s.metavar}]" if alone else s.metavar
+        opts.append(click.option(s.flag, s.key, type=RuleValue(s), default=None, metavar=metavar, help=text, **alone))
+    opts.append(click.option("--height", "old_height", type=float, default=None, hidden=True, expose_value=False,
+                             callback=_refuse_height))
+
+    def apply(fn):
+        @functools.wraps(fn)
+        def command(*args, **kwargs):
+            return fn(*args, rule_values={k: kwargs.pop(k) for k in keys}, **kwargs)
+
+        return _apply(opts)(command)
+
+    return apply
 
 
 def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
@@ -130,20 +160,16 @@ def _refuse_height(ctx: click.Context, param: click.Parameter, value) -> None:
                                "one observation.", ctx)
 
 
-def stop_rule_options(fn=None, *, dem_help: str = "Stop rule M4: DEM file(s) (GeoTIFF, DTED, SRTM .hgt/.zip, ESRI "
-                                                  "ASCII); repeat for tiles."):
-    """--range [R] | --target-height H | --dem FILE...: one of them chooses the stop rule."""
-    apply = _apply([range_option(), target_height_option("Stop rule M3: the targets' ellipsoidal height, metres."),
-                    dem_options(dem_help)])
-    return apply if fn is None else apply(fn)
+stop_rule_options = rule_options()
+"""--range [R] | --target-height H | --dem FILE...: one of them chooses the stop rule."""
 
 
 def ortho_options(crs_note: str = "", gsd_default: str = "the native GSD at the centre"):
     """The orthorectification options of `rectify` and `video`, declared once: the ground
-    (--target-height | --dem ...), --crs, --gsd, --resampling, --nodata, --occlusion."""
+    (the rules that stop on a surface: --target-height H | --dem ...), --crs, --gsd, --resampling,
+    --nodata, --occlusion."""
     return _apply([
-        target_height_option("Ground: this ellipsoidal height (m)."),
-        dem_options("Ground: DEM file(s); repeat for several tiles."),
+        rule_options(ground=True, role="Ground"),
         click.option("--crs", default="utm", show_default=True,
                      help="Output grid: utm, gk6, gk3 (Gauss-Krüger zones on WGS-84), or EPSG:xxxx / a PROJ string"
                           f"{crs_note}."),

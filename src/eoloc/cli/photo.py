@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .common import open_dem, working
+from .common import ground, open_dem, working
 from .main import NOTHING_LOCATED, console, err_console, warn
 from .options import (
     CONVENTIONS,
@@ -73,7 +73,7 @@ eoloc photo PHOTO|FOLDER... [--pixel U V]... [--dem FILE | --target-height H] [-
 @out_option("photo_fixes.*")
 @formats_option()
 @tak_options
-def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion,
+def photo(photos, pixels, rule_values, dem_paths, vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion,
           write_orthos, config_path, poses_path, refine_first, as_json, out_dir, formats, cot_urls, tak_cert,
           tak_cert_password, tak_ca, tak_package, tak_protocol) -> None:
     import orjson
@@ -88,9 +88,8 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
 
         budget = error_budget(load_config(config_path), config_path)
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    if dem is not None and target_height is not None:
-        raise click.UsageError("give --dem or --target-height, not both")
-    if write_orthos and dem is None and target_height is None:
+    rule = ground(rule_values, dem, required=False)
+    if write_orthos and rule is None:
         raise click.UsageError("--ortho needs the ground to rectify onto: give --dem FILE or --target-height H")
     settings = OrthoSettings(crs, gsd, resampling, nodata, occlusion)
     poses = None
@@ -110,7 +109,7 @@ def photo(photos, pixels, target_height, dem_paths, vertical, geoid, dem_crs, cr
 
         poses = read_photo_poses(poses_path)
     with working("orthorectifying the photos..." if write_orthos else "reading the photos..."):
-        job = photo_job(photos, pixels=pixels, dem=dem, target_height_m=target_height, budget=budget,
+        job = photo_job(photos, pixels=pixels, ground=rule, budget=budget,
                         ortho_dir=Path(out_dir) / "ortho" if write_orthos else None, ortho=settings, poses=poses,
                         poses_from=str(poses_path or ""))
     for msg in job.failed:

@@ -40,25 +40,26 @@ image's bounds) against the rigorous ray.
               help="Ground grid spacing (pixels).")
 @out_option("ortho.tif, footprint.geojson, ground_grid.csv and rectify.json")
 @flight_log_option
-def rectify(image, config_path, telemetry, frame, time_s, target_height, dem_paths, vertical, geoid, dem_crs, crs, gsd,
+def rectify(image, config_path, telemetry, frame, time_s, rule_values, dem_paths, vertical, geoid, dem_crs, crs, gsd,
             resampling, nodata, occlusion, grid_step, out_dir, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
     from ..io.export import fix_records
     from ..io.raster import write_ortho
     from ..io.writers import write_layer
+    from ..jobs.photo import ground_tag
     from ..jobs.rectify import rectify_job
 
-    surface = ground(target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
+    rule = ground(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path) if config_path else None  # drone photos carry their camera
     with working("rectifying..."):
-        job = rectify_job(cfg, image, telemetry, surface, frame=frame, time_s=time_s, crs=crs, gsd_m=gsd,
+        job = rectify_job(cfg, image, telemetry, rule, frame=frame, time_s=time_s, crs=crs, gsd_m=gsd,
                           resampling=resampling, nodata=nodata, occlusion=occlusion, grid_step_px=grid_step)
     report_issues(job.issues)
     ortho, fp, short = job.ortho, job.footprint, job.shortcut
     out = Path(out_dir)
     tif = write_ortho(ortho, out / "ortho.tif", tags={"EOLOC_SOURCE": Path(image).name,
                                                "EOLOC_TELEMETRY_LINE": job.telemetry_line,
-                                               "EOLOC_SURFACE": "DEM" if dem_paths else target_height})
+                                               "EOLOC_SURFACE": ground_tag(rule)})
     from ..ground.footprint import footprint_features
 
     feats = footprint_features([fp], [{"image": Path(image).name}])

@@ -7,9 +7,9 @@ import sys
 
 import click
 
-from .common import load_config, open_dem, progress
+from .common import load_config, open_dem, progress, stop_rule
 from .main import console, err_console, report_issues, warn
-from .options import config_option, dem_options, evaluation_options, out_option, target_height_option
+from .options import config_option, evaluation_options, out_option, rule_options
 
 REPORT_HELP = """A flight-test accuracy report from observations of surveyed points: locate, evaluate,
 calibrate (before/after), optionally cross-validate the learned compensation — one
@@ -36,28 +36,23 @@ eoloc report OBSERVATIONS.csv --config CAMERA.toml [--dem F | --target-height H]
 @click.command(help=REPORT_HELP)
 @click.argument("observations", type=click.Path(dir_okay=False))
 @config_option(help_text="Camera/gimbal/installation TOML (with [accuracy.budget] for the covariance of each fix).")
-@dem_options("Stop rule M4: the DEM the observations are located on (as in operation).")
-@target_height_option("Stop rule M3: this ellipsoidal height for every point (default: each point's own surveyed "
-                      "height).")
+@rule_options(records=False)
 @click.option("--estimate", default="mount", show_default=True,
               help="Installation parameters to calibrate, comma-separated: mount, boresight, heading; 'none' to "
                    "skip the calibration.")
 @click.option("--compensation", is_flag=True, help="Also cross-validate the learned compensation by flight.")
 @evaluation_options
 @out_option("report.html, report_points.csv and report_summary.csv")
-def report(observations, config_path, dem_paths, vertical, geoid, dem_crs, target_height, estimate, compensation,
+def report(observations, config_path, rule_values, dem_paths, vertical, geoid, dem_crs, estimate, compensation,
            n_boot, level, seed, cooks_threshold, out_dir) -> None:
-    from ..errors import InputError
     from ..jobs.report import report_job, write_report
 
     cfg = load_config(config_path)
-    dem = open_dem(dem_paths, vertical, geoid, dem_crs)
-    if dem is not None and target_height is not None:
-        raise InputError("choose one stop rule: --dem or --target-height (or neither: each point's surveyed height)")
+    rule = stop_rule(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs), required=False)
     groups = () if estimate.strip().lower() == "none" else tuple(e.strip() for e in estimate.split(",") if e.strip())
     with progress() as bar:
         task = bar.add_task("report", total=None)
-        job = report_job(cfg, config_path, observations, dem=dem, target_height=target_height, estimate=groups,
+        job = report_job(cfg, config_path, observations, rule=rule, estimate=groups,
                          compensation=compensation, n_boot=n_boot, level=level, seed=seed,
                          cooks_threshold=cooks_threshold, command="eoloc " + shlex.join(sys.argv[1:]),
                          progress=lambda text: bar.update(task, description=text))

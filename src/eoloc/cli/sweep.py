@@ -19,7 +19,7 @@ eoloc sweep --scenario q-ellipsoid                       Qiao: gimbal roll 10-82
 eoloc sweep CONFIG.toml --angle gimbal2 --angles 20:80:10 --terrain-sigmas 10,50
   For every angle and relief sigma, two Monte Carlo runs: on the ellipsoid at the scenario's
   height with the relief as a terrain-height error, and by M4 on a synthetic relief of that
-  sigma around the target. Needs a scenario that stops on the ellipsoid (stop = "height").
+  sigma around the target. Needs a scenario that stops on the ellipsoid (stop = {target_height_m = H}).
   Writes sweep.csv (CEP50 empirical and bivariate normal, CE90, DRMS, sigmas, slant range,
   oblique angle, failed samples) and sweep.png into --out.
 """

@@ -65,7 +65,7 @@ eoloc track TELEMETRY.csv DETECTIONS.csv --config CAMERA.toml (--range [R] | --t
 @click.option("--max-coast", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
               help="Tracks: seconds without a detection before a track ends.")
 @flight_log_option
-def track(telemetry, detections, config_path, range_opt, target_height, dem_paths, vertical, geoid, dem_crs,
+def track(telemetry, detections, config_path, rule_values, dem_paths, vertical, geoid, dem_crs,
           time_tolerance, interpolate, max_gap, time_offset, out_dir, formats, grid, static, associate, forgetting,
           window, accel_psd, meas_sigma, max_coast, flight_log) -> None:
     telemetry = with_flight_log(telemetry, flight_log)
@@ -75,7 +75,7 @@ def track(telemetry, detections, config_path, range_opt, target_height, dem_path
     if static and associate:
         fail("--associate groups fixes into tracks of moving targets; --static estimates each target_id's one "
              "position: give one of them")
-    rule = stop_rule(range_opt, target_height, open_dem(dem_paths, vertical, geoid, dem_crs))
+    rule = stop_rule(rule_values, open_dem(dem_paths, vertical, geoid, dem_crs))
     cfg = load_config(config_path)
     with working("locating..."):
         job = located_detections(cfg, telemetry, detections, rule, time_tolerance_s=time_tolerance,

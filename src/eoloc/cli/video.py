@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from .common import load_config, open_dem, progress
+from .common import ground, load_config, open_dem, progress
 from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import (
     CONVENTIONS,
@@ -155,7 +155,7 @@ Nothing is downloaded. detections.csv adds the class and score.
                    "VMTI in a KLV stream of its own (ids, centroid, box, location).")
 @out_option("frames/, mosaic.tif, mosaic_source.tif, tiles/, frames.csv, footprints.geojson and video.json")
 @flight_log_option
-def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, target_height, dem_paths,
+def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_gap, rule_values, dem_paths,
           vertical, geoid, dem_crs, crs, gsd, resampling, nodata, occlusion, every, start_s, end_s, write_frames,
           mosaic, tiles, player, detect, detect_score, detect_classes, detect_point, detect_window, detect_threshold,
           min_area, max_area, min_speed, refine_first, klv_out, out_dir, flight_log) -> None:
@@ -167,12 +167,8 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         raise click.UsageError("choose one metadata source beside the video: --klv FILE or --telemetry CSV")
     if telemetry and not config_path:
         raise click.UsageError("--telemetry needs --config (the camera: size, focal length, distortion)")
-    if target_height is not None and dem_paths:
-        raise click.UsageError("choose the ground: --target-height H or --dem FILE, not both")
     if end_s is not None and end_s < start_s:
         raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
-    if detect and not (dem_paths or target_height is not None):
-        raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
     if klv_out and not detect:
         raise click.UsageError("--klv-out writes the targets --detect finds: add --detect motion (or MODEL.onnx)")
     if min_area >= max_area:
@@ -180,6 +176,9 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
     if detect and detect != "motion" and not detect.lower().endswith(".onnx"):
         raise click.UsageError(f"--detect {detect!r}: 'motion', or an ONNX model file (MODEL.onnx)")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
+    rule = ground(rule_values, dem, required=False)  # None: each frame's metadata frame-centre elevation
+    if detect and rule is None:
+        raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
     finder = movers = None
     if detect:
         from ..detect.movers import MoverSettings
@@ -191,10 +190,8 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
                                     max_area_m2=max_area)
         else:
             from ..detect.learned import LearnedDetector
-            from ..rules import surface_rule
-
             classes = {c.strip() for c in detect_classes.split(",") if c.strip()} if detect_classes else None
-            finder = LearnedDetector(detect, surface_rule(dem if dem is not None else target_height),
+            finder = LearnedDetector(detect, rule,
                                      score=detect_score, classes=classes, point=detect_point)
         movers = MoverSettings(min_speed_mps=(2.0 if detect == "motion" else 0.0) if min_speed is None else min_speed)
     if refine_first:
@@ -202,7 +199,6 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
                                                        max_gap, Path(out_dir))
     dem_name = Path(dem_paths[0]).stem if dem_paths else "dem"
     serve_line = serve_command(Path(out_dir), dem_name, dem_paths, vertical, geoid, dem_crs, config_path)
-    surface = dem if dem is not None else target_height
     cfg = load_config(config_path) if config_path else None
     out = Path(out_dir)
     select = FrameSelection(every, start_s, math.inf if end_s is None else end_s)
@@ -213,7 +209,7 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         def searched(done: int, total: int) -> None:
             bar.update(searching, completed=done, total=total, visible=True)
 
-        job = video_job(video, out=out, klv=klv_path, telemetry=telemetry, cfg=cfg, surface=surface, crs=crs,
+        job = video_job(video, out=out, klv=klv_path, telemetry=telemetry, cfg=cfg, ground=rule, crs=crs,
                         gsd_m=gsd, resampling=resampling, nodata=nodata, occlusion=occlusion, select=select,
                         klv_stream=klv_stream, time_offset_s=time_offset, max_gap_s=max_gap,
                         write_frames=write_frames, mosaic=mosaic, tiles=tiles, player=player,

@@ -127,8 +127,8 @@ def run_compensation_demo(out_dir: Path, *, console: Console, sensor):
     console.rule("Large oblique angles: learned error compensation ([P]; eoloc compensate)")
     tr = calibration_flights(sensor, n_flights=6, looks_per_flight=300, seed=0)
     te = calibration_flights(sensor, n_flights=3, looks_per_flight=300, seed=1000, first_flight=6)
-    o_tr = C.locate_observations(sensor, tr.columns, dem=tr.dem)
-    o_te = C.locate_observations(sensor, te.columns, dem=te.dem)
+    o_tr = C.locate_observations(sensor, tr.columns, OnDEM(tr.dem))
+    o_te = C.locate_observations(sensor, te.columns, OnDEM(te.dem))
     model = C.fit(o_tr.features, o_tr.errors_enu, groups=o_tr.groups)
     model.save(out_dir / "compensation.json")
     pred = model.predict(o_te.features)
@@ -157,7 +157,7 @@ def run_report_demo(out_dir: Path, *, console: Console, config_path: Path, fligh
     (obs,) = write_layer(out_dir, "observations", Records(dict(flights.columns)), ["csv"])
     dem_path = write_dem(flights.dem, out_dir / "dem.tif")
     dem = open_dem([dem_path], vertical="ellipsoid")
-    job = report_job(load_config(config_path), config_path, obs, dem=dem, estimate=("mount", "heading"),
+    job = report_job(load_config(config_path), config_path, obs, rule=OnDEM(dem), estimate=("mount", "heading"),
                      compensation=True, n_boot=1000,
                      command=f"eoloc report {obs} --config {config_path} --dem {dem_path} --vertical ellipsoid "
                              "--estimate mount,heading --compensation --bootstrap 1000")
@@ -184,11 +184,12 @@ def run_rectify_demo(out_dir: Path, *, console: Console, data: Path) -> None:
     u, v = np.meshgrid(np.arange(640.0), np.arange(480.0))
     f = locate_dem(sensor, pose, dem, (u, v))
     frame = np.where(f.ok, 60 + 140 * ((np.floor(f.lat_deg / 0.001) + np.floor(f.lon_deg / 0.001)) % 2), 0)
-    ortho = rectify.orthorectify(frame.astype(np.uint8), sensor, pose, dem, crs="utm")
+    ortho = rectify.orthorectify(frame.astype(np.uint8), sensor, pose, OnDEM(dem), crs="utm")
     path = write_ortho(ortho, out_dir / "ortho.tif")
-    grid = rectify.ground_grid(sensor, pose, dem, step_px=40)
+    grid = rectify.ground_grid(sensor, pose, OnDEM(dem), step_px=40)
     ok = grid.fixes.ok.ravel()
-    short = rectify.shortcut_error(ortho, sensor, pose, dem, np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]).summary()
+    short = rectify.shortcut_error(ortho, sensor, pose, OnDEM(dem),
+                                   np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]).summary()
     console.print(f"A 640 x 480 frame of a 0.001° checkerboard on the terrain, seen 45° below the horizon from "
                   f"6000 m: {ortho.shape[1]} x {ortho.shape[0]} cells of {ortho.res[0]:.2f} m in {ortho.crs.name}, "
                   f"{100 * ortho.valid.mean():.0f} % seen (terrain-hidden cells blanked). [P]'s bounds shortcut "
@@ -270,7 +271,7 @@ def run_mountain_demo(out_dir: Path, *, console: Console, data: Path) -> None:
                   "meet the slopes behind (the long tail of their errors). That is the geometry, not the method: "
                   "a ray that clears a summit really does land behind it.[/]")
     every = np.arange(0, len(tel), 5)
-    prints = footprints(sensor, telemetry_pose(tel, every), dem, edge_samples=12)
+    prints = footprints(sensor, telemetry_pose(tel, every), OnDEM(dem), edge_samples=12)
     clipped = sum(bool(p.clipped.any()) for p in prints)
     records = fix_records(m4.fixes, dict(m4.extra, error_vs_truth_m=errors["dem"]))
     feats = footprint_features(prints, [{"time_s": float(tel.columns["time_s"][i])} for i in every])

@@ -26,9 +26,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..result import Fixes, Status
-from ..rules import surface_rule
+from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
-from ..terrain.dem import DEM
 
 _BISECTIONS = 26  # 2^-26 of a segment: below 1e-4 px on images up to 6000 px
 
@@ -141,19 +140,17 @@ def border_pixels(camera, edge_samples: int) -> np.ndarray:
     return np.vstack([corners[k] + s * (corners[(k + 1) % 4] - corners[k]) for k in range(4)])
 
 
-def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_samples: int = 16) -> list[Footprint]:
-    """Footprint of every pose element (a frame each; pose fields scalars or 1-D arrays).
-
-    ``surface``: a constant ellipsoidal height (m, M3) or a :class:`eoloc.DEM` (M4).
-    """
+def footprints(sensor: SensorModel, pose: Pose, ground: StopRule, *, edge_samples: int = 16) -> list[Footprint]:
+    """Footprint of every pose element (a frame each; pose fields scalars or 1-D arrays) on the
+    ``ground`` rule's surface: ``AtHeight(h)`` (M3) or ``OnDEM(dem)`` (M4)."""
     n = _n_frames(pose)
     frames = pose.take(np.arange(n))
     border = border_pixels(sensor.camera, edge_samples)
     S = border.shape[0]
-    fb = _stop(sensor, frames.take(np.repeat(np.arange(n), S)), np.tile(border, (n, 1)), surface)
+    fb = _stop(sensor, frames.take(np.repeat(np.arange(n), S)), np.tile(border, (n, 1)), ground)
     ok_b = (fb.status == Status.OK).reshape(n, S)
     centre_px = np.array(sensor.camera.centre_px)
-    fc = _stop(sensor, frames, np.tile(centre_px, (n, 1)), surface)
+    fc = _stop(sensor, frames, np.tile(centre_px, (n, 1)), ground)
     anchor = np.tile(centre_px, (n, 1))
     has_anchor = fc.status == Status.OK
     rng_b = np.where(ok_b, np.reshape(fb.range_m, (n, S)), np.inf)
@@ -170,7 +167,7 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
     seg_f = np.concatenate([f_miss, f_tr])
     seg_a = np.concatenate([anchor[f_miss], a_tr]).reshape(-1, 2)
     seg_b = np.concatenate([border[i_miss], b_tr]).reshape(-1, 2)
-    hit, px, why = _bisect(sensor, frames.take(seg_f), seg_a, seg_b, surface)
+    hit, px, why = _bisect(sensor, frames.take(seg_f), seg_a, seg_b, ground)
     n_miss = f_miss.size
     clip_at = {(int(f), int(i)): k for k, (f, i) in enumerate(zip(f_miss, i_miss, strict=True))}
     trans_at = {(int(f), int(i)): n_miss + k for k, (f, i) in enumerate(zip(f_tr, i_tr, strict=True))}
@@ -200,30 +197,30 @@ def footprints(sensor: SensorModel, pose: Pose, surface: float | DEM, *, edge_sa
 
 
 def _bisect(sensor: SensorModel, pose: Pose, a: np.ndarray, b: np.ndarray,
-            surface) -> tuple[Fixes, np.ndarray, np.ndarray]:
+            ground) -> tuple[Fixes, np.ndarray, np.ndarray]:
     """On each segment a (ray hits) -> b (ray misses): the last hit. -> (its fix, its pixel, the
     status just beyond it)."""
     lo = np.zeros(a.shape[0])
     hi = np.ones(a.shape[0])
     why = np.full(a.shape[0], Status.NO_INTERSECTION, dtype=np.int8)
     if a.shape[0] == 0:
-        return _stop(sensor, pose, a, surface), a, why
-    frame, rule = sensor.camera_frame(pose), surface_rule(surface)  # the same poses each step: once
+        return _stop(sensor, pose, a, ground), a, why
+    frame = sensor.camera_frame(pose)  # the same poses each step: once
     for _ in range(_BISECTIONS):
         mid = 0.5 * (lo + hi)
         p = a + mid[:, None] * (b - a)
         xn, yn = sensor.camera.pixel_to_normalized(p[:, 0], p[:, 1], focal_scale=pose.focal_scale)
-        f = rule.stop(sensor.rays_from(frame, xn, yn), sensor.ellipsoid)
+        f = ground.stop(sensor.rays_from(frame, xn, yn), sensor.ellipsoid)
         ok = f.status == Status.OK
         lo = np.where(ok, mid, lo)
         hi = np.where(ok, hi, mid)
         why = np.where(ok, why, f.status)
     px = a + lo[:, None] * (b - a)
-    return _stop(sensor, pose, px, surface), px, why
+    return _stop(sensor, pose, px, ground), px, why
 
 
-def _stop(sensor: SensorModel, pose: Pose, pixels: np.ndarray, surface) -> Fixes:
-    return surface_rule(surface).locate(sensor, pose, (pixels[..., 0], pixels[..., 1]))
+def _stop(sensor: SensorModel, pose: Pose, pixels: np.ndarray, ground) -> Fixes:
+    return ground.locate(sensor, pose, (pixels[..., 0], pixels[..., 1]))
 
 
 def _n_frames(pose: Pose) -> int:

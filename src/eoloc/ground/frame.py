@@ -17,12 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..result import Fixes, Status, with_status
-from ..rules import AtHeight, AtRange, OnDEM
+from ..result import Fixes
+from ..rules import AtHeight, AtRange, StopRule
 from ..sensor.camera import Camera
 from ..sensor.gimbal import AzElGimbal
 from ..sensor.model import Pose, Rays, SensorModel
-from ..terrain import DEM
 
 # ST 0601 corner order in units of the half-FOV tangents (x right, y down in the image)
 CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
@@ -82,42 +81,47 @@ class FrameGeometry:
     surface: str
 
 
-def stop_on(rays: Rays, surface, sensor: SensorModel) -> Fixes:
-    """Stop rays (…, K) on ``surface``: a DEM, or ellipsoidal heights (m) broadcasting as (F, 1)."""
-    if isinstance(surface, DEM):
-        return OnDEM(surface).stop(rays, sensor.ellipsoid)
-    h = np.asarray(surface, dtype=np.float64)
-    h = h[..., None] if h.ndim else h  # one height per packet, for all its points
-    fixes = AtHeight(np.nan_to_num(h)).stop(rays, sensor.ellipsoid)
-    return with_status(fixes, np.broadcast_to(~np.isfinite(h), fixes.shape), Status.INVALID_INPUT)
+def packet_heights(h_m: ArrayLike) -> AtHeight:
+    """The ground of each packet's rays at its own ellipsoidal height (m, (F,), e.g. the encoder's
+    frame-centre elevation; NaN: INVALID_INPUT for that packet's rays), for rays shaped (F, K)."""
+    h = np.asarray(h_m, dtype=np.float64)
+    return AtHeight(h[..., None] if h.ndim else h)
 
 
-def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_deg: ArrayLike, surface,
+def stop_on(rays: Rays, ground: StopRule, sensor: SensorModel) -> Fixes:
+    """Stop rays (…, K) on the ``ground`` rule (values broadcasting against (F, K): OnDEM, AtHeight,
+    or :func:`packet_heights`)."""
+    return ground.stop(rays, sensor.ellipsoid)
+
+
+def frame_geometry(sensor: SensorModel, pose: Pose, hfov_deg: ArrayLike, vfov_deg: ArrayLike, ground: StopRule,
                    *, range_m: ArrayLike | None = None) -> FrameGeometry:
-    """Frame centre and the four corners of each packet on ``surface`` (a DEM, or an ellipsoidal
-    height per packet such as the encoder's own frame-centre elevation). With ``range_m`` the
+    """Frame centre and the four corners of each packet on the ``ground`` rule (OnDEM, or
+    :func:`packet_heights` such as the encoder's own frame-centre elevation). With ``range_m`` the
     centre is placed at that slant range along the boresight instead (M1, laser)."""
     tx, ty = _half_tangents(hfov_deg, vfov_deg)
     if range_m is not None:
-        centre = frame_centre(sensor, pose, surface, range_m=range_m)
+        centre = frame_centre(sensor, pose, ground, range_m=range_m)
         corners = stop_on(packet_rays(sensor, pose, CORNERS[:, 0] * tx[..., None], CORNERS[:, 1] * ty[..., None]),
-                          surface, sensor)
+                          ground, sensor)
     else:  # the centre and the corners as one batch of five rays per packet
         zero = np.zeros_like(tx)[..., None]
         both = stop_on(packet_rays(sensor, pose, np.concatenate([zero, CORNERS[:, 0] * tx[..., None]], -1),
-                                   np.concatenate([zero, CORNERS[:, 1] * ty[..., None]], -1)), surface, sensor)
+                                   np.concatenate([zero, CORNERS[:, 1] * ty[..., None]], -1)), ground, sensor)
         arrays = np.broadcast_arrays(both.lat_deg, both.lon_deg, both.h_m, both.range_m, both.status)
         centre = Fixes(*(np.ascontiguousarray(a[..., 0]) for a in arrays)).flat()
         corners = Fixes(*(np.ascontiguousarray(a[..., 1:]) for a in arrays))
-    kind = "DEM" if isinstance(surface, DEM) else "ellipsoid at the frame-centre elevation"
+    kind = ("DEM" if ground.terrain is not None else "ellipsoid at the frame-centre elevation" if ground.value_shape
+            else ground.describe())
     return FrameGeometry(centre, corners, kind)
 
 
-def frame_centre(sensor: SensorModel, pose: Pose, surface, *, range_m: ArrayLike | None = None) -> Fixes:
-    """Each packet's boresight (F,) stopped on ``surface`` (a DEM or an ellipsoidal height per
-    packet), or at ``range_m`` along it when given."""
+def frame_centre(sensor: SensorModel, pose: Pose, ground: StopRule | None, *,
+                 range_m: ArrayLike | None = None) -> Fixes:
+    """Each packet's boresight (F,) stopped on the ``ground`` rule (OnDEM, or
+    :func:`packet_heights`), or at ``range_m`` along it when given (then ``ground`` may be None)."""
     zero = np.zeros((*np.shape(pose.lat_deg), 1))
     rays = packet_rays(sensor, pose, zero, zero)
     if range_m is not None:
         return AtRange(np.asarray(range_m, dtype=np.float64)[..., None]).stop(rays, sensor.ellipsoid).flat()
-    return stop_on(rays, surface, sensor).flat()
+    return stop_on(rays, ground, sensor).flat()

@@ -29,19 +29,21 @@ from numpy.typing import ArrayLike
 from .. import geodesy
 from ..errors import InputError
 from ..result import Fixes, Status
-from ..rules import locate_dem, surface_rule
+from ..rules import OnDEM, StopRule
 from ..sensor.model import Pose, SensorModel
-from ..terrain.dem import DEM
 from .footprint import Footprint, footprints
 
 RESAMPLING = {"nearest": 0, "bilinear": 1, "cubic": 3}
 _WGS84 = pyproj.CRS.from_epsg(4326)
 
 
-def _surface_height(surface: float | DEM, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    if isinstance(surface, DEM):
-        return surface.height(lat, lon)
-    return np.full(np.shape(lat), float(surface))
+def level_height(ground: StopRule) -> float:
+    """The one height (ellipsoidal m) of a ground without a terrain map (``AtHeight(h)``);
+    InputError for a height per target (one frame's ground is one surface)."""
+    h = np.asarray(ground.ground_height(0.0, 0.0), dtype=np.float64)
+    if h.ndim:
+        raise InputError(f"the ground of one frame is one surface: {ground.describe()} has a value per target")
+    return float(h)
 
 
 # -- ground grids ------------------------------------------------------------------------------
@@ -56,16 +58,16 @@ class GroundGrid:
     fixes: Fixes
 
 
-def ground_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, step_px: float = 32.0) -> GroundGrid:
+def ground_grid(sensor: SensorModel, pose: Pose, ground: StopRule, *, step_px: float = 32.0) -> GroundGrid:
     """The ground point of every ``step_px``-th pixel (both directions, the last row and column
-    always included) of one frame, on a constant ellipsoidal height or a DEM."""
+    always included) of one frame, on the ``ground`` rule's surface (AtHeight or OnDEM)."""
     cam = sensor.camera
     if not step_px > 0:
         raise ValueError(f"step_px must be > 0, got {step_px!r}")
     us = np.unique(np.r_[np.arange(0.0, cam.width - 1, step_px), cam.width - 1.0])
     vs = np.unique(np.r_[np.arange(0.0, cam.height - 1, step_px), cam.height - 1.0])
     u, v = np.meshgrid(us, vs)
-    return GroundGrid(u, v, surface_rule(surface).locate(sensor, pose, (u, v)))
+    return GroundGrid(u, v, ground.locate(sensor, pose, (u, v)))
 
 
 # -- output grids ------------------------------------------------------------------------------
@@ -132,11 +134,11 @@ class Ortho:
         tr = transformer(self.crs, _WGS84)
         return tr.transform_bounds(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1), densify_pts=101)
 
-def native_gsd_m(sensor: SensorModel, pose: Pose, surface: float | DEM) -> float:
+def native_gsd_m(sensor: SensorModel, pose: Pose, ground: StopRule) -> float:
     """Ground sample distance (m) at the principal point: the mean ground distance to the
     neighbouring pixel across and down."""
     cx, cy = sensor.camera.centre_px
-    f = surface_rule(surface).locate(sensor, pose, (np.array([cx, cx + 1.0, cx]), np.array([cy, cy, cy + 1.0])))
+    f = ground.locate(sensor, pose, (np.array([cx, cx + 1.0, cx]), np.array([cy, cy, cy + 1.0])))
     if not f.ok.all():
         raise InputError("the principal point does not see the ground: give the output resolution (gsd_m)")
     d = geodesy.horizontal_distance_m(f.lat_deg[0], f.lon_deg[0], f.lat_deg[1:], f.lon_deg[1:])
@@ -159,7 +161,7 @@ class OutputGrid:
         return t.c + (np.asarray(cols, float) + 0.5) * t.a, t.f + (np.asarray(rows, float) + 0.5) * t.e
 
 
-def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str | pyproj.CRS = "utm",
+def output_grid(sensor: SensorModel, pose: Pose, ground: StopRule, *, crs: str | pyproj.CRS = "utm",
                 gsd_m: float | None = None, res: tuple[float, float] | None = None, max_cells: int = 40_000_000,
                 edge_samples: int = 16, footprint: Footprint | None = None) -> OutputGrid:
     """The grid a frame is rectified onto: its footprint's bounding box in ``crs`` (see
@@ -169,7 +171,7 @@ def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: s
     the CRS's units (the frames of a pass after the first: the same cells exactly). ``footprint``:
     the frame's footprint when the caller has it already."""
     if footprint is None:
-        prints = footprints(sensor, pose, surface, edge_samples=edge_samples)
+        prints = footprints(sensor, pose, ground, edge_samples=edge_samples)
         if len(prints) != 1:
             raise ValueError(f"orthorectify takes the pose of one frame, got {len(prints)}")
         footprint = prints[0]
@@ -183,7 +185,7 @@ def output_grid(sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: s
         res = (float(res[0]), float(res[1]))
         gsd = math.radians(res[1]) * _radii(clat)[0] if out_crs.is_geographic else res[0]
     else:
-        gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, surface)
+        gsd = float(gsd_m) if gsd_m is not None else native_gsd_m(sensor, pose, ground)
         if not gsd > 0:
             raise InputError(f"gsd_m must be > 0, got {gsd_m!r}")
         if out_crs.is_geographic:
@@ -240,9 +242,9 @@ class FramePixels:
     map_y: np.ndarray
 
 
-def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: OutputGrid, *,
+def frame_pixels(sensor: SensorModel, pose: Pose, ground: StopRule, grid: OutputGrid, *,
                  occlusion: bool = True) -> FramePixels:
-    """Project every cell of ``grid`` (its ground point on ``surface``) into the frame seen from
+    """Project every cell of ``grid`` (its ground point on the ``ground`` rule's surface) into the frame seen from
     ``pose`` and decide which cells the camera sees: inside the image, and (``occlusion``, on a
     DEM) not hidden by nearer terrain (a z-buffer of the terrain mesh). Compiled (numba) passes,
     eoloc.kernels.ortho; with the numpy backend, the reference path (M4 rays for the hiding)."""
@@ -250,7 +252,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     from ..kernels.backend import get_backend
 
     if get_backend() == "numpy":
-        return _frame_pixels_reference(sensor, pose, surface, grid, occlusion=occlusion)
+        return _frame_pixels_reference(sensor, pose, ground, grid, occlusion=occlusion)
     from ..kernels import compiled, ortho
 
     cam = sensor.camera
@@ -267,13 +269,14 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     la, lo = np.radians(lat), np.radians(lon)
     up = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
     nodes = np.empty((nr, nc, ortho.N_NODE))
-    if isinstance(surface, DEM):  # the DEM's fractional row and column (linear in lat, lon: interpolated as they are)
-        g = surface.grid
+    terrain = ground.terrain
+    if terrain is not None:  # the DEM's fractional row and column (linear in lat, lon: interpolated as they are)
+        g = terrain.grid
         nodes[..., 0], nodes[..., 1] = (lat - g.lat0) / g.dlat, (lon - g.lon0) / g.dlon
         dem = (g.z, 0.0, True)
     else:
         nodes[..., 0], nodes[..., 1] = 0.0, 0.0
-        dem = (np.zeros((2, 2)), float(surface), False)
+        dem = (np.zeros((2, 2)), level_height(ground), False)
     nodes[..., 2:5] = (p0 - o) @ R  # R^T (p - o), row vectors
     nodes[..., 5:8] = up @ R
     row_i0, row_a = ortho.node_index(rows, NODE_STEP)
@@ -285,7 +288,7 @@ def frame_pixels(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: Ou
     u, v, rng = (np.empty((rows, cols)) for _ in range(3))
     valid = np.empty((rows, cols), np.uint8)
     map_x, map_y = np.empty((rows, cols), np.float32), np.empty((rows, cols), np.float32)
-    use_zbuf = occlusion and isinstance(surface, DEM)
+    use_zbuf = occlusion and terrain is not None
     zbuf = np.full((cam.height, cam.width) if use_zbuf else (1, 1), np.inf, np.float32)  # ranges to mm: ample
     # the image tiles the mesh's back faces touch: only there can terrain hide terrain (eoloc.kernels.ortho.fold_tiles)
     tiles = np.zeros((-(-cam.height // FOLD_TILE_PX), -(-cam.width // FOLD_TILE_PX)) if use_zbuf else (1, 1), np.uint8)
@@ -320,7 +323,7 @@ def _ideal_radius2(cam, focal_scale: float) -> float:
     return float(np.max(r2[np.isfinite(r2)])) if np.isfinite(r2).any() else math.inf
 
 
-def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DEM, grid: OutputGrid, *,
+def _frame_pixels_reference(sensor: SensorModel, pose: Pose, ground: StopRule, grid: OutputGrid, *,
                             occlusion: bool = True) -> FramePixels:
     """numpy: every cell through pyproj, the DEM and :meth:`SensorModel.ground_to_image`; a cell is
     hidden when the M4 ray through its own pixel stops on terrain well before reaching it."""
@@ -328,7 +331,7 @@ def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DE
     rr, cc = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
     gx, gy = grid.centres(rr, cc)
     lon, lat = transformer(grid.crs, _WGS84).transform(gx, gy)
-    h = _surface_height(surface, lat, lon)
+    h = ground.ground_height(lat, lon) if ground.terrain is not None else np.full(lat.shape, level_height(ground))
     p = np.stack(geodesy.geodetic_to_ecef(lat, lon, h), -1)
     u, v = sensor.ground_to_image(pose, p)
     cam = sensor.camera
@@ -337,8 +340,8 @@ def _frame_pixels_reference(sensor: SensorModel, pose: Pose, surface: float | DE
     with np.errstate(invalid="ignore"):
         valid = (np.isfinite(u) & np.isfinite(v) & (u >= -0.5) & (u <= cam.width - 0.5) & (v >= -0.5)
                  & (v <= cam.height - 0.5))
-    if occlusion and isinstance(surface, DEM) and valid.any():
-        f = locate_dem(sensor, pose, surface, (u[valid], v[valid]))
+    if occlusion and ground.terrain is not None and valid.any():
+        f = OnDEM(ground.terrain).locate(sensor, pose, (u[valid], v[valid]))
         gsd = float(min(abs(grid.res[0]), abs(grid.res[1])))
         if grid.crs.is_geographic:
             gsd *= math.pi / 180.0 * 6.37e6
@@ -404,13 +407,13 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
     return out
 
 
-def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: float | DEM, *, crs: str = "utm",
+def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, ground: StopRule, *, crs: str = "utm",
                  gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0,
                  occlusion: bool = True, max_cells: int = 40_000_000, edge_samples: int = 16,
                  grid: OutputGrid | None = None) -> Ortho:
     """Orthorectify one frame ``image`` ((H, W) or (bands, H, W), or (H, W, bands) with 3-4 bands
-    last, as images load) seen from ``pose`` onto ``surface`` (constant ellipsoidal height, or a
-    DEM) in ``crs`` (see :func:`output_crs`), at ``gsd_m`` metres per cell (default: the native
+    last, as images load) seen from ``pose`` onto the ``ground`` rule's surface (``AtHeight(h)``, or
+    ``OnDEM(dem)``) in ``crs`` (see :func:`output_crs`), at ``gsd_m`` metres per cell (default: the native
     ground sample distance at the image centre; for a geographic CRS the cell is that many metres
     at the frame centre's latitude), or onto a given ``grid``. Cells outside the footprint, off the
     DEM, or (``occlusion``, DEM only) hidden by terrain get ``nodata``."""
@@ -418,9 +421,9 @@ def orthorectify(image: ArrayLike, sensor: SensorModel, pose: Pose, surface: flo
         raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
     img = _bands_first(np.asarray(image), sensor)
     if grid is None:
-        grid = output_grid(sensor, pose, surface, crs=crs, gsd_m=gsd_m, max_cells=max_cells,
+        grid = output_grid(sensor, pose, ground, crs=crs, gsd_m=gsd_m, max_cells=max_cells,
                            edge_samples=edge_samples)
-    px = frame_pixels(sensor, pose, surface, grid, occlusion=occlusion)
+    px = frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
     data = resample(img, px, resampling=resampling, nodata=nodata)
     return Ortho(data, px.valid, grid.transform, grid.crs, nodata, grid.res)
 
@@ -475,12 +478,12 @@ def bounds_shortcut(ortho: Ortho, row: ArrayLike, col: ArrayLike) -> tuple[np.nd
             west + np.asarray(col, float) * (east - west) / width)
 
 
-def shortcut_error(ortho: Ortho, sensor: SensorModel, pose: Pose, surface: float | DEM, pixels: ArrayLike) -> \
+def shortcut_error(ortho: Ortho, sensor: SensorModel, pose: Pose, ground: StopRule, pixels: ArrayLike) -> \
         ShortcutError:
     """Locate ``pixels`` ((N, 2) u, v of the original frame) rigorously, find them in the
     rectified image, read them back with :func:`bounds_shortcut`, and return the distances."""
     px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-    f = surface_rule(surface).locate(sensor, pose, (px[:, 0], px[:, 1]))
+    f = ground.locate(sensor, pose, (px[:, 0], px[:, 1]))
     x, y = transformer(_WGS84, ortho.crs).transform(f.lon_deg, f.lat_deg)
     row, col = ortho.pixel_of(x, y)
     lat1, lon1 = bounds_shortcut(ortho, row, col)

@@ -184,29 +184,63 @@ class PoseConfig(_Strict):
     gimbal_deg: tuple[float, ...] = ()
 
 
+def stop_model(name: str, base: type[BaseModel], dem_field: tuple, **extra: tuple) -> type[BaseModel]:
+    """The stop rule as a table of one key (:data:`eoloc.rules.spec.SPECS`: ``range_m``,
+    ``target_height_m``, ``dem``; exactly one given), each number checked against its rule's
+    domain: a config's ``[accuracy.stop]`` and the HTTP API's ``stop`` object. ``dem_field``: the
+    DEM key's (type, Field) (files in a config, a served name in the API); ``extra``: more fields."""
+    from pydantic import create_model
+
+    from ..rules.spec import SPECS
+
+    keys = [s.key for s in SPECS]
+
+    class OneRule(base):
+        @model_validator(mode="after")
+        def _one(self):
+            if sum(getattr(self, k) is not None for k in keys) != 1:
+                raise ValueError(f"give exactly one of {', '.join(keys[:-1])} or {keys[-1]}")
+            return self
+
+    fields: dict = {}
+    for s in SPECS:
+        if s.value == "dem":
+            fields[s.key] = dem_field
+        else:
+            low = {"gt": s.minimum} if s.value == "distance" else {"ge": s.minimum}
+            fields[s.key] = (float | None, Field(None, **low, le=s.maximum, description=f"{s.method}: {s.help}"))
+    return create_model(name, __base__=OneRule, **fields, **extra)
+
+
+StopConfig = stop_model(
+    "StopConfig", _Strict, (tuple[str, ...] | None, Field(None, description="M4: DEM files, relative to the config")),
+    dem_vertical=(Literal["egm96", "egm2008", "ellipsoid"], "egm96"),
+    dem_crs=(str | None, None))  # the CRS of a DEM file that carries none (ESRI ASCII), as --dem-crs
+
+
 class AccuracyConfig(_Strict):
     """[accuracy]: the error budget (per-fix covariance: eoloc locate --covariance) and, for Monte
-    Carlo (eoloc accuracy CONFIG), the nominal observation: pose and stop rule."""
+    Carlo (eoloc accuracy CONFIG), the nominal observation: pose and ``[accuracy.stop]``, the stop
+    rule as one key (``range_m``, ``target_height_m`` or ``dem``)."""
 
     pose: PoseConfig | None = None
-    stop: Literal["range", "height", "dem"] | None = None
-    range_m: float | None = Field(None, gt=0)
-    height_m: float | None = None
-    dem: tuple[str, ...] | None = None
-    dem_vertical: Literal["egm96", "egm2008", "ellipsoid"] = "egm96"
-    dem_crs: str | None = None  # the CRS of a DEM file that carries none (ESRI ASCII), as --dem-crs
+    stop: StopConfig | None = None
     pixels: tuple[tuple[float, float], ...] | None = None
     velocity_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     samples: int = Field(100_000, ge=2)
     seed: int = 0
     budget: dict[str, dict[str, float | str]]
 
+    @model_validator(mode="before")
+    @classmethod
+    def _stop_table(cls, data):
+        if isinstance(data, dict) and isinstance(data.get("stop"), str):
+            raise ValueError(f"stop = {data['stop']!r}: the stop rule is a table of one key, e.g. [accuracy.stop] "
+                             "range_m = 10200 (or target_height_m = H, or dem = [\"tile.tif\"])")
+        return data
+
     @model_validator(mode="after")
-    def _stop_value(self) -> AccuracyConfig:
-        need = {"range": self.range_m, "height": self.height_m, "dem": self.dem, None: 0}[self.stop]
-        if need is None:
-            key = {"range": "range_m", "height": "height_m", "dem": "dem"}[self.stop]
-            raise ValueError(f"stop = {self.stop!r} needs {key}")
+    def _budget(self) -> AccuracyConfig:
         from ..accuracy.budget import ErrorBudget
 
         ErrorBudget.from_mapping(self.budget)  # names and laws checked here, with the key in the message

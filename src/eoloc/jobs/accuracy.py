@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InputError
+from ..rules import OnDEM
 
 
 @dataclass
@@ -110,7 +111,7 @@ def klv_flight_job(cfg, config_path, path, dem, *, samples: int, seed: int, prog
     if not len(det):
         raise InputError(f"{path}: no ST 0903 VMTI target in the stream: nothing to analyse (the accuracy of a "
                          "flight is that of its located targets)")
-    vf = vmti_flight(klv_telemetry(stream), det, dem, base=sensor)
+    vf = vmti_flight(klv_telemetry(stream), det, None if dem is None else OnDEM(dem), base=sensor)
     fixes, cov = locate_with_covariance(vf.sensor, vf.pose, budget, vf.pixels, vf.rule)
     ok = np.flatnonzero(fixes.ok)
     if ok.size == 0:

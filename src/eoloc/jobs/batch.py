@@ -59,7 +59,7 @@ class BatchSettings:
     geoid: str | None = None
     dem_crs: str | None = None
     config_path: str | None = None
-    target_height_m: float | None = None
+    rule_values: tuple[tuple[str, float | str], ...] = ()  # the stop rule of telemetry CSVs (rules.spec keys)
     footprint_every: int = 1
     grid: tuple[str, ...] = ()
     strict: bool = False
@@ -250,7 +250,7 @@ def _layers_klv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str,
 
 def _layers_csv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str, tuple[Records, Any]], int]]:
     """The layers of a telemetry CSV (and its detections), read whole."""
-    from ..rules import rule_from_options
+    from ..rules.spec import SPECS, rule_from_values
     from .klv import telemetry_records
     from .locate import locate_files
 
@@ -258,9 +258,11 @@ def _layers_csv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str,
     if cfg is None:
         raise InputError(f"{task.path}: a telemetry CSV needs --config (the camera) to be located")
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
-    if (dem is None) == (settings.target_height_m is None):
-        raise InputError(f"{task.path}: a telemetry CSV needs the ground: --target-height H or --dem FILE")
-    rule = rule_from_options(height_m=settings.target_height_m, dem=dem)
+    try:
+        rule = rule_from_values({**dict(settings.rule_values), "dem": dem})
+    except InputError:
+        flags = " or ".join(f"{s.flag} {s.metavar}" for s in SPECS)
+        raise InputError(f"{task.path}: a telemetry CSV needs one stop rule: {flags}") from None
     job = locate_files(cfg, task.path, task.detections, rule)
     yield {"fixes": (job.records, None),
            "packets": (telemetry_records(job.telemetry, cfg.telemetry.time_origin), None),

@@ -18,7 +18,7 @@ from itertools import combinations
 import numpy as np
 
 from ..geodesy import horizontal_distance_m
-from ..ground.frame import frame_centre, misb_sensor, packet_pose
+from ..ground.frame import frame_centre, misb_sensor, packet_heights, packet_pose
 from ..io.klv.conventions import CONVENTIONS, FRAME_CONVENTIONS, apply_to_telemetry, encoder_heights_hae
 from ..io.records import Records
 
@@ -123,7 +123,7 @@ def diagnose_frames(tel, sensor=None, *, threshold_m: float = THRESHOLD_M) -> Di
                         continue
                     centre = frame_centre(sensor, packet_pose(t), None, range_m=rng)
                 else:
-                    centre = frame_centre(sensor, packet_pose(t), tc["fc_h_m"])
+                    centre = frame_centre(sensor, packet_pose(t), packet_heights(tc["fc_h_m"]))
                 d = horizontal_distance_m(centre.lat_deg, centre.lon_deg, c["fc_lat_deg"], c["fc_lon_deg"])
                 trials.append(Trial(assume, stop, *_stats(d)))
     return _verdict("frame centre", trials, threshold_m)

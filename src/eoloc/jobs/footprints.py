@@ -11,6 +11,7 @@ from ..ground.footprint import Footprint, footprint_features, footprints
 from ..io.records import plain_value
 from ..io.table import Issue
 from ..io.telemetry import telemetry_pose
+from ..rules import StopRule
 from .inputs import job_inputs
 
 
@@ -35,17 +36,17 @@ class FootprintJob:
         return sum(bool(p.clipped.any()) for p in self.prints)
 
 
-def footprint_job(cfg, telemetry, surface, *, edge_samples: int = 16, chunk: int = 64,
+def footprint_job(cfg, telemetry, ground: StopRule, *, edge_samples: int = 16, chunk: int = 64,
                   progress: Callable[[int], None] | None = None) -> FootprintJob:
-    """Footprints of every record of ``telemetry`` on ``surface`` (an ellipsoidal height or a DEM),
+    """Footprints of every record of ``telemetry`` on the ``ground`` rule's surface (AtHeight or OnDEM),
     in chunks of ``chunk`` frames (``progress(k)`` after each)."""
-    inputs = job_inputs(cfg, telemetry, dem=surface)
+    inputs = job_inputs(cfg, telemetry, dem=ground.terrain)
     tel = inputs.telemetry
     sensor = inputs.sensor(cfg)
     prints: list[Footprint] = []
     for start in range(0, len(tel), chunk):
         idx = np.arange(start, min(start + chunk, len(tel)))
-        prints += footprints(sensor, telemetry_pose(tel, idx, sensor.camera), surface, edge_samples=edge_samples)
+        prints += footprints(sensor, telemetry_pose(tel, idx, sensor.camera), ground, edge_samples=edge_samples)
         if progress is not None:
             progress(idx.size)
     c = tel.columns

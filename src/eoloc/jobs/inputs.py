@@ -96,9 +96,10 @@ def read_inputs(telemetry, other=None, *, heading_bias_deg: float = 0.0, reader=
 
 def job_inputs(cfg, telemetry, other=None, *, reader=read_detections, dem=None, heading_bias: bool = True) -> Inputs:
     """:func:`read_inputs` with the config's [telemetry] settings (``cfg`` None: a source that
-    carries its camera, read as it is); ``dem`` a DEM or anything else (a target height: ignored)."""
+    carries its camera, read as it is); ``dem``: the stop rule's terrain (a DEM: drone photos
+    read the take-off's ground height from it), or None."""
     tel_cfg = cfg.telemetry if cfg is not None else None
     return read_inputs(telemetry, other, reader=reader,
                        heading_bias_deg=tel_cfg.heading_bias_deg if tel_cfg is not None and heading_bias else 0.0,
                        msl_geoid=tel_cfg.msl_geoid if tel_cfg is not None else None,
-                       dem=dem if hasattr(dem, "height") else None)
+                       dem=dem)

@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import KLVError
 from ..io.export import STATUS_NAMES, fix_features, fix_records, utc_times, with_utc
 from ..io.records import Records
+from ..rules import OnDEM
 
 
 @dataclass
@@ -142,7 +143,8 @@ def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_ev
     if carried is not stream:  # (the carried state's rows left out)
         raw_tel = raw_tel.keep(raw_tel.line >= 0)
     tel = apply_to_telemetry(raw_tel, assume)
-    check = check_frames(tel, dem, sensor=sensor)
+    ground = None if dem is None else OnDEM(dem)  # None: each packet's frame-centre elevation
+    check = check_frames(tel, ground, sensor=sensor)
     from_0 = "vmti-pixels-from-0" in assume
     det = vmti_detections(carried, pixels_from=0 if from_0 else 1)
     table = None
@@ -159,7 +161,7 @@ def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_ev
     diagnoses = [diagnose_frames(raw_tel, sensor)] if diagnose else []
     v = None
     if len(det):
-        v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
+        v = locate_vmti(tel, det, ground, budget=budget, base=sensor)
         extra = {"stream": det.columns["stream"], **v.extra}
         records = fix_records(v.fixes, with_utc(extra, "unix"), v.uncertainty)  # ST 0601 time stamps are UNIX
         if map_layers:
@@ -167,7 +169,7 @@ def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_ev
         if diagnose and np.isfinite(det.columns["encoder_lat_deg"]).any():  # the encoder's locations: conventions
             def other_numbering():
                 d = vmti_detections(carried, pixels_from=1 if from_0 else 0)
-                return d, locate_vmti(tel, d, dem, base=sensor).fixes
+                return d, locate_vmti(tel, d, ground, base=sensor).fixes
 
             diagnoses += diagnose_vmti(det, v.fixes, other_numbering, assume=assume)
     notes = []
@@ -176,7 +178,7 @@ def stream_job(path, stream, *, dem=None, sensor=None, budget=None, footprint_ev
             "the DEM is not under any frame" if dem is not None else
             "no packet gives the frame-centre elevation (tag 78, or 25 + geoid) that the corners stop at: give --dem"))
     if v is not None:
-        why = explain_vmti(tel, det, v.fixes, dem)
+        why = explain_vmti(tel, det, v.fixes, ground)
         if why:
             notes.append(why)
     return KLVJob(Path(path), stream, tel, check, det, v, records, layers, dem, [*tel.issues, *det.issues],

@@ -13,11 +13,11 @@ import numpy as np
 
 from ..geodesy import horizontal_distance_m
 from ..ground.footprint import polygon_geometry
-from ..ground.frame import FrameGeometry, frame_geometry, misb_sensor, packet_pose
+from ..ground.frame import FrameGeometry, frame_geometry, misb_sensor, packet_heights, packet_pose
 from ..io.records import Records
 from ..io.table import Table
 from ..result import Fixes, Status
-from ..rules import surface_rule
+from ..rules import AtHeight, OnDEM, StopRule
 from ..sensor.camera import Camera
 from ..sensor.model import Pose, SensorModel
 from .tables import locate_by_rule
@@ -52,17 +52,17 @@ class FrameCheck:
         return out
 
 
-def check_frames(tel: Table, surface=None, *, sensor: SensorModel | None = None) -> FrameCheck:
+def check_frames(tel: Table, ground: StopRule | None = None, *, sensor: SensorModel | None = None) -> FrameCheck:
     """Recompute every packet's frame centre and corners and compare them with the encoder's.
 
-    surface: a DEM, or None for the ellipsoid at the encoder's own frame-centre elevation (tag 78,
+    ground: a stop rule (OnDEM), or None for the ellipsoid at the encoder's own frame-centre elevation (tag 78,
     or tag 25 + geoid) of each packet; the encoder's choice of terrain then cancels out and what
     is left is the pointing model (rotation order, angle conventions, FOV).
     """
     c = tel.columns
     sensor = sensor or misb_sensor()
     geom = frame_geometry(sensor, packet_pose(tel), c["hfov_deg"], c["vfov_deg"],
-                          c["fc_h_m"] if surface is None else surface)
+                          packet_heights(c["fc_h_m"]) if ground is None else ground)
     centre = horizontal_distance_m(geom.centre.lat_deg, geom.centre.lon_deg, c["fc_lat_deg"], c["fc_lon_deg"])
     corners = np.stack([horizontal_distance_m(geom.corners.lat_deg[:, k], geom.corners.lon_deg[:, k],
                                               c[f"corner{k + 1}_lat_deg"], c[f"corner{k + 1}_lon_deg"])
@@ -156,7 +156,7 @@ def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, e
         if 0 < hf < 180 and 0 < vf < 180:
             sensor_g = SensorModel(Camera.from_hfov(hf, 1000, 1000, vfov_deg=vf), base.gimbal,
                                    base.mount_misalignment_deg, base.boresight_misalignment_deg, base.lever_arm_m)
-            geometry = [fp.geojson_geometry() for fp in footprints(sensor_g, pose_all.take(np.asarray(idx)), dem,
+            geometry = [fp.geojson_geometry() for fp in footprints(sensor_g, pose_all.take(np.asarray(idx)), OnDEM(dem),
                                                                    edge_samples=edge_samples)]
         for i, g in zip(idx, geometry, strict=True):
             feats[i] = {"type": "Feature", "geometry": g,
@@ -235,11 +235,11 @@ def camera_groups(hfov: np.ndarray, vfov: np.ndarray, w: np.ndarray, h: np.ndarr
             for g in np.argsort(first, kind="stable")]
 
 
-def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | None = None,
+def locate_vmti(tel: Table, det: Table, ground: StopRule | None = None, *, budget: ErrorBudget | None = None,
                 base: SensorModel | None = None) -> VMTIFixes:
     """Geolocate VMTI detections with their own packet's pose and field of view.
 
-    surface: a DEM, or None for the ellipsoid at the packet's frame-centre elevation. The image
+    ground: a stop rule (OnDEM), or None for the ellipsoid at the packet's frame-centre elevation. The image
     geometry of a detection is a pinhole over the VMTI frame size with the VMTI set's FOV (tags
     11, 12) or else the packet's (tags 16, 17). With an error ``budget`` each fix gets its
     first-order covariance; fixes are computed per distinct (size, FOV) group, one batched call each.
@@ -260,10 +260,10 @@ def locate_vmti(tel: Table, det: Table, surface=None, *, budget: ErrorBudget | N
         sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
                              base.lever_arm_m)
         pose = pose_all.take(idx)
-        rule = surface_rule(surface if surface is not None else np.nan_to_num(c["fc_h_m"][row[idx]]))
+        rule = ground if ground is not None else AtHeight(np.nan_to_num(c["fc_h_m"][row[idx]]))
         fixes, cov = locate_by_rule(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, budget=budget)
         st = np.asarray(fixes.status).copy()
-        if surface is None:
+        if ground is None:
             st[~np.isfinite(c["fc_h_m"][row[idx]])] = int(Status.INVALID_INPUT)
         ok = st == Status.OK
         lat[idx], lon[idx], hh[idx], rng[idx] = (np.where(ok, x, np.nan) for x in
@@ -314,7 +314,8 @@ class VMTIFlight:
     index: np.ndarray
 
 
-def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | None = None) -> VMTIFlight:
+def vmti_flight(tel: Table, det: Table, ground: StopRule | None = None, *,
+                base: SensorModel | None = None) -> VMTIFlight:
     """:class:`VMTIFlight` of the detections (as :func:`locate_vmti` pairs them with their packets).
     A stream whose VMTI frames differ in size or aspect is refused (a KLVError naming both)."""
     from ..errors import KLVError
@@ -323,7 +324,7 @@ def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | Non
     d, c = det.columns, tel.columns
     row, _, hfov, vfov, usable = vmti_frames(tel, det)
     w, h = d["frame_width"], d["frame_height"]
-    if surface is None:
+    if ground is None:
         usable &= np.isfinite(c["fc_h_m"][row])
     idx = np.flatnonzero(usable)
     if idx.size == 0:
@@ -344,7 +345,7 @@ def vmti_flight(tel: Table, det: Table, surface=None, *, base: SensorModel | Non
                          base.lever_arm_m)
     p = packet_pose(tel).take(row[idx])
     pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, p.gimbal_deg, scale)
-    rule = surface_rule(surface if surface is not None else c["fc_h_m"][row[idx]])
+    rule = ground if ground is not None else AtHeight(c["fc_h_m"][row[idx]])
     return VMTIFlight(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, d["time_s"][idx],
                       np.asarray(d["target_id"])[idx].astype(str), idx)
 
@@ -358,7 +359,7 @@ KLV_NAMES = {"lat_deg": "the sensor latitude (tag 13)", "lon_deg": "the sensor l
              "v_px": "the target's pixel (ST 0903 centroid)"}
 
 
-def explain_vmti(tel: Table, det: Table, fixes: Fixes, surface=None) -> str | None:
+def explain_vmti(tel: Table, det: Table, fixes: Fixes, ground: StopRule | None = None) -> str | None:
     """One line when most VMTI detections failed for one reason, naming the KLV items at fault: a
     stream without a frame-centre elevation (tags 78, 25) located without --dem, no field of view,
     no frame size, no matching packet (:func:`eoloc.jobs.explain.explain_failures`)."""
@@ -373,7 +374,7 @@ def explain_vmti(tel: Table, det: Table, fixes: Fixes, surface=None) -> str | No
                 "the field of view (tags 16, 17 or the VMTI set's 11, 12)":
                     found & ~((hfov > 0) & (hfov < 180) & (vfov > 0) & (vfov < 180)),
                 "the VMTI frame size (ST 0903 tags 8, 9)": found & ~((d["frame_width"] > 0) & (d["frame_height"] > 0))}
-    if surface is None:
+    if ground is None:
         more["the frame-centre elevation (tag 78, or 25 + geoid)"] = (
             found & ~np.isfinite(tel.columns["fc_h_m"][row]),
             "without a DEM the rays stop at that height: give --dem")

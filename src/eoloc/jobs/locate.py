@@ -47,7 +47,7 @@ def locate_files(cfg, telemetry: str | Path, detections: str | Path | Prefetch |
     sensor (``detections``: a path, or a :class:`Prefetch` of one started before the config was
     loaded); ``time_offset_s`` None takes the config's [telemetry] time_offset_s. ``poses``: drone
     photos' poses by file name (eoloc refine's, read from ``poses_from``) in place of their own."""
-    inputs = job_inputs(cfg, telemetry, detections, dem=getattr(rule, "dem", None))
+    inputs = job_inputs(cfg, telemetry, detections, dem=rule.terrain)
     if poses is not None:
         from ..io.sources.photos import DronePhotos, with_poses
 

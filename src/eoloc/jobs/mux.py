@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.table import Issue
+from ..rules import StopRule
 
 
 @dataclass
@@ -62,13 +63,12 @@ def _st0601_attitude(inputs, sensor, p) -> dict[int, np.ndarray]:
 
 
 def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: datetime | None = None,
-            surface=None, max_gap_s: float = 1.5) -> MuxJob:
+            ground: StopRule | None = None, max_gap_s: float = 1.5) -> MuxJob:
     """Write ``dest`` (see the module)."""
     from ..io.klv.encode import encode_uas_packet
     from ..io.klv.mux import add_klv, remux_video
     from ..io.telemetry import telemetry_pose
     from ..io.videofile import frame_times
-    from ..rules import AtHeight, OnDEM
     from ..sequence.interp import interpolate_poses
     from ..terrain.geoid import default_geoid
     from .inputs import job_inputs
@@ -78,7 +78,7 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
     times = frame_times(video)
     if times.size == 0:
         raise InputError(f"{video}: the video stream has no frame with a presentation time")
-    inputs = job_inputs(cfg, telemetry, dem=surface)
+    inputs = job_inputs(cfg, telemetry, dem=None if ground is None else ground.terrain)
     sensor = inputs.sensor(cfg)
     tel = inputs.telemetry
     t_rec = tel.columns["time_s"]
@@ -110,9 +110,8 @@ def mux_job(video, telemetry, cfg, dest, *, carriage: str = "async", start_utc: 
     n_geoid = default_geoid().undulation(p.lat_deg, p.lon_deg)
     attitude = _st0601_attitude(inputs, sensor, p)
     centre = n_centre = None
-    if surface is not None:
-        rule = OnDEM(surface) if hasattr(surface, "height") else AtHeight(float(surface))
-        centre = rule.locate(sensor, p, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
+    if ground is not None:
+        centre = ground.locate(sensor, p, (np.full(times.size, cam.cx), np.full(times.size, cam.cy)))
         n_centre = default_geoid().undulation(centre.lat_deg, centre.lon_deg)
     by_frame: dict[int, bytes] = {}
     for i in np.flatnonzero(got.ok):

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.photo import POSE_FIELDS, PhotoPose, read_photo
 from ..result import Status
+from ..rules import StopRule
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".tif", ".tiff", ".dng")
 
@@ -56,16 +57,17 @@ def photo_sensor_pose(p: PhotoPose):
                                                       (0.0, 0.0))
 
 
-def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = None, geoid=None,
+def photo_job(paths, *, pixels=(), ground: StopRule | None = None, geoid=None,
               budget=None, ortho_dir: Path | None = None, ortho: OrthoSettings = OrthoSettings(),
               poses: dict[str, dict[str, float]] | None = None, poses_from: str = "") -> PhotoJob:
     """Every photo of ``paths`` (files, or folders standing for the photos in them) located at
     ``pixels`` ((u, v) pairs; none: the image centre); ``budget`` (an ErrorBudget): each fix's
-    covariance columns (sigma_e_m ... ce90_m, le90_m). With a ground (``dem`` or
-    ``target_height_m``) each photo's footprint too; with ``ortho_dir`` each photo orthorectified
-    onto that ground as ``<ortho_dir>/<photo name>.tif`` (a Cloud-Optimised GeoTIFF), written as
-    it is made (one photo's pixels in memory at a time). ``poses`` ({photo file name: camera_lat ...
-    camera_roll}, :func:`eoloc.io.photo.read_photo_poses`, read from ``poses_from``): each named
+    covariance columns (sigma_e_m ... ce90_m, le90_m). With a ``ground`` (a stop rule on a
+    surface: ``OnDEM(dem)`` or ``AtHeight(h)``) each photo's footprint too; with ``ortho_dir``
+    each photo orthorectified onto that ground as ``<ortho_dir>/<photo name>.tif`` (a
+    Cloud-Optimised GeoTIFF), written as it is made (one photo's pixels in memory at a time).
+    ``poses`` ({photo file name: camera_lat ... camera_roll},
+    :func:`eoloc.io.photo.read_photo_poses`, read from ``poses_from``): each named
     photo's camera pose replaced (a refined one); a photo it does not name keeps its own, and is
     said."""
     from ..ground.footprint import footprint_features, footprints
@@ -88,7 +90,6 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
             expanded += found
         else:
             expanded.append(path)
-    surface = dem if dem is not None else target_height_m
     used: set[str] = set()
     for path in expanded:
         try:
@@ -106,25 +107,26 @@ def photo_job(paths, *, pixels=(), dem=None, target_height_m: float | None = Non
                                         height_rule=f"from {poses_from or 'the poses'}",
                                         notes=[*p.notes, f"pose from {poses_from or 'the poses given'}"])
         job.photos.append(p)
-        rows = locate_photo(p, pixels=pixels, dem=dem, target_height_m=target_height_m, budget=budget)
+        rows = locate_photo(p, pixels=pixels, ground=ground, budget=budget)
         job.rows += rows
         job.failed += [r["reason"] for r in rows if r["status"] in ("SUSPECT_ALTITUDE", "NO_SURFACE")]
-        if surface is None or any(r["status"] == "SUSPECT_ALTITUDE" for r in rows):
+        if ground is None or any(r["status"] == "SUSPECT_ALTITUDE" for r in rows):
             continue
         sensor, pose = photo_sensor_pose(p)
-        job.footprints += footprint_features(footprints(sensor, pose, surface), [{"file": str(path)}])
+        job.footprints += footprint_features(footprints(sensor, pose, ground), [{"file": str(path)}])
         if ortho_dir is not None:
-            job.orthos.append(_write_ortho(p, sensor, pose, surface, ortho, Path(ortho_dir), used))
+            job.orthos.append(_write_ortho(p, sensor, pose, ground, ortho, Path(ortho_dir), used))
     return job
 
 
-def _write_ortho(p: PhotoPose, sensor, pose, surface, settings: OrthoSettings, folder: Path, used: set[str]) -> Path:
+def _write_ortho(p: PhotoPose, sensor, pose, ground: StopRule, settings: OrthoSettings, folder: Path,
+                 used: set[str]) -> Path:
     """One photo orthorectified (:func:`eoloc.ground.rectify.orthorectify`) and written as a COG
     named after it (two photos of one name, from two folders, get -2, -3, ...)."""
     from ..ground import rectify
     from ..io.raster import read_image, write_ortho
 
-    result = rectify.orthorectify(read_image(p.path), sensor, pose, surface, crs=settings.crs, gsd_m=settings.gsd_m,
+    result = rectify.orthorectify(read_image(p.path), sensor, pose, ground, crs=settings.crs, gsd_m=settings.gsd_m,
                                   resampling=settings.resampling, nodata=settings.nodata,
                                   occlusion=settings.occlusion)
     stem, k = Path(p.path).stem, 1
@@ -133,29 +135,29 @@ def _write_ortho(p: PhotoPose, sensor, pose, surface, settings: OrthoSettings, f
     name = stem if k == 1 else f"{stem}-{k}"
     used.add(name)
     return write_ortho(result, folder / f"{name}.tif", tags={"EOLOC_SOURCE": Path(p.path).name,
-                                                           "EOLOC_SURFACE": "DEM" if hasattr(surface, "height")
-                                                           else f"{float(surface):g} m"})
+                                                           "EOLOC_SURFACE": ground_tag(ground)})
 
 
-def locate_photo(p: PhotoPose, *, pixels=(), dem=None, target_height_m: float | None = None, budget=None
-                 ) -> list[dict]:
+def locate_photo(p: PhotoPose, *, pixels=(), ground: StopRule | None = None, budget=None) -> list[dict]:
     """The rows of one photo read by :func:`eoloc.io.photo.read_photo`: one per pixel (none: the
-    image centre, by its laser range when it has one), each with its status, the camera's pose and,
+    image centre, by its laser range when it has one; else on the ``ground`` rule), each with
+    its status, the camera's pose and,
     with ``budget``, its uncertainty; a single SUSPECT_ALTITUDE row when the camera would be under
     the DEM, a NO_SURFACE row for a pixel with nothing to stop its ray."""
     from .. import geodesy
-    from ..rules import AtHeight, AtRange, OnDEM
+    from ..rules import AtRange
     from ..sensor import dronemodels
 
     path = p.path
     sensor, pose = photo_sensor_pose(p)
     camera = {"camera_lat": p.lat_deg, "camera_lon": p.lon_deg, "camera_h": p.h_m, "camera_yaw": p.yaw_deg,
               "camera_pitch": p.pitch_deg, "camera_roll": p.roll_deg}
+    dem = None if ground is None else ground.terrain
     if dem is not None:  # the camera must be above the ground it flies over: else its height tag is wrong
-        ground = float(dem.height(p.lat_deg, p.lon_deg))
-        if math.isfinite(ground) and p.h_m < ground - 2.0:
-            msg = (f"{path}: the camera would be {ground - p.h_m:.1f} m below the terrain under it "
-                   f"({p.height_rule}; the DEM says {ground:.1f} m): the altitude tag is suspect (RelativeAltitude "
+        under = float(dem.height(p.lat_deg, p.lon_deg))
+        if math.isfinite(under) and p.h_m < under - 2.0:
+            msg = (f"{path}: the camera would be {under - p.h_m:.1f} m below the terrain under it "
+                   f"({p.height_rule}; the DEM says {under:.1f} m): the altitude tag is suspect (RelativeAltitude "
                    f"{p.relative_altitude_m} m above take-off)")
             return [{"file": str(path), "status": "SUSPECT_ALTITUDE", "reason": msg, **camera}]
     rows = []
@@ -165,10 +167,8 @@ def locate_photo(p: PhotoPose, *, pixels=(), dem=None, target_height_m: float | 
         centre = not pixels
         if centre and p.lrf_range_m is not None:
             rule, source = AtRange(p.lrf_range_m), "laser"
-        elif dem is not None:
-            rule, source = OnDEM(dem), "dem"
-        elif target_height_m is not None:
-            rule, source = AtHeight(target_height_m), "height"
+        elif ground is not None:
+            rule, source = ground, ("dem" if dem is not None else "height")
         else:
             msg = (f"{path}: pixel ({u:g}, {v:g}) has no laser range: give --dem FILE or --target-height H to "
                    "stop its ray")
@@ -201,6 +201,13 @@ def locate_photo(p: PhotoPose, *, pixels=(), dem=None, target_height_m: float | 
                 row |= {"vendor_offset_h_m": float(math.hypot(e, n)), "vendor_offset_v_m": float(up)}
         rows.append(row)
     return rows
+
+
+def ground_tag(ground: StopRule) -> str:
+    """The ground an ortho stands on, for its GeoTIFF tags: "DEM", or the height ("120 m")."""
+    from ..ground.rectify import level_height
+
+    return "DEM" if ground.terrain is not None else f"{level_height(ground):g} m"
 
 
 def _f(x) -> float | None:

@@ -24,9 +24,9 @@ import numpy as np
 
 from ..io.export import json_column
 from ..result import Status
+from ..rules import StopRule
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses
-from ..terrain import DEM
 
 #: an offline click is refused where a grid cell's interpolation error is over this many of the
 #: cell's ground pixels (and over 1 m): a terrain edge inside the cell, where bilinear would mislead
@@ -68,14 +68,13 @@ def _local_m(lat: np.ndarray, lon: np.ndarray, lat_ref: float, lon_ref: float):
     return e, n
 
 
-def offline_grid(sensor: SensorModel, pose: Pose, ground, step_px: int, hidden_px=None) -> OfflineGrid:
+def offline_grid(sensor: SensorModel, pose: Pose, ground: StopRule, step_px: int, hidden_px=None) -> OfflineGrid:
     """The ground grid of one frame with every cell's interpolation check: the exact rays at the
     cell's centre and edge midpoints against the bilinear value of its corners (the worst is
     the cell's error; over max(CELL_LIMIT_PX ground pixels, 1 m) refuses the cell). ``hidden_px``:
     (u, v) where hidden ground projects into the frame (rectification's hidden cells): cells there
     and around hold a terrain edge and are refused whatever the checks say."""
     from ..ground.rectify import ground_grid
-    from ..rules import surface_rule
 
     g = ground_grid(sensor, pose, ground, step_px=step_px)
     ok = g.fixes.status == Status.OK
@@ -90,10 +89,9 @@ def offline_grid(sensor: SensorModel, pose: Pose, ground, step_px: int, hidden_p
     exact_ok = np.ones((R - 1, C - 1), bool)
     u0, v0 = np.meshgrid(us[:-1], vs[:-1])  # each cell's first and last node pixels
     u1, v1 = np.meshgrid(us[1:], vs[1:])
-    rule = surface_rule(ground)
     with np.errstate(invalid="ignore"):
         for a, b in ((0.5, 0.5), (0.5, 0.0), (0.0, 0.5), (1.0, 0.5), (0.5, 1.0)):  # centre, edge midpoints
-            fx = rule.locate(sensor, pose, (u0 + a * (u1 - u0), v0 + b * (v1 - v0)))
+            fx = ground.locate(sensor, pose, (u0 + a * (u1 - u0), v0 + b * (v1 - v0)))
             interp = [(1 - a) * (1 - b) * x[:-1, :-1] + a * (1 - b) * x[:-1, 1:] + (1 - a) * b * x[1:, :-1]
                       + a * b * x[1:, 1:] for x in (lat, lon, h)]
             e1, n1 = _local_m(interp[0], interp[1], lat_ref, lon_ref)
@@ -142,7 +140,7 @@ class PlayerData:
     rectified: dict[int, dict] = field(default_factory=dict)
     pending: list[tuple[int, Future]] = field(default_factory=list)
 
-    def add_frame(self, index: int, sensor: SensorModel, pose: Pose, ground: float | DEM, footprint: dict,
+    def add_frame(self, index: int, sensor: SensorModel, pose: Pose, ground: StopRule, footprint: dict,
                   image: np.ndarray, seen: np.ndarray, grid, submit: Callable[..., Future], hidden_px=None) -> None:
         """A rectified frame: its footprint feature, its ground grid (computed here, written by the
         writer thread; ``hidden_px``: the pixels of its hidden ground) and its drape (warped and

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.table import Issue
+from ..rules import StopRule
 from .inputs import job_inputs
 
 
@@ -45,7 +46,7 @@ def record_of(tel, telemetry, frame: int | None, time_s: float | None) -> int:
     return int(np.nanargmin(dt))
 
 
-def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, time_s: float | None = None,
+def rectify_job(cfg, image, telemetry, ground: StopRule, *, frame: int | None = None, time_s: float | None = None,
                 crs: str = "utm", gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0,
                 occlusion: bool = True, grid_step_px: float = 32) -> RectifyJob:
     from ..ground import rectify
@@ -53,22 +54,22 @@ def rectify_job(cfg, image, telemetry, surface, *, frame: int | None = None, tim
     from ..io.raster import read_image
     from ..io.telemetry import telemetry_pose
 
-    inputs = job_inputs(cfg, telemetry, dem=surface)
+    inputs = job_inputs(cfg, telemetry, dem=ground.terrain)
     tel = inputs.telemetry
     k = record_of(tel, telemetry, frame, time_s)
     sensor = inputs.sensor(cfg)
     pose = telemetry_pose(tel, k, sensor.camera)
     img = read_image(image)
     try:
-        ortho = rectify.orthorectify(img, sensor, pose, surface, crs=crs, gsd_m=gsd_m, resampling=resampling,
+        ortho = rectify.orthorectify(img, sensor, pose, ground, crs=crs, gsd_m=gsd_m, resampling=resampling,
                                      nodata=nodata, occlusion=occlusion)
     except InputError as exc:
         raise InputError(f"{image}: {exc}") from None
-    grid = rectify.ground_grid(sensor, pose, surface, step_px=grid_step_px)
+    grid = rectify.ground_grid(sensor, pose, ground, step_px=grid_step_px)
     ok = grid.fixes.ok.ravel()
     px = np.c_[grid.u_px.ravel(), grid.v_px.ravel()][ok]
-    short = rectify.shortcut_error(ortho, sensor, pose, surface, px).summary()
-    fp = footprints(sensor, pose, surface)[0]
+    short = rectify.shortcut_error(ortho, sensor, pose, ground, px).summary()
+    fp = footprints(sensor, pose, ground)[0]
     return RectifyJob(ortho, fp, grid, short, int(tel.line[k]), int(px.shape[0]), inputs.issues)
 
 

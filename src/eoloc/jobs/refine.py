@@ -397,7 +397,7 @@ def write_refined_ts(video, dest: Path, meta, ref: Refinement, track: TelemetryT
     lat, lon, h = (np.asarray(x, dtype=np.float64) for x in (pose.lat_deg, pose.lon_deg, pose.h_m))
     good = folded & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
     geo = frame_geometry(misb_sensor(), dataclasses.replace(pose, gimbal_deg=gimbal), meta.values["hfov_deg"],
-                         meta.values["vfov_deg"], dem)
+                         meta.values["vfov_deg"], OnDEM(dem))
     geoid = default_geoid()
     n_sensor = geoid.undulation(lat, lon)
     fc, co = geo.centre, geo.corners

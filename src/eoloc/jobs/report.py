@@ -20,6 +20,7 @@ from ..errors import InputError
 from ..io.html_report import Page
 from ..io.records import Records
 from ..io.table import Issue
+from ..rules import StopRule
 from .evaluate import Evaluation, evaluate_errors, evaluation_notes, evaluation_tables, figures, summary_rows
 
 MAX_HELD_OUT_FLIGHTS = 40  # leave-one-flight-out calibration beyond this many flights: by a note instead
@@ -56,7 +57,7 @@ def _locate(sensor, pose, uv, rule, budget):
     return fixes, covariance_columns(cov, fixes.ok)
 
 
-def report_job(cfg, config_path, observations, *, dem=None, target_height: float | None = None,
+def report_job(cfg, config_path, observations, *, rule: StopRule | None = None,
                estimate: tuple[str, ...] = ("mount",), compensation: bool = False, n_boot: int = 2000,
                level: float = 0.95, seed: int = 0, cooks_threshold: float | None = None, command: str = "",
                progress=None) -> ReportJob:
@@ -78,13 +79,13 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
     budget = optional_budget(cfg)
     c = t.columns
     pose, uv = C.observation_pose(c)
-    rule = C.observation_rule(c, dem=dem, height_m=target_height)
+    stop_rule = C.observation_rule(c, rule)
     truth = C.observation_truth(c)
     flights = np.asarray(c["flight"], dtype=object).astype(str)
     kw = {"n_boot": n_boot, "level": level, "seed": seed, "cooks_threshold": cooks_threshold}
 
     step("locating")
-    fixes, cov = _locate(sensor, pose, uv, rule, budget)
+    fixes, cov = _locate(sensor, pose, uv, stop_rule, budget)
     feats = C.error_features(sensor, pose, fixes, uv)
     cam = sensor.camera
     factor_values = {"range_m": ("slant range (m)", np.asarray(fixes.range_m, dtype=np.float64)),
@@ -96,7 +97,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
     ids = {"line": np.asarray(t.line), "flight": flights,
            "gcp_id": np.asarray(c.get("gcp_id", np.full(len(t), "", dtype=object)), dtype=object)}
 
-    own_height = dem is None and target_height is None  # the vertical error is zero by construction
+    own_height = rule is None  # the vertical error is zero by construction
 
     def judge(name: str, enu: np.ndarray, covariance=None) -> Stage:
         """A stage from the errors of every observation (NaN where not located)."""
@@ -130,7 +131,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
         cal = calibrate(sensor, pixels, truth, pose=pose, estimate=tuple(estimate))
         notes += cal.warnings[:5]
         pose_after = dataclasses.replace(pose, yaw_deg=np.asarray(pose.yaw_deg) - cal.heading_bias_deg)
-        fx, cv = _locate(cal.sensor, pose_after, uv, rule, budget)
+        fx, cv = _locate(cal.sensor, pose_after, uv, stop_rule, budget)
         stages.append(stage("calibrated (in sample)", fx, cv))
         names = sorted(set(flights.tolist()))
         if 2 <= len(names) <= MAX_HELD_OUT_FLIGHTS:
@@ -141,8 +142,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
                 cal_f = calibrate(sensor, pixels[~m], truth[~m], pose=pose.take(~m), estimate=tuple(estimate))
                 p_f = pose.take(m)
                 p_f = dataclasses.replace(p_f, yaw_deg=p_f.yaw_deg - cal_f.heading_bias_deg)
-                rule_f = C.observation_rule({k: np.asarray(v)[m] for k, v in c.items()}, dem=dem,
-                                            height_m=target_height)
+                rule_f = C.observation_rule({k: np.asarray(v)[m] for k, v in c.items()}, rule)
                 fx_f = rule_f.locate(cal_f.sensor, p_f, (uv[0][m], uv[1][m]))
                 held[m] = np.where(np.asarray(fx_f.ok)[:, None], C.error_enu(fx_f, truth[m]), np.nan)
             stages.append(judge("calibrated (flight held out)", held))
@@ -155,7 +155,7 @@ def report_job(cfg, config_path, observations, *, dem=None, target_height: float
         comp_rows, comp_fig = _compensation(C, feats, stages[0].enu_m, flights, fixes.ok, notes)
     step("writing the report")
     points = _points(ids, stages, factor_values)
-    page = _page(observations, config_path, t, stages, cal, estimate, comp_rows, comp_fig, dem, target_height,
+    page = _page(observations, config_path, t, stages, cal, estimate, comp_rows, comp_fig, rule,
                  budget, issues, notes, command, level)
     return ReportJob(stages, cal, comp_rows, page, points, issues, notes)
 
@@ -204,13 +204,13 @@ def _versions() -> list[list[str]]:
     return rows
 
 
-def _page(observations, config_path, table, stages, cal, estimate, comp_rows, comp_fig, dem, target_height,
+def _page(observations, config_path, table, stages, cal, estimate, comp_rows, comp_fig, rule,
           budget, issues, notes, command, level) -> Page:
     from ..accuracy.plots import figure_png
 
     page = Page(f"eoloc accuracy report: {Path(str(observations)).name}")
     first = stages[0].evaluation
-    stop = ("the DEM" if dem is not None else f"ellipsoidal height {target_height} m" if target_height is not None
+    stop = ("the DEM" if rule is not None and rule.terrain is not None else rule.describe() if rule is not None
             else "each point's own surveyed height (isolates the angular errors)")
     page.text(f"{len(table)} observations of surveyed points on {len(set(table.columns['flight'].tolist()))} "
               f"flight(s), located on {stop}; generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} by eoloc "
@@ -270,7 +270,7 @@ def _page(observations, config_path, table, stages, cal, estimate, comp_rows, co
                                           "compensation, and CEP by oblique band", "compensation")
 
     page.heading("Inputs and versions")
-    paths = [observations, config_path, *(getattr(dem, "files", ()) if dem is not None else ())]
+    paths = [observations, config_path, *(rule.terrain.files if rule is not None and rule.terrain is not None else ())]
     files = [[str(p), f"{Path(p).stat().st_size:,} bytes", _sha256(p)] for p in paths]  # the DEM tiles too
     page.table(["file", "size", "SHA-256"], files, align="lrl")
     if command:

@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..io.records import Coded
 from ..io.table import Issue, Table
 from ..result import Fixes, Status, with_status
-from ..rules import RangeFromRecords, StopRule, rule_from_options
+from ..rules import RangeFromRecords, StopRule
 from ..sensor import Pose, SensorModel
 
 if TYPE_CHECKING:  # the accuracy modules load scipy's statistics: imported only when a budget is given
@@ -43,8 +43,7 @@ class Located:
         return self.pose if self.pose is None or self.pose_index is None else self.pose.take(self.pose_index)
 
 
-def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rule: StopRule | None = None, *,
-                  range_m: float | None = None, height_m: float | None = None, dem=None,
+def locate_tables(sensor: SensorModel, tel: Table, det: Table | None, rule: StopRule, *,
                   time_tolerance_s: float = 0.02, budget: ErrorBudget | None = None, interpolate: bool = False,
                   max_gap_s: float = 0.5, time_offset_s: float = 0.0, compensation=None) -> Located:
     """Geolocate every detection (or, without detections, every record's image centre).
@@ -63,8 +62,6 @@ def locate_tables(sensor: SensorModel, tel: Table, det: Table | None = None, rul
     """
     from ..io.telemetry import match_detections, telemetry_pose
 
-    if rule is None:
-        rule = rule_from_options(range_m=range_m, height_m=height_m, dem=dem)
     if not isinstance(rule, StopRule):
         raise TypeError(f"rule must be a stop rule, got {rule!r}")
     issues: list[Issue] = []

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from ..detect.learned import LearnedDetector
     from ..detect.motion import MotionSettings
     from ..detect.movers import Movers, MoverSettings
-from ..terrain import DEM
+from ..rules import AtHeight, StopRule
 
 VISIBILITY = {"unseen": 0, "hidden": 1, "seen": 2}
 VISIBILITY_BAND = "visibility: 0 unseen (outside the frame or no ground), 1 hidden by terrain, 2 seen"
@@ -149,16 +149,16 @@ def klv_metadata(path, first_pts_s: float, *, in_video: bool, klv_stream: str | 
     return meta, issues, vmti
 
 
-def locate_video_vmti(vmti: VMTISource, surface, first_pts_s: float) -> list[dict]:
-    """Each VMTI detection located with its own packet's pose (as `eoloc klv` does) on ``surface``
-    (a DEM, an ellipsoidal height, or None: the packet's frame-centre elevation): one row per
+def locate_video_vmti(vmti: VMTISource, ground: StopRule | None, first_pts_s: float) -> list[dict]:
+    """Each VMTI detection located with its own packet's pose (as `eoloc klv` does) on the ``ground``
+    rule (OnDEM, AtHeight, or None: the packet's frame-centre elevation): one row per
     detection with its time since the first frame, box (px), point and status."""
     from ..io.export import STATUS_NAMES, json_column
     from ..result import Status
     from .klvframes import locate_vmti
 
     d = vmti.detections.columns
-    f = locate_vmti(vmti.telemetry, vmti.detections, surface).fixes
+    f = locate_vmti(vmti.telemetry, vmti.detections, ground).fixes
     status = np.asarray(f.status).astype(np.intp)
     ok = status == Status.OK
     packets = d["frame"].astype(np.int64)
@@ -206,7 +206,8 @@ def frame_visibility(px, width: int, height: int) -> np.ndarray:
     return vis
 
 
-def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, surface=None, crs: str = "utm",
+def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, ground: StopRule | None = None,
+              crs: str = "utm",
               gsd_m: float | None = None, resampling: str = "bilinear", nodata: float = 0, occlusion: bool = True,
               select: FrameSelection = FrameSelection(), klv_stream: str | None = None,
               time_offset_s: float | None = None, max_gap_s: float = 0.5, write_frames: bool = True,
@@ -215,7 +216,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
               movers: MoverSettings | None = None, progress: Callable[[int, int], None] | None = None,
               detect_progress: Callable[[int, int], None] | None = None) -> VideoJob:
     """Rectify the selected frames of ``video`` (see the module notes for the metadata) onto
-    ``surface`` (a DEM or an ellipsoidal height; None: each packet's frame-centre elevation, KLV
+    the ``ground`` rule (OnDEM or AtHeight; None: each packet's frame-centre elevation, KLV
     only), each onto the pass's grid (``crs``; cell ``gsd_m``, default the first rectified frame's
     native GSD), writing ``out``/frames/frame_NNNNNN.tif, the mosaic and the tiles, and with
     ``player`` the player page (its clicks ask `eoloc serve` for the DEM named ``dem_name``;
@@ -240,19 +241,19 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
     vmti_source = None
     if telemetry is not None:
         meta, issues, base_sensor = csv_metadata(telemetry, cfg, t0, time_offset_s=time_offset_s,
-                                                 dem=surface)
+                                                 dem=None if ground is None else ground.terrain)
     else:
         src = klv if klv is not None else video
         meta, issues, vmti_source = klv_metadata(src, t0, in_video=klv is None, klv_stream=klv_stream,
                                                  time_offset_s=time_offset_s, strict=strict)
         base_sensor = None
-    if detect is not None and surface is None:
+    if detect is not None and ground is None:
         raise InputError("finding movers needs the ground as one surface: --dem FILE or --target-height H")
-    if surface is None and "fc_h_m" not in meta.values:
+    if ground is None and "fc_h_m" not in meta.values:
         raise InputError("choose the ground: --target-height H or --dem FILE (a telemetry CSV has no frame-centre "
                          "elevation)")
     poses = poses_at_frames(meta, times, max_gap_s=max_gap_s)
-    page = _player_data(out, info, times, poses, base_sensor, surface, dem_name, serve_command) if player else None
+    page = _player_data(out, info, times, poses, base_sensor, ground, dem_name, serve_command) if player else None
     chosen = [i for i, t in enumerate(times) if select(i, float(t) - t0)]
     total = len(chosen)
     if total == 0:
@@ -292,18 +293,18 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                 sensor = misb_frame_sensor(w, h, vals["hfov_deg"], vals["vfov_deg"])
                 if sensor is None:
                     status, note = "INVALID_INPUT", "no usable field of view (tags 16, 17)"
-            ground = surface if surface is not None else vals.get("fc_h_m", math.nan)
-            if status == "OK" and not (isinstance(ground, DEM) or math.isfinite(ground)):
+            frame_ground = ground if ground is not None else AtHeight(vals.get("fc_h_m", math.nan))
+            if status == "OK" and ground is None and not math.isfinite(vals.get("fc_h_m", math.nan)):
                 status, note = "INVALID_INPUT", "no frame-centre elevation (tags 78 or 25) for the ground"
             result = None
             if status == "OK":
                 try:
                     if gsd_m is None and "res" not in pass_grid:  # the pass's cell: the first frame's GSD, rounded
-                        gsd_m = round_gsd(rectify.native_gsd_m(sensor, pose, ground))
-                    fp = footprints(sensor, pose, ground)[0]  # the grid's extent, and a layer of its own
-                    grid = rectify.output_grid(sensor, pose, ground, crs=pass_grid.get("crs", crs),
+                        gsd_m = round_gsd(rectify.native_gsd_m(sensor, pose, frame_ground))
+                    fp = footprints(sensor, pose, frame_ground)[0]  # the grid's extent, and a layer of its own
+                    grid = rectify.output_grid(sensor, pose, frame_ground, crs=pass_grid.get("crs", crs),
                                                gsd_m=gsd_m, res=pass_grid.get("res"), footprint=fp)
-                    result = _rectify_frame(fr.image, sensor, pose, ground, grid, resampling, nodata, occlusion)
+                    result = _rectify_frame(fr.image, sensor, pose, frame_ground, grid, resampling, nodata, occlusion)
                 except InputError as exc:
                     status, note = "NOT_RECTIFIED", str(exc)
             if result is not None:
@@ -330,7 +331,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
                 feats += footprint_features([fp], [{"frame": fr.index, "video_time_s": row["video_time_s"]}])
                 if page is not None:
                     hidden = vis == VISIBILITY["hidden"]
-                    page.add_frame(fr.index, sensor, pose, ground, feats[-1], data, seen, grid, submit,
+                    page.add_frame(fr.index, sensor, pose, frame_ground, feats[-1], data, seen, grid, submit,
                                    (px.u_px[hidden], px.v_px[hidden]))
             row.update({"status": status, "note": note})
             rows.append(row)
@@ -362,10 +363,9 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
             cx, cy = cell_size_m(g)
             tileset = write_xyz_tiles(out / "tiles", mres.data, mres.valid, g.transform, g.crs,
                                       cell_m=math.sqrt(cx * cy))
-    vmti_rows = locate_video_vmti(vmti_source, surface, t0) if vmti_source is not None else []
+    vmti_rows = locate_video_vmti(vmti_source, ground, t0) if vmti_source is not None else []
     job = VideoJob(info, meta, rows, feats, mres, tileset, written, issues, decode_errors, vmti_rows)
     if detect is not None:
-        from ..rules import surface_rule
         from .detect import detect_movers
 
         unix: dict[int, float] = {}
@@ -376,7 +376,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, sur
         learned = None if motion is not None else detect
         from .setup import optional_budget
 
-        job.movers = detect_movers(frames, surface_rule(surface), motion, movers, learned=learned,
+        job.movers = detect_movers(frames, ground, motion, movers, learned=learned,
                                    budget=optional_budget(cfg),  # each mover fix's absolute uncertainty
                                    total=int(times.size), progress=detect_progress)
         for r in job.movers.rows:  # the metadata's own clock (ST 0601 tag 2), where it has one
@@ -428,10 +428,11 @@ def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, ba
             yield fr.index, fr.pts_s - t0, fr.image, sensor, pose
 
 
-def _player_data(out: Path, info: VideoInfo, times: np.ndarray, poses: FramePoses, base_sensor, surface,
+def _player_data(out: Path, info: VideoInfo, times: np.ndarray, poses: FramePoses, base_sensor, ground,
                  dem_name: str, serve_command: str):
     """The player's data for this video: the camera and gimbal the page sends to /v1/locate, and
     the stop rule (the DEM by name, the target height, or each frame's frame-centre elevation)."""
+    from ..ground.rectify import level_height
     from .player import PlayerData
 
     if base_sensor is None:  # KLV: a pinhole per frame from its fields of view, az-el turret
@@ -441,10 +442,10 @@ def _player_data(out: Path, info: VideoInfo, times: np.ndarray, poses: FramePose
     else:  # the config's camera (with its distortion) and installation: the server needs --config
         camera, gimbal = None, base_sensor.gimbal.name
     ground_h = None
-    if isinstance(surface, DEM):
+    if ground is not None and ground.terrain is not None:
         stop = {"dem": dem_name}
-    elif surface is not None:
-        stop = {"target_height_m": float(surface)}
+    elif ground is not None:
+        stop = {"target_height_m": level_height(ground)}
     else:
         stop = {"frame_centre": True}
         ground_h = poses.values["fc_h_m"]
@@ -493,7 +494,7 @@ def _pose_columns(pose: Pose) -> dict[str, float]:
     return out
 
 
-def _rectify_frame(image: np.ndarray, sensor: SensorModel, pose: Pose, ground, grid, resampling: str,
+def _rectify_frame(image: np.ndarray, sensor: SensorModel, pose: Pose, ground: StopRule, grid, resampling: str,
                    nodata: float, occlusion: bool):
     from ..ground import rectify
 

@@ -27,6 +27,7 @@ import numpy as np
 from ..io.export import STATUS_NAMES, fix_records, utc_times, with_utc
 from ..kernels.backend import load_compiled
 from ..result import Status
+from ..rules import AtHeight
 
 
 @dataclass
@@ -138,13 +139,14 @@ class PacketLocator:
                 c["gimbal1_deg"], c["gimbal2_deg"], 0.0 if math.isnan(roll) else roll)
         surface_h = c["fc_h_m"]
         usable = all(math.isfinite(x) for x in pose) and abs(pose[0]) <= 90.0 and math.isfinite(surface_h)
+        ground = AtHeight(surface_h)  # the packet's frame-centre elevation stops its rays
         centre = footprint = look = None
         if platform is not None:
             hfov, vfov = c["hfov_deg"], c["vfov_deg"]
             tx = ty = math.nan
             if 0 < hfov < 180 and 0 < vfov < 180:
                 tx, ty = math.tan(math.radians(hfov) / 2.0), math.tan(math.radians(vfov) / 2.0)
-            ends = [self._ray(self.view, pose, usable, surface_h, x, y, in_image=False)
+            ends = [self._ray(self.view, pose, usable, ground, x, y, in_image=False)
                     for x, y in ((0.0, 0.0), *((cx * tx, cy * ty) for cx, cy in CORNERS))]
             if ends[0][4] == Status.OK:
                 centre = ends[0][:3]
@@ -159,19 +161,19 @@ class PacketLocator:
                 az, el = look_angles(platform["lat_deg"], platform["lon_deg"], platform["h_m"], *centre)
                 look |= {"azimuth_deg": az, "elevation_deg": el, "range_m": ends[0][3]}
         det = vmti_detections(KLVStream(source, "klv", [packet]))
-        fixes = self._targets(det, c, pose, usable, surface_h) if len(det) else []
+        fixes = self._targets(det, c, pose, usable, ground) if len(det) else []
         t = c["time_s"]
         return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
                             time_utc=utc_times([t], "unix")[0])
 
     @staticmethod
-    def _ray(sensor, pose: tuple, usable: bool, height_m: float, u: float, v: float, in_image: bool = True) -> tuple:
-        """(lat, lon, h, range, status) of one ray: the pose's pixel (u, v) stopped at ``height_m``;
+    def _ray(sensor, pose: tuple, usable: bool, ground: AtHeight, u: float, v: float, in_image: bool = True) -> tuple:
+        """(lat, lon, h, range, status) of one ray: the pose's pixel (u, v) stopped on ``ground``;
         INVALID_INPUT where the pose, the height or the pixel is not a number (as the batch path);
         ``in_image=False`` for the view sensor, whose pixels are normalised coordinates."""
         if not (usable and math.isfinite(u) and math.isfinite(v)):
             return math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT
-        return sensor.locate_one(*pose[:8], u, v, g3_deg=pose[8], height_m=height_m, in_image=in_image)
+        return sensor.locate_one(*pose[:8], u, v, rule=ground, g3_deg=pose[8], in_image=in_image)
 
     def _frame_sensor(self, hfov: float, vfov: float, width: int, height: int):
         """The sensor of a VMTI frame: a pinhole over its size with the given fields of view."""
@@ -186,7 +188,7 @@ class PacketLocator:
                                                                                       vfov_deg=vfov))
         return sensor
 
-    def _targets(self, det, c: dict, pose: tuple, usable: bool, surface_h: float) -> list[dict]:
+    def _targets(self, det, c: dict, pose: tuple, usable: bool, ground: AtHeight) -> list[dict]:
         """The rows of a packet's VMTI targets (the layout of :func:`eoloc.io.export.fix_records`,
         as the batch path writes them): each through its frame's camera, OUT_OF_IMAGE off the
         frame, INVALID_INPUT without a usable field of view or frame size."""
@@ -213,7 +215,7 @@ class PacketLocator:
             elif outside[i] and usable:
                 fix = (math.nan, math.nan, math.nan, math.nan, Status.OUT_OF_IMAGE)
             else:
-                fix = self._ray(sensors[i], pose, usable, surface_h, float(u[i]), float(v[i]))
+                fix = self._ray(sensors[i], pose, usable, ground, float(u[i]), float(v[i]))
             status = int(fix[4])
             good = status == Status.OK
             rows.append({"stream": str(d["stream"][i]), "frame": int(d["frame"][i]), "time_s": _finite(d["time_s"][i]),
@@ -228,10 +230,11 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
                   budget=None) -> PacketUpdate:
     """:meth:`PacketLocator.locate` by `eoloc klv`'s own functions on a one-packet stream (the
     batch driver: any surface, with or without an error budget)."""
-    from ..ground.frame import frame_geometry, misb_sensor, packet_pose
+    from ..ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
     from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.reader import KLVStream
     from ..jobs.klvframes import locate_vmti
+    from ..rules import OnDEM
 
     sensor = sensor or misb_sensor()
     known = known or packet
@@ -243,13 +246,13 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
         platform = {"name": name, "lat_deg": float(c["lat_deg"]), "lon_deg": float(c["lon_deg"]),
                     "h_m": float(c["h_m"]), "heading_deg": _finite(c["yaw_deg"])}
-    surface = dem if dem is not None else tel.columns["fc_h_m"]
+    ground = OnDEM(dem) if dem is not None else packet_heights(tel.columns["fc_h_m"])
     centre = footprint = look = None
     if platform is not None:
         from ..geodesy import geodetic_to_ned
         from ..ground.footprint import polygon_geometry
 
-        geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], surface)
+        geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], ground)
         if bool(geom.centre.ok[0]):
             centre = (float(geom.centre.lat_deg[0]), float(geom.centre.lon_deg[0]), float(geom.centre.h_m[0]))
         if dem is not None:  # the image border traced on the terrain, clipped at its edge (as `eoloc klv`)
@@ -271,7 +274,7 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     cov_enu = effects = tau = None
     det = vmti_detections(KLVStream(source, "klv", [packet]))
     if len(det):
-        v = locate_vmti(tel, det, dem, budget=budget, base=sensor)
+        v = locate_vmti(tel, det, ground if dem is not None else None, budget=budget, base=sensor)
         extra = with_utc({"stream": det.columns["stream"], **v.extra}, "unix")
         fixes = fix_records(v.fixes, extra, v.uncertainty).rows()
         cov_enu, effects, tau = v.cov_enu, v.effects, v.tau_s

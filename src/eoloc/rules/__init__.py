@@ -18,68 +18,52 @@ the status says why and the coordinates are NaN. ``locate_range`` & co. are thin
 
 from __future__ import annotations
 
-from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING
 
-from ..errors import InputError
-from ..result import Fixes
-from ..sensor.model import Pose, SensorModel
-from ..terrain.dem import DEM
-from .at_height import AtHeight, locate_ellipsoid, stop_at_ellipsoid
-from .at_range import AtRange, RangeFromRecords, locate_range, stop_at_range
-from .base import StopRule
-from .flat import FlatGround, locate_flat
-from .multiview import MultiView
-from .on_dem import OnDEM, locate_dem, stop_at_dem
+from ..util.lazy import lazy_attributes
+from .spec import SPECS, RuleSpec, rule_from_values
 
-RULES: dict[str, type[StopRule]] = {r.name: r for r in (AtRange, AtHeight, OnDEM, FlatGround)}
+if TYPE_CHECKING:  # the same names as _WHERE, for type checkers and the API reference (read statically)
+    from .at_height import AtHeight, locate_ellipsoid, stop_at_ellipsoid
+    from .at_range import AtRange, RangeFromRecords, locate_range, stop_at_range
+    from .base import StopRule, locate
+    from .flat import FlatGround, locate_flat
+    from .multiview import MultiView
+    from .on_dem import OnDEM, locate_dem, stop_at_dem
 
+_WHERE = {  # loaded on first use: reading the specs (the command line does, at start-up) loads no rule
+    **dict.fromkeys(("AtHeight", "locate_ellipsoid", "stop_at_ellipsoid"), "at_height"),
+    **dict.fromkeys(("AtRange", "RangeFromRecords", "locate_range", "stop_at_range"), "at_range"),
+    **dict.fromkeys(("FlatGround", "locate_flat"), "flat"),
+    **dict.fromkeys(("OnDEM", "locate_dem", "stop_at_dem"), "on_dem"),
+    "MultiView": "multiview",
+    **dict.fromkeys(("StopRule", "locate"), "base"),
+}
 
-def locate(sensor: SensorModel, pose: Pose, rule: StopRule, pixels: ArrayLike | None = None) -> Fixes:
-    """Pixels (an (..., 2) array or a (u, v) pair; default: the principal point) of ``pose`` to
-    the ground by stop ``rule`` -> :class:`eoloc.Fixes` with a status per target."""
-    if not isinstance(rule, StopRule):
-        raise TypeError(f"rule must be a stop rule (AtRange, AtHeight, OnDEM, FlatGround), got {rule!r}")
-    return rule.locate(sensor, pose, pixels)
-
-
-def surface_rule(surface: float | DEM | StopRule) -> StopRule:
-    """The ground of footprints, ground grids and rectification: a DEM (M4), a constant
-    ellipsoidal height in metres (M3), or a rule given as it is."""
-    if isinstance(surface, StopRule):
-        return surface
-    if isinstance(surface, DEM):
-        return OnDEM(surface)
-    return AtHeight(surface)
+__getattr__ = lazy_attributes(__name__, _WHERE)
 
 
-def rule_from_options(*, range_m: ArrayLike | None = None, height_m: ArrayLike | None = None,
-                      dem: DEM | None = None) -> StopRule:
-    """The one rule named by keyword (a range, a target height or a DEM); ValueError for none or
-    several. The adapter for callers that take the rule as options (config files, the CLI)."""
-    given = [(cls, v) for cls, v in ((AtRange, range_m), (AtHeight, height_m), (OnDEM, dem)) if v is not None]
-    if len(given) != 1:
-        raise InputError("choose one stop rule: a range (range_m), a target height (height_m) or a DEM (dem)")
-    cls, value = given[0]
-    return cls(value)
+def __dir__() -> list[str]:
+    return sorted(__all__)
 
 
 __all__ = [
-    "RULES",
+    "SPECS",
     "AtHeight",
     "AtRange",
     "FlatGround",
     "MultiView",
     "OnDEM",
     "RangeFromRecords",
+    "RuleSpec",
     "StopRule",
     "locate",
     "locate_dem",
     "locate_ellipsoid",
     "locate_flat",
     "locate_range",
-    "rule_from_options",
+    "rule_from_values",
     "stop_at_dem",
     "stop_at_ellipsoid",
     "stop_at_range",
-    "surface_rule",
 ]

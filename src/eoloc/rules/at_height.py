@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from ..geodesy import WGS84
+from ..kernels.core import STOP_ELLIPSOID
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from .base import KernelRule
@@ -36,6 +38,10 @@ class AtHeight(KernelRule):
     error_sources = ("terrain_m",)
     kernel = "stop_at_ellipsoid"
     value_field = "h_m"
+    scalar_kind = STOP_ELLIPSOID
+
+    def ground_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray:
+        return np.broadcast_to(self.h_m, np.broadcast_shapes(np.shape(lat_deg), np.shape(lon_deg), np.shape(self.h_m)))
 
 
 def stop_at_ellipsoid(rays: Rays, height_m: ArrayLike = 0.0, *, sensor: SensorModel | None = None) -> Fixes:

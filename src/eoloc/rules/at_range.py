@@ -8,6 +8,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import InputError
 from ..geodesy import WGS84
+from ..kernels.core import STOP_RANGE
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from .base import KernelRule, StopRule
@@ -30,6 +31,7 @@ class AtRange(KernelRule):
     error_sources = ("range_m",)
     kernel = "stop_at_range"
     value_field = "range_m"
+    scalar_kind = STOP_RANGE
 
 
 @dataclass(frozen=True)

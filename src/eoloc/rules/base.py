@@ -7,22 +7,27 @@ own in this package. It states its validity domain in its docstring, runs its ke
 them in ``errors``). Every caller (pipeline, Monte Carlo, covariance, compensation, footprints,
 rectification, KLV, CLI) holds a rule object and calls it, never branching on its kind.
 
-Adding a rule: one file here with a ``StopRule`` subclass and its kernel in ``eoloc.kernels.core``,
-plus its name in :data:`eoloc.rules.RULES` (docs/architecture.md "Architecture").
+Adding a rule: one file here with a ``StopRule`` subclass, its kernel in ``eoloc.kernels.core``,
+and its row in :data:`eoloc.rules.spec.SPECS` (how users name it: every front end reads that
+table; docs/architecture.md "Everyday changes, counted").
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import InputError
 from ..geodesy import WGS84, Ellipsoid
 from ..kernels.backend import run
 from ..result import Fixes, Status, mask_invalid
 from ..sensor.model import Pose, Rays, SensorModel
+
+if TYPE_CHECKING:
+    from ..terrain.dem import DEM
 
 Errors = Callable[[str], "np.ndarray | float"]  # error source name -> its draws (or 0.0)
 
@@ -58,19 +63,45 @@ class StopRule:
         (``pose_index``: each pixel's element of ``pose``, see :meth:`SensorModel.rays`)."""
         return self.stop(sensor.rays(pose, pixels, pose_index), sensor.ellipsoid)
 
+    @property
+    def terrain(self) -> DEM | None:
+        """The terrain map (DEM) this rule stops rays on; None for rules without one."""
+        return None
+
     def terrain_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray | None:
         """Heights (ellipsoidal m) of the terrain map this rule stops on, at (lat, lon); None for
         rules without a map (a corrected fix is then left at its own height)."""
-        return None
+        return None if self.terrain is None else self.terrain.height(lat_deg, lon_deg)
+
+    def ground_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray:
+        """Heights (ellipsoidal m) of the surface this rule stops rays on, at (lat, lon): what
+        footprints' neighbours, ground grids and orthorectification stand on. InputError for a
+        rule that stops rays somewhere else than on a surface (a range, other rays)."""
+        raise InputError(f"the {self.name} rule does not stop rays on a ground surface: give the ground as a target "
+                         "height (AtHeight, --target-height) or a DEM (OnDEM, --dem)")
 
     @property
     def value_shape(self) -> tuple[int, ...]:
         """The shape the rule's own value adds to the broadcast (a range or height per target)."""
         return ()
 
+    def scalar_stop(self) -> tuple[int, float] | None:
+        """(stop kind, value) for the compiled single-target kernel
+        (:meth:`eoloc.SensorModel.locate_one`); None: the rule has none, and one target goes
+        through :meth:`locate` instead."""
+        return None
+
     def describe(self) -> str:
         """One line for reports: the rule and its value."""
         return self.name
+
+
+def locate(sensor: SensorModel, pose: Pose, rule: StopRule, pixels: ArrayLike | None = None) -> Fixes:
+    """Pixels (an (..., 2) array or a (u, v) pair; default: the principal point) of ``pose`` to
+    the ground by stop ``rule`` -> :class:`eoloc.Fixes` with a status per target."""
+    if not isinstance(rule, StopRule):
+        raise TypeError(f"rule must be a stop rule (AtRange, AtHeight, OnDEM, FlatGround), got {rule!r}")
+    return rule.locate(sensor, pose, pixels)
 
 
 class KernelRule(StopRule):
@@ -80,6 +111,7 @@ class KernelRule(StopRule):
     kernel: ClassVar[str] = ""
     value_field: ClassVar[str] = ""
     unit: ClassVar[str] = "m"
+    scalar_kind: ClassVar[int | None] = None  # its stop kind in the single-target kernel (kernels.core.STOP_*)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, self.value_field, f64(getattr(self, self.value_field)))
@@ -91,6 +123,10 @@ class KernelRule(StopRule):
     @property
     def value_shape(self) -> tuple[int, ...]:
         return np.shape(getattr(self, self.value_field))
+
+    def scalar_stop(self) -> tuple[int, float] | None:
+        value = getattr(self, self.value_field)
+        return None if self.scalar_kind is None or np.ndim(value) else (self.scalar_kind, float(value))
 
     def describe(self) -> str:
         value = getattr(self, self.value_field)

@@ -95,7 +95,11 @@ class OnDEM(StopRule):
                 out = march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
         return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid, rays.out_of_image)
 
-    def terrain_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray:
+    @property
+    def terrain(self) -> DEM:
+        return self.dem
+
+    def ground_height(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> np.ndarray:
         return self.dem.height(lat_deg, lon_deg)
 
     def describe(self) -> str:

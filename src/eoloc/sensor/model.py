@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -28,6 +29,14 @@ from .gimbal import AzElGimbal, Gimbal, GimbalKind
 
 def _f64(x: ArrayLike) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
+
+
+class OneTargetRule(Protocol):
+    """What :meth:`SensorModel.locate_one` asks of a stop rule (every :class:`eoloc.rules.StopRule`)."""
+
+    def scalar_stop(self) -> tuple[int, float] | None: ...
+
+    def locate(self, sensor: SensorModel, pose: Pose, pixels=None): ...
 
 
 @dataclass(frozen=True)
@@ -270,21 +279,25 @@ class SensorModel:
 
     def locate_one(self, lat_deg: float, lon_deg: float, h_m: float, yaw_deg: float, pitch_deg: float,
                    roll_deg: float, g1_deg: float, g2_deg: float = 0.0, u: float | None = None,
-                   v: float | None = None, *, g3_deg: float = 0.0, range_m: float | None = None,
-                   height_m: float | None = None, in_image: bool = True) -> tuple[float, float, float, float, int]:
-        """One pose, one pixel -> (lat_deg, lon_deg, h_m, range_m, status code) in about a microsecond.
+                   v: float | None = None, *, rule: OneTargetRule, g3_deg: float = 0.0,
+                   in_image: bool = True) -> tuple[float, float, float, float, int]:
+        """One pose, one pixel, stop ``rule`` -> (lat_deg, lon_deg, h_m, range_m, status code).
 
-        Give ``range_m`` (M1) or ``height_m`` (M3, ellipsoidal). For a fixed mount g1_deg is the
-        sensor roll. Same kernels as the array path; compare the status with ``Status.OK``. A pixel
-        past the image is OUT_OF_IMAGE, as in :func:`eoloc.locate`; ``in_image=False`` skips that
-        check, for a placeholder camera whose "pixels" are normalised image coordinates.
+        A rule with a compiled single-target kernel (AtRange, AtHeight with one value:
+        :meth:`eoloc.rules.StopRule.scalar_stop`) answers in about a microsecond, the others
+        (OnDEM, FlatGround, ...) through their array path; the same answer either way. For a fixed
+        mount g1_deg is the sensor roll. Compare the status with ``Status.OK``. A pixel past the
+        image is OUT_OF_IMAGE, as in :func:`eoloc.locate`; ``in_image=False`` skips that check on
+        the kernel path, for a placeholder camera whose "pixels" are normalised image coordinates.
         """
-        if range_m is not None and height_m is None:
-            stop_kind, stop_value = kernels.STOP_RANGE, range_m
-        elif height_m is not None and range_m is None:
-            stop_kind, stop_value = kernels.STOP_ELLIPSOID, height_m
-        else:
-            raise ValueError("locate_one needs exactly one stop rule: range_m=... or height_m=...")
+        stop = rule.scalar_stop()
+        if stop is None:
+            angles = (g1_deg,) if self.gimbal.kind == GimbalKind.FIXED else (g1_deg, g2_deg, g3_deg)
+            pose = Pose(lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, angles)
+            f = rule.locate(self, pose, None if u is None and v is None else
+                            (self.camera.cx if u is None else u, self.camera.cy if v is None else v))
+            return float(f.lat_deg), float(f.lon_deg), float(f.h_m), float(f.range_m), int(f.status)
+        stop_kind, stop_value = stop
         if self.gimbal.kind == GimbalKind.FIXED:
             g1_deg, g3_deg = 0.0, g1_deg
         if u is not None or v is not None:

@@ -36,11 +36,11 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import Query  # these two at module level: FastAPI resolves the routes' annotations here
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.requests import Request
 
 from ..errors import EolocError
-from ..io.config import CameraConfig
+from ..io.config import CameraConfig, stop_model
 from ..kernels.backend import load_compiled
 from .docs import add_offline_docs
 
@@ -70,17 +70,8 @@ class PoseIn(_Strict):
                                               "sensor roll]; roll-pitch: frame roll, frame pitch[, sensor roll])")
 
 
-class StopIn(_Strict):
-    range_m: float | None = Field(None, gt=0, le=1e7, description="M1: slant range along each ray (laser), m")
-    target_height_m: float | None = Field(None, ge=-12_000, le=1e7,
-                                          description="M3: the ellipsoidal height of the ground, m")
-    dem: str | None = Field(None, description="M4: the name of a DEM given to `eoloc serve --dem NAME=PATH`")
-
-    @model_validator(mode="after")
-    def _one(self) -> StopIn:
-        if sum(x is not None for x in (self.range_m, self.target_height_m, self.dem)) != 1:
-            raise ValueError("give exactly one of range_m, target_height_m or dem")
-        return self
+StopIn = stop_model("StopIn", _Strict, (str | None, Field(None, description="M4: the name of a DEM given to "
+                                                                           "`eoloc serve --dem NAME=PATH`")))
 
 
 class ObservationIn(_Strict):
@@ -155,6 +146,16 @@ class ServiceState:
             raise RequestError(where, f"no DEM named {name!r}; this server has: {known}")
         return self.dems[name]
 
+    def rule(self, stop, where: str):
+        """The stop rule of a request's ``stop`` object (:data:`StopIn`; a DEM by its served name)."""
+        from ..rules.spec import SPECS, rule_from_values
+
+        values = {s.key: getattr(stop, s.key) for s in SPECS}
+        for s in SPECS:
+            if s.value == "dem":
+                values[s.key] = self.dem(values[s.key], f"{where}.{s.key}" if where else s.key)
+        return rule_from_values(values)
+
     def budget(self, wanted: bool, where: str):
         """The config's error budget when ``wanted`` (else None); RequestError at ``where`` when the
         server was started without one."""
@@ -180,7 +181,6 @@ def solve_observation(obs: ObservationIn, state: ServiceState, where: str, pixel
     """(fixes, u, v, uncertainty columns or None) of one observation; ``pixels``: (u, v) arrays that
     replace the observation's own (the Arrow route's columns)."""
     from ..jobs.tables import locate_by_rule
-    from ..rules import rule_from_options
     from ..sensor import Camera, Pose, SensorModel, gimbal_from_name
 
     cfg = state.config
@@ -205,8 +205,7 @@ def solve_observation(obs: ObservationIn, state: ServiceState, where: str, pixel
     angles = tuple(g) if sensor.gimbal.name == "fixed" else (*g, *([0.0] if len(g) == need else []))
     p = obs.pose
     pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, angles)
-    dem = state.dem(obs.stop.dem, f"{where}.stop.dem")
-    rule = rule_from_options(range_m=obs.stop.range_m, height_m=obs.stop.target_height_m, dem=dem)
+    rule = state.rule(obs.stop, f"{where}.stop")
     budget = state.budget(obs.covariance, f"{where}.covariance")
     if pixels is not None:
         u, v = pixels
@@ -386,8 +385,13 @@ def locate_photo_request(data: bytes, state: ServiceState, *, pixels: list[str],
 
     if target_height_m is not None and dem is not None:
         raise RequestError("target_height_m", "give dem or target_height_m, not both")
-    if target_height_m is not None and not (math.isfinite(target_height_m) and -12_000 <= target_height_m <= 1e5):
-        raise RequestError("target_height_m", f"{target_height_m!r} is not an ellipsoidal height in metres")
+    ground = None  # the photo's ground (a laser range, where it has one, stops the centre's ray first)
+    if target_height_m is not None or dem is not None:
+        try:
+            ground = state.rule(StopIn(target_height_m=target_height_m, dem=dem), "")
+        except ValidationError as exc:
+            raise RequestError("target_height_m" if target_height_m is not None else "dem",
+                               exc.errors()[0]["msg"].removeprefix("Value error, ")) from None
     uv = []
     for i, text in enumerate(pixels):
         try:
@@ -399,10 +403,9 @@ def locate_photo_request(data: bytes, state: ServiceState, *, pixels: list[str],
         uv.append((u, v))
     if len(uv) > MAX_PIXELS:
         raise RequestError("pixel", f"{len(uv)} pixels; at most {MAX_PIXELS}")
-    surface = state.dem(dem, "dem")
     budget = state.budget(covariance, "covariance")
     p = read_photo(name, data=data)  # a PhotoError (an EolocError: 422) names the tag and the fix
-    rows = locate_photo(p, pixels=uv, dem=surface, target_height_m=target_height_m, budget=budget)
+    rows = locate_photo(p, pixels=uv, ground=ground, budget=budget)
     return {"photo": {"name": name, "make": p.make, "model": p.model, "width": p.width, "height": p.height,
                       "thermal": p.thermal, "intrinsics": p.camera_source, "height_rule": p.height_rule,
                       "laser_range_m": p.lrf_range_m, "notes": list(p.notes)},

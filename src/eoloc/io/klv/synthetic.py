@@ -24,6 +24,7 @@ def circling_flight_klv(n_packets: int, *, seed: int = 0, lat_deg: float = 40.0,
     """``n_packets`` ST 0601 packets (raw KLV) of a circling flight centred ``seed``-dependently
     near (lat_deg, lon_deg); the ground is the geoid (MSL 0)."""
     from ...ground.frame import frame_geometry, misb_sensor
+    from ...rules import AtHeight
     from ...sensor import Pose
     from ...terrain.geoid import default_geoid
 
@@ -48,7 +49,7 @@ def circling_flight_klv(n_packets: int, *, seed: int = 0, lat_deg: float = 40.0,
     width, height = 1280, 720
     vfov = float(np.degrees(2 * np.arctan(np.tan(np.radians(hfov_deg) / 2) * height / width)))
     pose = Pose(lat, lon, h, heading, pitch, roll, (az, el))
-    geom = frame_geometry(misb_sensor(), pose, np.full(n_packets, hfov_deg), np.full(n_packets, vfov), n0)
+    geom = frame_geometry(misb_sensor(), pose, np.full(n_packets, hfov_deg), np.full(n_packets, vfov), AtHeight(n0))
     c = geom.centre
     u = rng.uniform(100, width - 100, (n_packets, n_targets))
     v = rng.uniform(100, height - 100, (n_packets, n_targets))
