@@ -189,7 +189,7 @@ def test_ts_replayed_at_its_own_rate_every_packet_and_cot_event_arrives(tmp_path
     rx.stop()
     assert proc.returncode == 0 and "Traceback" not in log, log
     assert took == pytest.approx(3.9, abs=0.5)  # paced by the stream's own clock, not sent at once
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (--packets 80)")):].splitlines()[0])
+    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (80 packets)")):].splitlines()[0])
     assert summary["packets"] == 80 and summary["corrupt"] == 0 and summary["fixes_ok"] == 400
     targets = [e for e in rx.events if e.get("type") == "a-u-G"]
     assert len(targets) == 400 and rx.bad == []

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import signal
 import sys
-import time
 
 import click
 
@@ -122,10 +121,8 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
          tak_ca, tak_package, tak_protocol, video_url, video_package, klv_out, map_at, cot_targets, cot_interval,
          refine, refine_legacy, realtime, max_packets, duration, silence, allow_hosts) -> None:
     from ..jobs.setup import misb_setup
-    from ..live.cotfeed import CotFeed
-    from ..live.senders import cot_sender
+    from ..live.loop import run
     from ..live.session import LiveSession
-    from ..live.sources import open_source
     from .common import load_config
 
     if refine_legacy is not None:
@@ -133,12 +130,22 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
              "the pixels in eoloc video, photo, klv and locate)", "deprecated")
         refine = refine_legacy
     cot_urls, tak_tls = tak_connection(cot_urls, tak_cert, tak_cert_password, tak_ca, tak_package)
-    if ndjson is None and not cot_urls and map_at is None and klv_out is None:
+    wanted = {"ndjson": ndjson, "cot": cot_urls, "klv_out": klv_out, "map": map_at}  # the outputs: SINKS
+    if not any(wanted.values()):
         fail("eoloc live: give at least one output: --ndjson FILE|-, --cot URL, --klv-out URL|FILE and/or "
              "--map HOST:PORT")
     map_host, map_port = parse_host_port(map_at) if map_at is not None else (None, None)
     if cot_targets != "fixes" and (refine == "off" or not cot_urls):
         fail(f"--cot-targets {cot_targets}: the refined targets need --track (static, moving or auto) and a --cot URL")
+    if video_url is None and source.split("://")[0].lower() in STREAM_SCHEMES:
+        video_url = source
+    if video_package is not None:
+        from ..io.cot import write_video_package
+        from ..live.cotfeed import CotFeed
+
+        if video_url is None:
+            fail("--video-package: give the stream's URL (--video-url rtsp://...; SOURCE is not a stream URL)")
+        write_video_package(video_package, video_url, uid=CotFeed().video_uid(), alias="eoloc video")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)
@@ -147,105 +154,82 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
         from ..live.refine import TargetFilters
 
         filters = TargetFilters(refine)
-    rewriter = None
-    if klv_out is not None:
-        from ..live.klvout import KlvOut
-
-        rewriter = KlvOut(klv_out)
-    session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=rewriter)
-    if video_url is None and source.split("://")[0].lower() in STREAM_SCHEMES:
-        video_url = source
-    feed_cot = CotFeed(interval_s=cot_interval, targets=cot_targets, video_url=video_url)
-    if video_package is not None:
-        from ..io.cot import write_video_package
-
-        if video_url is None:
-            fail("--video-package: give the stream's URL (--video-url rtsp://...; SOURCE is not a stream URL)")
-        write_video_package(video_package, video_url, uid=feed_cot.video_uid(), alias="eoloc video")
-    senders = [cot_sender(url, on_state=lambda m: warn(m, "cot"), hello=feed_cot.presence, tls=tak_tls,
-                          protocol=tak_protocol, uid=feed_cot.presence_uid()) for url in cot_urls]
-    hub = server = None
-    if map_at is not None:
-        hub, server = start_map(map_host, map_port, session, source, silence, dem, config, allow_hosts)
-    stopping = {"why": None}
-    started = time.monotonic()
-
-    def stop() -> bool:
-        if duration is not None and time.monotonic() - started > duration:
-            stopping["why"] = stopping["why"] or f"--duration {duration:g} s"
-        if max_packets is not None and session.counters.packets >= max_packets:
-            stopping["why"] = stopping["why"] or f"--packets {max_packets}"
-        if (fatal := next((s.fatal for s in senders if s.fatal), None)) is not None:
-            stopping["why"], stopping["fatal"] = stopping["why"] or "a TAK connection failed", fatal
-        return stopping["why"] is not None
+    settings = {"source": source, "dem": dem, "config": config, "silence_s": silence, "allow_hosts": allow_hosts,
+                "tls": tak_tls, "protocol": tak_protocol, "interval_s": cot_interval, "targets": cot_targets,
+                "video_url": video_url, "map_host": map_host, "map_port": map_port}
+    sinks = []
+    session = None
+    try:
+        klv = SINKS["klv_out"](klv_out, settings) if klv_out is not None else None
+        session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=klv)
+        settings["session"] = session
+        sinks = [klv] if klv is not None else []
+        sinks += [SINKS[name](value, settings) for name, value in wanted.items() if value and name != "klv_out"]
+    except BaseException:
+        for sink in sinks:
+            sink.close()
+        raise
+    stopping: dict = {"why": None}
 
     def on_signal(signum, _frame) -> None:
-        stopping["why"] = signal.Signals(signum).name
-
-    def on_silence(quiet_s: float) -> None:
-        warn(f"{source}: nothing received for {quiet_s:.0f} s", "silence")
-        for event in feed_cot.silence(quiet_s):
-            for s in senders:
-                s.send(event)
+        stopping["why"] = stopping["why"] or signal.Signals(signum).name
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
-    feed, where, source_state = open_source(source, stop, realtime=realtime, silence_s=silence,
-                                            on_silence=on_silence, on_event=lambda m: warn(m, "source"),
-                                            stdin=sys.stdin.buffer)
-    err_console.print(f"eoloc live: {where} (Ctrl-C stops)")
-    out = None if ndjson is None else sys.stdout if ndjson == "-" else open(ndjson, "w", encoding="utf-8")
+    result = run(source, session, sinks, max_packets=max_packets, duration_s=duration, realtime=realtime,
+                 silence_s=silence, should_stop=lambda: stopping["why"], report=_report, stdin=sys.stdin.buffer)
+    err_console.print(f"eoloc live stopped ({result.why or 'end of the source'}): " + json.dumps(result.summary),
+                      soft_wrap=True, highlight=False)
+    if result.fatal:
+        fail(result.fatal)
+
+
+def _report(message: str, kind: str) -> None:
+    """What the run says, as the command shows it: where it listens and the map's address plainly,
+    the rest as warnings of their kind."""
+    if kind == "start":
+        err_console.print(f"eoloc live: {message} (Ctrl-C stops)")
+    elif kind == "map":
+        err_console.print(f"eoloc live: {message}")
+    else:
+        warn(message, kind)
+
+
+def _ndjson_sink(path: str, settings: dict):
+    from ..live.sinks import NdjsonSink
+
+    return NdjsonSink(path)
+
+
+def _cot_sink(urls, settings: dict):
+    from ..live.sinks import CotSink
+
+    return CotSink(urls, interval_s=settings["interval_s"], targets=settings["targets"],
+                   video_url=settings["video_url"], tls=settings["tls"], protocol=settings["protocol"],
+                   on_state=lambda m: warn(m, "cot"))
+
+
+def _klv_out_sink(destination: str, settings: dict):
+    from ..live.klvout import KlvOut
+
+    return KlvOut(destination)
+
+
+def _map_sink(at: str, settings: dict):
+    from ..service.mapsink import MapSink
+
+    host, port = settings["map_host"], settings["map_port"]
     try:
-        for datagram, arrived, *stream in feed:
-            updates = session.feed(datagram, *stream)
-            for u in updates if senders else ():
-                for event in feed_cot.events(u):
-                    for s in senders:
-                        s.send(event)
-            if updates and (out is not None or hub is not None):
-                features = [u.features() for u in updates]
-                if out is not None:
-                    out.write("".join(json.dumps(f, allow_nan=False) + "\n" for fs in features for f in fs))
-                    out.flush()
-                if hub is not None:
-                    for u, fs in zip(updates, features, strict=True):
-                        hub.publish(u, fs)
-            session.done(arrived)
-            for line in session.faults.due():  # the first of each kind, then a count every few seconds
-                warn(line, "fault")
-            if stop():
-                break
-        if hub is not None:
-            hub.stop(stopping["why"] or "end of the source")
-            if stopping["why"] is None:
-                err_console.print(f"eoloc live: the source ended; the map stays up at {server.url} "
-                                  "(Ctrl-C stops)")
-                while not stop():
-                    time.sleep(0.1)
-    finally:
-        feed.close()
-        if out is not None and out is not sys.stdout:
-            out.close()
-        for s in senders:
-            s.close()
-        if server is not None:
-            server.close()
-        if rewriter is not None:
-            rewriter.close()
-    for line in session.faults.flush():
-        warn(line, "fault")
-    summary = session.counters.summary() | source_state.summary() | {"faults": session.faults.counts(),
-        "streams": session.streams, "cot_events": feed_cot.events_out,
-        "cot_held": feed_cot.held, "cot": [s.summary() for s in senders]}
-    if hub is not None:
-        summary["map"] = hub.summary()
-    if rewriter is not None:
-        summary["klv_out"] = rewriter.summary()
-    err_console.print(f"eoloc live stopped ({stopping['why'] or 'end of the source'}): "
-                      + json.dumps(summary), soft_wrap=True, highlight=False)
-    fatal = stopping.get("fatal") or next((s.fatal for s in senders if s.fatal), None)
-    if fatal:
-        fail(fatal)
+        return MapSink(host, port, settings["session"], settings["source"], silence_s=settings["silence_s"],
+                       dem=settings["dem"], config=settings["config"], allow_hosts=tuple(settings["allow_hosts"]),
+                       report=_report)
+    except OSError as exc:
+        fail(f"--map {host}:{port}: cannot serve there: {exc}")
+
+
+SINKS = {"ndjson": _ndjson_sink, "cot": _cot_sink, "klv_out": _klv_out_sink, "map": _map_sink}
+"""Each output of `eoloc live`: its option's value and the run's settings -> a sink of
+:func:`eoloc.live.run` (a new output: its sink class, its option above and its line here)."""
 
 
 def parse_host_port(text: str) -> tuple[str, int]:
@@ -255,21 +239,3 @@ def parse_host_port(text: str) -> tuple[str, int]:
         fail(f"--map {text!r}: give HOST:PORT, e.g. 127.0.0.1:8080 (0.0.0.0:8080 to be seen from other machines; "
              "port 0: any free one)")
     return host.strip("[]") or "127.0.0.1", int(port)
-
-
-def start_map(host: str, port: int, session, source: str, silence_s: float, dem, config, allow_hosts=()):
-    """The live map's hub and its server (eoloc serve's app with the map's routes), started."""
-    from ..service.api import ServiceState, create_app
-    from ..service.http import allowed_hosts
-    from ..service.livemap import LiveHub, MapServer
-
-    hub = LiveHub(silence_s=silence_s, title=f"eoloc live: {source}",
-                  counters=lambda: session.counters.counts() | {"streams": dict(session.streams)})
-    state = ServiceState(config, {"dem": dem} if dem is not None else {})
-    server = MapServer(create_app(state, hub=hub, hosts=allowed_hosts(host, tuple(allow_hosts))), host, port)
-    try:
-        server.start()
-    except OSError as exc:
-        fail(f"--map {host}:{port}: cannot serve there: {exc}")
-    err_console.print(f"eoloc live: map at {server.url}")
-    return hub, server

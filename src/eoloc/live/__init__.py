@@ -1,1 +1,20 @@
-"""eoloc live: KLV streams as they arrive (:mod:`.session`, :mod:`.sources`)."""
+"""eoloc live: KLV streams as they arrive. :func:`run` drives a :class:`LiveSession` (demultiplex,
+decode, locate, refine) on a source (:mod:`.sources`) into sinks (:mod:`.sinks`)."""
+
+from typing import TYPE_CHECKING
+
+from ..util.lazy import lazy_attributes
+
+if TYPE_CHECKING:  # the same names as _WHERE, for type checkers and the API reference (read statically)
+    from .klvout import KlvOut
+    from .loop import RunResult, run
+    from .session import LiveSession
+    from .sinks import BaseSink, CotSink, NdjsonSink, Sink
+    from .update import PacketUpdate
+
+_WHERE = {"run": "loop", "RunResult": "loop", "LiveSession": "session", "Sink": "sinks", "BaseSink": "sinks",
+          "NdjsonSink": "sinks", "CotSink": "sinks", "KlvOut": "klvout", "PacketUpdate": "update"}
+
+__getattr__ = lazy_attributes(__name__, _WHERE)
+
+__all__ = ["BaseSink", "CotSink", "KlvOut", "LiveSession", "NdjsonSink", "PacketUpdate", "RunResult", "Sink", "run"]

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import InputError
+from .sinks import BaseSink
 from .update import PacketUpdate
 
 TS_PACKET = 188
@@ -37,9 +38,13 @@ def first_located(update: PacketUpdate) -> dict | None:
     return min(ok, key=lambda r: str(r.get("target_id"))) if ok else None
 
 
-class KlvOut:
+class KlvOut(BaseSink):
     """Collects, per datagram, what the session decoded and located (:meth:`mark`), then sends the
-    datagram on rewritten (:meth:`raw_datagram`, :meth:`transport`)."""
+    datagram on rewritten (:meth:`raw_datagram`, :meth:`transport`). Given to the session
+    (``LiveSession(klv_out=)``), which rewrites as it demultiplexes, and to :func:`eoloc.live.run`
+    as a sink (closed and counted with the others)."""
+
+    name = "klv-out"
 
     def __init__(self, destination: str) -> None:
         from urllib.parse import urlparse
@@ -146,5 +151,5 @@ class KlvOut:
             self.sender.close()
 
     def summary(self) -> dict:
-        return {"to": self.destination, **self.counts,
-                **({"errors": self.sender.errors} if self.sender is not None else {})}
+        return {"klv_out": {"to": self.destination, **self.counts,
+                            **({"errors": self.sender.errors} if self.sender is not None else {})}}

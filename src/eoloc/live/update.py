@@ -51,6 +51,7 @@ class PacketUpdate:
 
     time_utc: str | None = None  # the time stamp as ISO 8601 UTC
     estimates: list[dict] = field(default_factory=list)  # refined targets (GeoJSON), see live.refine
+    _features: list[dict] | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def key(self) -> str:
@@ -63,7 +64,13 @@ class PacketUpdate:
         """GeoJSON features (RFC 7946: lon, lat, h): the aircraft, the footprint and the frame
         centre when known, and every target (a failed one with a null geometry); each with
         ``what``, ``stream``, ``packet`` and ``time_utc`` properties; then the targets refined over
-        the packets so far (``what`` "estimate", :mod:`eoloc.live.refine`)."""
+        the packets so far (``what`` "estimate", :mod:`eoloc.live.refine`). Made once (every sink
+        reads the same list: do not change it)."""
+        if self._features is None:
+            self._features = self._make_features()
+        return self._features
+
+    def _make_features(self) -> list[dict]:
         common = {"stream": self.stream, "packet": self.index, "time_utc": self.time_utc}
         out = []
         p = self.platform
