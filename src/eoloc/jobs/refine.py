@@ -386,7 +386,8 @@ def write_refined_ts(video, dest: Path, meta, ref: Refinement, track: TelemetryT
     from ..io.klv import read_klv
     from ..io.klv.encode import replace_items
     from ..io.klv.mux import rewrite_klv_in_ts
-    from ..io.klv.tables import FULL_CORNER_TAGS, OFFSET_CORNER_TAGS, TAGS
+    from ..io.klv.st0601 import Tag
+    from ..io.klv.tables import FULL_CORNER_TAGS, OFFSET_CORNER_TAGS
     from ..refine.correct import fold_installation, refined_poses
     from ..terrain.geoid import default_geoid
 
@@ -411,19 +412,23 @@ def write_refined_ts(video, dest: Path, meta, ref: Refinement, track: TelemetryT
             continue
         v: dict[int, object] = {}
         if good[i]:
-            v |= {TAGS["lat"]: lat[i], TAGS["lon"]: lon[i], TAGS["alt_msl"]: h[i] - n_sensor[i], TAGS["alt_hae"]: h[i],
-                  TAGS["heading"]: float(pose.yaw_deg[i]) % 360.0, TAGS["pitch"]: float(pose.pitch_deg[i]),
-                  TAGS["roll"]: float(pose.roll_deg[i]), TAGS["pitch_full"]: float(pose.pitch_deg[i]),
-                  TAGS["roll_full"]: float(pose.roll_deg[i]), TAGS["rel_az"]: float(gimbal[0][i]) % 360.0,
-                  TAGS["rel_el"]: (float(gimbal[1][i]) + 180.0) % 360.0 - 180.0,
-                  TAGS["rel_roll"]: float(gimbal[2][i]) % 360.0}
+            v |= {Tag.SENSOR_LATITUDE: lat[i], Tag.SENSOR_LONGITUDE: lon[i],
+                  Tag.SENSOR_TRUE_ALTITUDE: h[i] - n_sensor[i], Tag.SENSOR_ELLIPSOID_HEIGHT: h[i],
+                  Tag.PLATFORM_HEADING_ANGLE: float(pose.yaw_deg[i]) % 360.0,
+                  Tag.PLATFORM_PITCH_ANGLE: float(pose.pitch_deg[i]), Tag.PLATFORM_ROLL_ANGLE: float(pose.roll_deg[i]),
+                  Tag.PLATFORM_PITCH_ANGLE_FULL: float(pose.pitch_deg[i]),
+                  Tag.PLATFORM_ROLL_ANGLE_FULL: float(pose.roll_deg[i]),
+                  Tag.SENSOR_RELATIVE_AZIMUTH_ANGLE: float(gimbal[0][i]) % 360.0,
+                  Tag.SENSOR_RELATIVE_ELEVATION_ANGLE: (float(gimbal[1][i]) + 180.0) % 360.0 - 180.0,
+                  Tag.SENSOR_RELATIVE_ROLL_ANGLE: float(gimbal[2][i]) % 360.0}
         else:  # ST 0601's error indicator: this packet has no position a reader could trust
-            v |= {TAGS["lat"]: SpecialValue.RESERVED, TAGS["lon"]: SpecialValue.RESERVED}
+            v |= {Tag.SENSOR_LATITUDE: SpecialValue.RESERVED, Tag.SENSOR_LONGITUDE: SpecialValue.RESERVED}
         if fc_ok[i]:
-            v |= {TAGS["fc_lat"]: float(fc.lat_deg[i]), TAGS["fc_lon"]: float(fc.lon_deg[i]),
-                  TAGS["fc_el_msl"]: float(fc.h_m[i] - n_fc[i]), TAGS["fc_hae"]: float(fc.h_m[i])}
+            v |= {Tag.FRAME_CENTER_LATITUDE: float(fc.lat_deg[i]), Tag.FRAME_CENTER_LONGITUDE: float(fc.lon_deg[i]),
+                  Tag.FRAME_CENTER_ELEVATION: float(fc.h_m[i] - n_fc[i]),
+                  Tag.FRAME_CENTER_HEIGHT_ABOVE_ELLIPSOID: float(fc.h_m[i])}
         else:
-            v |= {TAGS["fc_lat"]: off, TAGS["fc_lon"]: off}
+            v |= {Tag.FRAME_CENTER_LATITUDE: off, Tag.FRAME_CENTER_LONGITUDE: off}
         for c in range(4):
             both = fc_ok[i] and good[i] and bool(co.ok[i, c])
             d_lat, d_lon = (float(co.lat_deg[i, c] - fc.lat_deg[i]), float(co.lon_deg[i, c] - fc.lon_deg[i])) \

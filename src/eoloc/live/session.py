@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..io.klv.st0601 import Tag
 from .faults import FaultLog
 from .update import PacketLocator, PacketUpdate
 
@@ -197,7 +198,7 @@ class LiveSession:
                 self.recent.popitem(last=False)
             c.packets += 1
             self.streams[pkt.stream] = self.streams.get(pkt.stream, 0) + 1
-            t = pkt.fields.get(2)
+            t = pkt.fields.get(Tag.PRECISION_TIME_STAMP)
             t_s = t.timestamp() if hasattr(t, "timestamp") else None
             newest = self.newest_s.get(pkt.stream)
             late = False
@@ -218,7 +219,7 @@ class LiveSession:
             if self.refine is not None:
                 self.refine.update(u)
             if self.klv_out is not None:
-                self.klv_out.mark(pkt.raw, u, hae=78 in known.fields)
+                self.klv_out.mark(pkt.raw, u, hae=Tag.FRAME_CENTER_HEIGHT_ABOVE_ELLIPSOID in known.fields)
             c.detections += len(u.fixes)
             c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")
             updates.append(u)

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..io.export import STATUS_NAMES, fix_records, utc_times, with_utc
+from ..io.klv.st0601 import Tag
 from ..kernels.backend import load_compiled
 from ..result import Status
 from ..rules import AtHeight
@@ -131,12 +132,12 @@ class PacketLocator:
         from ..ground.frame import CORNERS
         from ..io.klv import vmti_detections
         from ..io.klv.reader import KLVStream
-        from ..io.klv.tables import packet_view
+        from ..io.klv.tables import packet_view, platform_name
 
         known = known or packet
         f = known.fields
         c = packet_view(f)
-        name = f.get(10) or f.get(4) or None
+        name = platform_name(f)
         platform = None
         if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
             platform = {"name": name, "lat_deg": c["lat_deg"], "lon_deg": c["lon_deg"], "h_m": c["h_m"],
@@ -162,8 +163,9 @@ class PacketLocator:
 
                 k = np.array([e[:3] for e in ends[1:]])
                 footprint = polygon_geometry(k[:, 1], k[:, 0], k[:, 2])
-            look = {"hfov_deg": _finite(hfov), "vfov_deg": _finite(vfov), "sensor": f.get(11) or None,
-                    "range_m": None, "azimuth_deg": None, "elevation_deg": None}
+            look = {"hfov_deg": _finite(hfov), "vfov_deg": _finite(vfov),
+                    "sensor": f.get(Tag.IMAGE_SOURCE_SENSOR) or None, "range_m": None, "azimuth_deg": None,
+                "elevation_deg": None}
             if centre is not None:
                 az, el = look_angles(platform["lat_deg"], platform["lon_deg"], platform["h_m"], *centre)
                 look |= {"azimuth_deg": az, "elevation_deg": el, "range_m": ends[0][3]}
@@ -240,6 +242,7 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     from ..ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
     from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.reader import KLVStream
+    from ..io.klv.tables import platform_name
     from ..jobs.klvframes import locate_vmti
     from ..rules import OnDEM
 
@@ -248,7 +251,7 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     tel = klv_telemetry(KLVStream(source, "klv", [known]), report_on_change=False)
     c = {k: v[0] for k, v in tel.columns.items()}
     f = known.fields
-    name = f.get(10) or f.get(4) or None
+    name = platform_name(f)
     platform = None
     if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
         platform = {"name": name, "lat_deg": float(c["lat_deg"]), "lon_deg": float(c["lon_deg"]),
@@ -270,7 +273,8 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
             k = geom.corners
             footprint = polygon_geometry(k.lon_deg[0], k.lat_deg[0], k.h_m[0])
         look = {"hfov_deg": _finite(c["hfov_deg"]), "vfov_deg": _finite(c["vfov_deg"]),
-                "sensor": f.get(11) or None, "range_m": None, "azimuth_deg": None, "elevation_deg": None}
+                "sensor": f.get(Tag.IMAGE_SOURCE_SENSOR) or None, "range_m": None, "azimuth_deg": None,
+                "elevation_deg": None}
         if centre is not None:
             n, e, d = (float(v) for v in geodetic_to_ned(*centre, platform["lat_deg"], platform["lon_deg"],
                                                           platform["h_m"]))

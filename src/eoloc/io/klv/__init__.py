@@ -12,14 +12,14 @@ _WHERE = {  # name -> submodule: loaded on first use (the CLI imports .conventio
     "UAS_KEY": "reader", "KLVIssue": "reader", "KLVPacket": "reader", "KLVStream": "reader",
     "StreamNote": "reader", "decode_klv_bytes": "reader", "read_klv": "reader",
     "KLVColumns": "columnar", "decode_klv_columns": "columnar", "read_klv_columns": "columnar",
-    "TAGS": "tables", "klv_telemetry": "tables", "vmti_detections": "tables",
+    "Tag": "st0601", "VIEW": "tables", "klv_telemetry": "tables", "vmti_detections": "tables",
 }
 
 
 __getattr__ = lazy_attributes(__name__, _WHERE)
 
 
-__all__ = ["EG0104_KEY", "TAGS", "UAS_KEY", "KLVColumns", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote",
+__all__ = ["EG0104_KEY", "UAS_KEY", "VIEW", "KLVColumns", "KLVIssue", "KLVPacket", "KLVStream", "StreamNote", "Tag",
            "build_uas_packet", "decode_klv_bytes", "decode_klv_columns", "encode_eg0104", "encode_uas_packet",
            "encode_vmti", "frame_uas_packet", "klv_telemetry", "read_klv", "read_klv_columns", "uas_items",
            "vmti_detections", "with_target_location"]

@@ -26,14 +26,29 @@ from ..table import Issue, Table
 from .columnar import KLVColumns, concat_columns, empty_chunk
 from .localset import num
 from .reader import KLVStream
+from .st0601 import Tag
 
-# ST 0601 tags eoloc reads (name -> tag); see klv_telemetry for how they combine
-TAGS = {
-    "time": 2, "heading": 5, "pitch": 6, "roll": 7, "lat": 13, "lon": 14, "alt_msl": 15, "hfov": 16, "vfov": 17,
-    "rel_az": 18, "rel_el": 19, "rel_roll": 20, "slant_range": 21, "fc_lat": 23, "fc_lon": 24, "fc_el_msl": 25,
-    "target_lat": 40, "target_lon": 41, "target_el": 42, "target_ce90": 45, "target_le90": 46, "flags": 47,
-    "vmti": 74, "alt_hae": 75, "fc_hae": 78, "pitch_full": 90, "roll_full": 91,
+# The packet's pose and view by column name, from the ST 0601 items: the first item of each tuple
+# that the packet state has. One mapping for the batch (whole columns, _stream_columns) and the live
+# path (one packet, packet_view).
+VIEW: dict[str, tuple[Tag, ...]] = {
+    "lat_deg": (Tag.SENSOR_LATITUDE,), "lon_deg": (Tag.SENSOR_LONGITUDE,), "yaw_deg": (Tag.PLATFORM_HEADING_ANGLE,),
+    "pitch_deg": (Tag.PLATFORM_PITCH_ANGLE_FULL, Tag.PLATFORM_PITCH_ANGLE),
+    "roll_deg": (Tag.PLATFORM_ROLL_ANGLE_FULL, Tag.PLATFORM_ROLL_ANGLE),
+    "gimbal1_deg": (Tag.SENSOR_RELATIVE_AZIMUTH_ANGLE,), "gimbal2_deg": (Tag.SENSOR_RELATIVE_ELEVATION_ANGLE,),
+    "sensor_roll_deg": (Tag.SENSOR_RELATIVE_ROLL_ANGLE,), "hfov_deg": (Tag.SENSOR_HORIZONTAL_FIELD_OF_VIEW,),
+    "vfov_deg": (Tag.SENSOR_VERTICAL_FIELD_OF_VIEW,), "fc_lat_deg": (Tag.FRAME_CENTER_LATITUDE,),
+    "fc_lon_deg": (Tag.FRAME_CENTER_LONGITUDE,),
 }
+# Heights: the ellipsoidal item, else the MSL item plus the geoid's undulation at the point (its columns).
+HEIGHTS: dict[str, tuple[Tag, Tag, str, str]] = {
+    "h_m": (Tag.SENSOR_ELLIPSOID_HEIGHT, Tag.SENSOR_TRUE_ALTITUDE, "lat_deg", "lon_deg"),
+    "fc_h_m": (Tag.FRAME_CENTER_HEIGHT_ABOVE_ELLIPSOID, Tag.FRAME_CENTER_ELEVATION, "fc_lat_deg", "fc_lon_deg"),
+}
+READ_TAGS = frozenset({*(t for tags in VIEW.values() for t in tags), *(h[i] for h in HEIGHTS.values() for i in (0, 1)),
+                       Tag.SLANT_RANGE, Tag.TARGET_LOCATION_LATITUDE, Tag.TARGET_LOCATION_LONGITUDE,
+                       Tag.TARGET_LOCATION_ELEVATION, Tag.TARGET_ERROR_ESTIMATE_CE90, Tag.TARGET_ERROR_ESTIMATE_LE90,
+                       Tag.GENERIC_FLAG_DATA})  # the items of the telemetry table besides time and the corners
 OFFSET_CORNER_TAGS = tuple(range(26, 34))  # lat1, lon1, ..., lat4, lon4 as offsets from the frame centre
 FULL_CORNER_TAGS = tuple(range(82, 90))  # lat1, lon1, ..., lat4, lon4
 SLANT_RANGE_MEASURED = 1 << 4  # tag 47 bit: slant range measured (laser) rather than computed
@@ -143,43 +158,47 @@ def _stream_columns(cols: KLVColumns, rows: np.ndarray, geoid, report_on_change:
         return np.maximum.accumulate(cols.has(tag)[rows]) if n else np.zeros(0, bool)
 
     fill = fill_forward if report_on_change else (lambda c: c)
-    v = {tag: fill(cols.col(tag)[rows])
-         for tag in (*set(TAGS.values()) - {2, 74}, *OFFSET_CORNER_TAGS, *FULL_CORNER_TAGS)}
-
-    def prefer(a: int, b: int) -> np.ndarray:
-        """Tag a where the packet state has it, else tag b."""
-        return np.where(np.isfinite(v[a]), v[a], v[b])
-
-    lat, lon = v[13], v[14]
-    n_sensor = geoid.undulation(lat, lon) if n else np.zeros(0)
-    h = np.where(np.isfinite(v[75]), v[75], v[15] + n_sensor)
-    fc_lat, fc_lon = v[23], v[24]
-    n_fc = geoid.undulation(fc_lat, fc_lon) if n else np.zeros(0)
-    fc_h = np.where(np.isfinite(v[78]), v[78], v[25] + n_fc)
-    # tag 42's datum follows the frame-centre height in use (ST 0601.19 §8.42.1): HAE once 78 is sent
-    target_hae = seen(78)
-    target_h = np.where(target_hae, v[42], v[42] + geoid.undulation(v[40], v[41])) if n else v[42]
-    flags = v[47]
+    v = {tag: fill(cols.col(tag)[rows]) for tag in (*READ_TAGS, *OFFSET_CORNER_TAGS, *FULL_CORNER_TAGS)}
+    view: dict[str, np.ndarray] = {}
+    for name, tags in VIEW.items():
+        x = v[tags[0]]
+        for t in tags[1:]:
+            x = np.where(np.isfinite(x), x, v[t])
+        view[name] = x
+    for name, (hae, msl, at_lat, at_lon) in HEIGHTS.items():
+        undulation = geoid.undulation(view[at_lat], view[at_lon]) if n else np.zeros(0)
+        view[name] = np.where(np.isfinite(v[hae]), v[hae], v[msl] + undulation)
+    # the target's elevation datum follows the frame-centre height in use (ST 0601.19 §8.42.1): HAE once 78 is sent
+    target_hae = seen(Tag.FRAME_CENTER_HEIGHT_ABOVE_ELLIPSOID)
+    lat_t, lon_t, h_t = (v[t] for t in (Tag.TARGET_LOCATION_LATITUDE, Tag.TARGET_LOCATION_LONGITUDE,
+                                        Tag.TARGET_LOCATION_ELEVATION))
+    target_h = np.where(target_hae, h_t, h_t + geoid.undulation(lat_t, lon_t)) if n else h_t
+    flags = v[Tag.GENERIC_FLAG_DATA]
     measured = np.where(np.isfinite(flags), (np.nan_to_num(flags).astype(np.int64) & SLANT_RANGE_MEASURED) > 0,
                         np.nan)
     out: dict[str, np.ndarray] = {
         "stream": cols.stream[rows].astype(str),
         "time_s": cols.time_s[rows], "frame": cols.index[rows].astype(np.float64), "pts_s": cols.pts_s[rows],
-        "lat_deg": lat, "lon_deg": lon, "h_m": h, "h_msl_m": v[15],
-        "yaw_deg": v[5], "pitch_deg": prefer(90, 6), "roll_deg": prefer(91, 7),
-        "gimbal1_deg": v[18], "gimbal2_deg": v[19], "sensor_roll_deg": v[20],
-        "range_m": v[21], "range_measured": measured.astype(np.float64), "hfov_deg": v[16], "vfov_deg": v[17],
-        "fc_lat_deg": fc_lat, "fc_lon_deg": fc_lon, "fc_h_m": fc_h, "fc_h_msl_m": v[25],
-        "target_lat_deg": v[40], "target_lon_deg": v[41], "target_h_m": target_h,
-        "target_elevation_hae": target_hae.astype(np.float64),
-        "target_ce90_m": v[45], "target_le90_m": v[46],
+        **{k: view[k] for k in ("lat_deg", "lon_deg", "h_m")}, "h_msl_m": v[Tag.SENSOR_TRUE_ALTITUDE],
+        **{k: view[k] for k in ("yaw_deg", "pitch_deg", "roll_deg", "gimbal1_deg", "gimbal2_deg", "sensor_roll_deg")},
+        "range_m": v[Tag.SLANT_RANGE], "range_measured": measured.astype(np.float64),
+        **{k: view[k] for k in ("hfov_deg", "vfov_deg", "fc_lat_deg", "fc_lon_deg", "fc_h_m")},
+        "fc_h_msl_m": v[Tag.FRAME_CENTER_ELEVATION], "target_lat_deg": lat_t, "target_lon_deg": lon_t,
+        "target_h_m": target_h, "target_elevation_hae": target_hae.astype(np.float64),
+        "target_ce90_m": v[Tag.TARGET_ERROR_ESTIMATE_CE90], "target_le90_m": v[Tag.TARGET_ERROR_ESTIMATE_LE90],
     }
+    fc_lat, fc_lon = view["fc_lat_deg"], view["fc_lon_deg"]
     for k in range(4):
         full_lat, full_lon = v[FULL_CORNER_TAGS[2 * k]], v[FULL_CORNER_TAGS[2 * k + 1]]
         off_lat, off_lon = v[OFFSET_CORNER_TAGS[2 * k]], v[OFFSET_CORNER_TAGS[2 * k + 1]]
         out[f"corner{k + 1}_lat_deg"] = np.where(np.isfinite(full_lat), full_lat, fc_lat + off_lat)
         out[f"corner{k + 1}_lon_deg"] = np.where(np.isfinite(full_lon), full_lon, fc_lon + off_lon)
     return out
+
+
+def platform_name(fields: dict[int, Any]) -> str | None:
+    """The platform's name: its designation (tag 10), else its tail number (tag 4), else None."""
+    return fields.get(Tag.PLATFORM_DESIGNATION) or fields.get(Tag.PLATFORM_TAIL_NUMBER) or None
 
 
 def packet_view(fields: dict[int, Any], geoid=None) -> dict[str, float]:
@@ -191,23 +210,20 @@ def packet_view(fields: dict[int, Any], geoid=None) -> dict[str, float]:
     the live path's one packet at a time, without building a table."""
     from ...terrain.geoid import default_geoid
 
-    def val(tag: int) -> float:
-        return num(fields.get(tag))
-
-    def prefer(a: int, b: int) -> float:
-        x = val(a)
-        return x if math.isfinite(x) else val(b)
-
-    lat, lon, fc_lat, fc_lon = val(13), val(14), val(23), val(24)
-    h, fc_h = val(75), val(78)
-    if not (math.isfinite(h) and math.isfinite(fc_h)):  # MSL: one geoid look-up for both points
-        n_sensor, n_fc = (geoid or default_geoid()).undulation(np.array([lat, fc_lat]), np.array([lon, fc_lon]))
-        h = h if math.isfinite(h) else val(15) + float(n_sensor)
-        fc_h = fc_h if math.isfinite(fc_h) else val(25) + float(n_fc)
-    return {"time_s": packet_time_s(fields), "lat_deg": lat, "lon_deg": lon, "h_m": h, "yaw_deg": val(5),
-            "pitch_deg": prefer(90, 6), "roll_deg": prefer(91, 7), "gimbal1_deg": val(18), "gimbal2_deg": val(19),
-            "sensor_roll_deg": val(20), "hfov_deg": val(16), "vfov_deg": val(17), "fc_lat_deg": fc_lat,
-            "fc_lon_deg": fc_lon, "fc_h_m": fc_h}
+    out = {"time_s": packet_time_s(fields)}
+    for name, tags in VIEW.items():
+        x = num(fields.get(tags[0]))
+        for t in tags[1:]:
+            x = x if math.isfinite(x) else num(fields.get(t))
+        out[name] = x
+    heights = {name: num(fields.get(hae)) for name, (hae, *_) in HEIGHTS.items()}
+    if not all(math.isfinite(h) for h in heights.values()):  # MSL: one geoid look-up for both points
+        at = [(out[la], out[lo]) for _, _, la, lo in HEIGHTS.values()]
+        undulation = (geoid or default_geoid()).undulation(np.array([a[0] for a in at]), np.array([a[1] for a in at]))
+        for (name, (_, msl, _, _)), n in zip(HEIGHTS.items(), undulation, strict=True):
+            if not math.isfinite(heights[name]):
+                heights[name] = num(fields.get(msl)) + float(n)
+    return out | heights
 
 
 # -- ST 0903 VMTI -------------------------------------------------------------------------------
