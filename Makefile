@@ -84,9 +84,9 @@ tak: $(TAK_STAMP)
 test: $(STAMP) lint browser tak streams geoconvert ffmpeg
 	$(BIN)/python -m pytest -n 2 -q
 
-# the inner loop: no browser, no fresh virtual environments (markers in pyproject.toml); the rest as in test
-test-fast: $(STAMP) lint tak streams geoconvert ffmpeg
-	$(BIN)/python -m pytest -n 2 -q -m "not slow and not browser"
+# the inner loop: no browser, no TAK server, no fresh virtual environments (markers: docs/tests.md)
+test-fast: $(STAMP) lint streams geoconvert ffmpeg
+	$(BIN)/python -m pytest -n 2 -q -m "not slow and not browser and not tak"
 
 # the documentation site (MkDocs, mkdocs.yml): site/index.html
 docs: $(STAMP)

@@ -4,7 +4,7 @@
 
 For each path that emits an uncertainty — covariance per fix (height and range rules), the CoT
 ce/le a receiver parses, RLS static over a pass, Kalman tracks of moving targets, Monte Carlo,
-triangulation — n simulated targets whose truth is made without eoloc (tests/coverage_lib.py: the
+triangulation — n simulated targets whose truth is made without eoloc (tests/helpers/coverage_lib.py: the
 oracle's geometry, pyproj, scipy) and whose telemetry carries biases, noise and Gauss–Markov errors
 drawn from the budget; the share of truths inside the predicted 50 % and 90 % circles and 90 %
 vertical interval, with the binomial 99 % band. Targets flagged non-linear or INCONSISTENT are
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "helpers"))
 
 import coverage_lib as C
 

@@ -2,7 +2,7 @@
 found, against OpenCV's plain frame differencing on the same frames.
 
 1. Throughput, 1280 x 720: a flight over flat textured ground with 20 vehicles (5-20 m/s) rendered
-   by OpenCV (tests/moving_scene.py; ~0.5 m ground pixels). eoloc: every frame warped onto its
+   by OpenCV (tests/helpers/moving_scene.py; ~0.5 m ground pixels). eoloc: every frame warped onto its
    references through the poses, the residual measured, changes -> blobs -> located on the
    ground -> Kalman tracks (detection + tracking + location). The peer: consecutive frames
    differenced as they are (cv2.absdiff, threshold, closing, connected components): what a
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 
 
@@ -91,6 +91,7 @@ def plain_differencing(images, threshold: float = 40.0) -> dict[int, np.ndarray]
 
 def throughput(n_frames: int) -> list[str]:
     import moving_scene as ms
+
     from eoloc import AzElGimbal, Camera, Pose, SensorModel
     from eoloc.jobs.detect import detect_movers
     from eoloc.rules import AtHeight

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).parents[1] / "tests" / "helpers"))
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests" / "integration"))
 
 from _common import HEADER, machine, row
@@ -239,10 +239,11 @@ def serve(seconds: float, clients: int) -> list[str]:
 
 
 def klv(n: int) -> list[str]:
+    from klvfuzz import mutated_packets
+
     import eoloc
     from eoloc.io.klv.reader import decode_klv_bytes, split_klv
     from eoloc.live.session import LiveSession
-    from hostile.klvfuzz import mutated_packets
 
     flight = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "flight.klv"
     good = [raw for raw, _ in split_klv(flight.read_bytes()) if decode_klv_bytes(raw).packets]
@@ -264,7 +265,7 @@ def klv(n: int) -> list[str]:
             session.feed(p)
         except Exception:
             live_errors += 1
-    return [row(f"{n:,} mutated ST 0601 packets with valid checksums (tests/hostile/klvfuzz.py) through the "
+    return [row(f"{n:,} mutated ST 0601 packets with valid checksums (tests/helpers/klvfuzz.py) through the "
                 "tolerant decoder", f"{kept:,} kept, exceptions {errors}, {decode_s / n * 1e6:.0f} µs a packet", "",
                 None),
             row(f"the first {m:,} through a live session (located, faults counted)",
@@ -273,8 +274,9 @@ def klv(n: int) -> list[str]:
 
 
 def csv_files(n: int) -> list[str]:
+    from csvfuzz import fuzzed_csv
+
     from eoloc.io.telemetry import read_detections
-    from hostile.csvfuzz import fuzzed_csv
 
     lost = extra = errors = lines = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -297,9 +299,8 @@ def csv_files(n: int) -> list[str]:
 
 def http(n: int) -> list[str]:
     import httpx
-    from test_hostile_input import MOUNTAIN, _hostile_bodies
-
     from served import eoloc_serve, stop_and_log
+    from test_hostile_input import MOUNTAIN, _hostile_bodies
 
     rng = np.random.default_rng(1)
     codes: dict[int, int] = {}

@@ -1,6 +1,6 @@
 """Refining a pass from its own pixels (`eoloc refine`, eoloc.refine): time and what it recovers.
 
-A 60 s orbit at 30 frames/s, 1280 x 720 H.264, over SRTM's Boulder foothills (tests/terrain_scene.py:
+A 60 s orbit at 30 frames/s, 1280 x 720 H.264, over SRTM's Boulder foothills (tests/helpers/terrain_scene.py:
 rendered without eoloc; a keyframe rendered every second at 640 x 360 and enlarged, the frames
 between repeating it), its telemetry with a turret mounted (0.3, -0.6, 0.4) deg off, the heading
 reading 1.2 deg high and the clock 0.3 s ahead. Timed: the whole job (decode, predicted overlap,
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 
 from _common import HEADER, row
 
@@ -32,7 +32,6 @@ FPS = 30
 def make_pass(folder: Path, seconds: float):
     import av
     import cv2
-
     import terrain_scene as ts
 
     err = ts.Errors(**ERRORS)

@@ -1,5 +1,5 @@
 """The hostile-input oracle at scale: every answer of every stop rule on both backends, checked
-against ``tests/oracle_lib.py`` (scipy Rotation + pyproj + pymap3d, no eoloc code).
+against ``tests/helpers/oracle_lib.py`` (scipy Rotation + pyproj + pymap3d, no eoloc code).
 
     python bench/oracle.py [-n 1000000] [--m4 100000] [--multiview 100000] [--seed 0]
 
@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "helpers"))
+
+import oracle_lib as O
 
 import eoloc
-import oracle_lib as O
 from eoloc.rules.multiview import triangulate
 
 TILE = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "longs_peak_srtmgl3.tif"

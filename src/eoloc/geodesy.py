@@ -3,7 +3,7 @@
 Units: degrees at the API (``degrees=False`` for radians), metres everywhere; heights are
 ellipsoidal (h above WGS-84). ECEF is WGS-84 Earth-centred Earth-fixed.
 Accuracy: geodetic <-> ECEF agrees with PROJ to < 1 micrometre from -10 km to +100 km height
-at every latitude including the poles (tests/test_geodesy.py).
+at every latitude including the poles (tests/unit/test_geodesy.py).
 """
 
 from __future__ import annotations

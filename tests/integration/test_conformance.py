@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from where import ROOT, TESTS
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = TESTS / "data"
 KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
 
 
@@ -306,7 +307,7 @@ def test_49_7_every_kml_eoloc_writes_is_valid_ogc_kml_2_2(tmp_path):
         assert not errors, (path.name, errors[:3])
 
 
-SHARED_TRUCK = Path(__file__).resolve().parents[3] / "shared" / "data" / "klv" / "esri_fmv_sample" / "Truck.klv"
+SHARED_TRUCK = ROOT.parent / "shared" / "data" / "klv" / "esri_fmv_sample" / "Truck.klv"
 TARGET_LSB = {40: 180 / (2**32 - 2), 41: 360 / (2**32 - 2), 42: 19_900 / 65_535, 45: 4095 / 65_535,
               46: 4095 / 65_535}  # one least significant bit of each target item (ST 0601's mappings)
 KLVDATA_NAMES = {40: "TargetLocationLatitude", 41: "TargetLocationLongitude", 42: "TargetLocationElevation",

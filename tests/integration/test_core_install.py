@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from where import ROOT
 
 import eoloc
 
-ROOT = Path(__file__).resolve().parents[2]
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 OPTIONAL = ("fastapi", "uvicorn", "dask", "distributed", "av", "cv2", "folium", "matplotlib", "sklearn", "takproto",
             "mercantile", "onnxruntime")

@@ -1,6 +1,6 @@
 """Issue 47: every uncertainty eoloc gives is checked by coverage against a truth made without it.
 
-The coverage suite (tests/coverage_lib.py): ~10^3 simulated targets per path, their telemetry
+The coverage suite (tests/helpers/coverage_lib.py): ~10^3 simulated targets per path, their telemetry
 errors drawn from a budget with biases, noise and Gauss–Markov errors; the share of truths inside
 each path's predicted 50 % and 90 % horizontal circles and 90 % vertical interval must fall in the
 binomial 99 % band of 50 % / 90 %. Seeded: the same numbers every run. `python bench/bench_coverage.py
@@ -20,14 +20,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import coverage_lib as C
 import numpy as np
+import oracle_lib as O
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import coverage_lib as C
 import eoloc
-import oracle_lib as O
 from eoloc.accuracy import ErrorBudget, ErrorSource, locate_with_covariance
 from eoloc.errors import InputError
 from eoloc.result import Status

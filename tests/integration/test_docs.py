@@ -14,10 +14,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from where import ROOT
 
 import eoloc
 
-ROOT = Path(__file__).resolve().parents[2]
 MKDOCS = Path(sys.executable).with_name("mkdocs")
 
 

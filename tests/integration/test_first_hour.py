@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from where import ROOT
 
 import eoloc
 
@@ -306,11 +307,11 @@ def test_50_5_a_repeated_dem_is_tiles_of_one_dem_in_serve_too(tmp_path):
     import numpy as np
     import rasterio
     from rasterio.windows import Window
+    from served import eoloc_serve
 
     from eoloc import OnDEM, Pose
     from eoloc.io.config import load_config
     from eoloc.terrain import open_dem
-    from served import eoloc_serve
 
     whole = MOUNTAIN / "longs_peak_srtmgl3.tif"
     with rasterio.open(whole) as src:
@@ -342,10 +343,9 @@ def test_50_3_the_api_docs_render_their_operations_offline(tmp_path):
     """/docs (Swagger UI) in headless Chromium with no network beyond loopback: every
     operation of the API is drawn, every file the pages load comes from the eoloc server itself,
     and the browser logs no error."""
+    from browser import chromium
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
-
-    from browser import chromium
     from served import eoloc_serve
 
     operations = {("post", "/v1/locate"), ("post", "/v1/locate/arrow"), ("get", "/v1/health")}
@@ -383,7 +383,6 @@ def test_50_8_a_bad_request_gets_one_problem_per_mistake_with_its_path():
     pose), invalid JSON is the body with the line and column, a batch's bad pixel its full path;
     two mistakes, two problems; no model name of eoloc's in any of them."""
     import httpx
-
     from served import eoloc_serve
 
     pose = {"lat_deg": 40.25, "lon_deg": -105.56, "h_m": 6000.0, "yaw_deg": 0.0, "pitch_deg": 0.0, "roll_deg": 0.0,
@@ -528,10 +527,9 @@ def _screen(page: Path, wait_tiles: bool):
     import io
 
     import numpy as np
+    from browser import chromium
     from PIL import Image
     from selenium.webdriver.support.ui import WebDriverWait
-
-    from browser import chromium
 
     d = chromium(offline=True)
     d.set_window_size(1200, 900)
@@ -735,7 +733,7 @@ def _walkthrough_blocks() -> list[tuple[str, str]]:
     """The persona walk-throughs of docs/tutorials.md: (persona, shell block) in order."""
     import re
 
-    text = (Path(__file__).resolve().parents[2] / "docs" / "tutorials.md").read_text(encoding="utf-8")
+    text = (ROOT / "docs" / "tutorials.md").read_text(encoding="utf-8")
     start = text.index("## Four ways in")
     end = text.find("\n## ", start + 10)
     section = text[start:end if end >= 0 else len(text)]
@@ -758,7 +756,7 @@ def test_50_readme_walkthrough_runs_as_written(tmp_path):
     blocks = _walkthrough_blocks()
     assert [b[0] for b in blocks] == ["Flight-test engineer", "FMV analyst", "Ground-station integrator",
                                       "Drone operator"]
-    root = Path(__file__).resolve().parents[2]
+    root = ROOT
     for name in ("src", "tests"):
         (tmp_path / name).symlink_to(root / name)
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
@@ -794,7 +792,7 @@ def test_50_1_nothing_a_user_reads_or_runs_points_outside_the_repository():
     and the docs leads to a file of the repository."""
     import re
 
-    root = Path(__file__).resolve().parents[2]
+    root = ROOT
     texts = [root / "README.md", root / "Makefile", *(root / "docs").glob("*.md"),
              *(root / "src").rglob("*.py"), *(root / "examples").glob("*.py"), *(root / "bench").glob("*.py"),
              *(root / "bench").glob("*.md")]

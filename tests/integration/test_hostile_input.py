@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from livecmd import free_udp_port, until_listening, wait_for_packets
 
 import eoloc
 from eoloc.cli import main
@@ -24,7 +25,6 @@ from eoloc.io.klv import build_uas_packet, decode_klv_bytes, klv_telemetry, uas_
 from eoloc.io.klv.localset import encode_items, parse_items
 from eoloc.io.klv.reader import split_klv
 from eoloc.rules import AtHeight
-from livecmd import free_udp_port, until_listening, wait_for_packets
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 FLIGHT = MOUNTAIN / "flight.klv"
@@ -318,12 +318,12 @@ def test_46_6_old_mac_line_ends_and_fields_over_128_kib_are_read(tmp_path):
 
 
 def test_46_6_fuzzed_csv_files_keep_every_good_line(tmp_path):
-    """400 seeded files with every line-end and size oddity (tests/hostile/csvfuzz.py): no exception,
+    """400 seeded files with every line-end and size oddity (tests/helpers/csvfuzz.py): no exception,
     every good record read with its values, every bad line reported, nothing invented."""
     import numpy as np
+    from csvfuzz import fuzzed_csv
 
     from eoloc.io.telemetry import read_detections
-    from hostile.csvfuzz import fuzzed_csv
 
     for seed in range(400):
         f = fuzzed_csv(seed)
@@ -371,7 +371,6 @@ def test_46_4_a_compressed_arrow_bomb_is_refused_before_it_is_decompressed(serve
     """A few KB of zstd declaring 10^8 rows (1.6 GB once decompressed): 413, and the server's memory
     does not move (before: 1.5 GB per request, kept)."""
     import httpx
-
     from served import rss_mb
 
     def post(body: bytes):
@@ -392,7 +391,6 @@ def test_46_4_a_compressed_arrow_bomb_is_refused_before_it_is_decompressed(serve
 
 def test_46_4_a_chunked_body_over_the_limit_is_413_without_a_traceback():
     import httpx
-
     from served import eoloc_serve
 
     def chunks():
@@ -485,7 +483,6 @@ def test_46_4_clients_that_never_read_their_answers_are_cut_and_their_memory_fre
     after the send time-out, the server goes on answering, and its memory stays far below what the
     unread answers would hold (before: every one held for as long as its client stayed connected)."""
     import httpx
-
     from served import rss_mb
 
     body = json.dumps({"pose": {**S13_POSE, "gimbal_deg": [45.0, -30.0]}, "stop": {"target_height_m": 100.0},
@@ -810,13 +807,14 @@ def test_46_3_a_flood_of_bad_datagrams_keeps_memory_bounded_and_every_good_packe
 
 def test_46_mutated_klv_never_raises_in_any_path_and_keeps_every_packet(tmp_path):
     """1 000 packets of the mountain flight with random item mutations and valid checksums
-    (tests/hostile/klvfuzz.py; `bench/bench_hostile.py klv` runs 10^5): `read_klv`, the tables, `eoloc klv`
+    (tests/helpers/klvfuzz.py; `bench/bench_hostile.py klv` runs 10^5): `read_klv`, the tables, `eoloc klv`
     and `eoloc batch` take them all without an exception, a live session the first 300; every packet
     is kept (its bad items left out with a note), and the good packets are located as before."""
+    from klvfuzz import mutated_packets
+
     from eoloc.io.klv import read_klv
     from eoloc.live.session import LiveSession
     from eoloc.terrain import open_dem
-    from hostile.klvfuzz import mutated_packets
 
     good = [p for p in _packets() if decode_klv_bytes(p).packets]
     bad = mutated_packets(good, 1_000, seed=46)
@@ -882,7 +880,6 @@ def test_46_hostile_http_bodies_get_4xx_never_5xx_and_no_traceback():
     the server answers a good request after them and its log has no traceback."""
     import httpx
     import numpy as np
-
     from served import eoloc_serve, stop_and_log
 
     rng = np.random.default_rng(46)
@@ -941,6 +938,7 @@ def test_46_5_the_live_map_shows_hostile_names_as_text(tmp_path):
     published to the live map (`eoloc live --map`'s server and page) and shown in headless Chromium:
     no script runs, on load or when every tooltip opens, and each tooltip reads the text sent."""
     from browser import chromium
+
     from eoloc.service.api import create_app
     from eoloc.service.livemap import LiveHub, MapServer
 

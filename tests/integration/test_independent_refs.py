@@ -13,12 +13,12 @@
 from __future__ import annotations
 
 import numpy as np
+import oracle_lib as O
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import eoloc
-import oracle_lib as O
 from eoloc.rules import AtRange
 
 ANGLE = st.floats(-179.0, 179.0)

@@ -1,7 +1,7 @@
 """Issue 48 (first part): drone photos located from their own EXIF/XMP (`eoloc photo`).
 
 The independent references: DJI's own laser-range target written in a real Zenmuse H20N photo;
-synthetic DJI photos whose XMP/EXIF the test writes (tests/dronephoto.py) from a camera pose and a
+synthetic DJI photos whose XMP/EXIF the test writes (tests/helpers/dronephoto.py) from a camera pose and a
 ground point chosen first, the pixel found by the oracle's projection (scipy, pyproj).
 """
 
@@ -17,19 +17,20 @@ import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
 
-import numpy as np
-import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 import coverage_lib as C
-import eoloc
+import numpy as np
 import oracle_lib as O
+import pytest
 from demtruth import TILE, first_crossing, tile_grid
 from dronephoto import write_photo
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from where import DATA
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "drone"
-H20N = DATA / "H20N__DJI_0006_R.JPG"
+import eoloc
+
+DRONE = DATA / "drone"
+H20N = DRONE / "H20N__DJI_0006_R.JPG"
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
 EOLOC = str(Path(sys.executable).parent / "eoloc")
 
@@ -189,6 +190,7 @@ def _vendor_case(vendor: str, rng, *, w=1280, h=960, resized=1, ir=False):
     """(tags, exif gps, make, model, extra writer kwargs, the camera the test expects, camera pose
     as written) of one synthetic photo per vendor's rules (each rule restated here, not eoloc's)."""
     from dronephoto import gps_as_written
+
     from eoloc.terrain.geoid import default_geoid  # the geoid grid is tested against its source elsewhere
 
     grid = tile_grid()
@@ -292,6 +294,7 @@ def test_52_a_refined_pose_goes_back_into_the_photos_own_xmp(tmp_path, case):
     photo (the sidecar as its XMP), the photo reads as the refined pose: attitude to 1e-6 deg,
     position to 1e-9 deg and 1 mm; a position kept in EXIF is left, and said."""
     import dronephoto as D
+
     from eoloc.io.photo import read_photo
     from eoloc.io.xmpsidecar import refined_sidecar
 
@@ -537,7 +540,6 @@ def test_48_the_http_api_locates_a_photo_as_eoloc_photo_does(tmp_path):
     wrong (a non-image, both grounds, a malformed pixel, an unknown DEM, covariance without a
     budget), never a traceback."""
     import httpx
-
     from served import eoloc_serve, stop_and_log
 
     rng = np.random.default_rng(4849)

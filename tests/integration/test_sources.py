@@ -15,21 +15,22 @@ import subprocess
 import sys
 from pathlib import Path
 
+import coverage_lib as C
 import numpy as np
+import oracle_lib as O
 import pandas as pd
 import pytest
 import srt
-
-import coverage_lib as C
-import eoloc
-import oracle_lib as O
 from demtruth import TILE, first_crossing, tile_grid
+from where import DATA
+
+import eoloc
 from eoloc.errors import EolocError
 from eoloc.io.sources import SOURCES, identify, read_source
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "drone"
-SRTS = sorted(p for p in (DATA / "srt").iterdir() if p.suffix.lower() == ".srt")
-LOGS = sorted((DATA / "logs").glob("*.csv"))
+DRONE = DATA / "drone"
+SRTS = sorted(p for p in (DRONE / "srt").iterdir() if p.suffix.lower() == ".srt")
+LOGS = sorted((DRONE / "logs").glob("*.csv"))
 EOLOC = str(Path(sys.executable).parent / "eoloc")
 
 # what the files cannot give, and the words their message must carry
@@ -43,15 +44,15 @@ def test_48_every_source_is_registered_and_told_apart_by_content(tmp_path):
     names = [s.name for s in SOURCES]
     assert len(names) == len(set(names)) and names[-1] == "csv"
     demo = Path(eoloc.__file__).parent / "data" / "demo"
-    cases = {"klv": demo / "mountain" / "flight.klv", "photos": DATA / "H20N__DJI_0006_R.JPG",
-             "dji-srt": DATA / "srt" / "p4_rtk.SRT", "airdata": LOGS[0], "csv": demo / "telemetry.csv"}
+    cases = {"klv": demo / "mountain" / "flight.klv", "photos": DRONE / "H20N__DJI_0006_R.JPG",
+             "dji-srt": DRONE / "srt" / "p4_rtk.SRT", "airdata": LOGS[0], "csv": demo / "telemetry.csv"}
     for name, path in cases.items():
         disguised = tmp_path / f"input-{name}.txt"  # the extension says nothing
         disguised.write_bytes(path.read_bytes())
         assert identify(disguised).name == name, name
     folder = tmp_path / "photos"
     folder.mkdir()
-    (folder / "a.bin").write_bytes((DATA / "H20N__DJI_0006_R.JPG").read_bytes())
+    (folder / "a.bin").write_bytes((DRONE / "H20N__DJI_0006_R.JPG").read_bytes())
     assert identify(folder).name == "photos"
 
 
@@ -104,7 +105,7 @@ def test_48_srt_values_as_the_file_writes_them(name, k, lat, lon, yaw, pitch, ro
     """Latitude/longitude in each format's order (GPS(lon, lat, sats); the Matrice 300's
     GPS(lat, lon, 0.0M); a file whose tuples only make sense the other way, read so and said so),
     the longtitude typo, and the gimbal's attitude (G.PRY as pitch, roll, yaw; gb_*)."""
-    data = read_source(DATA / "srt" / name)
+    data = read_source(DRONE / "srt" / name)
     c = data.telemetry.columns
     assert c["lat_deg"][k] == pytest.approx(lat, abs=1e-9) and c["lon_deg"][k] == pytest.approx(lon, abs=1e-9)
     if yaw is None:
@@ -121,10 +122,10 @@ def test_48_heights_rule_and_the_named_suspect_tag():
     elsewhere) and said to be the drone's own estimate."""
     from eoloc.terrain.geoid import default_geoid
 
-    p4 = read_source(DATA / "srt" / "p4_rtk.SRT")
+    p4 = read_source(DRONE / "srt" / "p4_rtk.SRT")
     assert np.isnan(p4.telemetry.columns["h_m"]).all()
     assert any("--dem" in i.message and "H (above the take-off point)" in i.message for i in p4.telemetry.issues)
-    air = read_source(DATA / "srt" / "air2s.srt")  # [altitude: 117.000000] on line 5
+    air = read_source(DRONE / "srt" / "air2s.srt")  # [altitude: 117.000000] on line 5
     c = air.telemetry.columns
     n = float(default_geoid().undulation(c["lat_deg"][0], c["lon_deg"][0]))
     assert c["h_m"][0] == pytest.approx(117.0 + n, abs=1e-6)
@@ -183,7 +184,7 @@ def _flight(n=8, seed=48):
 
 
 def _truth(grid, g0, poses):
-    """The oracle's first DEM crossing of each image centre's ray (tests/demtruth.py)."""
+    """The oracle's first DEM crossing of each image centre's ray (tests/helpers/demtruth.py)."""
     cam = O.Camera(W, H, F, F, CX, CY)
     return np.array([first_crossing(grid, cam, poses["lat"][k], poses["lon"][k], g0 + poses["rel"][k],
                                     poses["yaw"][k], poses["pitch"][k], poses["roll"][k], CX, CY)
@@ -284,15 +285,15 @@ def test_48_a_camera_under_the_ground_names_its_height_tag(tmp_path):
 def test_48_no_attitude_and_no_height_are_said_not_assumed(tmp_path):
     """A real SRT without attitude or absolute height (Mini 2 SE): `eoloc locate` says why no
     record is located (no nadir assumed, no height guessed) and shows no traceback."""
-    r, fixes = _locate(tmp_path, DATA / "srt" / "MICK_folsomake_DJI_0031-01.srt", "--target-height", 100)
+    r, fixes = _locate(tmp_path, DRONE / "srt" / "MICK_folsomake_DJI_0031-01.srt", "--target-height", 100)
     assert "no camera attitude" in r.stderr and "above the take-off point" in r.stderr
     assert fixes is None or (fixes["status"] != "OK").all()
 
 
 # -- a video's SRT completed by the flight log ------------------------------------------------------
 
-FOLSOM_SRT = DATA / "srt" / "MICK_folsomake_DJI_0031-01.srt"
-FOLSOM_LOG = DATA / "logs" / "Dec-22nd-2023-11-56AM-Flight-Airdata.csv"
+FOLSOM_SRT = DRONE / "srt" / "MICK_folsomake_DJI_0031-01.srt"
+FOLSOM_LOG = DRONE / "logs" / "Dec-22nd-2023-11-56AM-Flight-Airdata.csv"
 
 
 def test_48_real_srt_synced_with_its_flight_log():
@@ -330,7 +331,7 @@ def test_48_real_srt_synced_with_its_flight_log():
 def test_48_a_log_of_another_flight_is_refused(tmp_path):
     """The same clip against the log of another day's flight: no offset matches; the message names
     both files; `eoloc locate` shows no traceback."""
-    other = DATA / "logs" / "Jan-4th-2024-02-19PM-Flight-Airdata-first30s.csv"
+    other = DRONE / "logs" / "Jan-4th-2024-02-19PM-Flight-Airdata-first30s.csv"
     r, fixes = _locate(tmp_path, FOLSOM_SRT, "--flight-log", other, "--target-height", 100)
     assert r.returncode != 0 and "does not match the flight log" in r.stderr and other.name in r.stderr
     assert fixes is None

@@ -13,7 +13,7 @@ Two drivers of the same kernels, chosen once per session by :class:`PacketLocato
   (:func:`eoloc.io.klv.klv_telemetry`, :func:`eoloc.ground.frame.frame_geometry`,
   :func:`eoloc.jobs.klvframes.locate_vmti`) on a one-packet stream.
 
-Both give the same numbers (tests/test_live_fast.py holds them to each other and to the batch
+Both give the same numbers (tests/integration/live/test_live_fast.py holds them to each other and to the batch
 path over hostile packets: NaN angles, fields of view out of range, pixels outside the frame,
 rays above the horizon)."""
 

@@ -213,7 +213,7 @@ def clean_klv_payloads(data: bytes, *, max_pes_bytes: int = MAX_PES_BYTES
     unchanged once metadata has begun, every metadata PES whole (its declared length met) with the
     standard header and a PTS or none (not a DTS), no transport error flag on a metadata packet, no
     synchronous (0x15) metadata. Then :class:`KLVDemux` would give exactly this and no damage (the same
-    tables, read by the same code; ``tests/test_klv_columnar.py`` compares the two), at the cost
+    tables, read by the same code; ``tests/unit/io/klv/test_klv_columnar.py`` compares the two), at the cost
     of a few numpy passes instead of a Python object per transport packet."""
     import numpy as np
     from stanag4609.transport.demux import StreamKind

@@ -2,7 +2,7 @@
 
 The table below holds the ST 0601.19 items eoloc uses (time, platform and sensor pose, fields of
 view, frame centre and corners, target location, flags, heights) with the standard's mappings;
-``tests/test_klv_tolerant.py`` checks every entry against stanag4609's definition of the same tag
+``tests/unit/io/klv/test_klv_tolerant.py`` checks every entry against stanag4609's definition of the same tag
 and every decoded value against stanag4609's decoder. Items eoloc does not use are kept as their
 raw bytes. An item that cannot be decoded (wrong length, reserved value, bad text) is left out
 with a note; the rest of the packet is used. ST 0903 VMTI (tag 74) is decoded by

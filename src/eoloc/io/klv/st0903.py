@@ -4,7 +4,7 @@ Real encoders leave out items ST 0903.6 makes mandatory (the LS version, the num
 reported) and send the frame size only in some packets; stanag4609 (a validator) then refuses
 the whole set and every target in it is lost. This decoder keeps every target pack and every item
 that can be read, with a note for what could not (a truncated pack, an item of the wrong length).
-The tag table is ST 0903.6's (Tables 2 and 5); ``tests/test_klv_tolerant.py`` decodes sets built
+The tag table is ST 0903.6's (Tables 2 and 5); ``tests/unit/io/klv/test_klv_tolerant.py`` decodes sets built
 by stanag4609's encoder and compares every value.
 """
 
