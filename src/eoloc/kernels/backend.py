@@ -309,7 +309,7 @@ def run(name: str, *args):
     else:
         from . import compiled
 
-        getattr(compiled, name)(n, *_gather_all(flat_in), *outs)
+        compiled.DRIVERS[name](n, *_gather_all(flat_in), *outs)
     shaped = iter([o.reshape(shape) for o in outs])
     return tuple(tuple(next(shaped) for _ in range(9)) if sig.width(o) == 9 else next(shaped) for o in sig.outputs)
 

@@ -258,8 +258,10 @@ try:
                         _at(ox, i), _at(oy, i), _at(oz, i), _at(dx, i), _at(dy, i), _at(dz, i), _at(ht, i), a, b, e2,
                         ep2)
 
-    # every other declared kernel: its element loop generated from the declaration
-    globals().update(_generated_drivers([name for name in K.SIGNATURES if name != "stop_at_ellipsoid"], _g))
+    # the drivers of the declared kernels (K.SIGNATURES), by name: what eoloc.kernels.backend.run calls;
+    # each element loop generated from its declaration but the hand-written one above
+    DRIVERS = {"stop_at_ellipsoid": stop_at_ellipsoid,
+               **_generated_drivers([name for name in K.SIGNATURES if name != "stop_at_ellipsoid"], _g)}
 
 finally:
     numba.config.CACHE_DIR = _saved_cache_dir

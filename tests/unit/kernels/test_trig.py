@@ -128,7 +128,7 @@ def test_per_element_drivers_compile_to_simd_loops(name, n_out):
     rng = np.random.default_rng(0)
     arr = lambda: rng.uniform(0.1, 0.9, n)  # noqa: E731
     ell = (6378137.0, 6356752.314245179, 0.0066943799901413165, 0.006739496742276434)
-    fresh = compiled._driver(getattr(compiled, name).py_func, cache=False)  # cached code carries no IR
+    fresh = compiled._driver(compiled.DRIVERS[name].py_func, cache=False)  # cached code carries no IR
     if name == "camera_frame":  # az-el turret angles, skew and the pose varying; mount, boresight fixed
         eye = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
         args = [0, arr(), arr(), arr(), *eye, *eye, *eye, arr(), *(arr() for _ in range(6)), 0.1, 0.2, 0.3, ell[0],
@@ -150,7 +150,7 @@ def test_per_element_drivers_compile_to_simd_loops(name, n_out):
     fresh(n, *args, *got)
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert re.search(r"<\d+ x double>", ir), f"{name}: the element loop did not vectorise"
-    getattr(compiled, name)(n, *args, *ref)  # and the cached driver the library runs gives the same numbers
+    compiled.DRIVERS[name](n, *args, *ref)  # and the cached driver the library runs gives the same numbers
     for a, b in zip(got, ref, strict=True):
         np.testing.assert_array_equal(a, b)
 
