@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike
 
 from .. import geodesy
 from ..errors import InputError
+from ..kernels.backend import backend, implements
 from ..result import Fixes, Status
 from ..rules import OnDEM, StopRule
 from ..sensor.model import Pose, SensorModel
@@ -248,12 +249,16 @@ def frame_pixels(sensor: SensorModel, pose: Pose, ground: StopRule, grid: Output
     ``pose`` and decide which cells the camera sees: inside the image, and (``occlusion``, on a
     DEM) not hidden by nearer terrain (a z-buffer of the terrain mesh). Compiled (numba) passes,
     eoloc.kernels.ortho; with the numpy backend, the reference path (M4 rays for the hiding)."""
-    from ..kernels import core as kernels
-    from ..kernels.backend import get_backend
+    return backend().frame_pixels(sensor, pose, ground, grid, occlusion=occlusion)
 
-    if get_backend() == "numpy":
-        return _frame_pixels_reference(sensor, pose, ground, grid, occlusion=occlusion)
+
+@implements("frame_pixels", "numba")
+def _frame_pixels_compiled(sensor: SensorModel, pose: Pose, ground: StopRule, grid: OutputGrid, *,
+                           occlusion: bool = True) -> FramePixels:
+    """numba: the cells projected at nodes and interpolated, visibility by the terrain mesh's
+    z-buffer where it folds (eoloc.kernels.ortho)."""
     from ..kernels import compiled, ortho
+    from ..kernels import core as kernels
 
     cam = sensor.camera
     rows, cols = grid.shape
@@ -323,6 +328,7 @@ def _ideal_radius2(cam, focal_scale: float) -> float:
     return float(np.max(r2[np.isfinite(r2)])) if np.isfinite(r2).any() else math.inf
 
 
+@implements("frame_pixels", "numpy")
 def _frame_pixels_reference(sensor: SensorModel, pose: Pose, ground: StopRule, grid: OutputGrid, *,
                             occlusion: bool = True) -> FramePixels:
     """numpy: every cell through pyproj, the DEM and :meth:`SensorModel.ground_to_image`; a cell is
@@ -366,8 +372,6 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
     other integer types go through eoloc's compiled sampler (exact weights), cubic through scipy."""
     if resampling not in RESAMPLING:
         raise InputError(f"resampling {resampling!r}: choose from {sorted(RESAMPLING)}")
-    from ..kernels.backend import get_backend
-
     rows, cols = px.valid.shape
     is_int = np.issubdtype(image.dtype, np.integer)
     fill = np.asarray(nodata).astype(image.dtype)[()]
@@ -387,23 +391,39 @@ def resample(image: np.ndarray, px: FramePixels, *, resampling: str = "bilinear"
                     cv2.extractChannel(got, i, dst=out[b0 + i])
         return out
     out = np.empty((image.shape[0], rows, cols), dtype=image.dtype)
-    if resampling != "cubic" and get_backend() != "numpy":
-        from ..kernels import compiled
+    if resampling != "cubic":
+        return backend().sample_bands(image, px, resampling == "bilinear", is_int, fill, out)
+    return _sample_bands_scipy(image, px, RESAMPLING[resampling], is_int, fill, out)
 
-        compiled.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8),
-                                    resampling == "bilinear", is_int, fill, out)
-        return out
+
+@implements("sample_bands", "numba")
+def _sample_bands_compiled(image: np.ndarray, px: FramePixels, bilinear: bool, is_int: bool, fill, out: np.ndarray):
+    """Nearest or bilinear, exact weights: eoloc's compiled sampler."""
+    from ..kernels import compiled
+
+    compiled.ortho_sample_bands(np.ascontiguousarray(image), px.u_px, px.v_px, px.valid.view(np.uint8), bilinear,
+                                is_int, fill, out)
+    return out
+
+
+@implements("sample_bands", "numpy")
+def _sample_bands_numpy(image: np.ndarray, px: FramePixels, bilinear: bool, is_int: bool, fill, out: np.ndarray):
+    """Nearest or bilinear through scipy."""
+    return _sample_bands_scipy(image, px, 1 if bilinear else 0, is_int, fill, out)
+
+
+def _sample_bands_scipy(image: np.ndarray, px: FramePixels, order: int, is_int: bool, fill, out: np.ndarray):
+    """Every band through scipy's map_coordinates (spline ``order``: 0, 1, 3), ``fill`` outside."""
     from scipy.ndimage import map_coordinates
 
     info = np.iinfo(image.dtype) if is_int else None
-    order = RESAMPLING[resampling]
     valid = px.valid
     coords = np.stack([np.where(valid, px.v_px, -10.0), np.where(valid, px.u_px, -10.0)])
     for b in range(image.shape[0]):
         band = map_coordinates(image[b].astype(np.float64), coords, order=order, mode="nearest", prefilter=order > 1)
         if is_int:
             band = np.clip(np.rint(band), info.min, info.max)
-        out[b] = np.where(valid, band, nodata).astype(image.dtype)
+        out[b] = np.where(valid, band, fill).astype(image.dtype)
     return out
 
 

@@ -80,6 +80,67 @@ def set_backend(name: str) -> None:
 _state["name"] = (os.environ.get("EOLOC_BACKEND", "") or "auto").strip().lower()  # checked on first use
 
 
+class Backend:
+    """One backend's versions of the functions that differ by backend, by the same names
+    (scipy's backend objects' shape): ``backend().terrain_march(...)`` is the numba or the numpy
+    one, whichever is in force. Each version is registered where it is written, next to its
+    twin, with :func:`implements`; nothing outside this module asks which backend runs."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.functions: dict[str, Callable] = {}
+
+    def __getattr__(self, function: str) -> Callable:
+        try:
+            return self.__dict__["functions"][function]
+        except KeyError:
+            raise AttributeError(f"the {self.__dict__['name']} backend has no {function!r}") from None
+
+    def __repr__(self) -> str:
+        return f"<eoloc backend {self.name}: {', '.join(sorted(self.functions))}>"
+
+
+BACKEND_OBJECTS = {name: Backend(name) for name in BACKENDS}
+
+
+def implements(function: str, name: str) -> Callable[[Callable], Callable]:
+    """Decorator: the decorated function is backend ``name``'s ``function``."""
+    def register(fn: Callable) -> Callable:
+        BACKEND_OBJECTS[name].functions[function] = fn
+        return fn
+
+    return register
+
+
+def backend() -> Backend:
+    """The backend in force, as the object holding its versions of the functions."""
+    return BACKEND_OBJECTS[get_backend()]
+
+
+def compiled_version(function: str) -> Callable:
+    """The numba backend's ``function``: ``eoloc.kernels.compiled.<function>``, loaded (with
+    numba) on its first call, which then registers the compiled function itself."""
+    def first_call(*args):
+        from . import compiled
+
+        fn = getattr(compiled, function)
+        BACKEND_OBJECTS["numba"].functions[function] = fn
+        return fn(*args)
+
+    return first_call
+
+
+@implements("locate_one", "numpy")
+def _locate_one_numpy(*args) -> tuple[float, float, float, float, int]:
+    """One pose, one pixel: :func:`eoloc.kernels.core.locate_one` run as numpy scalars."""
+    with np.errstate(all="ignore"):
+        lat, lon, h, t, st = kernels.locate_one(*args)
+    return float(lat), float(lon), float(h), float(t), int(st)
+
+
+implements("locate_one", "numba")(compiled_version("locate_one"))
+
+
 @contextlib.contextmanager
 def use_backend(name: str) -> Iterator[None]:
     """Context manager running the enclosed code on backend ``name``."""

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 
 from ..geodesy import WGS84, Ellipsoid
 from ..kernels import core as kernels
-from ..kernels.backend import get_backend, run
+from ..kernels.backend import backend, implements, run
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel, split_pixels
 from .base import StopRule, f64, to_fixes
@@ -92,8 +92,12 @@ def locate_flat(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels
     range) on the numba backend runs as a single compiled call, undistortion included: the
     real-time path.
     """
-    if get_backend() == "numba" and _one_frame(pose, main_range_m, main_pixel):
-        return _flat_frame_numba(sensor, pose, float(main_range_m), pixels, main_pixel)
+    return backend().locate_flat(sensor, pose, main_range_m, pixels, main_pixel)
+
+
+@implements("locate_flat", "numpy")
+def _locate_flat_arrays(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels, main_pixel) -> Fixes:
+    """M2 on arrays: the plane of each frame, then every target's ray on it."""
     ell = sensor.ellipsoid.constants
     frame = sensor.camera_frame(pose)
     xn0, yn0 = sensor.normalized(main_pixel, pose.focal_scale)
@@ -112,9 +116,15 @@ def _one_frame(pose: Pose, main_range_m, main_pixel) -> bool:
             and (main_pixel is None or np.size(main_pixel) == 2))
 
 
-def _flat_frame_numba(sensor: SensorModel, pose: Pose, main_range_m: float, pixels, main_pixel) -> Fixes:
+@implements("locate_flat", "numba")
+def _locate_flat_compiled(sensor: SensorModel, pose: Pose, main_range_m: ArrayLike, pixels, main_pixel) -> Fixes:
+    """M2 compiled: one frame (scalar pose and range) as a single call, undistortion included;
+    several frames as the arrays path."""
+    if not _one_frame(pose, main_range_m, main_pixel):
+        return _locate_flat_arrays(sensor, pose, main_range_m, pixels, main_pixel)
     from ..kernels import compiled
 
+    main_range_m = float(main_range_m)
     pose9 = np.radians([pose.lat_deg, pose.lon_deg, pose.h_m, pose.yaw_deg, pose.pitch_deg, pose.roll_deg, 0, 0, 0])
     pose9[2] = pose.h_m
     pose9[6:] = sensor.gimbal.angles(pose.gimbal_deg)

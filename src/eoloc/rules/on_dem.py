@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 from .. import geodesy
 from ..geodesy import WGS84, Ellipsoid
 from ..kernels import march
-from ..kernels.backend import get_backend, in_chunks
+from ..kernels.backend import backend
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
@@ -79,20 +79,8 @@ class OnDEM(StopRule):
                                       ep2)
         else:
             fine, coarse, margin = march.march_params(self.dem)
-            if get_backend() == "numba":
-                from ..kernels import compiled
-
-                n = flat[0].size
-                out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
-                bmax = self.dem.block_max
-
-                def part(i: int, j: int) -> None:  # one contiguous slice of the rays, on a thread of its own
-                    compiled.terrain_march(j - i, *(x[i:j] for x in flat), g.z, bmax, g.lat0, g.lon0, g.dlat, g.dlon,
-                                           hmin, hmax, fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
-
-                in_chunks(n, part)
-            else:
-                out = march.march_numpy(*flat, g.z, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax, fine, a, b, e2, ep2)
+            out = backend().terrain_march(flat, g.z, self.dem.block_max, g.lat0, g.lon0, g.dlat, g.dlon, hmin, hmax,
+                                          fine, coarse, margin, a, b, e2, ep2)
         return to_fixes([np.asarray(x).reshape(shape) for x in out], rays.invalid, rays.out_of_image)
 
     @property

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 
 from ..geodesy import WGS84, Ellipsoid, as_matrix
 from ..kernels import core as kernels
-from ..kernels.backend import Gathered, get_backend, run, take_all
+from ..kernels.backend import Gathered, backend, run, take_all
 from ..rotation import small_angle_rotation
 from .camera import Camera
 from .gimbal import AzElGimbal, Gimbal, GimbalKind
@@ -312,27 +312,13 @@ class SensorModel:
             elif in_image and math.isfinite(u + v) and not (-_EDGE <= u <= cam.width - 1.0 + _EDGE
                                                             and -_EDGE <= v <= cam.height - 1.0 + _EDGE):
                 return _NOWHERE  # a pixel the image does not have (kernels.pixel_in_image, without numpy)
-        fn = self._one_fn()
-        return fn(self.kernel_params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg, g2_deg, g3_deg,
-                  self.camera.cx if u is None else u, self.camera.cy if v is None else v, stop_kind, stop_value)
-
-    @staticmethod
-    def _one_fn():
-        if get_backend() == "numba":
-            from ..kernels import compiled
-
-            return compiled.locate_one
-        return _locate_one_numpy
+        return backend().locate_one(self.kernel_params, lat_deg, lon_deg, h_m, yaw_deg, pitch_deg, roll_deg, g1_deg,
+                                    g2_deg, g3_deg, self.camera.cx if u is None else u,
+                                    self.camera.cy if v is None else v, stop_kind, stop_value)
 
 
 _NOWHERE = (math.nan, math.nan, math.nan, math.nan, kernels.OUT_OF_IMAGE)
 _EDGE = 0.5 + kernels.IMAGE_MARGIN_PX  # how far past the centres of the edge pixels a pixel is still in the image
-
-
-def _locate_one_numpy(*args):
-    with np.errstate(all="ignore"):
-        lat, lon, h, t, st = kernels.locate_one(*args)
-    return float(lat), float(lon), float(h), float(t), int(st)
 
 
 def _rot9(angles_deg: ArrayLike) -> tuple:
