@@ -90,11 +90,10 @@ class Backend:
         self.name = name
         self.functions: dict[str, Callable] = {}
 
-    def __getattr__(self, function: str) -> Callable:
-        try:
-            return self.__dict__["functions"][function]
-        except KeyError:
-            raise AttributeError(f"the {self.__dict__['name']} backend has no {function!r}") from None
+    def add(self, function: str, fn: Callable) -> None:
+        """Register ``fn`` as this backend's ``function`` (an attribute: found at a dict's speed)."""
+        self.functions[function] = fn
+        setattr(self, function, fn)
 
     def __repr__(self) -> str:
         return f"<eoloc backend {self.name}: {', '.join(sorted(self.functions))}>"
@@ -106,7 +105,7 @@ BACKEND_OBJECTS = {name: Backend(name) for name in BACKENDS}
 def implements(function: str, name: str) -> Callable[[Callable], Callable]:
     """Decorator: the decorated function is backend ``name``'s ``function``."""
     def register(fn: Callable) -> Callable:
-        BACKEND_OBJECTS[name].functions[function] = fn
+        BACKEND_OBJECTS[name].add(function, fn)
         return fn
 
     return register
@@ -124,7 +123,7 @@ def compiled_version(function: str) -> Callable:
         from . import compiled
 
         fn = getattr(compiled, function)
-        BACKEND_OBJECTS["numba"].functions[function] = fn
+        BACKEND_OBJECTS["numba"].add(function, fn)
         return fn(*args)
 
     return first_call
