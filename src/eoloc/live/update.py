@@ -15,7 +15,8 @@ Two drivers of the same kernels, chosen once per session by :class:`PacketLocato
 
 Both give the same numbers (tests/integration/live/test_live_fast.py holds them to each other and to the batch
 path over hostile packets: NaN angles, fields of view out of range, pixels outside the frame,
-rays above the horizon)."""
+rays above the horizon), and both build what they report the same way (:func:`platform_of`,
+:func:`look_of`, :class:`PacketUpdate`): they differ only in how the rays are stopped."""
 
 from __future__ import annotations
 
@@ -103,6 +104,31 @@ def _finite(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def platform_of(fields: dict, c: dict) -> dict | None:
+    """The aircraft of a packet (name, position, heading) from its view ``c``
+    (:func:`eoloc.io.klv.tables.packet_view`'s names), None without a position."""
+    from ..io.klv.tables import platform_name
+
+    if not all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
+        return None
+    return {"name": platform_name(fields), "lat_deg": float(c["lat_deg"]), "lon_deg": float(c["lon_deg"]),
+            "h_m": float(c["h_m"]), "heading_deg": _finite(c["yaw_deg"])}
+
+
+def look_of(fields: dict, c: dict, platform: dict, centre: tuple | None, range_m: float) -> dict:
+    """The sensor's look (fields of view, sensor name; azimuth, elevation and slant range to the
+    frame ``centre`` when there is one), the same whichever driver located the packet."""
+    from ..geodesy import look_angles
+
+    look = {"hfov_deg": _finite(c["hfov_deg"]), "vfov_deg": _finite(c["vfov_deg"]),
+            "sensor": fields.get(Tag.IMAGE_SOURCE_SENSOR) or None, "range_m": None, "azimuth_deg": None,
+            "elevation_deg": None}
+    if centre is not None:
+        az, el = look_angles(platform["lat_deg"], platform["lon_deg"], platform["h_m"], *centre)
+        look |= {"azimuth_deg": az, "elevation_deg": el, "range_m": float(range_m)}
+    return look
+
+
 class PacketLocator:
     """Works out the packets of one live session (:meth:`locate`): the sensor, the surface (a
     ``dem``, else each packet's frame-centre elevation) and the error ``budget`` stay the same
@@ -128,20 +154,15 @@ class PacketLocator:
         if not self.per_ray:
             return locate_packet(source, packet, known, late=late, dem=self.dem, sensor=self.sensor,
                                  budget=self.budget)
-        from ..geodesy import look_angles
         from ..ground.frame import CORNERS
         from ..io.klv import vmti_detections
         from ..io.klv.reader import KLVStream
-        from ..io.klv.tables import packet_view, platform_name
+        from ..io.klv.tables import packet_view
 
         known = known or packet
         f = known.fields
         c = packet_view(f)
-        name = platform_name(f)
-        platform = None
-        if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
-            platform = {"name": name, "lat_deg": c["lat_deg"], "lon_deg": c["lon_deg"], "h_m": c["h_m"],
-                        "heading_deg": _finite(c["yaw_deg"])}
+        platform = platform_of(f, c)
         roll = c["sensor_roll_deg"]
         pose = (c["lat_deg"], c["lon_deg"], c["h_m"], c["yaw_deg"], c["pitch_deg"], c["roll_deg"],
                 c["gimbal1_deg"], c["gimbal2_deg"], 0.0 if math.isnan(roll) else roll)
@@ -163,12 +184,7 @@ class PacketLocator:
 
                 k = np.array([e[:3] for e in ends[1:]])
                 footprint = polygon_geometry(k[:, 1], k[:, 0], k[:, 2])
-            look = {"hfov_deg": _finite(hfov), "vfov_deg": _finite(vfov),
-                    "sensor": f.get(Tag.IMAGE_SOURCE_SENSOR) or None, "range_m": None, "azimuth_deg": None,
-                "elevation_deg": None}
-            if centre is not None:
-                az, el = look_angles(platform["lat_deg"], platform["lon_deg"], platform["h_m"], *centre)
-                look |= {"azimuth_deg": az, "elevation_deg": el, "range_m": ends[0][3]}
+            look = look_of(f, c, platform, centre, ends[0][3])
         det = vmti_detections(KLVStream(source, "klv", [packet]))
         fixes = self._targets(det, c, pose, usable, ground) if len(det) else []
         t = c["time_s"]
@@ -242,7 +258,6 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     from ..ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
     from ..io.klv import klv_telemetry, vmti_detections
     from ..io.klv.reader import KLVStream
-    from ..io.klv.tables import platform_name
     from ..jobs.klvframes import locate_vmti
     from ..rules import OnDEM
 
@@ -251,15 +266,10 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
     tel = klv_telemetry(KLVStream(source, "klv", [known]), report_on_change=False)
     c = {k: v[0] for k, v in tel.columns.items()}
     f = known.fields
-    name = platform_name(f)
-    platform = None
-    if all(math.isfinite(c[k]) for k in ("lat_deg", "lon_deg", "h_m")):
-        platform = {"name": name, "lat_deg": float(c["lat_deg"]), "lon_deg": float(c["lon_deg"]),
-                    "h_m": float(c["h_m"]), "heading_deg": _finite(c["yaw_deg"])}
+    platform = platform_of(f, c)
     ground = OnDEM(dem) if dem is not None else packet_heights(tel.columns["fc_h_m"])
     centre = footprint = look = None
     if platform is not None:
-        from ..geodesy import geodetic_to_ned
         from ..ground.footprint import polygon_geometry
 
         geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], ground)
@@ -272,15 +282,7 @@ def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=No
         elif bool(np.all(geom.corners.ok[0])):
             k = geom.corners
             footprint = polygon_geometry(k.lon_deg[0], k.lat_deg[0], k.h_m[0])
-        look = {"hfov_deg": _finite(c["hfov_deg"]), "vfov_deg": _finite(c["vfov_deg"]),
-                "sensor": f.get(Tag.IMAGE_SOURCE_SENSOR) or None, "range_m": None, "azimuth_deg": None,
-                "elevation_deg": None}
-        if centre is not None:
-            n, e, d = (float(v) for v in geodetic_to_ned(*centre, platform["lat_deg"], platform["lon_deg"],
-                                                          platform["h_m"]))
-            look |= {"azimuth_deg": math.degrees(math.atan2(e, n)) % 360.0,
-                     "elevation_deg": math.degrees(math.atan2(-d, math.hypot(n, e))),
-                     "range_m": float(geom.centre.range_m[0])}
+        look = look_of(f, c, platform, centre, float(geom.centre.range_m[0]))
     fixes: list[dict] = []
     cov_enu = effects = tau = None
     det = vmti_detections(KLVStream(source, "klv", [packet]))
