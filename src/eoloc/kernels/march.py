@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .backend import implements, in_chunks
 from .core import (
     BELOW_SURFACE,
     DEM_VOID,
@@ -432,31 +431,6 @@ def _polish_numpy(ox, oy, oz, dx, dy, dz, t, z, a, b, e2, ep2, lat0, lon0, dlat,
 
 
 # ---------------------------------------------------------------- [Q]'s descent iteration
-
-
-@implements("terrain_march", "numpy")
-def terrain_march_numpy(rays, z, block_max, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin, a, b, e2, ep2):
-    """The first crossing of each ray (``rays``: ox, oy, oz, dx, dy, dz, 1-D) with the bilinear
-    DEM ``z``: (lat rad, lon rad, h, range, status) arrays (numpy: :func:`march_numpy`, fine steps)."""
-    return march_numpy(*rays, z, lat0, lon0, dlat, dlon, hmin, hmax, fine, a, b, e2, ep2)
-
-
-@implements("terrain_march", "numba")
-def terrain_march_numba(rays, z, block_max, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin, a, b, e2,
-                        ep2):
-    """:func:`terrain_march_numpy` compiled, with coarse skipping over ``block_max``, the rays in
-    contiguous slices on the kernel threads."""
-    from . import compiled
-
-    n = rays[0].size
-    out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
-
-    def part(i: int, j: int) -> None:  # one contiguous slice of the rays, on a thread of its own
-        compiled.terrain_march(j - i, *(x[i:j] for x in rays), z, block_max, lat0, lon0, dlat, dlon, hmin, hmax,
-                               fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
-
-    in_chunks(n, part)
-    return out
 
 
 def descent_numpy(ox, oy, oz, dx, dy, dz, z, lat0, lon0, dlat, dlon, hmin, hmax, eps_h, a, b, e2, ep2):

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 from .. import geodesy
 from ..geodesy import WGS84, Ellipsoid
 from ..kernels import march
-from ..kernels.backend import backend
+from ..kernels.backend import backend, implements, in_chunks
 from ..result import Fixes
 from ..sensor.model import Pose, Rays, SensorModel
 from ..terrain.dem import DEM
@@ -94,6 +94,32 @@ class OnDEM(StopRule):
         w, s, e, n = self.dem.bounds
         return (f"DEM {self.dem.source or 'grid'} covering lat {s:.4f}..{n:.4f}, lon {w:.4f}..{e:.4f}"
                 + ("" if self.method == "march" else f", {self.method}"))
+
+
+@implements("terrain_march", "numpy")
+def terrain_march_numpy(rays, z, block_max, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin, a, b, e2, ep2):
+    """The first crossing of each ray (``rays``: ox, oy, oz, dx, dy, dz, 1-D) with the bilinear
+    DEM ``z``: (lat rad, lon rad, h, range, status) arrays (numpy:
+    :func:`eoloc.kernels.march.march_numpy`, fine steps)."""
+    return march.march_numpy(*rays, z, lat0, lon0, dlat, dlon, hmin, hmax, fine, a, b, e2, ep2)
+
+
+@implements("terrain_march", "numba")
+def terrain_march_numba(rays, z, block_max, lat0, lon0, dlat, dlon, hmin, hmax, fine, coarse, margin, a, b, e2,
+                        ep2):
+    """:func:`terrain_march_numpy` compiled, with coarse skipping over ``block_max``, the rays in
+    contiguous slices on the kernel threads."""
+    from ..kernels import compiled
+
+    n = rays[0].size
+    out = [np.empty(n) for _ in range(4)] + [np.empty(n, dtype=np.int8)]
+
+    def part(i: int, j: int) -> None:  # one contiguous slice of the rays, on a thread of its own
+        compiled.terrain_march(j - i, *(x[i:j] for x in rays), z, block_max, lat0, lon0, dlat, dlon, hmin, hmax,
+                               fine, coarse, margin, a, b, e2, ep2, *(o[i:j] for o in out))
+
+    in_chunks(n, part)
+    return out
 
 
 def stop_at_dem(rays: Rays, dem: DEM, *, method: str = "march", eps_h: float = 1.0,
