@@ -477,6 +477,15 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     np.testing.assert_allclose([p.pts_s for p in back.packets], times, atol=1.2e-5)
     assert [p.raw for p in back.packets] == [bytes(k.packet.raw) for k in klv]
     assert any(n.kind == "timed by arrival" and n.count == 20 for n in back.notes) == (carriage == "async")
+    # and through the tolerant path: a null cell with the reserved adaptation field control (00)
+    # slipped in halfway makes the stream unclean, and changes nothing of the KLV or its timing
+    data = out.read_bytes()
+    half = len(data) // 188 // 2 * 188
+    damaged = tmp_path / "damaged.ts"
+    damaged.write_bytes(data[:half] + b"\x47\x1f\xff\x00" + b"\xff" * 184 + data[half:])
+    again = read_klv(damaged)
+    assert [p.raw for p in again.packets] == [p.raw for p in back.packets]
+    np.testing.assert_allclose([p.pts_s for p in again.packets], times, atol=1.2e-5)
 
 
 def _cot_schema():
