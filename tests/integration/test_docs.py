@@ -78,18 +78,22 @@ def test_the_pages_open_in_a_browser_without_script_errors(site):
     server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(Quiet, directory=str(site)))
     threading.Thread(target=server.serve_forever, daemon=True).start()
     base = f"http://127.0.0.1:{server.server_address[1]}/"
+    from selenium.common.exceptions import TimeoutException
+    from selenium.webdriver.support.ui import WebDriverWait
+
     d = chromium(offline=True)
     try:
         pages = sorted(p.name for p in site.glob("*.html") if p.name != "404.html")
         assert len(pages) >= 18
         for name in pages:
             d.get(base + name)
-            assert d.title.endswith("eoloc"), (name, d.title)
+            try:  # the title, once the page has it (a loaded machine may hand it over a moment late)
+                WebDriverWait(d, 30).until(lambda drv: drv.title.endswith("eoloc"))
+            except TimeoutException:
+                raise AssertionError((name, d.title)) from None
             assert d.find_element("css selector", "h1").text.strip(), name
             errors = [e for e in d.get_log("browser") if e["level"] == "SEVERE" and "favicon" not in e["message"]]
             assert not errors, (name, errors)
-        from selenium.webdriver.support.ui import WebDriverWait
-
         d.get(base + "index.html")
         search = ("var q = document.getElementById('mkdocs-search-query'); q.value = 'OnDEM';"
                   "q.dispatchEvent(new Event('keyup'));"
