@@ -38,18 +38,19 @@ def stop_rule(rule_values: dict, dem=None, *, required: bool = True, what: str =
     target's value from the files (:class:`eoloc.rules.RangeFromRecords`). None when nothing is
     given and the rule is not ``required``; a usage error naming the flags otherwise."""
     from ..errors import InputError
-    from ..rules.spec import SPECS, chosen, rule_from_values
+    from ..rules.spec import FROM_RECORDS, SPECS, chosen
 
     values = {**rule_values, "dem": dem}
     if not required and all(v is None for v in values.values()):
         return None
     specs = [s for s in SPECS if s.key in values]
     try:
-        chosen(values, specs)
+        spec, value = chosen(values, specs)
     except InputError:
         flags = [f"{s.flag} {s.metavar} ({s.help})" for s in specs]
         raise click.UsageError(f"choose {what}: {', '.join(flags[:-1])} or {flags[-1]}") from None
-    return rule_from_values(values, specs)
+    # (the option's own type checked the number against the rule's domain)
+    return spec.records_rule() if isinstance(value, str) and value == FROM_RECORDS else spec.rule(value)
 
 
 def ground(rule_values: dict, dem=None, *, required: bool = True) -> StopRule | None:

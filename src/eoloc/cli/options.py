@@ -57,8 +57,6 @@ def _is_number(text: str) -> bool:
     return text.startswith("-")
 
 
-
-
 class RuleValue(click.ParamType):
     """A stop rule's number in metres, checked against the rule's domain (:class:`RuleSpec`), or
     (a rule with ``records``) no value: each target's own from the files."""

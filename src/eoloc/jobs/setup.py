@@ -16,7 +16,7 @@ def accuracy_scenario(cfg: Config, path: str | Path, *, rule=None, dem_crs: str 
     the config's DEM files that carry none, replacing its ``dem_crs``."""
     from ..accuracy.budget import ErrorBudget
     from ..accuracy.montecarlo import Scenario
-    from ..rules.spec import SPECS, rule_from_values
+    from ..rules.spec import rule_from_table
     from ..sensor import Pose
     from ..terrain import open_dem
 
@@ -31,12 +31,8 @@ def accuracy_scenario(cfg: Config, path: str | Path, *, rule=None, dem_crs: str 
     p = a.pose
     if rule is None:  # [accuracy.stop]: one key names the rule and holds its value (DEM files: opened here)
         st = a.stop
-        values = {s.key: getattr(st, s.key) for s in SPECS}
-        for s in SPECS:
-            if s.value == "dem" and values[s.key] is not None:
-                values[s.key] = open_dem([Path(path).parent / d for d in values[s.key]], vertical=st.dem_vertical,
-                                         assume_crs=dem_crs or st.dem_crs)
-        rule = rule_from_values(values)
+        rule = rule_from_table(st, lambda files: open_dem([Path(path).parent / d for d in files],
+                                                          vertical=st.dem_vertical, assume_crs=dem_crs or st.dem_crs))
     return Scenario(Path(path).stem, cfg.sensor(),
                     Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, tuple(p.gimbal_deg)),
                     ErrorBudget.from_mapping(a.budget), rule,

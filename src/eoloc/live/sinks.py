@@ -78,10 +78,10 @@ class NdjsonSink(BaseSink):
         self.lines = 0
 
     def send(self, updates: list[PacketUpdate]) -> None:
-        text = "".join(json.dumps(f, allow_nan=False) + "\n" for u in updates for f in u.features())
-        self.out.write(text)
+        lines = [json.dumps(f, allow_nan=False) + "\n" for u in updates for f in u.features()]
+        self.out.write("".join(lines))
         self.out.flush()
-        self.lines += text.count("\n")
+        self.lines += len(lines)
 
     def close(self) -> None:
         if self.out is not sys.stdout:

@@ -13,7 +13,7 @@ by its module, so that reading it (the command line does, at start-up) loads no 
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from importlib import import_module
 from typing import TYPE_CHECKING, Any, Literal
@@ -36,8 +36,11 @@ class RuleSpec:
     ``value``: what the value is — ``"distance"`` (metres > ``minimum``), ``"height"`` (an
     ellipsoidal height in metres within [``minimum``, ``maximum``]) or ``"dem"`` (DEM files on the
     command line and in configs, a served DEM's name in the API); ``help``: the value in words,
-    with its unit; ``build``: the rule from its value; ``records``: the rule that takes each
-    target's own value from its input row (the flag given without a value), if the rule has one.
+    with its unit; ``build``: the rule's class as ``"module:Class"`` of this package (called with
+    the value; named, not imported, so that reading the table loads no rule); ``records``: the
+    class, named likewise, of the rule that takes each target's own value from its input row (the
+    flag given without a value), if the rule has one; ``ground``: the rule stops rays on a surface
+    (footprints, ground grids and orthorectification can stand on it).
     """
 
     key: str
@@ -103,6 +106,17 @@ def rule_from_values(values: Mapping[str, Any], specs: Iterable[RuleSpec] | None
         if why is not None:
             raise InputError(why)
     return spec.rule(value)
+
+
+def rule_from_table(table: Any, dem: Callable[[Any], Any]) -> StopRule:
+    """The rule of a stop table — an object with one attribute per key of :data:`SPECS` (a
+    config's ``[accuracy.stop]``, the HTTP API's ``stop``) — its DEM value turned into a DEM by
+    ``dem`` (a config's files opened, a served DEM looked up by name)."""
+    values = {s.key: getattr(table, s.key) for s in SPECS}
+    for s in SPECS:
+        if s.value == "dem" and values[s.key] is not None:
+            values[s.key] = dem(values[s.key])
+    return rule_from_values(values)
 
 
 def _class(where: str) -> type:

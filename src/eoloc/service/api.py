@@ -148,13 +148,9 @@ class ServiceState:
 
     def rule(self, stop, where: str):
         """The stop rule of a request's ``stop`` object (:data:`StopIn`; a DEM by its served name)."""
-        from ..rules.spec import SPECS, rule_from_values
+        from ..rules.spec import rule_from_table
 
-        values = {s.key: getattr(stop, s.key) for s in SPECS}
-        for s in SPECS:
-            if s.value == "dem":
-                values[s.key] = self.dem(values[s.key], f"{where}.{s.key}" if where else s.key)
-        return rule_from_values(values)
+        return rule_from_table(stop, lambda name: self.dem(name, f"{where}.dem" if where else "dem"))
 
     def budget(self, wanted: bool, where: str):
         """The config's error budget when ``wanted`` (else None); RequestError at ``where`` when the
