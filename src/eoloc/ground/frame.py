@@ -12,7 +12,7 @@ Pure math: the tables come from :mod:`eoloc.io.klv`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -38,6 +38,12 @@ def misb_sensor(mount_misalignment_deg=(0.0, 0.0, 0.0), boresight_misalignment_d
     """
     return SensorModel(camera or Camera(2, 2, 1.0, 1.0, 0.5, 0.5), AzElGimbal(), mount_misalignment_deg,
                        boresight_misalignment_deg, lever_arm_m)
+
+
+def frame_sensor(base: SensorModel, hfov_deg: float, vfov_deg: float, width: int, height: int) -> SensorModel:
+    """``base`` (its gimbal and installation) with the pinhole of one frame: ``width`` x ``height``
+    pixels whose fields of view (degrees, in (0, 180)) span the image (a VMTI frame, a video frame)."""
+    return replace(base, camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=vfov_deg))
 
 
 def misb_frame_sensor(width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:

@@ -58,9 +58,12 @@ def utc_times(time_s, origin: str | None) -> np.ndarray | None:
     if not ms.size:
         return np.zeros(ms.shape, dtype=object)
     flat = ms.ravel()
-    first = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])  # one string per run of one instant (a packet's targets)
+    change = np.empty(flat.size, bool)
+    change[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=change[1:])
+    first = np.flatnonzero(change)  # one string per run of one instant (a packet's targets)
     text = np.datetime_as_string(flat[first].astype("datetime64[ms]"), unit="ms", timezone="UTC").astype(object)
-    out = np.repeat(text, np.diff(np.r_[first, flat.size])).reshape(ms.shape)
+    out = np.repeat(text, np.diff(first, append=flat.size)).reshape(ms.shape)
     out[~ok] = None
     return out
 

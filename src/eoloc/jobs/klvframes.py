@@ -13,12 +13,11 @@ import numpy as np
 
 from ..geodesy import horizontal_distance_m
 from ..ground.footprint import polygon_geometry
-from ..ground.frame import FrameGeometry, frame_geometry, misb_sensor, packet_heights, packet_pose
+from ..ground.frame import FrameGeometry, frame_geometry, frame_sensor, misb_sensor, packet_heights, packet_pose
 from ..io.records import Records
 from ..io.table import Table
 from ..result import Fixes, Status
 from ..rules import AtHeight, OnDEM, StopRule
-from ..sensor.camera import Camera
 from ..sensor.model import Pose, SensorModel
 from .tables import locate_by_rule
 
@@ -154,8 +153,7 @@ def dem_footprint_features(tel: Table, dem, sensor: SensorModel | None = None, e
     for (hf, vf), idx in groups.items():
         geometry: list = [None] * len(idx)
         if 0 < hf < 180 and 0 < vf < 180:
-            sensor_g = SensorModel(Camera.from_hfov(hf, 1000, 1000, vfov_deg=vf), base.gimbal,
-                                   base.mount_misalignment_deg, base.boresight_misalignment_deg, base.lever_arm_m)
+            sensor_g = frame_sensor(base, hf, vf, 1000, 1000)
             geometry = [fp.geojson_geometry() for fp in footprints(sensor_g, pose_all.take(np.asarray(idx)), OnDEM(dem),
                                                                    edge_samples=edge_samples)]
         for i, g in zip(idx, geometry, strict=True):
@@ -229,6 +227,8 @@ def camera_groups(hfov: np.ndarray, vfov: np.ndarray, w: np.ndarray, h: np.ndarr
     if not idx.size:
         return []
     keys = np.stack([hfov[idx], vfov[idx], np.trunc(w[idx]), np.trunc(h[idx])], -1)
+    if (keys == keys[0]).all():  # one camera (the common case: no sort)
+        return [((float(keys[0, 0]), float(keys[0, 1]), int(keys[0, 2]), int(keys[0, 3])), idx)]
     uniq, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
     return [((float(uniq[g, 0]), float(uniq[g, 1]), int(uniq[g, 2]), int(uniq[g, 3])), idx[inverse == g])
@@ -256,9 +256,7 @@ def locate_vmti(tel: Table, det: Table, ground: StopRule | None = None, *, budge
     pose_all = packet_pose(tel).take(row) if n else None
     status[found & ~usable] = int(Status.INVALID_INPUT)
     for (hf, vf, wi, hi), idx in camera_groups(hfov, vfov, w, h, usable):
-        cam = Camera.from_hfov(hf, wi, hi, vfov_deg=vf)
-        sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
-                             base.lever_arm_m)
+        sensor = frame_sensor(base, hf, vf, wi, hi)
         pose = pose_all.take(idx)
         rule = ground if ground is not None else AtHeight(np.nan_to_num(c["fc_h_m"][row[idx]]))
         fixes, cov = locate_by_rule(sensor, pose, (d["u_px"][idx], d["v_px"][idx]), rule, budget=budget)
@@ -340,9 +338,7 @@ def vmti_flight(tel: Table, det: Table, ground: StopRule | None = None, *,
         raise KLVError("the VMTI frames' horizontal and vertical fields of view do not zoom together (the aspect "
                        "changes): the accuracy of a flight takes one camera")
     (wi, hi), = sizes
-    cam = Camera.from_hfov(float(hfov[idx[0]]), wi, hi, vfov_deg=float(vfov[idx[0]]))
-    sensor = SensorModel(cam, base.gimbal, base.mount_misalignment_deg, base.boresight_misalignment_deg,
-                         base.lever_arm_m)
+    sensor = frame_sensor(base, float(hfov[idx[0]]), float(vfov[idx[0]]), wi, hi)
     p = packet_pose(tel).take(row[idx])
     pose = Pose(p.lat_deg, p.lon_deg, p.h_m, p.yaw_deg, p.pitch_deg, p.roll_deg, p.gimbal_deg, scale)
     rule = ground if ground is not None else AtHeight(c["fc_h_m"][row[idx]])

@@ -2,21 +2,17 @@
 footprint, look angles) and where each of its VMTI targets is. Every output (NDJSON, CoT, the
 map, KLV out) is written from a :class:`PacketUpdate`.
 
-Two drivers of the same kernels, chosen once per session by :class:`PacketLocator`:
-
-- **per ray** (the common case: the frame-centre elevation as the surface, no error budget, no
-  lens model): the packet's pose read as plain numbers (:func:`eoloc.io.klv.tables.packet_view`)
-  and each of its rays — frame centre, four corners, every VMTI target — put through the
-  single-target kernel (:meth:`eoloc.sensor.model.SensorModel.locate_one`, ~1 µs a ray): a packet
-  of 20 targets in a fraction of a millisecond, nothing set up per packet but its numbers;
-- **per packet as a batch** (a DEM, an error budget): `eoloc klv`'s own functions
-  (:func:`eoloc.io.klv.klv_telemetry`, :func:`eoloc.ground.frame.frame_geometry`,
-  :func:`eoloc.jobs.klvframes.locate_vmti`) on a one-packet stream.
-
-Both give the same numbers (tests/integration/live/test_live_fast.py holds them to each other and to the batch
-path over hostile packets: NaN angles, fields of view out of range, pixels outside the frame,
-rays above the horizon), and both build what they report the same way (:func:`platform_of`,
-:func:`look_of`, :class:`PacketUpdate`): they differ only in how the rays are stopped."""
+One driver, :class:`PacketLocator`, whatever the ground (each packet's frame-centre elevation or
+a DEM) and with or without an error budget: the packet's pose read as plain numbers
+(:func:`eoloc.io.klv.tables.packet_view`), its rays — frame centre, four corners, every VMTI
+target — stopped by the ground's rule (one by one through the single-target kernel,
+:meth:`eoloc.sensor.model.SensorModel.locate_one`, ~1 µs a ray, where the rule has one: a packet
+of 20 targets in a fraction of a millisecond; in one array call on a DEM), the rows written by
+the batch's own writer. It gives `eoloc klv`'s numbers (tests/integration/live/test_live_fast.py
+holds it to the batch functions — :func:`eoloc.io.klv.klv_telemetry`,
+:func:`eoloc.ground.frame.frame_geometry`, :func:`eoloc.jobs.klvframes.locate_vmti` — on every
+ground, with and without a budget, over real streams and hostile packets: NaN angles, fields of
+view out of range, pixels outside the frame, rays above the horizon)."""
 
 from __future__ import annotations
 
@@ -25,11 +21,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..io.export import STATUS_NAMES, fix_records, utc_times, with_utc
+from ..io.export import fix_records, utc_times
 from ..io.klv.st0601 import Tag
 from ..kernels.backend import load_compiled
-from ..result import Status
-from ..rules import AtHeight
+from ..result import Fixes, Status
+from ..rules import AtHeight, OnDEM
 
 
 @dataclass
@@ -130,17 +126,26 @@ def look_of(fields: dict, c: dict, platform: dict, centre: tuple | None, range_m
 
 
 class PacketLocator:
-    """Works out the packets of one live session (:meth:`locate`): the sensor, the surface (a
+    """Works out the packets of one live session (:meth:`locate`): the sensor, the ground (a
     ``dem``, else each packet's frame-centre elevation) and the error ``budget`` stay the same
-    from packet to packet, and so does the driver (see the module notes)."""
+    from packet to packet.
+
+    One driver for every ground: a packet's pose is read as plain numbers
+    (:func:`eoloc.io.klv.tables.packet_view`), its rays — the frame centre, the four corners and
+    every VMTI target, in normalised image coordinates — are stopped together by the ground's
+    rule (:meth:`_stop`: a rule with a single-target kernel takes them one by one, ~1 µs a ray;
+    a DEM all of them in one array call), and the rows are written by the batch's own writer
+    (:func:`eoloc.io.export.fix_records`). On a DEM the footprint is the image border traced on
+    the terrain (:func:`eoloc.ground.footprint.footprints`, as `eoloc klv`); with a ``budget`` each
+    target's covariance comes with its fix (one call per VMTI frame camera)."""
 
     def __init__(self, *, dem=None, sensor=None, budget=None) -> None:
         from ..ground.frame import misb_sensor
         from ..sensor.camera import Camera
 
         self.sensor = sensor or misb_sensor()
-        self.dem, self.budget = dem, budget
-        self.per_ray = dem is None and budget is None and self.sensor.camera.distortion is None
+        self.terrain = None if dem is None else OnDEM(dem)  # None: each packet's frame-centre elevation
+        self.budget = budget
         # the frame's own rays in normalised image coordinates: a camera whose pixels are them
         self.view = replace(self.sensor, camera=Camera(1, 1, 1.0, 1.0, 0.0, 0.0))
         self.frames: dict[tuple, object] = {}  # (hfov, vfov, width, height) -> the VMTI frame's sensor
@@ -151,9 +156,6 @@ class PacketLocator:
         ``known``: the same packet with the values it left out (report-on-change) filled in from
         those its stream sent before (default: the packet as it is); the pose comes from it, the
         VMTI targets from ``packet`` alone."""
-        if not self.per_ray:
-            return locate_packet(source, packet, known, late=late, dem=self.dem, sensor=self.sensor,
-                                 budget=self.budget)
         from ..ground.frame import CORNERS
         from ..io.klv import vmti_detections
         from ..io.klv.reader import KLVStream
@@ -166,132 +168,174 @@ class PacketLocator:
         roll = c["sensor_roll_deg"]
         pose = (c["lat_deg"], c["lon_deg"], c["h_m"], c["yaw_deg"], c["pitch_deg"], c["roll_deg"],
                 c["gimbal1_deg"], c["gimbal2_deg"], 0.0 if math.isnan(roll) else roll)
-        surface_h = c["fc_h_m"]
-        usable = all(math.isfinite(x) for x in pose) and abs(pose[0]) <= 90.0 and math.isfinite(surface_h)
-        ground = AtHeight(surface_h)  # the packet's frame-centre elevation stops its rays
+        ground = self.terrain or AtHeight(c["fc_h_m"])  # without a DEM the frame-centre elevation stops the rays
+        usable = all(math.isfinite(x) for x in pose) and abs(pose[0]) <= 90.0 and \
+            (self.terrain is not None or math.isfinite(c["fc_h_m"]))
+        det = vmti_detections(KLVStream(source, "klv", [packet]))
+        targets = self._target_rays(det, c, usable)
+        hfov, vfov = c["hfov_deg"], c["vfov_deg"]
+        tx = ty = math.nan
+        if 0 < hfov < 180 and 0 < vfov < 180:
+            tx, ty = math.tan(math.radians(hfov) / 2.0), math.tan(math.radians(vfov) / 2.0)
+        # the packet's rays: the frame centre and the four corners (with the aircraft), then its targets
+        xn = np.array([0.0, *(CORNERS[:, 0] * tx)] if platform is not None else [])
+        yn = np.array([0.0, *(CORNERS[:, 1] * ty)] if platform is not None else [])
+        n_frame = xn.size
+        if self.budget is None:
+            xn, yn = np.concatenate([xn, targets.xn]), np.concatenate([yn, targets.yn])
+        ends = self._stop(pose, usable, ground, xn, yn)
         centre = footprint = look = None
         if platform is not None:
-            hfov, vfov = c["hfov_deg"], c["vfov_deg"]
-            tx = ty = math.nan
-            if 0 < hfov < 180 and 0 < vfov < 180:
-                tx, ty = math.tan(math.radians(hfov) / 2.0), math.tan(math.radians(vfov) / 2.0)
-            ends = [self._ray(self.view, pose, usable, ground, x, y, in_image=False)
-                    for x, y in ((0.0, 0.0), *((cx * tx, cy * ty) for cx, cy in CORNERS))]
-            if ends[0][4] == Status.OK:
-                centre = ends[0][:3]
-            if all(e[4] == Status.OK for e in ends[1:]):
-                from ..ground.footprint import polygon_geometry
+            if ends.status[0] == Status.OK:
+                centre = (float(ends.lat_deg[0]), float(ends.lon_deg[0]), float(ends.h_m[0]))
+            footprint = self._footprint(pose, hfov, vfov, ends.flat(slice(1, n_frame)))
+            look = look_of(f, c, platform, centre, float(ends.range_m[0]))
+        iso = utc_times(np.concatenate([[c["time_s"]], det.columns["time_s"]]), "unix")  # one call: ~25 µs each
+        update = PacketUpdate(source, packet.stream, packet.index, c["time_s"], late, platform, look, centre, footprint,
+                              time_utc=iso[0])
+        if len(det):
+            self._fixes(update, det, iso[1:], targets, ends.flat(slice(n_frame, None)), pose, usable, ground)
+        return update
 
-                k = np.array([e[:3] for e in ends[1:]])
-                footprint = polygon_geometry(k[:, 1], k[:, 0], k[:, 2])
-            look = look_of(f, c, platform, centre, ends[0][3])
-        det = vmti_detections(KLVStream(source, "klv", [packet]))
-        fixes = self._targets(det, c, pose, usable, ground) if len(det) else []
-        t = c["time_s"]
-        return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
-                            time_utc=utc_times([t], "unix")[0])
+    def _stop(self, pose: tuple, usable: bool, ground, xn: np.ndarray, yn: np.ndarray) -> Fixes:
+        """The rays of normalised image coordinates (xn, yn) from ``pose`` stopped by ``ground``:
+        one by one through the single-target kernel where the rule has one, else in one array
+        call; INVALID_INPUT for all where the pose (or the height it needs) is not usable, and for
+        each ray whose coordinates are not numbers (as the batch path)."""
+        n = xn.size
+        out = Fixes(*(np.full(n, np.nan) for _ in range(4)), np.full(n, int(Status.INVALID_INPUT), np.int8))
+        todo = np.flatnonzero(np.isfinite(xn) & np.isfinite(yn)) if usable else np.zeros(0, np.intp)
+        if not todo.size:
+            return out
+        if ground.scalar_stop() is not None:
+            one = self.view.locate_one
+            got = np.array([one(*pose[:8], x, y, rule=ground, g3_deg=pose[8], in_image=False)
+                            for x, y in zip(xn[todo].tolist(), yn[todo].tolist(), strict=True)]).T
+        else:
+            from ..ground.frame import packet_rays, stop_on
+            from ..sensor.model import Pose
 
-    @staticmethod
-    def _ray(sensor, pose: tuple, usable: bool, ground: AtHeight, u: float, v: float, in_image: bool = True) -> tuple:
-        """(lat, lon, h, range, status) of one ray: the pose's pixel (u, v) stopped on ``ground``;
-        INVALID_INPUT where the pose, the height or the pixel is not a number (as the batch path);
-        ``in_image=False`` for the view sensor, whose pixels are normalised coordinates."""
-        if not (usable and math.isfinite(u) and math.isfinite(v)):
-            return math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT
-        return sensor.locate_one(*pose[:8], u, v, rule=ground, g3_deg=pose[8], in_image=in_image)
+            f = stop_on(packet_rays(self.view, Pose(*pose[:6], pose[6:]), xn[todo], yn[todo]), ground, self.view)
+            got = (f.lat_deg, f.lon_deg, f.h_m, f.range_m, f.status)
+        for name, values in zip(("lat_deg", "lon_deg", "h_m", "range_m", "status"), got, strict=True):
+            getattr(out, name)[todo] = values
+        return out
+
+    def _footprint(self, pose: tuple, hfov: float, vfov: float, corners: Fixes) -> dict | None:
+        """The frame's footprint as a GeoJSON geometry: on a DEM the image border traced on the
+        terrain and clipped at its edge or the horizon (as `eoloc klv`), else the four corners
+        when all four reached the ground."""
+        from ..ground.footprint import footprints, polygon_geometry
+
+        if self.terrain is None:
+            ok = bool(np.all(corners.status == Status.OK))
+            return polygon_geometry(corners.lon_deg, corners.lat_deg, corners.h_m) if ok else None
+        if not (0 < hfov < 180 and 0 < vfov < 180):
+            return None
+        from ..sensor.model import Pose
+
+        traced = footprints(self._frame_sensor(hfov, vfov, 1000, 1000), Pose(*pose[:6], pose[6:]), self.terrain,
+                            edge_samples=8)
+        return traced[0].geojson_geometry()
 
     def _frame_sensor(self, hfov: float, vfov: float, width: int, height: int):
         """The sensor of a VMTI frame: a pinhole over its size with the given fields of view."""
         key = (hfov, vfov, width, height)
         sensor = self.frames.get(key)
         if sensor is None:
-            from ..sensor.camera import Camera
+            from ..ground.frame import frame_sensor
 
             if len(self.frames) > 64:
                 self.frames.clear()
-            sensor = self.frames[key] = replace(self.sensor, camera=Camera.from_hfov(hfov, width, height,
-                                                                                      vfov_deg=vfov))
+            sensor = self.frames[key] = frame_sensor(self.sensor, hfov, vfov, width, height)
         return sensor
 
-    def _targets(self, det, c: dict, pose: tuple, usable: bool, ground: AtHeight) -> list[dict]:
-        """The rows of a packet's VMTI targets (the layout of :func:`eoloc.io.export.fix_records`,
-        as the batch path writes them): each through its frame's camera, OUT_OF_IMAGE off the
-        frame, INVALID_INPUT without a usable field of view or frame size."""
+    def _target_rays(self, det, c: dict, usable: bool) -> TargetRays:
+        """The VMTI targets' rays: each pixel through its frame's camera to normalised image
+        coordinates; INVALID_INPUT without a usable field of view or frame size, OUT_OF_IMAGE off
+        the frame (where the pose is usable), as the batch path decides them."""
+        from ..jobs.klvframes import camera_groups
+
         d = det.columns
+        n = len(det)
         hfov = np.where(np.isfinite(d["vmti_hfov_deg"]), d["vmti_hfov_deg"], c["hfov_deg"])
         vfov = np.where(np.isfinite(d["vmti_vfov_deg"]), d["vmti_vfov_deg"], c["vfov_deg"])
         w, h, u, v = d["frame_width"], d["frame_height"], d["u_px"], d["v_px"]
-        ok_frame = np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
+        framed = np.isfinite(hfov) & np.isfinite(vfov) & (w > 0) & (h > 0) & (hfov > 0) & (hfov < 180) & \
             (vfov > 0) & (vfov < 180)
-        outside = np.zeros(len(det), bool)
-        sensors = [None] * len(det)  # each target's frame sensor (None: no usable frame)
-        for key in {(float(hfov[i]), float(vfov[i]), int(w[i]), int(h[i])) for i in np.flatnonzero(ok_frame)}:
-            idx = np.flatnonzero(ok_frame & (hfov == key[0]) & (vfov == key[1]) & (w == key[2]) & (h == key[3]))
-            sensor = self._frame_sensor(*key)
-            cam = sensor.camera
-            outside[idx] = cam.outside(u[idx], v[idx], *cam.pixel_to_normalized(u[idx], v[idx]))
-            for i in idx:
-                sensors[i] = sensor
-        iso = utc_times(d["time_s"], "unix")
-        rows = []
-        for i in range(len(det)):
-            if sensors[i] is None:
-                fix = (math.nan, math.nan, math.nan, math.nan, Status.INVALID_INPUT)
-            elif outside[i] and usable:
-                fix = (math.nan, math.nan, math.nan, math.nan, Status.OUT_OF_IMAGE)
-            else:
-                fix = self._ray(sensors[i], pose, usable, ground, float(u[i]), float(v[i]))
-            status = int(fix[4])
-            good = status == Status.OK
-            rows.append({"stream": str(d["stream"][i]), "frame": int(d["frame"][i]), "time_s": _finite(d["time_s"][i]),
-                         "time_utc": iso[i], "target_id": str(d["target_id"][i]), "u_px": float(u[i]),
-                         "v_px": float(v[i]), "lat_deg": fix[0] if good else None, "lon_deg": fix[1] if good else None,
-                         "h_m": fix[2] if good else None, "range_m": fix[3] if good else None,
-                         "status": STATUS_NAMES[status]})
-        return rows
+        xn, yn = np.full(n, np.nan), np.full(n, np.nan)
+        status = np.where(framed, -1, int(Status.INVALID_INPUT)).astype(np.int8)  # -1: to be located
+        groups = []
+        for key, idx in camera_groups(hfov, vfov, w, h, framed):
+            cam = self._frame_sensor(*key).camera
+            xn[idx], yn[idx] = cam.pixel_to_normalized(u[idx], v[idx])
+            if usable:
+                status[idx[cam.outside(u[idx], v[idx], xn[idx], yn[idx])]] = int(Status.OUT_OF_IMAGE)
+            groups.append((key, idx))
+        todo = status == -1
+        return TargetRays(np.where(todo, xn, np.nan), np.where(todo, yn, np.nan), status, groups)
+
+    def _fixes(self, update: PacketUpdate, det, time_utc: np.ndarray, targets: TargetRays, stopped: Fixes,
+               pose: tuple, usable: bool, ground) -> None:
+        """``update``'s target rows (the layout of `eoloc klv`'s fixes) from the ``stopped`` rays,
+        or with the error budget from one call per frame camera that gives each fix its
+        covariance (and each budget source's effect on it)."""
+        n = len(det)
+        d = det.columns
+        status = targets.status.copy()
+        unc: dict[str, np.ndarray] = {}
+        if self.budget is None:
+            fixes = stopped
+            status[status == -1] = stopped.status[status == -1]
+        else:
+            fixes = Fixes(*(np.full(n, np.nan) for _ in range(4)), status)
+            if not usable:
+                status[status == -1] = int(Status.INVALID_INPUT)
+            for key, idx in targets.groups:  # every framed target, as the batch locates them
+                self._covariance(update, fixes, unc, self._frame_sensor(*key), pose, ground, idx, d["u_px"][idx],
+                                 d["v_px"][idx], n)
+        ok = status == Status.OK
+        located = Fixes(*(np.where(ok, x, np.nan) for x in (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m)),
+                        status)
+        extra = {"stream": d["stream"], "frame": d["frame"].astype(np.int64), "time_s": d["time_s"],
+                 "time_utc": time_utc, "target_id": d["target_id"], "u_px": d["u_px"], "v_px": d["v_px"]}
+        update.fixes = fix_records(located, extra, unc).rows()
+
+    def _covariance(self, update: PacketUpdate, fixes: Fixes, unc: dict, sensor, pose: tuple, ground, idx: np.ndarray,
+                    u: np.ndarray, v: np.ndarray, n: int) -> None:
+        """The targets ``idx`` of one frame camera located with their covariance (into ``fixes``,
+        the uncertainty columns ``unc`` and ``update``'s covariance arrays); a status decided
+        before (``fixes.status`` not -1) stands."""
+        from ..accuracy.covariance import covariance_columns
+        from ..jobs.tables import locate_by_rule
+        from ..sensor.model import Pose
+
+        m = idx.size
+        p = Pose(*(np.full(m, x) for x in pose[:6]), tuple(np.full(m, x) for x in pose[6:]))
+        f, cov = locate_by_rule(sensor, p, (u, v), ground, budget=self.budget)
+        for name in ("lat_deg", "lon_deg", "h_m", "range_m"):
+            getattr(fixes, name)[idx] = getattr(f, name)
+        decided = fixes.status[idx] != -1  # no frame, off the frame, or a pose that cannot be used
+        fixes.status[idx] = np.where(decided, fixes.status[idx], f.status)
+        ok = fixes.status[idx] == Status.OK
+        for k, col in covariance_columns(cov, ok).items():
+            unc.setdefault(k, np.full(n, np.nan))[idx] = col
+        if update.cov_enu is None:
+            update.tau_s = cov.tau_s
+            update.cov_enu = np.full((n, 3, 3), np.nan)
+            update.effects = np.full((n, 3, cov.tau_s.size), np.nan)
+        update.cov_enu[idx] = np.where(ok[:, None, None], np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
+        update.effects[idx] = np.where(ok[:, None, None], np.reshape(cov.scaled_jacobian, (-1, 3, cov.tau_s.size)),
+                                       np.nan)
 
 
-def locate_packet(source: str, packet, known=None, *, late: bool = False, dem=None, sensor=None,
-                  budget=None) -> PacketUpdate:
-    """:meth:`PacketLocator.locate` by `eoloc klv`'s own functions on a one-packet stream (the
-    batch driver: any surface, with or without an error budget)."""
-    from ..ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
-    from ..io.klv import klv_telemetry, vmti_detections
-    from ..io.klv.reader import KLVStream
-    from ..jobs.klvframes import locate_vmti
-    from ..rules import OnDEM
+@dataclass(frozen=True)
+class TargetRays:
+    """A packet's VMTI targets as rays: normalised image coordinates (NaN where the target is not
+    to be located), the status decided before any ray is stopped (-1: to be located) and the
+    targets of each frame camera ((hfov, vfov, width, height), indices)."""
 
-    sensor = sensor or misb_sensor()
-    known = known or packet
-    tel = klv_telemetry(KLVStream(source, "klv", [known]), report_on_change=False)
-    c = {k: v[0] for k, v in tel.columns.items()}
-    f = known.fields
-    platform = platform_of(f, c)
-    ground = OnDEM(dem) if dem is not None else packet_heights(tel.columns["fc_h_m"])
-    centre = footprint = look = None
-    if platform is not None:
-        from ..ground.footprint import polygon_geometry
-
-        geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], ground)
-        if bool(geom.centre.ok[0]):
-            centre = (float(geom.centre.lat_deg[0]), float(geom.centre.lon_deg[0]), float(geom.centre.h_m[0]))
-        if dem is not None:  # the image border traced on the terrain, clipped at its edge (as `eoloc klv`)
-            from ..jobs.klvframes import dem_footprint_features
-
-            footprint = dem_footprint_features(tel, dem, sensor)[0]["geometry"]
-        elif bool(np.all(geom.corners.ok[0])):
-            k = geom.corners
-            footprint = polygon_geometry(k.lon_deg[0], k.lat_deg[0], k.h_m[0])
-        look = look_of(f, c, platform, centre, float(geom.centre.range_m[0]))
-    fixes: list[dict] = []
-    cov_enu = effects = tau = None
-    det = vmti_detections(KLVStream(source, "klv", [packet]))
-    if len(det):
-        v = locate_vmti(tel, det, ground if dem is not None else None, budget=budget, base=sensor)
-        extra = with_utc({"stream": det.columns["stream"], **v.extra}, "unix")
-        fixes = fix_records(v.fixes, extra, v.uncertainty).rows()
-        cov_enu, effects, tau = v.cov_enu, v.effects, v.tau_s
-    t = float(c["time_s"])
-    iso = utc_times([t], "unix")[0]
-    return PacketUpdate(source, packet.stream, packet.index, t, late, platform, look, centre, footprint, fixes,
-                        cov_enu, effects, tau, iso)
+    xn: np.ndarray
+    yn: np.ndarray
+    status: np.ndarray
+    groups: list

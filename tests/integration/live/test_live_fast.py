@@ -1,9 +1,12 @@
-"""The live path's two drivers give the same numbers: the per-ray driver (each ray of a packet
-through the single-target kernel, what `eoloc live` runs on the frame-centre elevation) against
-the batch driver (`eoloc klv`'s own functions on a one-packet stream), over hostile packets drawn
-by hypothesis — poses anywhere on the Earth, rays above the horizon, frame centres above the
-aircraft, fields of view of 0 and 180 degrees, tags left out, VMTI frames of their own size and
-field of view — and over real streams; and the scalar look angles against pymap3d."""
+"""The live packet locator gives `eoloc klv`'s numbers: `PacketLocator` (each packet's rays
+stopped by the session's rule — one by one through the single-target kernel on the frame-centre
+elevation, in one array call on a DEM — and with an error budget each target's covariance)
+against the batch functions on a one-packet stream (`klv_telemetry`, `frame_geometry`, the
+traced DEM footprint, `locate_vmti`), on the frame-centre elevation and on a DEM, with and without
+an error budget, over hostile packets drawn by hypothesis — poses anywhere on the Earth, rays
+above the horizon, frame centres above the aircraft, fields of view of 0 and 180 degrees, tags
+left out, VMTI frames of their own size and field of view — and over real streams; and the scalar
+look angles against pymap3d."""
 
 from __future__ import annotations
 
@@ -22,10 +25,51 @@ from eoloc.geodesy import look_angles
 from eoloc.io.klv.encode import encode_uas_packet, encode_vmti
 from eoloc.io.klv.reader import decode_klv_bytes
 from eoloc.io.klv.synthetic import circling_flight_klv
-from eoloc.live.update import PacketLocator, locate_packet
+from eoloc.live.update import PacketLocator, PacketUpdate, look_of, platform_of
 
-FLIGHT = Path(eoloc.__file__).parent / "data" / "demo" / "mountain" / "flight.klv"
+MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
+FLIGHT, DEM, CONFIG = MOUNTAIN / "flight.klv", MOUNTAIN / "longs_peak_srtmgl3.tif", MOUNTAIN / "klv.toml"
 LOCATOR = PacketLocator()
+
+
+def batch_packet(source: str, packet, *, dem=None, sensor=None, budget=None) -> PacketUpdate:
+    """The reference: what `eoloc klv`'s own functions make of ``packet`` as a one-packet stream
+    (the telemetry table, the frame geometry on the ground, the DEM footprint traced as the
+    job traces it, the VMTI fixes and their covariance), in the live update's shape."""
+    from eoloc.ground.footprint import polygon_geometry
+    from eoloc.ground.frame import frame_geometry, misb_sensor, packet_heights, packet_pose
+    from eoloc.io.export import fix_records, utc_times, with_utc
+    from eoloc.io.klv import klv_telemetry, vmti_detections
+    from eoloc.io.klv.reader import KLVStream
+    from eoloc.jobs.klvframes import dem_footprint_features, locate_vmti
+    from eoloc.rules import OnDEM
+
+    sensor = sensor or misb_sensor()
+    tel = klv_telemetry(KLVStream(source, "klv", [packet]), report_on_change=False)
+    c = {k: v[0] for k, v in tel.columns.items()}
+    platform = platform_of(packet.fields, c)
+    ground = OnDEM(dem) if dem is not None else packet_heights(tel.columns["fc_h_m"])
+    centre = footprint = look = None
+    if platform is not None:
+        geom = frame_geometry(sensor, packet_pose(tel), tel.columns["hfov_deg"], tel.columns["vfov_deg"], ground)
+        if bool(geom.centre.ok[0]):
+            centre = (float(geom.centre.lat_deg[0]), float(geom.centre.lon_deg[0]), float(geom.centre.h_m[0]))
+        if dem is not None:
+            footprint = dem_footprint_features(tel, dem, sensor)[0]["geometry"]
+        elif bool(np.all(geom.corners.ok[0])):
+            k = geom.corners
+            footprint = polygon_geometry(k.lon_deg[0], k.lat_deg[0], k.h_m[0])
+        look = look_of(packet.fields, c, platform, centre, float(geom.centre.range_m[0]))
+    fixes, cov_enu, effects, tau = [], None, None, None
+    det = vmti_detections(KLVStream(source, "klv", [packet]))
+    if len(det):
+        v = locate_vmti(tel, det, ground if dem is not None else None, budget=budget, base=sensor)
+        fixes = fix_records(v.fixes, with_utc({"stream": det.columns["stream"], **v.extra}, "unix"),
+                            v.uncertainty).rows()
+        cov_enu, effects, tau = v.cov_enu, v.effects, v.tau_s
+    t = float(c["time_s"])
+    return PacketUpdate(source, packet.stream, packet.index, t, False, platform, look, centre, footprint, fixes,
+                        cov_enu, effects, tau, utc_times([t], "unix")[0])
 
 
 def _decoded(raw: bytes):
@@ -67,33 +111,55 @@ def _same_look(a: dict | None, b: dict | None) -> None:
                   "look")
 
 
-def _assert_drivers_agree(raw: bytes) -> int:
-    """Both drivers on each packet of ``raw``; the number of OK fixes compared."""
+def _assert_drivers_agree(raw: bytes, locator: PacketLocator = LOCATOR, **batch) -> int:
+    """The live locator and the batch reference on each packet of ``raw``; the number of OK
+    fixes compared."""
     ok = 0
     for packet in _decoded(raw):
-        fast = LOCATOR.locate("test", packet)
-        batch = locate_packet("test", packet)
+        fast = locator.locate("test", packet)
+        ref = batch_packet("test", packet, **batch)
         for name in ("stream", "index", "late", "platform", "centre", "footprint", "time_utc"):
-            _same_numbers(getattr(fast, name), getattr(batch, name), name)
-        _same_look(fast.look, batch.look)
-        _same_numbers(fast.time_s, batch.time_s, "time_s")
-        _same_numbers(fast.fixes, batch.fixes, "fixes")
+            _same_numbers(getattr(fast, name), getattr(ref, name), name)
+        _same_look(fast.look, ref.look)
+        _same_numbers(fast.time_s, ref.time_s, "time_s")
+        _same_numbers(fast.fixes, ref.fixes, "fixes")
+        for name in ("cov_enu", "effects", "tau_s"):
+            a, b = getattr(fast, name), getattr(ref, name)
+            assert (a is None) == (b is None), name
+            if a is not None:
+                np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9, err_msg=name)
         ok += sum(r["status"] == "OK" for r in fast.fixes)
     return ok
 
 
-def test_per_ray_driver_is_the_one_live_uses_on_heights():
-    assert PacketLocator().per_ray
-    from eoloc.terrain import open_dem
+def _grounds():
+    """The sessions compared: (locator, the batch reference's keywords) on the frame-centre
+    elevation and on the mountain flight's DEM, each with and without the demo's error budget."""
+    from eoloc.io.config import load_config
+    from eoloc.jobs.setup import misb_setup
 
-    dem = open_dem(FLIGHT.parent / "longs_peak_srtmgl3.tif")
-    assert not PacketLocator(dem=dem).per_ray  # a DEM: the batch driver, its terrain march
+    sensor, budget = misb_setup(load_config(str(CONFIG)))
+    dem = eoloc.open_dem(DEM)
+    out = {}
+    for name, kw in (("heights", {}), ("heights+budget", {"sensor": sensor, "budget": budget}),
+                     ("dem", {"dem": dem}), ("dem+budget", {"dem": dem, "sensor": sensor, "budget": budget})):
+        out[name] = (PacketLocator(**kw), kw)
+    return out
 
 
-@pytest.mark.parametrize("raw", [FLIGHT.read_bytes(), circling_flight_klv(60, seed=3, n_targets=20)],
-                         ids=["mountain flight", "circling flight"])
-def test_drivers_agree_on_real_and_synthetic_streams(raw):
-    assert _assert_drivers_agree(raw) > 50
+GROUNDS = _grounds()
+
+
+@pytest.mark.parametrize("ground", list(GROUNDS))
+def test_live_gives_the_batch_numbers_on_the_mountain_flight(ground):
+    locator, kw = GROUNDS[ground]
+    assert _assert_drivers_agree(FLIGHT.read_bytes(), locator, **kw) > 50
+
+
+def test_live_gives_the_batch_numbers_on_a_circling_flight():
+    assert _assert_drivers_agree(circling_flight_klv(60, seed=3, n_targets=20)) > 50
+    locator, kw = GROUNDS["heights+budget"]
+    assert _assert_drivers_agree(circling_flight_klv(20, seed=4, n_targets=20), locator, **kw) > 50
 
 
 # ST 0601 value ranges (tag: (lo, hi)) as the encoder takes them
@@ -103,8 +169,11 @@ RANGES = {5: (0.0, 360.0), 6: (-20.0, 20.0), 7: (-50.0, 50.0), 13: (-90.0, 90.0)
 
 
 @st.composite
-def hostile_packets(draw) -> bytes:
+def hostile_packets(draw, over_dem: bool = False) -> bytes:
     values = {tag: draw(st.floats(lo, hi, allow_nan=False)) for tag, (lo, hi) in RANGES.items()}
+    if over_dem:  # the aircraft over the mountain flight's DEM (or near its edges), 2-8 km up
+        values[13], values[14] = draw(st.floats(40.18, 40.33)), draw(st.floats(-105.72, -105.53))
+        values[15] = draw(st.floats(2000.0, 8000.0))
     # the frame centre's position: near the aircraft (its geoid there), anywhere, or left out
     values[23] = float(np.clip(values[13] + draw(st.floats(-0.2, 0.2)), -90, 90))
     values[24] = float(np.clip(values[14] + draw(st.floats(-0.2, 0.2)), -180, 180))
@@ -134,8 +203,17 @@ NADIR = bytes.fromhex(
 @settings(max_examples=400, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @example(NADIR)
 @given(hostile_packets())
-def test_drivers_agree_on_hostile_packets(raw):
+def test_live_gives_the_batch_numbers_on_hostile_packets(raw):
     _assert_drivers_agree(raw)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@example(NADIR, "dem+budget")
+@given(st.one_of(hostile_packets(), hostile_packets(over_dem=True)), st.sampled_from(["heights+budget", "dem",
+                                                                                       "dem+budget"]))
+def test_live_gives_the_batch_numbers_on_hostile_packets_on_a_dem_and_with_a_budget(raw, ground):
+    locator, kw = GROUNDS[ground]
+    _assert_drivers_agree(raw, locator, **kw)
 
 
 def test_hostile_packets_reach_every_status():
@@ -155,6 +233,24 @@ def test_hostile_packets_reach_every_status():
 
     collect()
     assert {"OK", "NO_INTERSECTION", "INVALID_INPUT"} <= seen, seen
+
+    seen.clear()  # over the DEM, with the budget: the terrain's statuses too, and fixes with a covariance
+    locator = GROUNDS["dem+budget"][0]
+    covs = []
+
+    @settings(max_examples=300, deadline=None, derandomize=True, phases=[Phase.generate], database=None,
+              suppress_health_check=list(HealthCheck))
+    @given(hostile_packets(over_dem=True))
+    def collect_dem(raw: bytes) -> None:
+        for p in _decoded(raw):
+            u = locator.locate("t", p)
+            seen.update(r["status"] for r in u.fixes)
+            if u.cov_enu is not None:
+                covs.extend(u.cov_enu[[r["status"] == "OK" for r in u.fixes]])
+
+    collect_dem()
+    assert {"OK", "OUT_OF_COVERAGE", "BELOW_SURFACE", "NO_INTERSECTION", "INVALID_INPUT"} <= seen, seen
+    assert len(covs) > 20 and np.all(np.isfinite(covs)), len(covs)
 
 
 @settings(max_examples=300, deadline=None)
