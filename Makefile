@@ -90,7 +90,8 @@ test-fast: $(STAMP) lint streams geoconvert ffmpeg
 
 # the documentation site (MkDocs, mkdocs.yml): site/index.html
 docs: $(STAMP)
-	$(BIN)/mkdocs build --strict
+	rm -rf build/walk
+	EOLOC_DOCS_WALK=build/walk $(BIN)/mkdocs build --strict
 
 bench: $(STAMP) bytecode
 	$(BIN)/python bench/run_all.py

@@ -1,5 +1,6 @@
 """The documentation site (issue 45, step 6): `mkdocs build --strict` with no warning (broken links
-and anchors are warnings: strict turns them into failures); every public name of `eoloc` has its
+and anchors are warnings: strict turns them into failures), the tutorials' walk-throughs run as it
+builds and what they wrote checked; every public name of `eoloc` has its
 entry in the API reference, generated from its docstring; every command has its `--help` in the
 command-line reference, the same text `eoloc COMMAND --help` prints; the pages, served on
 loopback, open in headless Chromium offline without a script error, and the search finds; the
@@ -8,6 +9,7 @@ into docs/ lead to pages that exist."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -23,12 +25,50 @@ MKDOCS = Path(sys.executable).with_name("mkdocs")
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
+    """The site as `make docs` builds it: strict, the tutorials' walk-throughs run in ``walk``
+    beside it (``EOLOC_DOCS_WALK``)."""
     out = tmp_path_factory.mktemp("site")
+    env = {**os.environ, "EOLOC_DOCS_WALK": str(out.parent / "walk")}
     done = subprocess.run([str(MKDOCS), "build", "--strict", "--site-dir", str(out)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=600)
+                          text=True, timeout=2400, env=env)
     assert done.returncode == 0, done.stderr[-4000:]
     assert "WARNING" not in done.stderr, done.stderr
     return out
+
+
+def test_the_tutorials_ran_as_written_when_the_site_was_built(site):
+    """Every command of the four persona walk-throughs (docs/tutorials.md) ran in a shell exactly
+    as written as the site was built (docs/hooks.py; a failing block would have stopped the
+    build), the page says so under each block; then what they wrote is checked: the drone photo's
+    laser fix against DJI's own target in its XMP (SOURCES.md: 22.5960255 N, 114.0066452 E), the
+    HTTP answer, the live NDJSON, the report, the map."""
+    import csv
+    import json
+    import math
+
+    sys.path.insert(0, str(ROOT / "docs"))
+    from hooks import walkthrough_blocks
+
+    blocks = walkthrough_blocks((ROOT / "docs" / "tutorials.md").read_text(encoding="utf-8"))
+    assert [b[0] for b in blocks] == ["Flight-test engineer", "FMV analyst", "Ground-station integrator",
+                                      "Drone operator"]
+    page = (site / "tutorials.html").read_text(encoding="utf-8")
+    runs = re.findall(r"Run when this page was built \(\d{4}-\d\d-\d\d\): every command exited 0, (\d+) s, "
+                      r"(\d+) files written", page)
+    assert len(runs) == 4 and all(int(files) > 0 for _, files in runs), runs
+    walk = site.parent / "walk" / "walk"
+    with (walk / "photo" / "photo_fixes.csv").open(newline="", encoding="utf-8") as fh:
+        (fix,) = list(csv.DictReader(fh))
+    d_m = math.hypot((float(fix["lat_deg"]) - 22.5960255) * 110_760,
+                     (float(fix["lon_deg"]) - 114.0066452) * 102_850)
+    assert fix["status"] == "OK" and d_m < 0.3, d_m
+    answer = json.loads((walk / "locate.json").read_text())["fixes"][0]
+    assert answer["status"] == "OK" and 40.20 < answer["lat_deg"] < 40.31 and -105.70 < answer["lon_deg"] < -105.55
+    features = [json.loads(line) for line in (walk / "live.ndjson").read_text().splitlines()]
+    assert sum(f["properties"]["what"] == "target" for f in features) == 108
+    assert (walk / "report" / "report.html").stat().st_size > 10_000
+    assert (walk / "map" / "map.html").is_file() and (walk / "klv" / "eoloc.kml").is_file()
+    assert (walk / "model" / "compensation.json").is_file() and (walk / "flight_with_fixes.klv").stat().st_size
 
 
 def test_every_public_name_has_its_entry_in_the_api_reference(site):
@@ -112,3 +152,23 @@ def test_the_readme_is_short_and_its_links_lead_somewhere():
     assert len(targets) > 10
     for t in targets:
         assert (ROOT / t).is_file(), t
+
+
+def test_a_walkthrough_that_fails_stops_the_build(tmp_path):
+    """The hook's refusal: a block whose command fails (or prints a traceback) raises MkDocs's
+    PluginError naming the persona and the error; a block that passes gets its line."""
+    from mkdocs.exceptions import PluginError
+
+    sys.path.insert(0, str(ROOT / "docs"))
+    from hooks import run_walkthroughs
+
+    page = "# T\n\n## Four ways in\n\n**Tester** — one:\n\n```sh\necho made > a.txt\n{}\n```\n\n## After\n"
+    with pytest.raises(PluginError, match=r"the Tester walk-through failed \(exit 3\)(.|\n)*no such thing"):
+        run_walkthroughs(page.format("echo no such thing >&2; exit 3"), tmp_path / "a")
+    with pytest.raises(PluginError, match="Traceback"):
+        run_walkthroughs(page.format("python3 -c 'raise SystemExit(\"Traceback (most recent call last)\")' || true"),
+                         tmp_path / "b")
+    done = run_walkthroughs(page.format("true"), tmp_path / "c")
+    assert re.search(r"```\n\n\*Run when this page was built \(\d{4}-\d\d-\d\d\): every command exited 0, \d+ s, "
+                     r"1 file written\.\*\n\n\n## After", done), done
+    assert (tmp_path / "c" / "a.txt").read_text() == "made\n"
