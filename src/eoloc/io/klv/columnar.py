@@ -194,12 +194,13 @@ def put_packet(chunk: dict[str, np.ndarray], row: int, p: KLVPacket, targets: li
     t = f.get(2)
     chunk["time_us"][row] = (t - EPOCH) // _US if isinstance(t, datetime) else -1
     vals, pres = chunk["values"][row], chunk["present"][row]
-    for tag, c in COLUMN.items():
-        if tag in f:
+    vals.fill(math.nan)  # the row as if nothing were sent (a row the compiled scanner left is rewritten whole)
+    pres.fill(False)
+    for tag, v in f.items():  # the packet's own items (fewer than the columns)
+        c = COLUMN.get(tag)
+        if c is not None:
             pres[c] = True
-            vals[c] = num(f[tag])
-        else:
-            pres[c], vals[c] = False, math.nan
+            vals[c] = num(v)
     vm = f.get(74)
     if vm is None or not hasattr(vm, "targets"):
         chunk["has_vmti"][row], chunk["vmti_f"][row] = False, math.nan
@@ -207,11 +208,12 @@ def put_packet(chunk: dict[str, np.ndarray], row: int, p: KLVPacket, targets: li
     chunk["has_vmti"][row] = True
     chunk["vmti_f"][row] = [num(vm.value(t)) for t in VMTI_COLUMNS]
     for tg in vm.targets:
-        loc = tg.value(17)
+        tv = tg.values
+        loc = tv.get(17)
         sent = hasattr(loc, "lat_deg")
         where = (loc.lat_deg, loc.lon_deg, loc.h_m) if sent else (math.nan,) * 3
-        targets.append(((row, _int_or_absent(tg.target_id), *(_int_or_absent(tg.value(t)) for t in TARGET_INT_COLUMNS),
-                         1 if sent else -1), (*(num(tg.value(t)) for t in (10, 11, 12)), *where)))
+        targets.append(((row, _int_or_absent(tg.target_id), *[_int_or_absent(tv.get(t)) for t in TARGET_INT_COLUMNS],
+                         1 if sent else -1), (num(tv.get(10)), num(tv.get(11)), num(tv.get(12)), *where)))
 
 
 def chunk_from_packets(packets: list[KLVPacket]) -> dict[str, np.ndarray]:

@@ -293,7 +293,7 @@ def _pixel_numbers(value: np.ndarray, width: np.ndarray, pixels_from: int = 1) -
     the standard); NaN where there is no number or no usable frame width."""
     ok = (value >= pixels_from) & np.isfinite(width) & (width > 0)
     # (a width past 2^62 is wider than any pixel number: one row, as Python's divmod would say)
-    wi = np.maximum(np.where(ok, np.minimum(np.nan_to_num(width, nan=1.0), 2.0 ** 62), 1.0).astype(np.int64), 1)
+    wi = np.maximum(np.where(ok, np.minimum(width, 2.0 ** 62), 1.0).astype(np.int64), 1)  # (ok: width finite)
     row, col = np.divmod(np.where(ok, value - pixels_from, 0), wi)
     return np.where(ok, col, np.nan), np.where(ok, row, np.nan)
 
