@@ -138,6 +138,7 @@ class _Frame:
     pixel_m2: np.ndarray  # (gh, gw) ground area of one working pixel around each grid point
     luma: np.ndarray  # (H', W') float32, shrunk for the residual's phase correlation
     grid32: np.ndarray  # (gh, gw, 4) float32: ground ENU and pixel_m2, for cv2.remap
+    p_ecef: np.ndarray  # (gh, gw, 3) the grid's ground points in ECEF m (projected into each reference)
 
 
 class MotionDetector:
@@ -187,9 +188,9 @@ class MotionDetector:
             img = img if img.ndim == 3 else img[..., None]
             img = np.ascontiguousarray(np.concatenate([img, np.full((*img.shape[:2], 1), 255, np.uint8)], -1))
         h, w = img.shape[:2]
-        ground, pixel_m2 = self._ground_grid(sensor, pose, w, h)
+        ground, pixel_m2, p_ecef = self._ground_grid(sensor, pose, w, h)
         fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, luma,
-                    np.dstack([ground, pixel_m2]).astype(np.float32))
+                    np.dstack([ground, pixel_m2]).astype(np.float32), p_ecef)
         self.frames.append(fr)
         self.pending.append(fr)
         out = []
@@ -234,18 +235,19 @@ class MotionDetector:
             self.origin = (float(np.ravel(fixes.lat_deg)[i]), float(np.ravel(fixes.lon_deg)[i]),
                            float(np.ravel(fixes.h_m)[i]))
         if self.origin is None:
-            g = np.full((*u.shape, 3), np.nan)
+            g, p = np.full((*u.shape, 3), np.nan), np.full((*u.shape, 3), np.nan)
         else:
             p = np.stack(geodetic_to_ecef(fixes.lat_deg, fixes.lon_deg, fixes.h_m), -1)
             g = ecef_to_enu(p.reshape(-1, 3), *self.origin).reshape((*u.shape, 3))
             g[~ok] = np.nan
+            p[~ok] = np.nan
         # a working pixel's ground area: the grid cell's (cross product of its sides) / step^2
         area = np.linalg.norm(np.cross(np.gradient(g, axis=1), np.gradient(g, axis=0)), axis=-1) / float(step) ** 2
-        return g, area
+        return g, area, p
 
     def _choose_scale(self, sensor: SensorModel, pose: Pose, width: int, height: int) -> float:
         self.scale = 1.0
-        _, pixel_m2 = self._ground_grid(sensor, pose, width, height)
+        _, pixel_m2, _ = self._ground_grid(sensor, pose, width, height)
         self.origin = None  # set again by the first frame itself
         m2 = float(np.nanmedian(pixel_m2)) if np.isfinite(pixel_m2).any() else math.nan
         for scale in (0.25, 0.5):
@@ -275,12 +277,9 @@ class MotionDetector:
         """On ``cur``'s grid (gh, gw, 3) float32: where ``ref`` saw each grid point's ground (u, v
         in ref's working pixels) and whether it could tell there (1/0: both frames see the ground,
         ref not from behind a ridge nor much coarser)."""
-        from ..geodesy import enu_to_ecef
-
         h, w = cur.image.shape[:2]
         _, _, step = self._grid(w, h)
-        p = enu_to_ecef(cur.ground.reshape(-1, 3), *self.origin).reshape(cur.ground.shape)
-        ur, vr = ref.sensor.ground_to_image(ref.pose, p)
+        ur, vr = ref.sensor.ground_to_image(ref.pose, cur.p_ecef)
         k = self._to_full(ref.image.shape[1], ref.sensor)
         ur, vr = (ur - (k - 1) / 2) / k, (vr - (k - 1) / 2) / k
         # hidden in ref: ref's own ray through (ur, vr) lands elsewhere (bilinear in ref's grid)
@@ -291,9 +290,9 @@ class MotionDetector:
         # and a reference that saw the ground much coarser than this frame cannot tell (a slope
         # seen edge-on there): its pixel's ground area at most RESOLUTION_RATIO^2 times this one's
         ref_m2 = seen[..., 3]
-        seen = seen[..., :3].astype(np.float64)
+        gap = seen[..., :3].astype(np.float64) - cur.ground
         with np.errstate(invalid="ignore"):
-            ok = ((np.linalg.norm(seen - cur.ground, axis=-1) <= tol) & np.isfinite(ur) & np.isfinite(vr)
+            ok = ((np.einsum("...i,...i->...", gap, gap) <= tol * tol) & np.isfinite(ur) & np.isfinite(vr)
                   & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2))
         return np.dstack([np.where(ok, ur, 0.0), np.where(ok, vr, 0.0), ok]).astype(np.float32)
 
@@ -394,7 +393,9 @@ class MotionDetector:
             # tolerance_px: the difference from the reference's neighbourhood (its range per
             # channel), so that a fraction of a pixel of misregistration on an edge is no change
             hi, lo = (cv2.dilate(warped, box), cv2.erode(warped, box)) if self.s.tolerance_px else (warped, warped)
-            d = _channel_max(cv2.max(cv2.subtract(cur.image, hi), cv2.subtract(lo, cur.image))) * valid
+            # (the alpha channel's difference is 0 wherever valid: the frame's alpha is opaque and
+            # so is the reference's there, so the largest over all channels is over the colours)
+            d = _largest_channel(cv2.max(cv2.subtract(cur.image, hi), cv2.subtract(lo, cur.image))) * valid
             return ((d > thr).astype(np.uint8), valid, warped), d, shift
 
         # one at a time: OpenCV spreads each operation over the cores already (measured: two
@@ -534,6 +535,15 @@ def _channel_max(img: np.ndarray) -> np.ndarray:
     for c in chans[1:]:
         d = cv2.max(d, c)
     return d
+
+
+def _largest_channel(img: np.ndarray) -> np.ndarray:
+    """The largest of all the channels per pixel (cv2.reduce over the pixels' channels: ~2x
+    cv2.split and cv2.max)."""
+    import cv2
+
+    h, w, c = img.shape
+    return cv2.reduce(img.reshape(h * w, c), 1, cv2.REDUCE_MAX).reshape(h, w)
 
 
 def _no_blobs(fr: _Frame) -> Blobs:
