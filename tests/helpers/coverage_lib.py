@@ -210,6 +210,14 @@ class Coverage:
                 f"{100 * hi50:.1f}) | {100 * self.in90:.1f} % ({100 * lo90:.1f}–{100 * hi90:.1f}) | {le} |")
 
 
+def assert_covers(cv: Coverage, n: int, *, apart_max: float = 0.02, check50: bool = True) -> None:
+    """The path's 90 % circle and interval (and its 50 % circle unless ``check50`` is off) hold
+    their share of the ``n`` truths within the binomial band, nearly every target located."""
+    ok = cv.within()
+    assert cv.n >= 0.95 * n and cv.apart <= apart_max * n, cv
+    assert ok["CE90"] and ok["LE90"] and (ok["CE50"] or not check50), cv.row()
+
+
 def coverage(path: str, err_enu: np.ndarray, cep50: np.ndarray, ce90: np.ndarray, le90: np.ndarray | None,
              keep: np.ndarray) -> Coverage:
     """Shares of truths inside the predicted regions, over the targets ``keep`` marks."""

@@ -13,46 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from where import ROOT, TESTS
+from misbcheck import bcc16, cot_schema
+from where import TESTS
 
 DATA = TESTS / "data"
-KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
-
-
-def _bcc16(packet: bytes) -> int:
-    """MISB ST 0601's checksum: the 16-bit sum of every byte up to the checksum value, each byte
-    in the high half at even offsets and the low half at odd ones (ST 0601 §6.5.3)."""
-    s = 0
-    for i, b in enumerate(packet[:-2]):
-        s += b << (8 * ((i + 1) % 2))
-    return s & 0xFFFF
-
-
-@pytest.mark.parametrize("name,count", [("sitrec_day_truncated_keys.klv", 6), ("sitrec_night_truncated_keys.klv", 18)])
-def test_49_3_packets_whose_key_lost_its_head_are_recovered_and_said(name, count):
-    """Real packets that lost the first 5 bytes of their key: read (6 and 18), with a note; each
-    recovered packet is the file's bytes after the key head put back, its checksum verifies by the
-    standard's own sum, and klvdata decodes the same time stamp and sensor latitude."""
-    import klvdata
-
-    from eoloc.io.klv import read_klv
-
-    path = DATA / "klv" / name
-    stream = read_klv(path)
-    assert stream.n_good == count and stream.n_bad == 0
-    assert any(n.kind == "damaged key" and "06 0e 2b 34 02" in n.message for n in stream.notes)
-    raw = path.read_bytes()
-    tail = KEY[5:]
-    starts = [i for i in range(len(raw)) if raw.startswith(tail, i)]
-    assert len(starts) == count
-    for p, a, b in zip(stream.packets, starts, [*starts[1:], len(raw)], strict=True):
-        assert p.raw == KEY[:5] + raw[a:b]
-        assert _bcc16(p.raw) == int.from_bytes(p.raw[-2:], "big")
-        (ref,) = list(klvdata.StreamParser(p.raw))
-        values = {k: v[3] for k, v in ref.MetadataList().items()}
-        assert float(values[13]) == pytest.approx(p.fields[13], abs=1e-6)
 
 
 def test_49_3_a_damaged_stream_is_recognised_by_content_as_klv(tmp_path):
@@ -62,55 +26,6 @@ def test_49_3_a_damaged_stream_is_recognised_by_content_as_klv(tmp_path):
     disguised = tmp_path / "flight.dat"
     disguised.write_bytes((DATA / "klv" / "sitrec_day_truncated_keys.klv").read_bytes())
     assert identify(disguised).name == "klv"
-
-
-def _geoconvert_mgrs(lat: np.ndarray, lon: np.ndarray) -> list[str]:
-    """GeographicLib's GeoConvert -m -p 0 (1 m MGRS) on every point, one process."""
-    exe = shutil.which("GeoConvert")
-    assert exe, "GeoConvert (Debian geographiclib-tools) is installed by `make test` (target geoconvert)"
-    text = "\n".join(f"{a:.12f} {b:.12f}" for a, b in zip(lat, lon, strict=True))
-    out = subprocess.run([exe, "-m", "-p", "0"], input=text, capture_output=True, text=True, check=True).stdout
-    return out.split()
-
-
-def test_49_9_mgrs_truncates_to_the_metre_as_geoconvert_does():
-    """eoloc's MGRS = GeographicLib's GeoConvert over 2.5·10^4 points: random everywhere UTM
-    applies, 8 000 within 0.1 mm of a 1 m easting or northing line (where rounding, as the mgrs
-    package did, is 1 m off), zone and band edges, Norway's and Svalbard's exceptions."""
-    from pyproj import Transformer
-
-    from eoloc.io.gridref import mgrs_column
-
-    rng = np.random.default_rng(49)
-    lat = [rng.uniform(-79.99, 83.99, 12_000)]
-    lon = [rng.uniform(-180, 180, 12_000)]
-    # within 0.1 mm of a metre line: UTM coordinates chosen there, taken back to lat/lon (PROJ)
-    for zone in rng.integers(1, 61, 40):
-        to_ll = Transformer.from_crs(f"EPSG:{32600 + int(zone)}", "EPSG:4326", always_xy=True)
-        e = rng.integers(200_000, 800_000, 200) + rng.choice([-1e-4, 1e-4], 200)
-        nn = rng.integers(100_000, 9_000_000, 200) + rng.choice([-1e-4, 1e-4], 200)
-        x, y = to_ll.transform(e, nn)
-        lat.append(np.asarray(y))
-        lon.append(np.asarray(x))
-    # zone and band edges, the Norway and Svalbard exceptions
-    edge_lon = np.r_[np.arange(-174, 180, 6), 3, 9, 12, 21, 33, 42]
-    for d in (-1e-7, 1e-7):
-        lon.append(np.tile(edge_lon + d, 20))
-        lat.append(np.repeat(np.linspace(-79, 83.5, 20), edge_lon.size))
-    bands = np.r_[np.arange(-72, 80, 8), 56, 64, 72]
-    for d in (-1e-7, 1e-7):
-        lat.append(np.tile(bands + d, 40))
-        lon.append(np.repeat(np.linspace(-179, 179, 40), bands.size))
-    lat.append(rng.uniform(56, 64, 500))
-    lon.append(rng.uniform(0, 12, 500))
-    lat.append(rng.uniform(72, 83.99, 500))
-    lon.append(rng.uniform(0, 42, 500))
-    lat, lon = np.concatenate(lat), np.concatenate(lon)
-    assert lat.size >= 20_000
-    ours = mgrs_column(lat, lon)
-    ref = _geoconvert_mgrs(lat, lon)
-    wrong = [(a, b, o, r) for a, b, o, r in zip(lat, lon, ours, ref, strict=True) if o != r]
-    assert not wrong, (len(wrong), wrong[:5])
 
 
 def _vectors():
@@ -169,7 +84,7 @@ def test_49_2_stand_alone_st0903_sets_are_read_and_their_checksum_checked(tmp_pa
     for p in stream.packets:
         vset = p.fields[74]
         assert set(vset.values) | {101} == JMISB_0903_TAGS and len(vset.targets) == 2
-        assert p.standard == "ST 0903" and _bcc16(p.raw) == int.from_bytes(p.raw[-2:], "big")
+        assert p.standard == "ST 0903" and bcc16(p.raw) == int.from_bytes(p.raw[-2:], "big")
     raw = bytearray(path.read_bytes())
     second = stream.packets[1]
     raw[second.offset + 40] ^= 0x20
@@ -307,77 +222,6 @@ def test_49_7_every_kml_eoloc_writes_is_valid_ogc_kml_2_2(tmp_path):
         assert not errors, (path.name, errors[:3])
 
 
-SHARED_TRUCK = ROOT.parent / "shared" / "data" / "klv" / "esri_fmv_sample" / "Truck.klv"
-TARGET_LSB = {40: 180 / (2**32 - 2), 41: 360 / (2**32 - 2), 42: 19_900 / 65_535, 45: 4095 / 65_535,
-              46: 4095 / 65_535}  # one least significant bit of each target item (ST 0601's mappings)
-KLVDATA_NAMES = {40: "TargetLocationLatitude", 41: "TargetLocationLongitude", 42: "TargetLocationElevation",
-                 45: "TargetErrorEstimateCE90", 46: "TargetErrorEstimateLE90"}
-
-
-def _real_packets(name: str) -> Path:
-    if name == "Truck.klv":  # Esri's clip: not redistributable, read where this machine has it (tests/data/SOURCES.md)
-        if not SHARED_TRUCK.is_file():
-            pytest.skip("Esri's Truck.klv is not redistributed with eoloc and is absent on this machine")
-        return SHARED_TRUCK
-    return DATA / "klv" / name
-
-
-@pytest.mark.parametrize("name, count", [("realflight.bin", 19), ("Truck.klv", 711)])
-def test_49_4_klv_out_writes_a_fix_into_every_real_packet(name, count):
-    """Every packet of two real streams takes a fix (before: none of Truck.klv's 711, whose ST 0102
-    set lacks a required item, and 1 of realflight's 19 came back without it). stanag4609 decodes
-    the result (checksum verified; fields it finds non-standard kept raw): the five target items
-    to one LSB, every other item byte for byte (tag, length form, value) and in its order; the
-    packet length in the form it came. klvdata, where it reads the stream, agrees to one LSB."""
-    import klvdata
-    from stanag4609.st0601 import FieldDecodingMode, decode_uas_local_set
-
-    from eoloc.io.klv import read_klv
-    from eoloc.io.klv.encode import with_fix
-
-    def items(packet: bytes) -> tuple[dict[int, float], list[bytes]]:
-        fields = decode_uas_local_set(packet, field_decoding=FieldDecodingMode.PRESERVE).fields
-        target = {f.definition.tag: float(f.value) for f in fields if f.definition.tag in TARGET_LSB}
-        rest = [f.item.tag_octets + f.item.length_octets + f.item.value for f in fields
-                if f.definition.tag not in TARGET_LSB]
-        assert fields[-1].definition.tag == 1  # the checksum (verified by the decoder) comes last
-        return target, rest[:-1]
-
-    packets = [p for p in read_klv(_real_packets(name)).packets if p.standard == "ST 0601"]
-    assert len(packets) == count
-    rng = np.random.default_rng(49)
-    for p in packets:
-        fix = {40: rng.uniform(-89.9, 89.9), 41: rng.uniform(-179.9, 179.9), 42: rng.uniform(-899, 18_999),
-               45: rng.uniform(0, 4000), 46: rng.uniform(0, 4000)}
-        new = with_fix(p.raw, fix[40], fix[41], fix[42], ce90_m=fix[45], le90_m=fix[46], tag42_hae=True)
-        assert new is not None, p.index
-        got, rest = items(new)
-        _, rest_before = items(p.raw)
-        assert rest == rest_before
-        assert all(abs(got[t] - fix[t]) <= TARGET_LSB[t] for t in TARGET_LSB), (p.index, got, fix)
-        assert (new[16] >= 0x80) == (p.raw[16] >= 0x80)
-        if name == "Truck.klv":
-            (ref,) = list(klvdata.StreamParser(new))
-            by_name = {type(v).__name__: v.value for v in ref.items.values()}
-            by_name = {KLVDATA_NAMES[t]: float(by_name[KLVDATA_NAMES[t]].value) for t in TARGET_LSB}
-            assert all(abs(by_name[KLVDATA_NAMES[t]] - fix[t]) <= TARGET_LSB[t] for t in TARGET_LSB)
-
-
-def test_49_4_a_fix_no_tag_can_hold_is_refused_with_none():
-    """A height outside tag 42's range (-900 to 19 000 m) or a NaN coordinate: None, as the
-    docstring promises (before: stanag4609's ValueError out of `with_fix`); a packet whose own
-    length runs past its bytes: None too. The caller passes the packet on as it came."""
-    from eoloc.io.klv import read_klv
-    from eoloc.io.klv.encode import with_fix
-
-    raw = read_klv(DATA / "klv" / "realflight.bin").packets[0].raw
-    assert with_fix(raw, 41.0, -104.0, 19_000.5, tag42_hae=True) is None
-    assert with_fix(raw, 41.0, -104.0, -900.5, tag42_hae=True) is None
-    assert with_fix(raw, float("nan"), -104.0, 100.0, tag42_hae=True) is None
-    assert with_fix(raw[:-10], 41.0, -104.0, 100.0, tag42_hae=True) is None
-    assert with_fix(raw, 41.0, -104.0, 18_999.0, tag42_hae=True) is not None
-
-
 def test_49_4_klv_out_without_a_fix_says_so(tmp_path):
     """`eoloc klv FILE --klv-out F` on a stream without VMTI: no file, and a note saying why
     (before: nothing written and nothing said)."""
@@ -488,12 +332,6 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     np.testing.assert_allclose([p.pts_s for p in again.packets], times, atol=1.2e-5)
 
 
-def _cot_schema():
-    import xmlschema
-
-    return xmlschema.XMLSchema(str(DATA / "conformance" / "cot_event_2_0.xsd"))
-
-
 def test_49_cot_every_event_eoloc_sends_is_valid_against_the_cot_schema(tmp_path):
     """MITRE's CoT Event 2.0 schema (tests/data/conformance/cot_event_2_0.xsd) on every kind of
     event eoloc makes: the TAK data package of `eoloc klv` (each fix), and a whole live flight's
@@ -514,7 +352,7 @@ def test_49_cot_every_event_eoloc_sends_is_valid_against_the_cot_schema(tmp_path
     from eoloc.live.session import LiveSession
     from eoloc.terrain import open_dem
 
-    schema = _cot_schema()
+    schema = cot_schema()
     mountain = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
     flight, dem, config = mountain / "flight.klv", mountain / "longs_peak_srtmgl3.tif", mountain / "klv.toml"
     r = CliRunner().invoke(main, ["klv", str(flight), "--dem", str(dem), "--config", str(config), "--out",
@@ -534,32 +372,6 @@ def test_49_cot_every_event_eoloc_sends_is_valid_against_the_cot_schema(tmp_path
     for event in [*packaged, *live]:
         errors = [str(e)[:300] for e in schema.iter_errors(event.decode())]
         assert not errors, (event[:400], errors[:2])
-
-
-_COT_SCHEMA = None
-
-
-@settings(max_examples=300, deadline=None)
-@given(lat=st.floats(-90, 90), lon=st.floats(-180, 180), h=st.floats(-1e5, 1e5),
-       errors=st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(0, 1e12)), min_size=5,
-                       max_size=5),
-       tid=st.one_of(st.integers(), st.text(max_size=40)))
-def test_49_cot_a_fix_with_any_values_makes_a_valid_event(lat, lon, h, errors, tid):
-    """Whatever a fix row holds (an uncertainty NaN, infinite, negative or past 10^7 m; a target
-    name with markup, control characters or other scripts), its CoT event is valid against the
-    CoT schema: ce/le decimals within the schema (9999999, CoT's 'unknown', for what is not a
-    usable error), the name escaped."""
-    global _COT_SCHEMA
-    from eoloc.io.cot import UNKNOWN, cot_event_bytes
-
-    _COT_SCHEMA = _COT_SCHEMA or _cot_schema()
-    row = {"status": "OK", "lat_deg": lat, "lon_deg": lon, "h_m": h, "target_id": tid,
-           **dict(zip(("ce90_m", "le90_m", "sigma_e_m", "sigma_n_m", "sigma_u_m"), errors, strict=True))}
-    event = cot_event_bytes(row).decode()
-    problems = [str(e)[:200] for e in _COT_SCHEMA.iter_errors(event)]
-    assert not problems, (event, problems)
-    point = _COT_SCHEMA.to_dict(event)["point"]
-    assert all(0 <= float(point[f"@{k}"]) <= UNKNOWN for k in ("ce", "le"))
 
 
 def _rfc7946_problems(obj: dict) -> list[str]:

@@ -16,12 +16,12 @@ import sys
 from pathlib import Path
 
 import coverage_lib as C
+import droneflight as DF
 import numpy as np
-import oracle_lib as O
 import pandas as pd
 import pytest
 import srt
-from demtruth import TILE, first_crossing, tile_grid
+from demtruth import TILE
 from where import DATA
 
 import eoloc
@@ -163,76 +163,9 @@ def test_48_airdata_logs_against_pandas(path):
 
 # -- synthetic flights over a real DEM tile ---------------------------------------------------------
 
-W, H, F, CX, CY = 1280, 960, 1100.0, 639.5, 479.5
-CAMERA_TOML = f"[camera]\nwidth = {W}\nheight = {H}\nfx = {F}\ncx = {CX}\ncy = {CY}\n"
-
-
-def _flight(n=8, seed=48):
-    """Camera poses over the tile (as the files will write them: rounded to their formats'
-    decimals) and the take-off point with its ground height (the oracle's bilinear DEM)."""
-    rng = np.random.default_rng(seed)
-    grid = tile_grid()
-    la, lo = grid.lat_range, grid.lon_range
-    t_lat, t_lon = round(float(np.mean(la)), 6), round(float(np.mean(lo)), 6)
-    g0 = float(grid.sample(np.array([t_lat]), np.array([t_lon]))[0][0])
-    rel_min = grid.hmax - g0 + 150.0
-    poses = {"lat": np.round(t_lat + rng.uniform(-0.03, 0.03, n), 6),
-             "lon": np.round(t_lon + rng.uniform(-0.03, 0.03, n), 6),
-             "rel": np.round(rel_min + rng.uniform(0, 300, n), 2), "yaw": np.round(rng.uniform(-180, 180, n), 1),
-             "pitch": np.round(rng.uniform(-80, -35, n), 1), "roll": np.round(rng.uniform(-2, 2, n), 1)}
-    return grid, (t_lat, t_lon, g0), poses
-
-
-def _truth(grid, g0, poses):
-    """The oracle's first DEM crossing of each image centre's ray (tests/helpers/demtruth.py)."""
-    cam = O.Camera(W, H, F, F, CX, CY)
-    return np.array([first_crossing(grid, cam, poses["lat"][k], poses["lon"][k], g0 + poses["rel"][k],
-                                    poses["yaw"][k], poses["pitch"][k], poses["roll"][k], CX, CY)
-                     for k in range(poses["lat"].size)])
-
-
-def _write_p4(path, takeoff, poses):
-    lines = []
-    for k in range(poses["lat"].size):
-        lines += [str(k + 1), f"00:00:{k:02d},000 --> 00:00:{k + 1:02d},000",
-                  f"F/5.6, SS 400, ISO 100, EV 0, GPS ({poses['lon'][k]:.6f}, {poses['lat'][k]:.6f}, 15), "
-                  f"HOME ({takeoff[1]:.6f}, {takeoff[0]:.6f}, 12.00m), D 100.00m, H {poses['rel'][k]:.2f}m, "
-                  f"H.S 0.00m/s, V.S 0.00m/s, F.PRY (2.7°, -7.0°, 110.1°), "
-                  f"G.PRY ({poses['pitch'][k]:.1f}°, {poses['roll'][k]:.1f}°, {poses['yaw'][k]:.1f}°)", ""]
-    path.write_text("\n".join(lines), encoding="utf-8")
-
-
-def _write_bracket(path, takeoff, poses, abs_off_m):
-    lines = []
-    for k in range(poses["lat"].size):
-        rel = 0.0 if k == 0 else poses["rel"][k]  # the clip starts on the ground at take-off
-        lat, lon = (takeoff[0], takeoff[1]) if k == 0 else (poses["lat"][k], poses["lon"][k])
-        lines += [str(k + 1), f"00:00:00,{k * 40:03d} --> 00:00:00,{k * 40 + 40:03d}",
-                  f'<font size="28">FrameCnt: {k + 1}, DiffTime: 40ms', "2026-05-27 13:10:00.015",
-                  f"[iso: 200] [shutter: 1/6400.0] [fnum: 1.9] [focal_len: 24.00] [latitude: {lat:.6f}] "
-                  f"[longitude: {lon:.6f}] [rel_alt: {rel:.3f} abs_alt: {rel + abs_off_m:.3f}] "
-                  f"[gb_yaw: {poses['yaw'][k]:.1f} gb_pitch: {poses['pitch'][k]:.1f} gb_roll: {poses['roll'][k]:.1f}]"
-                  "</font>", ""]
-    path.write_text("\n".join(lines), encoding="utf-8")
-
-
-def _write_airdata(path, poses, is_video=None):
-    head = ("time(millisecond),datetime(utc),latitude,longitude,height_above_takeoff(feet),"
-            "altitude_above_seaLevel(feet), compass_heading(degrees), pitch(degrees), roll(degrees),isVideo,"
-            "gimbal_heading(degrees),gimbal_pitch(degrees),gimbal_roll(degrees)")
-    rows = [head]
-    for k in range(poses["lat"].size):
-        rel_ft = poses["rel"][k] / 0.3048
-        rows.append(f"{k * 100},2024-01-04 22:19:40,{poses['lat'][k]:.6f},{poses['lon'][k]:.6f},{rel_ft:.9f},"
-                    f"{rel_ft + 9000:.9f}, 32.2, 1.4, 2.5,{1 if is_video is None else int(is_video[k])},"
-                    f"{poses['yaw'][k]:.1f},{poses['pitch'][k]:.1f},"
-                    f"{poses['roll'][k]:.1f}")
-    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
-
-
 def _locate(tmp_path, tel, *more):
     cfg = tmp_path / "camera.toml"
-    cfg.write_text(CAMERA_TOML, encoding="utf-8")
+    cfg.write_text(DF.CAMERA_TOML, encoding="utf-8")
     out = tmp_path / f"out-{tel.stem}"
     r = subprocess.run([EOLOC, "locate", str(tel), "--config", str(cfg), "--out", str(out), "--format", "csv",
                         *map(str, more)], capture_output=True, text=True, timeout=180)
@@ -247,17 +180,17 @@ def test_48_synthetic_drone_flight_located_on_the_dem_within_1cm(tmp_path, fmt):
     gb_yaw/gb_pitch/gb_roll) or an Airdata log (feet): `eoloc locate FILE --dem TILE` puts every
     image centre within 1 cm of the oracle's first DEM crossing; the heights come from the DEM's
     take-off ground + the height above take-off, and the wrong abs_alt is named."""
-    grid, takeoff, poses = _flight()
+    grid, takeoff, poses = DF.flight()
     path = tmp_path / {"p4rtk": "flight.SRT", "bracket": "clip.SRT", "airdata": "log.csv"}[fmt]
     if fmt == "p4rtk":
-        _write_p4(path, takeoff, poses)
+        DF.write_p4(path, takeoff, poses)
     elif fmt == "bracket":
-        _write_bracket(path, takeoff, poses, abs_off_m=60.0)
+        DF.write_bracket(path, takeoff, poses, abs_off_m=60.0)
         poses = {k: v[1:] for k, v in poses.items()}  # record 0 sits at take-off, looking at the horizon-ish
     else:
         poses["lat"][0], poses["lon"][0] = takeoff[0], takeoff[1]  # the log's first record is take-off
-        _write_airdata(path, poses)
-    truth = _truth(grid, takeoff[2], poses)
+        DF.write_airdata(path, poses)
+    truth = DF.truth(grid, takeoff[2], poses)
     r, fixes = _locate(tmp_path, path, "--dem", TILE, "--vertical", "ellipsoid")
     assert r.returncode == 0, r.stderr
     if fmt == "bracket":
@@ -272,11 +205,11 @@ def test_48_a_camera_under_the_ground_names_its_height_tag(tmp_path):
     """An Airdata log whose heights above take-off are 400 m too low puts the camera under the
     ridge: those records are refused, the message names height_above_takeoff; nothing is located
     there (no plausible wrong point)."""
-    grid, takeoff, poses = _flight(n=4)
+    grid, takeoff, poses = DF.flight(n=4)
     poses["lat"][0], poses["lon"][0] = takeoff[0], takeoff[1]
     poses["rel"] = poses["rel"] - (grid.hmax - takeoff[2] + 400.0)
     path = tmp_path / "low.csv"
-    _write_airdata(path, poses)
+    DF.write_airdata(path, poses)
     r, fixes = _locate(tmp_path, path, "--dem", TILE, "--vertical", "ellipsoid")
     assert "under the ground" in r.stderr and "height_above_takeoff" in r.stderr
     assert fixes is None or (fixes["status"] != "OK").all()
@@ -296,38 +229,6 @@ FOLSOM_SRT = DRONE / "srt" / "MICK_folsomake_DJI_0031-01.srt"
 FOLSOM_LOG = DRONE / "logs" / "Dec-22nd-2023-11-56AM-Flight-Airdata.csv"
 
 
-def test_48_real_srt_synced_with_its_flight_log():
-    """The real DJI Mini 2 SE clip (no attitude, positions to 1e-4°, H above take-off) and the
-    Airdata log of its flight: the offset found puts every SRT height within 0.15 m of the log's
-    (pandas, read by hand from the CSV) and every position within 12 m (the SRT's rounding); it is
-    within a second after an isVideo rising edge (the recording's start); each record's attitude
-    is the log's gimbal angles there."""
-    from eoloc.jobs.flightlog import WithFlightLog
-    from eoloc.jobs.inputs import read_inputs
-
-    inputs = read_inputs(WithFlightLog(str(FOLSOM_SRT), str(FOLSOM_LOG)))
-    note = next(i.message for i in inputs.issues if "poses from the flight log" in i.message)
-    offset = float(note.split("time + ")[1].split(" s")[0])
-    log = pd.read_csv(FOLSOM_LOG, skipinitialspace=True)
-    log.columns = [c.strip() for c in log.columns]
-    t_log = log["time(millisecond)"].to_numpy() / 1000.0
-    edges = t_log[np.flatnonzero(np.diff(log["isVideo"].to_numpy()) == 1) + 1]
-    assert ((offset - edges >= 0) & (offset - edges <= 1.0)).any(), (offset, edges)
-    srt_rows = read_source(FOLSOM_SRT).telemetry.columns
-    t = srt_rows["time_s"] + offset
-    h_log = np.interp(t, t_log, log["height_above_takeoff(feet)"].to_numpy() * 0.3048)
-    assert np.abs(h_log - srt_rows["h_rel_m"]).max() < 0.15
-    lat = np.interp(t, t_log, log["latitude"].to_numpy())
-    lon = np.interp(t, t_log, log["longitude"].to_numpy())
-    apart = np.hypot((lat - srt_rows["lat_deg"]) * 111_320, (lon - srt_rows["lon_deg"]) * 111_320 * np.cos(0.676))
-    assert apart.max() < 12.0, apart.max()
-    c = inputs.telemetry.columns
-    np.testing.assert_allclose(c["pitch_deg"], np.interp(t, t_log, log["gimbal_pitch(degrees)"]), atol=0.05)
-    assert np.isfinite(c["yaw_deg"]).all() and np.isfinite(c["h_m"]).all()
-    # what the SRT alone lacked (attitude, a placeable height) the log answered: no longer reported
-    assert not [i for i in inputs.issues if "no camera attitude" in i.message or "placed in height" in i.message]
-
-
 def test_48_a_log_of_another_flight_is_refused(tmp_path):
     """The same clip against the log of another day's flight: no offset matches; the message names
     both files; `eoloc locate` shows no traceback."""
@@ -342,7 +243,7 @@ def test_48_synthetic_srt_and_log_located_within_1cm(tmp_path):
     synthetic flight, the video starting at 37.4 s on the log's clock (its isVideo edge): the
     offset is found to 0.05 s, and `eoloc locate SRT --flight-log LOG --dem TILE` puts each image
     centre within 1 cm of the oracle's DEM crossing seen from the log's pose at that time."""
-    grid, takeoff, poses = _flight(n=60, seed=7)
+    grid, takeoff, poses = DF.flight(n=60, seed=7)
     n = poses["lat"].size
     start = 37.4
     # a smooth flight: the poses drift slowly (the log at 10 Hz)
@@ -358,7 +259,7 @@ def test_48_synthetic_srt_and_log_located_within_1cm(tmp_path):
     log_poses["lat"][0], log_poses["lon"][0] = takeoff[0], takeoff[1]
     log_poses["rel"][:pre] = np.linspace(0.0, poses["rel"][0], pre)
     path = tmp_path / "log.csv"
-    _write_airdata(path, log_poses, is_video=np.arange(pre + n) >= pre)
+    DF.write_airdata(path, log_poses, is_video=np.arange(pre + n) >= pre)
     srt_path = tmp_path / "clip.SRT"
     blocks = []
     for j in range(0, n, 10):  # one block a second, as the old models write
@@ -367,7 +268,7 @@ def test_48_synthetic_srt_and_log_located_within_1cm(tmp_path):
                    f"D 10.00m, H {poses['rel'][j]:.2f}m, H.S 0.00m/s, V.S 0.00m/s", ""]
     srt_path.write_text("\n".join(blocks), encoding="utf-8")
     picked = {key: v[::10] for key, v in poses.items()}
-    truth = _truth(grid, takeoff[2], picked)
+    truth = DF.truth(grid, takeoff[2], picked)
     r, fixes = _locate(tmp_path, srt_path, "--flight-log", path, "--dem", TILE, "--vertical", "ellipsoid")
     assert r.returncode == 0, r.stderr
     offset = float(r.stderr.split("time + ")[1].split(" s")[0])
@@ -492,7 +393,7 @@ def test_48_a_new_source_is_one_class_and_one_registry_line(tmp_path, monkeypatc
     csv_path.write_text("time_s,lat_deg,lon_deg,h_m,yaw_deg,pitch_deg,roll_deg,gimbal1_deg,gimbal2_deg\n"
                         + "\n".join(",".join(map(str, p)) for p in poses) + "\n", encoding="utf-8")
     cfg = tmp_path / "camera.toml"
-    cfg.write_text(CAMERA_TOML, encoding="utf-8")
+    cfg.write_text(DF.CAMERA_TOML, encoding="utf-8")
     outs = []
     for tel in (log, csv_path):
         out = tmp_path / f"o-{tel.suffix[1:]}"
