@@ -74,3 +74,22 @@ def write_airdata(path, poses, is_video=None):
                     f"{poses['yaw'][k]:.1f},{poses['pitch'][k]:.1f},"
                     f"{poses['roll'][k]:.1f}")
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+
+
+FLIGHT_FILES = {"p4rtk": "flight.SRT", "bracket": "clip.SRT", "airdata": "log.csv"}
+
+
+def write_flight(folder, fmt: str, abs_off_m: float = 60.0):
+    """:func:`flight` written in ``fmt`` ("p4rtk", "bracket": its record 0 on the ground at
+    take-off, abs_alt ``abs_off_m`` off; "airdata": its first record at take-off) into ``folder``:
+    (grid, take-off, poses as written, the file)."""
+    grid, takeoff, poses = flight()
+    path = folder / FLIGHT_FILES[fmt]
+    if fmt == "p4rtk":
+        write_p4(path, takeoff, poses)
+    elif fmt == "bracket":
+        write_bracket(path, takeoff, poses, abs_off_m=abs_off_m)
+    else:
+        poses["lat"][0], poses["lon"][0] = takeoff[0], takeoff[1]
+        write_airdata(path, poses)
+    return grid, takeoff, poses, path

@@ -67,3 +67,11 @@ def mutated_packets(good: list[bytes], n: int, seed: int = 0) -> list[bytes]:
         items = [(t, v) for t, v in uas_items(good[k % len(good)]) if t != 1]  # (the checksum is rebuilt)
         out.append(build_uas_packet(_mutate_items(rng, items)))
     return out
+
+
+def with_reserved_null_cell(ts: bytes) -> bytes:
+    """An MPEG-TS with one null packet whose adaptation_field_control is the reserved 00 slipped
+    in halfway (at a 188-byte boundary): a stream the vectorised demultiplexer calls unclean, so
+    the reader takes its tolerant path, with nothing of the KLV or its timing changed."""
+    half = len(ts) // 188 // 2 * 188
+    return ts[:half] + b"\x47\x1f\xff\x00" + b"\xff" * 184 + ts[half:]

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from klvfuzz import with_reserved_null_cell
 from misbcheck import bcc16, cot_schema
 from where import TESTS
 
@@ -323,10 +324,8 @@ def test_49_8_mux_writes_st1402_carriage_and_reads_it_back(tmp_path, carriage):
     assert any(n.kind == "timed by arrival" and n.count == 20 for n in back.notes) == (carriage == "async")
     # and through the tolerant path: a null cell with the reserved adaptation field control (00)
     # slipped in halfway makes the stream unclean, and changes nothing of the KLV or its timing
-    data = out.read_bytes()
-    half = len(data) // 188 // 2 * 188
     damaged = tmp_path / "damaged.ts"
-    damaged.write_bytes(data[:half] + b"\x47\x1f\xff\x00" + b"\xff" * 184 + data[half:])
+    damaged.write_bytes(with_reserved_null_cell(out.read_bytes()))
     again = read_klv(damaged)
     assert [p.raw for p in again.packets] == [p.raw for p in back.packets]
     np.testing.assert_allclose([p.pts_s for p in again.packets], times, atol=1.2e-5)

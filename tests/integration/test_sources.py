@@ -180,16 +180,9 @@ def test_48_synthetic_drone_flight_located_on_the_dem_within_1cm(tmp_path, fmt):
     gb_yaw/gb_pitch/gb_roll) or an Airdata log (feet): `eoloc locate FILE --dem TILE` puts every
     image centre within 1 cm of the oracle's first DEM crossing; the heights come from the DEM's
     take-off ground + the height above take-off, and the wrong abs_alt is named."""
-    grid, takeoff, poses = DF.flight()
-    path = tmp_path / {"p4rtk": "flight.SRT", "bracket": "clip.SRT", "airdata": "log.csv"}[fmt]
-    if fmt == "p4rtk":
-        DF.write_p4(path, takeoff, poses)
-    elif fmt == "bracket":
-        DF.write_bracket(path, takeoff, poses, abs_off_m=60.0)
+    grid, takeoff, poses, path = DF.write_flight(tmp_path, fmt)
+    if fmt == "bracket":
         poses = {k: v[1:] for k, v in poses.items()}  # record 0 sits at take-off, looking at the horizon-ish
-    else:
-        poses["lat"][0], poses["lon"][0] = takeoff[0], takeoff[1]  # the log's first record is take-off
-        DF.write_airdata(path, poses)
     truth = DF.truth(grid, takeoff[2], poses)
     r, fixes = _locate(tmp_path, path, "--dem", TILE, "--vertical", "ellipsoid")
     assert r.returncode == 0, r.stderr

@@ -7,6 +7,7 @@ descriptor, PES headers, adaptation-field stuffing, the MPEG-2 CRC-32), not by e
 from __future__ import annotations
 
 import numpy as np
+from klvfuzz import with_reserved_null_cell
 
 from eoloc.io.klv import read_klv
 
@@ -94,9 +95,8 @@ def test_asynchronous_klv_is_timed_by_the_frame_it_follows_on_both_paths(tmp_pat
     np.testing.assert_allclose([p.pts_s for p in back.packets], times, atol=1.2e-5)
     assert any(n.kind == "timed by arrival" and n.count == times.size for n in back.notes)
     # a null packet with the reserved adaptation_field_control (00) halfway: the tolerant path
-    half = len(data) // 188 // 2 * 188
     damaged = tmp_path / "damaged.ts"
-    damaged.write_bytes(data[:half] + b"\x47\x1f\xff\x00" + b"\xff" * 184 + data[half:])
+    damaged.write_bytes(with_reserved_null_cell(data))
     again = read_klv(damaged)
     assert [p.raw for p in again.packets] == [p.raw for p in back.packets]
     np.testing.assert_allclose([p.pts_s for p in again.packets], times, atol=1.2e-5)

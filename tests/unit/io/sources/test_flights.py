@@ -19,15 +19,7 @@ from eoloc.io.sources import read_source
 
 @pytest.mark.parametrize("fmt", ["p4rtk", "bracket", "airdata"])
 def test_a_flight_is_read_as_written(tmp_path, fmt):
-    grid, takeoff, poses = DF.flight()
-    path = tmp_path / {"p4rtk": "flight.SRT", "bracket": "clip.SRT", "airdata": "log.csv"}[fmt]
-    if fmt == "p4rtk":
-        DF.write_p4(path, takeoff, poses)
-    elif fmt == "bracket":
-        DF.write_bracket(path, takeoff, poses, abs_off_m=60.0)
-    else:
-        poses["lat"][0], poses["lon"][0] = takeoff[0], takeoff[1]  # the log's first record is take-off
-        DF.write_airdata(path, poses)
+    _, takeoff, poses, path = DF.write_flight(tmp_path, fmt)
     data = read_source(path, dem=eoloc.open_dem(TILE, vertical="ellipsoid"))  # the oracle reads its posts as they are
     c = data.telemetry.columns
     first = 1 if fmt == "bracket" else 0  # the bracket clip's record 0 sits on the ground at take-off
