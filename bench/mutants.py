@@ -143,7 +143,7 @@ MUTANTS = [
            "ST 1201 IMAPB decoded with the zero offset's sign flipped"),
     # --- photos (issue 48)
     Mutant("photo-datum", "io/photo.py", "        h = alt + n\n", "        h = alt - n\n",
-           ("tests/unit/io/test_photo.py",),
+           ("tests/unit/io/test_photo_tags.py",),
            "Skydio's AbsoluteAltitude (above EGM96) converted to ellipsoidal the wrong way"),
     Mutant("photo-db-scale", "sensor/dronemodels.py", 'scale = width / e["widthPixels"]', "scale = 1.0",
            ("tests/unit/sensor/test_dronemodels.py",), "a resized photo's focal length not scaled"),
@@ -151,7 +151,7 @@ MUTANTS = [
            "cx * k, cy * k)", ("tests/unit/sensor/test_dronemodels.py",),
            "a resized photo's principal point scaled without the half-pixel convention"),
     Mutant("photo-pix4d-pitch", "io/photo.py", 'pitch = _num(tags, "Pitch", p.path) - 90.0',
-           'pitch = 90.0 - _num(tags, "Pitch", p.path)', ("tests/unit/io/test_photo.py",),
+           'pitch = 90.0 - _num(tags, "Pitch", p.path)', ("tests/unit/io/test_photo_tags.py",),
            "old Autel (Pix4D Camera:Pitch, 0 at nadir) turned the wrong way"),
     Mutant("fisheye-theta", "kernels/core.py", "t = _TWO_OVER_PI * np.arctan(r)", "t = _TWO_OVER_PI * r",
            ("tests/unit/kernels/test_references.py",), "Pix4D fisheye angle without the arctangent"),

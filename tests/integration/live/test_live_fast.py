@@ -249,6 +249,18 @@ def test_hostile_packets_reach_every_status():
                 covs.extend(u.cov_enu[[r["status"] == "OK" for r in u.fixes]])
 
     collect_dem()
+    # and packets made to reach each of the terrain's statuses whatever the draws gave: a camera
+    # 4 km over the tile looking down, one 1 km under its ground, one beyond the tile's edge
+    made = {"OK": (40.255, -105.62, 8000.0), "BELOW_SURFACE": (40.255, -105.62, 1000.0),
+            "OUT_OF_COVERAGE": (41.5, -105.62, 8000.0)}
+    for want, (lat, lon, h) in made.items():
+        values = {2: datetime.fromtimestamp(1.7e9, UTC), 13: lat, 14: lon, 15: h, 5: 0.0, 6: 0.0, 7: 0.0, 16: 20.0,
+                  17: 15.0, 18: 0.0, 19: -90.0, 20: 0.0, 23: lat, 24: lon, 25: 3000.0,
+                  74: encode_vmti([(1, 320.0, 240.0), (2, 100.0, 50.0)], 640, 480)}
+        (p,) = _decoded(encode_uas_packet(values))
+        got = {r["status"] for r in locator.locate("t", p).fixes}
+        assert got == {want}, (want, got)
+        seen |= got
     assert {"OK", "OUT_OF_COVERAGE", "BELOW_SURFACE", "NO_INTERSECTION", "INVALID_INPUT"} <= seen, seen
     assert len(covs) > 20 and np.all(np.isfinite(covs)), len(covs)
 
