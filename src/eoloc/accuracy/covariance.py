@@ -211,3 +211,28 @@ def covariance_columns(cov: FixCovariance, ok: ArrayLike | None = None) -> dict[
     out = {k: np.ravel(np.where(keep, v, np.nan)) for k, v in cols.items()}
     out["nonlinearity"] = np.ravel(np.where(ok if ok is not None else True, cov.nonlinearity, np.nan))
     return out
+
+
+class CovarianceRows:
+    """The covariances of ``n`` targets located in groups (one call per camera): each group's
+    :meth:`put` fills its rows' uncertainty columns (:func:`covariance_columns`), ENU covariance
+    (n, 3, 3) m^2 and each budget source's 1-sigma effect (n, 3, S); NaN where a target is not OK
+    or no group held it. ``columns`` stays empty, the arrays None, until a group is put."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.columns: dict[str, np.ndarray] = {}
+        self.cov_enu: np.ndarray | None = None
+        self.effects: np.ndarray | None = None
+        self.tau_s: np.ndarray | None = None
+
+    def put(self, idx: np.ndarray, cov: FixCovariance, ok: np.ndarray) -> None:
+        for k, col in covariance_columns(cov, ok).items():
+            self.columns.setdefault(k, np.full(self.n, np.nan))[idx] = col
+        if self.cov_enu is None:
+            self.tau_s = cov.tau_s
+            self.cov_enu = np.full((self.n, 3, 3), np.nan)
+            self.effects = np.full((self.n, 3, cov.tau_s.size), np.nan)
+        keep = np.asarray(ok, dtype=bool)[:, None, None]
+        self.cov_enu[idx] = np.where(keep, np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
+        self.effects[idx] = np.where(keep, np.reshape(cov.scaled_jacobian, (-1, 3, cov.tau_s.size)), np.nan)

@@ -251,8 +251,7 @@ def locate_vmti(tel: Table, det: Table, ground: StopRule | None = None, *, budge
     w, h = d["frame_width"], d["frame_height"]
     lat, lon, hh, rng = (np.full(n, np.nan) for _ in range(4))
     status = np.full(n, int(Status.NO_TELEMETRY), dtype=np.int8)
-    unc: dict[str, np.ndarray] = {}
-    cov_enu = effects = tau = None
+    covs = None  # CovarianceRows, with a budget
     pose_all = packet_pose(tel).take(row) if n else None
     status[found & ~usable] = int(Status.INVALID_INPUT)
     for (hf, vf, wi, hi), idx in camera_groups(hfov, vfov, w, h, usable):
@@ -268,19 +267,16 @@ def locate_vmti(tel: Table, det: Table, ground: StopRule | None = None, *, budge
                                                  (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m))
         status[idx] = st
         if cov is not None:
-            from ..accuracy.covariance import covariance_columns  # scipy (1.2 s): only when a budget asks for it
+            if covs is None:
+                from ..accuracy.covariance import CovarianceRows  # scipy (1.2 s): only when a budget asks for it
 
-            for k, v in covariance_columns(cov, ok).items():
-                unc.setdefault(k, np.full(n, np.nan))[idx] = v
-            if cov_enu is None:
-                cov_enu = np.full((n, 3, 3), np.nan)
-                tau = cov.tau_s
-                effects = np.full((n, 3, tau.size), np.nan)
-            cov_enu[idx] = np.where(ok[:, None, None], np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
-            effects[idx] = np.where(ok[:, None, None], np.reshape(cov.scaled_jacobian, (-1, 3, tau.size)), np.nan)
+                covs = CovarianceRows(n)
+            covs.put(idx, cov, ok)
     extra = {"frame": d["frame"].astype(np.int64), "time_s": d["time_s"], "target_id": d["target_id"],
              "u_px": d["u_px"], "v_px": d["v_px"]}
-    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, unc, cov_enu, effects, tau)
+    if covs is None:
+        return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, {}, None, None, None)
+    return VMTIFixes(Fixes(lat, lon, hh, rng, status), extra, covs.columns, covs.cov_enu, covs.effects, covs.tau_s)
 
 
 def _frame_properties(tel: Table, i: int) -> dict:

@@ -168,7 +168,8 @@ class PacketLocator:
         roll = c["sensor_roll_deg"]
         pose = (c["lat_deg"], c["lon_deg"], c["h_m"], c["yaw_deg"], c["pitch_deg"], c["roll_deg"],
                 c["gimbal1_deg"], c["gimbal2_deg"], 0.0 if math.isnan(roll) else roll)
-        ground = self.terrain or AtHeight(c["fc_h_m"])  # without a DEM the frame-centre elevation stops the rays
+        # without a DEM the frame-centre elevation stops the rays
+        ground = self.terrain if self.terrain is not None else AtHeight(c["fc_h_m"])
         usable = all(math.isfinite(x) for x in pose) and abs(pose[0]) <= 90.0 and \
             (self.terrain is not None or math.isfinite(c["fc_h_m"]))
         det = vmti_detections(KLVStream(source, "klv", [packet]))
@@ -288,12 +289,17 @@ class PacketLocator:
             fixes = stopped
             status[status == -1] = stopped.status[status == -1]
         else:
+            from ..accuracy.covariance import CovarianceRows
+
             fixes = Fixes(*(np.full(n, np.nan) for _ in range(4)), status)
             if not usable:
                 status[status == -1] = int(Status.INVALID_INPUT)
+            covs = CovarianceRows(n)
             for key, idx in targets.groups:  # every framed target, as the batch locates them
-                self._covariance(update, fixes, unc, self._frame_sensor(*key), pose, ground, idx, d["u_px"][idx],
-                                 d["v_px"][idx], n)
+                self._covariance(covs, fixes, self._frame_sensor(*key), pose, ground, idx, d["u_px"][idx],
+                                 d["v_px"][idx])
+            unc = covs.columns
+            update.cov_enu, update.effects, update.tau_s = covs.cov_enu, covs.effects, covs.tau_s
         ok = status == Status.OK
         located = Fixes(*(np.where(ok, x, np.nan) for x in (fixes.lat_deg, fixes.lon_deg, fixes.h_m, fixes.range_m)),
                         status)
@@ -301,12 +307,11 @@ class PacketLocator:
                  "time_utc": time_utc, "target_id": d["target_id"], "u_px": d["u_px"], "v_px": d["v_px"]}
         update.fixes = fix_records(located, extra, unc).rows()
 
-    def _covariance(self, update: PacketUpdate, fixes: Fixes, unc: dict, sensor, pose: tuple, ground, idx: np.ndarray,
-                    u: np.ndarray, v: np.ndarray, n: int) -> None:
-        """The targets ``idx`` of one frame camera located with their covariance (into ``fixes``,
-        the uncertainty columns ``unc`` and ``update``'s covariance arrays); a status decided
-        before (``fixes.status`` not -1) stands."""
-        from ..accuracy.covariance import covariance_columns
+    def _covariance(self, covs, fixes: Fixes, sensor, pose: tuple, ground, idx: np.ndarray, u: np.ndarray,
+                    v: np.ndarray) -> None:
+        """The targets ``idx`` of one frame camera located with their covariance (into ``fixes`` and
+        ``covs``, a :class:`~eoloc.accuracy.covariance.CovarianceRows`); a status decided before
+        (``fixes.status`` not -1) stands."""
         from ..jobs.tables import locate_by_rule
         from ..sensor.model import Pose
 
@@ -317,16 +322,7 @@ class PacketLocator:
             getattr(fixes, name)[idx] = getattr(f, name)
         decided = fixes.status[idx] != -1  # no frame, off the frame, or a pose that cannot be used
         fixes.status[idx] = np.where(decided, fixes.status[idx], f.status)
-        ok = fixes.status[idx] == Status.OK
-        for k, col in covariance_columns(cov, ok).items():
-            unc.setdefault(k, np.full(n, np.nan))[idx] = col
-        if update.cov_enu is None:
-            update.tau_s = cov.tau_s
-            update.cov_enu = np.full((n, 3, 3), np.nan)
-            update.effects = np.full((n, 3, cov.tau_s.size), np.nan)
-        update.cov_enu[idx] = np.where(ok[:, None, None], np.reshape(cov.cov_enu, (-1, 3, 3)), np.nan)
-        update.effects[idx] = np.where(ok[:, None, None], np.reshape(cov.scaled_jacobian, (-1, 3, cov.tau_s.size)),
-                                       np.nan)
+        covs.put(idx, cov, fixes.status[idx] == Status.OK)
 
 
 @dataclass(frozen=True)
