@@ -8,7 +8,10 @@ import json
 import socket
 import subprocess
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
+
+from eoloc.live.sources import DatagramSink
 
 
 def free_udp_port() -> int:
@@ -40,3 +43,32 @@ def wait_for_packets(ndjson: Path, n: int, proc: subprocess.Popen, timeout_s: fl
                 break
         time.sleep(0.05)
     return seen
+
+
+class CotReceiver(DatagramSink):
+    """Every datagram on a UDP address (a multicast group joined) parsed as one CoT event."""
+
+    def __init__(self, url: str) -> None:
+        self.events: list[ET.Element] = []
+        self.bad: list[bytes] = []
+        super().__init__(url, self._parse)
+
+    def _parse(self, data: bytes, _arrival: float) -> None:
+        try:
+            ev = ET.fromstring(data)
+            assert ev.tag == "event" and ev.find("point") is not None
+            self.events.append(ev)
+        except (ET.ParseError, AssertionError):
+            self.bad.append(data)
+
+
+def settle(path: Path, quiet_s: float = 1.5, timeout_s: float = 120.0) -> None:
+    """Wait until ``path`` has stopped growing for ``quiet_s`` (the receiver has caught up)."""
+    deadline, last, since = time.monotonic() + timeout_s, -1, time.monotonic()
+    while time.monotonic() < deadline:
+        size = path.stat().st_size if path.exists() else 0
+        if size != last:
+            last, since = size, time.monotonic()
+        elif size and time.monotonic() - since > quiet_s:
+            return
+        time.sleep(0.1)

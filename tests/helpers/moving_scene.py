@@ -48,6 +48,10 @@ class Vehicle:
         return np.array([[e, n] + s * a * fwd + r * b * right for s, r in ((1, 1), (1, -1), (-1, -1), (-1, 1))])
 
 
+CARS = [Vehicle(-100, 20, 90, 12), Vehicle(50, -80, 10, 8), Vehicle(120, 100, 225, 15)]
+START_UNIX_S = 1_784_044_800.0  # 2026-07-14 16:00:00 UTC: the KLV's time stamp of t = 0
+
+
 def ground_texture(seed: int = 7) -> np.ndarray:
     """Smooth colour noise (three scales), uint8 (N, N, 3); row 0 is the north edge."""
     rng = np.random.default_rng(seed)
@@ -134,3 +138,22 @@ def in_view(vehicle: Vehicle, t_s: float, margin_px: float = 8.0, **cam) -> bool
     p = K() @ (R @ (np.array([e, n, 0.0]) - c))
     u, v = p[:2] / p[2]
     return bool(margin_px <= u <= W - 1 - margin_px and margin_px <= v <= H - 1 - margin_px)
+
+
+def klv_packets(n: int) -> list[tuple[bytes, float]]:
+    """The camera's telemetry at FPS as ST 0601 packets (eoloc's encoder; their values are checked
+    against stanag4609 in tests/unit/io/klv), one per frame: (packet, time s)."""
+    from datetime import UTC, datetime
+
+    from eoloc.io.klv.encode import encode_uas_packet
+
+    vfov = float(np.degrees(2 * np.arctan((H / 2) / K()[1, 1])))
+    out = []
+    for i in range(n):
+        t = i / FPS
+        tel = telemetry(t)
+        values = {2: datetime.fromtimestamp(START_UNIX_S + t, UTC), 5: 0.0, 6: 0.0, 7: 0.0, 13: tel["lat_deg"],
+                  14: tel["lon_deg"], 75: tel["h_m"], 16: HFOV_DEG, 17: vfov, 18: tel["az_deg"] % 360,
+                  19: tel["el_deg"], 20: tel["roll_deg"] % 360}
+        out.append((encode_uas_packet(values), t))
+    return out

@@ -11,7 +11,15 @@ import click
 
 from .common import open_dem
 from .main import err_console, fail, warn
-from .options import allow_host_option, config_option, dem_options, tak_connection, tak_options
+from .options import (
+    allow_host_option,
+    config_option,
+    dem_options,
+    detect_options,
+    detect_settings,
+    tak_connection,
+    tak_options,
+)
 
 LIVE_HELP = """Locate the VMTI targets of a live MISB ST 0601 stream, packet by packet, as it arrives,
 and send them on as NDJSON and Cursor-on-Target (TAK).
@@ -58,10 +66,23 @@ Outputs (any combination, at least one):
                     out: video, audio and tables passed on untouched, the metadata PES rebuilt.
   --map HOST:PORT   a live map in the browser at http://HOST:PORT/live (offline Leaflet, updated
                     over a WebSocket): aircraft and trail, footprint, frame centre, targets with
-                    their CEP50 circles and tracks, and the stream's state (live, SILENT, STOPPED).
+                    their CEP50 circles and tracks, movers (--detect) with their tracks, and the
+                    stream's state (live, SILENT, STOPPED).
                     The same server answers eoloc serve's API (POST /v1/locate, /docs). Port 0:
                     any free one (printed). With --map the page stays up after the source ends,
                     until Ctrl-C or --duration.
+\b
+Targets from the video itself (--detect motion|MODEL.onnx, with --dem): the stream's own video
+(MPEG-TS sources: udp, srt, tcp, a file, stdin; not RTSP/RTMP, whose KLV FFmpeg hands over alone)
+is decoded as it arrives, each frame posed by the KLV packets around it (PTS), and searched as
+`eoloc video --detect` searches it (motion: each frame against frames up to --detect-window
+seconds before and after it, the camera's motion taken out through the poses and the DEM; a
+model: its boxes). A track is sent once it is a mover (confirmed, 1 s long, moving at least
+--min-speed), then with every frame it is found in: "mover" features in --ndjson and --map (id,
+speed, heading, box; with [accuracy.budget] its CE90/LE90) and CoT markers <platform>-mover-<id>
+with course, speed and ce/le. Movers trail the video by --detect-window plus the work (the
+summary's movers.latency_ms); frames are skipped, not queued, when the work falls behind a live
+source (movers.frames_skipped); a file is searched whole.
 \b
 Faults are counted, never fatal: corrupt or non-KLV datagrams, duplicated packets (dropped),
 late ones (located all the same), encoder restarts (time back > 2 s), silence (--silence S: a
@@ -116,10 +137,12 @@ STREAM_SCHEMES = ("udp", "srt", "rtsp", "rtsps", "rtp", "rtmp", "http", "https")
               help="Stop after S seconds.")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
+@detect_options
 @allow_host_option
 def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, tak_cert, tak_cert_password,
          tak_ca, tak_package, tak_protocol, video_url, video_package, klv_out, map_at, cot_targets, cot_interval,
-         refine, refine_legacy, realtime, max_packets, duration, silence, allow_hosts) -> None:
+         refine, refine_legacy, realtime, max_packets, duration, silence, detect, detect_score, detect_classes,
+         detect_point, detect_window, detect_threshold, min_area, max_area, min_speed, allow_hosts) -> None:
     from ..jobs.setup import misb_setup
     from ..live.loop import run
     from ..live.session import LiveSession
@@ -146,9 +169,25 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
         if video_url is None:
             fail("--video-package: give the stream's URL (--video-url rtsp://...; SOURCE is not a stream URL)")
         write_video_package(video_package, video_url, uid=CotFeed().video_uid(), alias="eoloc video")
+    if detect and not dem_paths:
+        fail("--detect needs the ground the video sees: --dem FILE")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     config = load_config(config_path) if config_path else None
     sensor, budget = misb_setup(config)
+    movers = None
+    if detect:
+        from ..live.movers import LiveMovers
+        from ..rules import OnDEM
+
+        rule = OnDEM(dem)
+        finder, mover_settings = detect_settings(
+            detect, rule, detect_score=detect_score, detect_classes=detect_classes, detect_point=detect_point,
+            detect_window=detect_window, detect_threshold=detect_threshold, min_area=min_area, max_area=max_area,
+            min_speed=min_speed)
+        learned = None if detect == "motion" else finder
+        movers = LiveMovers(rule, motion=finder if learned is None else None, learned=learned,
+                            settings=mover_settings, budget=budget, sensor=sensor,
+                            wait=not realtime and "://" not in source and source != "-", source=source)
     filters = None
     if refine != "off" and (ndjson is not None or map_at is not None or cot_targets != "fixes"):  # estimates wanted
         from ..live.refine import TargetFilters
@@ -161,13 +200,16 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
     session = None
     try:
         klv = SINKS["klv_out"](klv_out, settings) if klv_out is not None else None
-        session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=klv)
+        session = LiveSession(source, dem=dem, sensor=sensor, budget=budget, refine=filters, klv_out=klv,
+                              movers=movers)
         settings["session"] = session
         sinks = [klv] if klv is not None else []
         sinks += [SINKS[name](value, settings) for name, value in wanted.items() if value and name != "klv_out"]
     except BaseException:
         for sink in sinks:
             sink.close()
+        if movers is not None:
+            movers.close()
         raise
     stopping: dict = {"why": None}
 
@@ -180,6 +222,9 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
                  silence_s=silence, should_stop=lambda: stopping["why"], report=_report, stdin=sys.stdin.buffer)
     err_console.print(f"eoloc live stopped ({result.why or 'end of the source'}): " + json.dumps(result.summary),
                       soft_wrap=True, highlight=False)
+    if movers is not None and not movers.counts["video_frames"]:
+        warn(f"--detect: {source} brought no video eoloc could decode (MPEG-TS with an H.264, HEVC or MPEG-2 "
+             "video PID is needed), so no mover was searched for", "detect")
     if result.fatal:
         fail(result.fatal)
 

@@ -102,6 +102,60 @@ def dem_options(dem_help: str):
     ])
 
 
+def detect_options(fn):
+    """--detect and its settings: the same options on `eoloc video` and `eoloc live`
+    (:func:`detect_settings` turns them into the detector's and the tracker's settings)."""
+    return _apply([
+        click.option("--detect", default=None, metavar="motion|MODEL.onnx",
+                     help="Find the targets in the frames: 'motion' = what moves on the ground, or the boxes of an "
+                          "ONNX object detector (YOLO outputs) you give (see above)."),
+        click.option("--detect-score", type=click.FloatRange(0.0, 1.0), default=0.35, show_default=True,
+                     help="--detect MODEL.onnx: the least score of a box kept."),
+        click.option("--detect-classes", default=None, metavar="NAME,NAME",
+                     help="--detect MODEL.onnx: keep only these classes (the model's names)."),
+        click.option("--detect-point", type=click.Choice(["bottom", "centre"]), default="bottom", show_default=True,
+                     help="--detect MODEL.onnx: a box's point on the ground: its bottom centre (upright objects) or "
+                          "centre (objects lying flat)."),
+        click.option("--detect-window", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
+                     help="--detect: seconds before and after a frame to compare it with."),
+        click.option("--detect-threshold", type=click.FloatRange(1.0, 255.0), default=40.0, show_default=True,
+                     help="--detect: colour difference (0-255) that counts as a change."),
+        click.option("--min-area", type=click.FloatRange(0.0, min_open=True), default=6.0, show_default=True,
+                     help="--detect: smallest target, square metres on the ground."),
+        click.option("--max-area", type=click.FloatRange(0.0, min_open=True), default=5000.0, show_default=True,
+                     help="--detect: largest target, square metres on the ground."),
+        click.option("--min-speed", type=click.FloatRange(0.0), default=None,
+                     help="--detect: slowest target kept, m/s over the ground [default: 2 for motion, 0 for a model]."),
+    ])(fn)
+
+
+def detect_settings(detect: str | None, rule, *, detect_score: float, detect_classes: str | None, detect_point: str,
+                    detect_window: float, detect_threshold: float, min_area: float, max_area: float,
+                    min_speed: float | None):
+    """(the motion detector's settings or the learned detector, the movers' settings) of
+    :func:`detect_options`' values; (None, None) without --detect. ``rule``: the ground."""
+    if min_area >= max_area:
+        raise click.UsageError(f"--min-area {min_area:g} must be below --max-area {max_area:g}")
+    if not detect:
+        return None, None
+    if detect != "motion" and not detect.lower().endswith(".onnx"):
+        raise click.UsageError(f"--detect {detect!r}: 'motion', or an ONNX model file (MODEL.onnx)")
+    from ..detect.movers import MoverSettings
+
+    if detect == "motion":
+        from ..detect.motion import MotionSettings
+
+        finder = MotionSettings(window_s=detect_window, threshold=detect_threshold, min_area_m2=min_area,
+                                max_area_m2=max_area)
+    else:
+        from ..detect.learned import LearnedDetector
+
+        classes = {c.strip() for c in detect_classes.split(",") if c.strip()} if detect_classes else None
+        finder = LearnedDetector(detect, rule, score=detect_score, classes=classes, point=detect_point)
+    movers = MoverSettings(min_speed_mps=(2.0 if detect == "motion" else 0.0) if min_speed is None else min_speed)
+    return finder, movers
+
+
 def basemap_options(fn):
     """--basemap PATH, --world/--no-world and --tiles NAME: what lies under a map, the same on
     every command that draws one."""

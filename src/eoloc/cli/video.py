@@ -14,6 +14,8 @@ from .main import NOTHING_LOCATED, console, err_console, report_issues, warn
 from .options import (
     CONVENTIONS,
     config_option,
+    detect_options,
+    detect_settings,
     flight_log_option,
     ortho_options,
     out_option,
@@ -127,26 +129,7 @@ Nothing is downloaded. detections.csv adds the class and score.
 @click.option("--tiles/--no-tiles", default=True, show_default=True, help="Cut the mosaic into XYZ tiles.")
 @click.option("--player/--no-player", default=True, show_default=True,
               help="Write player.html: the video beside the map (the video remuxed or transcoded to MP4).")
-@click.option("--detect", default=None, metavar="motion|MODEL.onnx",
-              help="Find the targets in the frames: 'motion' = what moves on the ground, or the boxes of an ONNX "
-                   "object detector (YOLO outputs) you give (see above).")
-@click.option("--detect-score", type=click.FloatRange(0.0, 1.0), default=0.35, show_default=True,
-              help="--detect MODEL.onnx: the least score of a box kept.")
-@click.option("--detect-classes", default=None, metavar="NAME,NAME",
-              help="--detect MODEL.onnx: keep only these classes (the model's names).")
-@click.option("--detect-point", type=click.Choice(["bottom", "centre"]), default="bottom", show_default=True,
-              help="--detect MODEL.onnx: a box's point on the ground: its bottom centre (upright objects) or centre "
-                   "(objects lying flat).")
-@click.option("--detect-window", type=click.FloatRange(0.0, min_open=True), default=2.0, show_default=True,
-              help="--detect: seconds before and after a frame to compare it with.")
-@click.option("--detect-threshold", type=click.FloatRange(1.0, 255.0), default=40.0, show_default=True,
-              help="--detect: colour difference (0-255) that counts as a change.")
-@click.option("--min-area", type=click.FloatRange(0.0, min_open=True), default=6.0, show_default=True,
-              help="--detect: smallest target, square metres on the ground.")
-@click.option("--max-area", type=click.FloatRange(0.0, min_open=True), default=5000.0, show_default=True,
-              help="--detect: largest target, square metres on the ground.")
-@click.option("--min-speed", type=click.FloatRange(0.0), default=None,
-              help="--detect: slowest target kept, m/s over the ground [default: 2 for motion, 0 for a model].")
+@detect_options
 @refine_option("the telemetry from the video's own pixels (eoloc refine, its defaults, into OUT/refine/; needs "
                "--dem), then run on the refined telemetry and config (or the video's own KLV refined: "
                "OUT/refine/NAME_refined.ts).")
@@ -171,29 +154,14 @@ def video(video, klv_path, telemetry, config_path, klv_stream, time_offset, max_
         raise click.UsageError(f"--end {end_s:g} is before --start {start_s:g}")
     if klv_out and not detect:
         raise click.UsageError("--klv-out writes the targets --detect finds: add --detect motion (or MODEL.onnx)")
-    if min_area >= max_area:
-        raise click.UsageError(f"--min-area {min_area:g} must be below --max-area {max_area:g}")
-    if detect and detect != "motion" and not detect.lower().endswith(".onnx"):
-        raise click.UsageError(f"--detect {detect!r}: 'motion', or an ONNX model file (MODEL.onnx)")
     dem = open_dem(dem_paths, vertical, geoid, dem_crs)
     rule = ground(rule_values, dem, required=False)  # None: each frame's metadata frame-centre elevation
     if detect and rule is None:
         raise click.UsageError("--detect needs the ground as one surface: --dem FILE or --target-height H")
-    finder = movers = None
-    if detect:
-        from ..detect.movers import MoverSettings
-
-        if detect == "motion":
-            from ..detect.motion import MotionSettings
-
-            finder = MotionSettings(window_s=detect_window, threshold=detect_threshold, min_area_m2=min_area,
-                                    max_area_m2=max_area)
-        else:
-            from ..detect.learned import LearnedDetector
-            classes = {c.strip() for c in detect_classes.split(",") if c.strip()} if detect_classes else None
-            finder = LearnedDetector(detect, rule,
-                                     score=detect_score, classes=classes, point=detect_point)
-        movers = MoverSettings(min_speed_mps=(2.0 if detect == "motion" else 0.0) if min_speed is None else min_speed)
+    finder, movers = detect_settings(detect, rule, detect_score=detect_score, detect_classes=detect_classes,
+                                     detect_point=detect_point, detect_window=detect_window,
+                                     detect_threshold=detect_threshold, min_area=min_area, max_area=max_area,
+                                     min_speed=min_speed)
     if refine_first:
         video, telemetry, config_path = refined_inputs(video, klv_path, telemetry, config_path, time_offset, dem,
                                                        max_gap, Path(out_dir))

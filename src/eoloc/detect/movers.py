@@ -26,8 +26,10 @@ a blob the edge cuts) in east and north; CoT's ce/le come from them.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +44,8 @@ from ..sequence.track import Track, Tracker, TrackerConfig, TrackSet, smooth_tra
 from .motion import Blobs
 
 EDGE_SIGMA_M = 30.0  # the position sigma of a blob the image's edge cuts
+RECENT = 64  # the online decision's speed: the median over a track's last this many updates
+FRAMES_KEPT = 1 << 17  # frame times a live tracker keeps (over an hour at 30 frames/s)
 SIDES = {0: "both", -1: "before", 1: "after"}  # which reference frames a detection differs from
 
 
@@ -96,6 +100,7 @@ class MoverTracker:
     rule: StopRule
     settings: MoverSettings = field(default_factory=MoverSettings)
     budget: ErrorBudget | None = None  # each fix's absolute uncertainty (see the module notes)
+    history: bool = True  # keep every row and track for :meth:`result` (False: a live stream)
 
     def __post_init__(self) -> None:
         s = self.settings
@@ -105,15 +110,20 @@ class MoverTracker:
         self.by_track: dict[str, list[int]] = {}
         self.n_blobs = 0
         self.not_located = 0
-        self.frame_times: list[float] = []
+        self.frame_times: list[float] | deque[float] = [] if self.history else deque(maxlen=FRAMES_KEPT)
 
-    def add(self, blobs: Blobs, sensor: SensorModel, pose: Pose) -> None:
-        """Locate the blobs of one frame with its sensor and pose, and update the tracks."""
+    def add(self, blobs: Blobs, sensor: SensorModel, pose: Pose) -> list[dict]:
+        """Locate the blobs of one frame with its sensor and pose, and update the tracks; the rows
+        of this frame's located blobs (each with its track's key, ``track``). Without ``history``
+        (a live stream) neither the rows nor the ended tracks are kept: memory stays bounded."""
         self.n_blobs += len(blobs)
         self.frame_times.append(blobs.time_s)
+        new: list[dict] = []
+        if not self.history:
+            self.tracker.done.clear()
         if not len(blobs):
             self.tracker.frame(blobs.time_s, np.zeros(0, np.intp), np.zeros((0, 3)), np.zeros((0, 2, 2)), None)
-            return
+            return []
         share = np.where(blobs.side == 0, 1 / 16, 1 / 4)
         centroid2 = np.where(blobs.at_edge, EDGE_SIGMA_M**2, share * blobs.area_m2)
         if self.budget is None:
@@ -128,7 +138,7 @@ class MoverTracker:
             self.origin = (float(f.lat_deg[i]), float(f.lon_deg[i]), float(f.h_m[i]))
         self.not_located += int((~ok).sum())
         if self.origin is None:
-            return
+            return new
         z = geodesy.ecef_to_enu(f.p_ecef(), *self.origin)
         # a blob's centroid: within about a quarter of its size
         # (half of it for a blob found from one side only, at the ends of a target's time in view);
@@ -149,8 +159,41 @@ class MoverTracker:
                    "lat_deg": float(f.lat_deg[j]), "lon_deg": float(f.lon_deg[j]), "h_m": round(float(f.h_m[j]), 3),
                    "status": Status(int(f.status[j])).name,
                    **({} if sigma is None else {k: _num(v[j]) for k, v in sigma.items()})}
-            self.by_track.setdefault(key, []).append(len(self.rows))
-            self.rows.append(row)
+            new.append(row)
+            if self.history:
+                self.by_track.setdefault(key, []).append(len(self.rows))
+                self.rows.append(row)
+        return new
+
+    def is_mover(self, key: str) -> bool:
+        """Whether track ``key``, as it stands now, is a mover by the same tests as :meth:`result`
+        with what is known so far: confirmed, ``min_track_s`` long, seen in ``min_hit_ratio`` of
+        the frames it spans, and its filtered speed (the median over its updates since it was
+        confirmed, the Kalman filter's, not yet smoothed) at least ``min_speed_mps``. The online
+        decision of a live stream (:mod:`eoloc.live.movers`); :meth:`result` decides again at the
+        end with the smoothed tracks."""
+        s = self.settings
+        lv = self.tracker.live.get(key)
+        if lv is None or not lv.track.confirmed:
+            return False
+        tr = lv.track
+        t0, t1 = tr.time_s[0], tr.time_s[-1]
+        times = self.frame_times  # in time order
+        spanned = bisect.bisect_right(times, t1 + 1e-9) - bisect.bisect_left(times, t0 - 1e-9)
+        if t1 - t0 < s.min_track_s - 1e-9 or len(tr.time_s) < s.min_hit_ratio * spanned:
+            return False
+        n = len(tr.state) - s.tracker.confirm_hits + 1  # since confirmed, the last RECENT updates
+        recent = Track(key, [], tr.state[-min(n, RECENT):]) if n > 0 else None
+        return recent is not None and float(np.median(recent.speed_mps)) >= s.min_speed_mps
+
+    def now(self, key: str) -> dict[str, float]:
+        """Track ``key``'s filtered speed (m/s), its 1-sigma and heading (degrees from north) at
+        its last update."""
+        tr = self.tracker.live[key].track
+        last = Track(key, tr.time_s[-1:], tr.state[-1:], tr.cov[-1:])
+        return {"speed_mps": round(float(last.speed_mps[0]), 2),
+                "speed_sigma_mps": _num(last.speed_sigma_mps[0]),
+                "heading_deg": round(float(last.heading_deg[0]), 1)}
 
     def result(self) -> Movers:
         s = self.settings

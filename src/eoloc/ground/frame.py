@@ -40,9 +40,10 @@ def misb_sensor(mount_misalignment_deg=(0.0, 0.0, 0.0), boresight_misalignment_d
                        boresight_misalignment_deg, lever_arm_m)
 
 
-def frame_sensor(base: SensorModel, hfov_deg: float, vfov_deg: float, width: int, height: int) -> SensorModel:
+def frame_sensor(base: SensorModel, hfov_deg: float, vfov_deg: float | None, width: int, height: int) -> SensorModel:
     """``base`` (its gimbal and installation) with the pinhole of one frame: ``width`` x ``height``
-    pixels whose fields of view (degrees, in (0, 180)) span the image (a VMTI frame, a video frame)."""
+    pixels whose fields of view (degrees, in (0, 180)) span the image (a VMTI frame, a video frame;
+    ``vfov_deg`` None: square pixels)."""
     return replace(base, camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=vfov_deg))
 
 

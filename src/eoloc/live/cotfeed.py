@@ -24,7 +24,10 @@ Per packet, each event one standalone XML document:
   horizontal position only), the model and fix count in the remarks, a moving target's speed and
   course in ``<track>``; a target whose fixes do not agree with one point (INCONSISTENT) gets no
   marker — a point there would be a plausible wrong one; ``targets="both"``: the fixes, and the
-  estimates as ``<platform>-<target id>-refined``.
+  estimates as ``<platform>-<target id>-refined``;
+- one event per **mover found in the video** (``eoloc live --detect``, :mod:`eoloc.live.movers`;
+  ``a-u-G``, uid ``<platform>-mover-<id>``): where it was in its frame, its course and speed in
+  ``<track>``, ``ce``/``le`` from its fix's covariance as for a target (unknown without a budget).
 
 ``time``/``start`` are when the event is sent and ``stale`` that plus ``stale_packets`` packet
 intervals of its stream (the median of the last 15 by the ST 0601 time stamps, between ``min_stale_s`` and
@@ -151,6 +154,10 @@ class CotFeed:
                 uid = f"{base}-{est['properties']['target_id']}{suffix}"
                 if self._due(uid, now_s):
                     out.append(self._estimate(est, uid, name, link, now, stale, when))
+        for mover in u.movers:
+            uid = f"{base}-mover-{mover['properties']['track_id']}"
+            if self._due(uid, now_s):
+                out.append(self._mover(mover, uid, name, link, now, stale, when))
         self.events_out += len(out)
         return out
 
@@ -168,6 +175,21 @@ class CotFeed:
         if p.get("speed_mps") is not None:
             detail += element_xml("track", course=_fmt(p.get("heading_deg")), speed=_fmt(p["speed_mps"]))
         detail += element_xml("remarks", f"{'; '.join(remarks)}; {when}")
+        ce, le = ce_le(p)
+        return event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale, lat=lat, lon=lon, hae=h,
+                         ce=ce, le=le, detail=detail)
+
+    def _mover(self, mover: dict, uid: str, name: str, link: str, now: str, stale: str, when: str) -> bytes:
+        """A mover found in the video (a live.movers GeoJSON feature) as its marker: where it was in
+        its frame, its filtered course and speed, ce/le from its fix's covariance (unknown without
+        an error budget)."""
+        p = mover["properties"]
+        lon, lat, h = mover["geometry"]["coordinates"]
+        label = f"M{p['track_id']}" + (f" {p['class']}" if p.get("class") else "")
+        detail = (element_xml("contact", callsign=f"{name} {label}") + link
+                  + element_xml("track", course=_fmt(p.get("heading_deg")), speed=_fmt(p.get("speed_mps")))
+                  + element_xml("remarks", f"eoloc mover {label} found in the video (frame {p['frame']}): "
+                                           f"{p['speed_mps']:.1f} m/s; {when}"))
         ce, le = ce_le(p)
         return event_xml(uid=uid, cot_type=TARGET_TYPE, how="m-i", time=now, stale=stale, lat=lat, lon=lon, hae=h,
                          ce=ce, le=le, detail=detail)

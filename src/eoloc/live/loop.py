@@ -71,7 +71,7 @@ def run(source: str, session: LiveSession, sinks: Sequence[Sink], *, max_packets
                                                 stdin=stdin)
         report(where, "start")
         for datagram, arrived, *stream in feed:
-            updates = session.feed(datagram, *stream)
+            updates = session.feed(datagram, *stream) + session.mover_updates()
             if updates:
                 for s in sinks:
                     s.send(updates)
@@ -80,12 +80,19 @@ def run(source: str, session: LiveSession, sinks: Sequence[Sink], *, max_packets
                 report(line, "fault")
             if stop():
                 break
+        # the video's last frames searched (the movers trail the video by the detector's window)
+        last = session.mover_updates(final=True, timeout_s=120.0 if state["why"] is None else 5.0)
+        if last:
+            for s in sinks:
+                s.send(last)
         for s in sinks:
             s.end(state["why"])
         if state["why"] is None and any(s.holds() for s in sinks):
             while not stop():
                 time.sleep(0.1)
     finally:
+        if session.movers is not None:
+            session.movers.close()
         if feed is not None:
             feed.close()
         for s in sinks:
@@ -94,6 +101,8 @@ def run(source: str, session: LiveSession, sinks: Sequence[Sink], *, max_packets
         report(line, "fault")
     summary = session.counters.summary() | source_state.summary() | {"faults": session.faults.counts(),
                                                                       "streams": session.streams}
+    if session.movers is not None:
+        summary |= session.movers.summary()
     for s in sinks:
         summary |= s.summary()
     fatal = state.get("fatal") or next((s.fatal for s in sinks if s.fatal), None)

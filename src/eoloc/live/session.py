@@ -76,7 +76,7 @@ class LiveSession:
     runs from the datagram's arrival to its outputs sent."""
 
     def __init__(self, source: str, *, dem=None, sensor=None, budget=None, recent: int = 512,
-                 restart_s: float = RESTART_S, refine=None, klv_out=None) -> None:
+                 restart_s: float = RESTART_S, refine=None, klv_out=None, movers=None) -> None:
         self.source, self.dem, self.budget = source, dem, budget
         self.locator = PacketLocator(dem=dem, sensor=sensor, budget=budget)
         self.sensor = self.locator.sensor
@@ -93,6 +93,8 @@ class LiveSession:
         self.refine = refine  # a live.refine.TargetFilters: the targets refined across packets, or None
         self.klv_out = klv_out  # a live.klvout.KlvOut: the stream re-sent with the target locations, or None
         self._items: list = []  # with klv_out: the datagram's transport packets to pass on and PES to rebuild
+        self.movers = movers  # a live.movers.LiveMovers: the movers found in the stream's video, or None
+        self.mover_stream: str | None = None  # the KLV stream whose packets pose the video's frames
 
     def feed(self, datagram: bytes, stream: str = "") -> list[PacketUpdate]:
         """``stream``: the name of the KLV stream a raw (not MPEG-TS) datagram belongs to, where the
@@ -100,10 +102,10 @@ class LiveSession:
         c = self.counters
         c.datagrams += 1
         transport = is_transport(datagram)
-        chunks = self._demux(datagram) if transport else [(datagram, stream)]
+        chunks = self._demux(datagram) if transport else [(datagram, stream, None)]
         updates: list[PacketUpdate] = []
-        for payload, stream_name in chunks:
-            updates += self._packets(payload, stream_name)
+        for payload, stream_name, pts in chunks:
+            updates += self._packets(payload, stream_name, pts)
         if self.klv_out is not None:
             if transport:
                 self.klv_out.transport(self._items)
@@ -111,14 +113,22 @@ class LiveSession:
                 self.klv_out.raw_datagram(datagram)
         return updates
 
+    def mover_updates(self, *, final: bool = False, timeout_s: float = 120.0) -> list[PacketUpdate]:
+        """The movers found in the video since the last call (none without ``movers``); ``final``:
+        the source has ended, so the frames still waiting are searched first (up to ``timeout_s``)."""
+        if self.movers is None:
+            return []
+        return self.movers.finish(timeout_s) if final else self.movers.updates()
+
     def done(self, arrived: float) -> None:
         """The outputs of the datagram that arrived at ``arrived`` are sent: its latency is counted."""
         c = self.counters
         c.latency_s.append(time.perf_counter() - arrived)
         c.latency_max_s = max(c.latency_max_s, c.latency_s[-1])
 
-    def _demux(self, datagram: bytes) -> list[tuple[bytes, str]]:
-        """KLV payloads (stream name) completed by the transport packets of one datagram."""
+    def _demux(self, datagram: bytes) -> list[tuple[bytes, str, int | None]]:
+        """KLV payloads (stream name, PES presentation time in 90 kHz ticks) completed by the
+        transport packets of one datagram; with ``movers`` its video handed to them."""
         from stanag4609.transport.demux import PESStreamEvent, PMTEvent, StreamKind
         from stanag4609.transport.metadata import parse_metadata_au_cells
 
@@ -130,9 +140,14 @@ class LiveSession:
         out = []
         items = self._items = []
         metadata_pids = self._metadata_pids() if self.klv_out is not None else set()
+        video_pid = min(self.demux.video_types, default=None) if self.movers is not None else None
+        video = []
         for k in range(0, len(datagram), TS_PACKET):
             cell = datagram[k:k + TS_PACKET]
-            if self.klv_out is not None and ((cell[1] & 0x1F) << 8 | cell[2]) not in metadata_pids:
+            pid = (cell[1] & 0x1F) << 8 | cell[2]
+            if pid == video_pid:
+                video.append(cell)
+            if self.klv_out is not None and pid not in metadata_pids:
                 items.append(cell)  # passed on untouched (video, audio, tables, clock)
             events, damage = self.demux.feed_cells(cell, k)
             for d in damage:
@@ -142,6 +157,8 @@ class LiveSession:
             for ev in events:
                 if isinstance(ev, PMTEvent) and self.klv_out is not None:
                     metadata_pids = self._metadata_pids()
+                if isinstance(ev, PMTEvent) and self.movers is not None:
+                    video_pid = min(self.demux.video_types, default=None)
                 if not isinstance(ev, PESStreamEvent):
                     continue
                 if ev.kind is not StreamKind.KLV:
@@ -159,14 +176,16 @@ class LiveSession:
                         self.faults.add("metadata access unit",
                                         f"{self.source}: PID {ev.pid}: metadata access unit: {one_line(exc)}")
                         continue
-                out.append((payload, f"PID {ev.pid}"))
+                out.append((payload, f"PID {ev.pid}", ev.pes.pts))
+        if video:
+            self.movers.video(self.demux.video_types[video_pid], b"".join(video), time.perf_counter())
         return out
 
     def _metadata_pids(self) -> set[int]:
         """The PIDs the program tables give as metadata (their packets are held for KLV out)."""
         return set(self.demux.streams)
 
-    def _packets(self, payload: bytes, stream_name: str) -> list[PacketUpdate]:
+    def _packets(self, payload: bytes, stream_name: str, pts: int | None = None) -> list[PacketUpdate]:
         from ..io.klv.reader import decode_klv_bytes
 
         c = self.counters
@@ -220,6 +239,11 @@ class LiveSession:
                 self.refine.update(u)
             if self.klv_out is not None:
                 self.klv_out.mark(pkt.raw, u, hae=Tag.FRAME_CENTER_HEIGHT_ABOVE_ELLIPSOID in known.fields)
+            if self.movers is not None and not late and u.platform is not None and pts is not None:
+                if self.mover_stream is None:
+                    self.mover_stream = pkt.stream  # the first stream with a position poses the video
+                if pkt.stream == self.mover_stream:
+                    self.movers.pose(pts / 90_000.0, u.view, u.key, pkt.stream, pkt.index)
             c.detections += len(u.fixes)
             c.fixes_ok += sum(1 for r in u.fixes if r["status"] == "OK")
             updates.append(u)

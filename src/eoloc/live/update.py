@@ -49,20 +49,29 @@ class PacketUpdate:
 
     time_utc: str | None = None  # the time stamp as ISO 8601 UTC
     estimates: list[dict] = field(default_factory=list)  # refined targets (GeoJSON), see live.refine
+    movers: list[dict] = field(default_factory=list)  # movers found in one video frame (GeoJSON), see live.movers
+    name: str | None = None  # the platform's name where ``platform`` is not given (a movers' update)
+    view: dict | None = field(default=None, repr=False, compare=False)  # the packet's pose (packet_view)
     _features: list[dict] | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def kind(self) -> str:
+        """"packet" (one KLV packet's results), or "movers" (the movers of one video frame, no packet)."""
+        return "movers" if self.movers and self.platform is None and not self.fixes else "packet"
 
     @property
     def key(self) -> str:
         """A name for the platform's things that stays the same packet after packet (CoT uids,
         map layers): the platform designation, else the stream."""
-        name = (self.platform or {}).get("name") or self.stream or "stream"
+        name = (self.platform or {}).get("name") or self.name or self.stream or "stream"
         return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
 
     def features(self) -> list[dict]:
         """GeoJSON features (RFC 7946: lon, lat, h): the aircraft, the footprint and the frame
         centre when known, and every target (a failed one with a null geometry); each with
         ``what``, ``stream``, ``packet`` and ``time_utc`` properties; then the targets refined over
-        the packets so far (``what`` "estimate", :mod:`eoloc.live.refine`). Made once (every sink
+        the packets so far (``what`` "estimate", :mod:`eoloc.live.refine`) and the movers found in
+        the video (``what`` "mover", :mod:`eoloc.live.movers`). Made once (every sink
         reads the same list: do not change it)."""
         if self._features is None:
             self._features = self._make_features()
@@ -84,7 +93,7 @@ class PacketUpdate:
             props = {k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}
             out.append(_feature("target", _point(row["lon_deg"], row["lat_deg"], row["h_m"]) if ok else None,
                                 {**common, **props}))
-        return out + self.estimates
+        return out + self.estimates + self.movers
 
 
 def _point(lon, lat, h) -> dict:
@@ -193,7 +202,7 @@ class PacketLocator:
             look = look_of(f, c, platform, centre, float(ends.range_m[0]))
         iso = utc_times(np.concatenate([[c["time_s"]], det.columns["time_s"]]), "unix")  # one call: ~25 µs each
         update = PacketUpdate(source, packet.stream, packet.index, c["time_s"], late, platform, look, centre, footprint,
-                              time_utc=iso[0])
+                              time_utc=iso[0], view=c)
         if len(det):
             self._fixes(update, det, iso[1:], targets, ends.flat(slice(n_frame, None)), pose, usable, ground)
         return update

@@ -73,14 +73,14 @@ class LiveHub:
     def publish(self, update, features: list[dict] | None = None) -> None:
         """Send one :class:`~eoloc.live.update.PacketUpdate` (its features, when already made) to
         every browser."""
-        self.publish_message({"type": "packet", "key": update.key, "stream": update.stream, "index": update.index,
-                              "time_utc": update.time_utc, "late": update.late,
+        self.publish_message({"type": "packet", "kind": update.kind, "key": update.key, "stream": update.stream,
+                              "index": update.index, "time_utc": update.time_utc, "late": update.late,
                               "features": update.features() if features is None else features})
 
     def publish_message(self, message: dict) -> None:
         data = orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
         with self.lock:
-            self.newest[str(message.get("stream", ""))] = data
+            self.newest[f'{message.get("stream", "")}/{message.get("kind", "")}'] = data
             self.last_packet = time.monotonic()
             self.published += 1
             number = self.published

@@ -240,7 +240,7 @@ def test_a_browser_that_does_not_read_loses_only_its_own_messages():
                     return
 
     class U:  # a PacketUpdate's shape, with a big payload
-        key, stream, late, time_utc = "k", "s", False, None
+        key, kind, stream, late, time_utc = "k", "packet", "s", False, None
 
         def __init__(self, i):
             self.index = i

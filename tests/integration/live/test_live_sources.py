@@ -120,7 +120,7 @@ def rtsp_server(stream):
 
 def test_rtsp_from_a_real_rtsp_server_gives_what_the_file_gives(stream, rtsp_server, tmp_path):
     """MPEG-TS over RTP from gst-rtsp-server, paced at the stream's clock (4 s), with CoT out."""
-    from test_live_ts_cot import CotReceiver
+    from livecmd import CotReceiver
 
     cot_port = _free_port()
     with CotReceiver(f"udp://127.0.0.1:{cot_port}") as rx:

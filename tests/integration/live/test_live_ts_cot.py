@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from livecmd import CotReceiver, settle
 
 import eoloc
 from eoloc.io.klv import read_klv
@@ -31,7 +32,7 @@ from eoloc.io.klv.reader import split_klv
 from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.klv import klv_job
 from eoloc.jobs.setup import misb_setup
-from eoloc.live.sources import DatagramSink, file_datagrams, ts_packet_times
+from eoloc.live.sources import file_datagrams, ts_packet_times
 from eoloc.terrain import open_dem
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
@@ -43,23 +44,6 @@ def _free_port(kind=socket.SOCK_DGRAM) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-class CotReceiver(DatagramSink):
-    """Every datagram on a UDP address (a multicast group joined) parsed as one CoT event."""
-
-    def __init__(self, url: str) -> None:
-        self.events: list[ET.Element] = []
-        self.bad: list[bytes] = []
-        super().__init__(url, self._parse)
-
-    def _parse(self, data: bytes, _arrival: float) -> None:
-        try:
-            ev = ET.fromstring(data)
-            assert ev.tag == "event" and ev.find("point") is not None
-            self.events.append(ev)
-        except (ET.ParseError, AssertionError):
-            self.bad.append(data)
 
 
 def _two_pid_ts(path: Path) -> tuple[Path, int]:
@@ -80,18 +64,6 @@ def _wait_listening(proc) -> str:
         assert line, "".join(lines)
         lines.append(line)
     return "".join(lines)
-
-
-def _settle(path: Path, quiet_s: float = 1.5, timeout_s: float = 120.0) -> None:
-    """Wait until ``path`` has stopped growing for ``quiet_s`` (the receiver has caught up)."""
-    deadline, last, since = time.monotonic() + timeout_s, -1, time.monotonic()
-    while time.monotonic() < deadline:
-        size = path.stat().st_size if path.exists() else 0
-        if size != last:
-            last, since = size, time.monotonic()
-        elif size and time.monotonic() - since > quiet_s:
-            return
-        time.sleep(0.1)
 
 
 def _parse_time(iso: str) -> float:
@@ -116,7 +88,7 @@ def test_ts_over_udp_to_cot_multicast_equals_the_batch_path(tmp_path):
     for d in sends:
         tx.sendto(d, ("127.0.0.1", port))
         time.sleep(0.002)
-    _settle(out)
+    settle(out)
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
     rx.stop()

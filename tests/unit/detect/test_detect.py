@@ -24,11 +24,11 @@ from where import DATA
 
 from eoloc import AzElGimbal, Camera, Pose, SensorModel
 from eoloc.detect import MotionDetector, MotionSettings
-from eoloc.detect.movers import MoverSettings, mover_tracker_config
+from eoloc.detect.movers import MoverSettings, MoverTracker, mover_tracker_config
 from eoloc.jobs.detect import detect_movers
 from eoloc.rules import AtHeight
 
-CARS = [ms.Vehicle(-100, 20, 90, 12), ms.Vehicle(50, -80, 10, 8), ms.Vehicle(120, 100, 225, 15)]
+CARS = ms.CARS
 N_FRAMES = 60
 RULE = AtHeight(ms.ORIGIN[2])
 
@@ -172,6 +172,35 @@ def test_ground_that_stands_still_gives_no_mover(texture, speed, alt, jitter, se
            pose_at(i / ms.FPS, jitter, seed=seed + i, **cam)) for i in range(40)]
     m = detect_movers(fr, RULE)
     assert m.tracks == [] and m.rows == []
+    assert online_movers(fr)[0] == {}, "no still ground is declared a mover online either"
+
+
+def online_movers(frames):
+    """The live stream's decision (MoverTracker.is_mover after each frame, as eoloc live takes it):
+    {track key: time first declared}, and the batch's movers' keys from the same tracker."""
+    detector, tracker = MotionDetector(RULE), MoverTracker(RULE)
+    posed, declared = {}, {}
+
+    def take(blobs_list):
+        for b in blobs_list:
+            for row in tracker.add(b, *posed.pop(b.index)):
+                if row["track"] not in declared and tracker.is_mover(row["track"]):
+                    declared[row["track"]] = b.time_s
+
+    for index, t, image, s, pose in frames:
+        posed[index] = (s, pose)
+        take(detector.push(index, t, image, s, pose))
+    take(detector.flush())
+    tracks = {id(tr): tr.track_id for tr in tracker.tracker.tracks()}
+    return declared, {tracks[id(tr)] for tr in tracker.result().tracks}
+
+
+def test_the_online_decision_is_the_batch_decision_a_second_in(images):
+    """eoloc live decides a track is a mover as it goes: the same tracks as the whole pass's decision
+    (smoothed at the end), each within 1.5 s of its first detection (min_track_s is 1 s)."""
+    declared, batch = online_movers(frames(images))
+    assert set(declared) == batch and len(batch) == 3
+    assert all(t <= 1.5 for t in declared.values()), declared
 
 
 def test_settings_are_checked():
@@ -186,27 +215,10 @@ def test_settings_are_checked():
         det.push(0, 0.0, np.zeros((4, 4), np.float32), sensor(), pose_at(0.0))
 
 
-def klv_packets(n: int) -> list[tuple[bytes, float]]:
-    from eoloc.io.klv.encode import encode_uas_packet
-
-    hfov = ms.HFOV_DEG
-    vfov = float(np.degrees(2 * np.arctan((ms.H / 2) / ms.K()[1, 1])))
-    start = datetime(2026, 7, 14, 16, 0, 0, tzinfo=UTC).timestamp()
-    out = []
-    for i in range(n):
-        t = i / ms.FPS
-        tel = ms.telemetry(t)
-        values = {2: datetime.fromtimestamp(start + t, UTC), 5: 0.0, 6: 0.0, 7: 0.0, 13: tel["lat_deg"],
-                  14: tel["lon_deg"], 75: tel["h_m"], 16: hfov, 17: vfov, 18: tel["az_deg"] % 360,
-                  19: tel["el_deg"], 20: tel["roll_deg"] % 360}
-        out.append((encode_uas_packet(values), t))
-    return out
-
-
 def test_cli_video_detect_writes_detections_and_movers(images, tmp_path):
     from eoloc.io.klv.mux import write_klv_ts
 
-    ts = write_klv_ts(tmp_path / "drive.ts", [klv_packets(N_FRAMES)], video_fps=ms.FPS, video_size=(ms.W, ms.H),
+    ts = write_klv_ts(tmp_path / "drive.ts", [ms.klv_packets(N_FRAMES)], video_fps=ms.FPS, video_size=(ms.W, ms.H),
                       frame_source=lambda i: images[i])
     eoloc = [sys.executable, "-m", "eoloc", "video", str(ts)]
     bad = subprocess.run([*eoloc, "--detect", "motion", "--out", str(tmp_path / "x")], capture_output=True, text=True)

@@ -1,6 +1,7 @@
 // eoloc's live map: Leaflet, fed by eoloc live over a WebSocket (see eoloc/service/livemap.py).
 // Every drawn thing carries a CSS class (eoloc-aircraft, eoloc-aircraft-trail, eoloc-footprint,
-// eoloc-centre, eoloc-target, eoloc-cep, eoloc-track, eoloc-estimate) and window.eoloc holds what
+// eoloc-centre, eoloc-target, eoloc-cep, eoloc-track, eoloc-estimate, eoloc-mover, eoloc-mover-track) and
+// window.eoloc holds what
 // the page knows, for scripts and tests. The circles are each fix's and estimate's CE90 (the 90 %
 // circle a TAK receiver draws from the same CoT ce, 2.1460 ce); a target whose fixes are
 // INCONSISTENT has no estimate marker and is listed in the panel (eoloc-inconsistent).
@@ -9,18 +10,18 @@
   const TRAIL = 2000;      // points kept per aircraft trail and per target track
   const NO_CONTACT_S = 4;  // no message at all for this long: the server is gone or the network is
   const COLOURS = {aircraft: "#1f77b4", footprint: "#ff9900", centre: "#ff9900", target: "#d62728",
-                   track: "#9467bd", estimate: "#2ca02c"};
+                   track: "#9467bd", estimate: "#2ca02c", mover: "#e377c2"};
   const S = window.eoloc = {state: "connecting", packets: 0, messages: 0, dropped: 0, connects: 0,
-                            aircraft: {}, centres: {}, targets: {}, estimates: {}, streams: {}, last: null};
+                            aircraft: {}, centres: {}, targets: {}, estimates: {}, movers: {}, streams: {}, last: null};
   const map = L.map("map", {preferCanvas: false, zoomControl: true}).setView([0, 0], 2);
   L.control.scale().addTo(map);
   const groups = {};
-  for (const name of ["aircraft", "footprints", "frame centres", "tracks", "targets", "estimates"]) {
+  for (const name of ["aircraft", "footprints", "frame centres", "tracks", "targets", "estimates", "movers"]) {
     groups[name] = L.featureGroup().addTo(map);
   }
   L.control.layers(null, groups, {collapsed: false}).addTo(map);
   const drawn = {aircraft: {}, trail: {}, footprint: {}, centre: {}, target: {}, cep: {}, track: {}, estimate: {},
-                 estimateCep: {}};
+                 estimateCep: {}, mover: {}, moverCep: {}, moverTrack: {}};
   let fitted = false;
   let lastMessage = 0;
 
@@ -58,6 +59,7 @@
   }
 
   function onPacket(m) {
+    if (m.kind === "movers") { onMovers(m); return; }
     S.packets += 1;
     if (S.state !== "live" && S.state !== "stopped") { setState("live", "LIVE"); }
     const key = m.key;
@@ -113,6 +115,24 @@
       if (box.getNorth() > box.getSouth() || box.getEast() > box.getWest()) { map.fitBounds(box.pad(0.3)); }
       else { map.setView(box.getCenter(), 13); }
       fitted = true;
+    }
+  }
+
+  // the movers found in the video (eoloc live --detect): where each was in its frame, its track
+  function onMovers(m) {
+    for (const f of m.features) {
+      const p = f.properties || {}, g = f.geometry;
+      if (!g || p.what !== "mover") { continue; }
+      const id = `${m.key}/M${p.track_id}`, ll = [g.coordinates[1], g.coordinates[0]];
+      const v = S.movers[id] = S.movers[id] || {n: 0};
+      Object.assign(v, {lat: ll[0], lon: ll[1], h_m: g.coordinates[2], speed_mps: p.speed_mps,
+                        heading_deg: p.heading_deg, ce90_m: p.ce90_m, n: v.n + 1, frame: p.frame});
+      marker(groups.movers, drawn.mover, id, ll, {radius: 6, color: COLOURS.mover, className: "eoloc-mover"},
+             tip(`mover M${p.track_id}` + (p.class ? ` ${p.class}` : ""),
+                 `${num(p.speed_mps, 1)} m/s, heading ${num(p.heading_deg, 0)}°`,
+                 p.ce90_m != null ? `CE90 ${num(p.ce90_m, 1)} m (circle)` : null, m.time_utc || ""));
+      circle(groups.movers, drawn.moverCep, id, ll, p.ce90_m, {color: COLOURS.mover, className: "eoloc-cep"});
+      trail(groups.movers, drawn.moverTrack, id, ll, {color: COLOURS.mover, className: "eoloc-mover-track"});
     }
   }
 

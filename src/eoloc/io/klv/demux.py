@@ -53,6 +53,7 @@ class KLVDemux:
         self.streams: dict[int, tuple] = {}  # metadata PID -> (program number, stream info, kind, KLV carriage)
         self.assemblers: dict[int, object] = {}
         self.video_pids: set[int] = set()  # what the tables name as video
+        self.video_types: dict[int, int] = {}  # video PID -> its stream type, as the tables name them
         # arrival: each metadata PES's place in the stream, as the PTS of the video PES begun before
         # it (:attr:`arrival_pts`, by the PES's byte offset), for asynchronous KLV sent without PTS
         self.arrival = arrival
@@ -167,7 +168,9 @@ class KLVDemux:
         now = {s.elementary_pid: (pmt.program_number, s, StreamKind.KLV if s.elementary_pid in klv else StreamKind.DATA,
                                   klv.get(s.elementary_pid))
                for s in pmt.streams if s.stream_type in METADATA_STREAM_TYPES or s.elementary_pid in klv}
-        self.video_pids |= {s.elementary_pid for s in pmt.streams if s.stream_type in VIDEO_STREAM_TYPES}
+        self.video_types |= {s.elementary_pid: s.stream_type for s in pmt.streams
+                             if s.stream_type in VIDEO_STREAM_TYPES}
+        self.video_pids |= set(self.video_types)
         for pid in [p for p, s in self.streams.items() if s[0] == pmt.program_number and p not in now]:
             del self.streams[pid]
             self.assemblers.pop(pid, None)
