@@ -82,7 +82,7 @@ model: its boxes). A track is sent once it is a mover (confirmed, 1 s long, movi
 speed, heading, box; with [accuracy.budget] its CE90/LE90) and CoT markers <platform>-mover-<id>
 with course, speed and ce/le. Movers trail the video by --detect-window plus the work (the
 summary's movers.latency_ms); frames are skipped, not queued, when the work falls behind a live
-source (movers.frames_skipped); a file is searched whole.
+source by --detect-lag seconds (movers.frames_skipped); a file is searched whole.
 \b
 Faults are counted, never fatal: corrupt or non-KLV datagrams, duplicated packets (dropped),
 late ones (located all the same), encoder restarts (time back > 2 s), silence (--silence S: a
@@ -138,11 +138,15 @@ STREAM_SCHEMES = ("udp", "srt", "rtsp", "rtsps", "rtp", "rtmp", "http", "https")
 @click.option("--silence", type=click.FloatRange(0.0, min_open=True), default=3.0, show_default=True, metavar="S",
               help="Warn (and mark the aircraft stale in TAK) when nothing arrives for S seconds.")
 @detect_options
+@click.option("--detect-lag", type=click.FloatRange(0.0, min_open=True), default=1.0, show_default=True, metavar="S",
+              help="--detect on a live source: a frame the search reaches more than S seconds after it arrived is "
+                   "skipped (the search keeps up rather than lag; a file is searched whole).")
 @allow_host_option
 def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_urls, tak_cert, tak_cert_password,
          tak_ca, tak_package, tak_protocol, video_url, video_package, klv_out, map_at, cot_targets, cot_interval,
          refine, refine_legacy, realtime, max_packets, duration, silence, detect, detect_score, detect_classes,
-         detect_point, detect_window, detect_threshold, min_area, max_area, min_speed, allow_hosts) -> None:
+         detect_point, detect_window, detect_threshold, min_area, max_area, min_speed, detect_lag,
+         allow_hosts) -> None:
     from ..jobs.setup import misb_setup
     from ..live.loop import run
     from ..live.session import LiveSession
@@ -186,7 +190,7 @@ def live(source, dem_paths, vertical, geoid, dem_crs, config_path, ndjson, cot_u
             min_speed=min_speed)
         learned = None if detect == "motion" else finder
         movers = LiveMovers(rule, motion=finder if learned is None else None, learned=learned,
-                            settings=mover_settings, budget=budget, sensor=sensor,
+                            settings=mover_settings, budget=budget, sensor=sensor, max_lag_s=detect_lag,
                             wait=not realtime and "://" not in source and source != "-", source=source)
     filters = None
     if refine != "off" and (ndjson is not None or map_at is not None or cot_targets != "fixes"):  # estimates wanted

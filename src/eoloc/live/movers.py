@@ -55,7 +55,7 @@ POSE_COLUMNS = ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg",
 VALUES = ("hfov_deg", "vfov_deg", "time_s")
 RECORDS_KEPT = 4096  # KLV packets kept to pose frames (over 2 minutes at 30 packets/s)
 EARLIER_KEPT = 256  # detections of a track kept until it is known to move (sent then, before its newest)
-FRAMES_WAITING = 256  # decoded frames waiting for the KLV after them (beyond: posed with what there is)
+FRAMES_WAITING = 32  # decoded frames waiting for the KLV after them (beyond: posed with what there is; ~1 s)
 END = object()
 
 

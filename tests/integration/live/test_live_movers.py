@@ -119,6 +119,7 @@ def test_live_detect_over_udp_finds_locates_and_sends_the_movers(drive, tmp_path
     out = tmp_path / "live.ndjson"
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port}", "--dem", str(dem), "--vertical", "ellipsoid",
                              "--config", str(tmp_path / "budget.toml"), "--detect", "motion", "--ndjson", str(out),
+                             "--detect-lag", "60",  # every frame searched however loaded the machine running the test
                              "--cot", f"udp://127.0.0.1:{cot_port}", "--map", f"127.0.0.1:{http}"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     until_listening(proc)
@@ -148,9 +149,9 @@ def test_live_detect_over_udp_finds_locates_and_sends_the_movers(drive, tmp_path
     summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
     m = summary["movers"]
     assert m["video_frames"] == N and m["frames_posed"] == N and m["decode_errors"] == 0, m
-    assert m["frames_searched"] + m["frames_skipped"] == N and m["movers"] == 3, m
-    # the latency: the detector's 2 s window and the work, from the frame's arrival to its mover sent
-    assert 2000 <= m["latency_ms_median"] < 4000, m
+    assert m["frames_searched"] == N and m["frames_skipped"] == 0 and m["movers"] == 3, m
+    # the latency: at least the detector's 2 s window (a frame is compared with those after it)
+    assert m["latency_ms_median"] >= 2000, m
     rows = [json.loads(x) for x in out.read_text().splitlines()]
     movers = [f for f in rows if f["properties"]["what"] == "mover"]
     s = _score(movers)
@@ -158,7 +159,7 @@ def test_live_detect_over_udp_finds_locates_and_sends_the_movers(drive, tmp_path
     for v in s.values():
         c = ms.CARS[v["car"]]
         seen = {i for i in range(N) if ms.in_view(c, i / ms.FPS)}
-        assert len(v["frames"] & seen) >= 0.95 * len(seen) - m["frames_skipped"], (v["car"], len(v["frames"]))
+        assert len(v["frames"] & seen) >= 0.95 * len(seen), (v["car"], len(v["frames"]))
         assert np.median(v["err"]) < 1.0 and v["err"].max() < 5.0, (v["car"], np.median(v["err"]))
         # the filtered (not smoothed) speed and heading, once the filter has settled (the second half)
         half = len(v["speed"]) // 2
@@ -234,3 +235,19 @@ def test_detect_needs_a_dem_and_a_video(drive, tmp_path):
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
     assert "brought no video" in r.stderr
     assert sum('"aircraft"' in x for x in (tmp_path / "b.ndjson").read_text().splitlines()) == 20
+
+
+def test_a_search_that_falls_behind_skips_frames_and_says_so(drive, tmp_path):
+    """A frame the worker reaches more than max_lag_s after it arrived is skipped, counted, never
+    queued (here every frame: a lag of 1 ns); the KLV path goes on; the run ends cleanly."""
+    import os
+
+    from eoloc.live import LiveMovers, LiveSession, NdjsonSink, run
+    from eoloc.rules import AtHeight
+
+    ts, _, _ = drive
+    session = LiveSession(str(ts), movers=LiveMovers(AtHeight(ms.ORIGIN[2]), max_lag_s=1e-9))
+    summary = run(str(ts), session, [NdjsonSink(os.devnull)]).summary
+    m = summary["movers"]
+    assert summary["packets"] == N and m["video_frames"] == m["frames_posed"] == m["frames_skipped"] == N
+    assert m["frames_searched"] == 0 and m["movers"] == 0 and m["latency_ms_median"] is None
