@@ -30,8 +30,10 @@ of a target lying on the ground.
 What it cannot see, by construction: targets that stand still or move less than half their
 length in ``window_s``, targets the colour of the ground under them. What it reports that does
 not move (false-alarm sources): tall objects not in the DEM (buildings, trees, masts: their tops
-are displaced by parallax as the aircraft moves, about aircraft speed x height / altitude;
-the tracks' minimum speed in :class:`eoloc.detect.MotionSettings` removes most), DEM errors on
+are displaced by parallax as the aircraft moves, about aircraft speed x height / altitude, and
+their walls come into and out of view; measured in ``bench/bench_detect.py``: over a town of 30
+buildings 10-40 m tall, 17 false movers in 6 s at 40 m/s, and a surface model holding the
+buildings does not remove them, the warp being interpolated across roof edges), DEM errors on
 steep slopes, moving shadows and water, lighting changes between frames.
 """
 
