@@ -189,51 +189,6 @@ def parallax(n_frames: int) -> list[str]:
     return out
 
 
-def draw_buildings(ms, image: np.ndarray, buildings: list[tuple], t: float) -> np.ndarray:
-    """The frame at time t with box buildings (east, north, half width m, height m) standing on the
-    ground, drawn far to near (walls, then the roof): what the ground model does not know."""
-    import cv2
-
-    c, R = ms.camera_enu(t)
-    img = image.copy()
-
-    def px(p):
-        q = ms.K() @ (R @ (np.asarray(p, float) - c))
-        return q[:2] / q[2]
-
-    for e, n, half, h in sorted(buildings, key=lambda b: -np.hypot(b[0] - c[0], b[1] - c[1])):
-        base = [(e - half, n - half), (e + half, n - half), (e + half, n + half), (e - half, n + half)]
-        walls = sorted(range(4), key=lambda k: -np.hypot(*(np.mean([base[k], base[(k + 1) % 4]], 0) - c[:2])))
-        for k in walls:
-            a, b = base[k], base[(k + 1) % 4]
-            quad = np.array([px((*a, 0.0)), px((*b, 0.0)), px((*b, h)), px((*a, h))])
-            cv2.fillConvexPoly(img, np.round(quad * 16).astype(np.int32), (95 + 12 * k,) * 3, cv2.LINE_AA, 4)
-        roof = np.array([px((*q, h)) for q in base])
-        cv2.fillConvexPoly(img, np.round(roof * 16).astype(np.int32), (200, 200, 205), cv2.LINE_AA, 4)
-    return img
-
-
-def surface_model(ms, buildings: list[tuple], path: Path) -> Path:
-    """A digital surface model of the scene (GeoTIFF, 1 m cells, ellipsoidal heights): the flat
-    ground with the buildings standing on it (cell centres inside a footprint at its roof height),
-    georeferenced through pymap3d at the scene's origin."""
-    import pymap3d
-    import rasterio
-    from rasterio.transform import from_origin
-
-    n = int(2 * ms.HALF_M)
-    e, nn = np.meshgrid(np.arange(n) - ms.HALF_M + 0.5, ms.HALF_M - 0.5 - np.arange(n))
-    z = np.full((n, n), ms.ORIGIN[2], np.float32)
-    for be, bn, half, h in buildings:
-        z[(np.abs(e - be) <= half) & (np.abs(nn - bn) <= half)] = ms.ORIGIN[2] + h
-    lat0, lon0, _ = pymap3d.enu2geodetic(-ms.HALF_M, ms.HALF_M, 0.0, *ms.ORIGIN)
-    lat1, lon1, _ = pymap3d.enu2geodetic(ms.HALF_M, -ms.HALF_M, 0.0, *ms.ORIGIN)
-    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs="EPSG:4326",
-                       transform=from_origin(lon0, lat0, (lon1 - lon0) / n, (lat0 - lat1) / n)) as f:
-        f.write(z[None])
-    return path
-
-
 def buildings(n_frames: int) -> list[str]:
     """Tall things not in the ground model (the motion detector's documented false-alarm source):
     the throughput scene at 640 x 360 with 30 box buildings 10-40 m tall among 20 vehicles, the
@@ -263,7 +218,7 @@ def buildings(n_frames: int) -> list[str]:
         if path_d > half * 1.5 + 10:
             blds.append((e, n, half, h))
     tex = ms.ground_texture()
-    images = [draw_buildings(ms, ms.render(tex, cars, i / ms.FPS), blds, i / ms.FPS) for i in range(n_frames)]
+    images = [ms.draw_buildings(ms.render(tex, cars, i / ms.FPS), blds, i / ms.FPS) for i in range(n_frames)]
     K = ms.K()
     sensor = SensorModel(Camera(ms.W, ms.H, K[0, 0], K[1, 1], K[0, 2], K[1, 2]), AzElGimbal())
 
@@ -275,7 +230,7 @@ def buildings(n_frames: int) -> list[str]:
     frames = [(i, i / ms.FPS, img, sensor, pose(i / ms.FPS)) for i, img in enumerate(images)]
     out = []
     with tempfile.TemporaryDirectory() as d:
-        dsm = OnDEM(open_dem(surface_model(ms, blds, Path(d) / "dsm.tif"), vertical="ellipsoid"))
+        dsm = OnDEM(open_dem(ms.surface_model(blds, Path(d) / "dsm.tif"), vertical="ellipsoid"))
         runs = [(m_label, g_label, rule, settings)
                 for g_label, rule in (("a flat ground", AtHeight(ms.ORIGIN[2])), ("a DSM with the buildings", dsm))
                 for m_label, settings in (("min speed 2 m/s (default)", MoverSettings()),

@@ -157,3 +157,47 @@ def klv_packets(n: int) -> list[tuple[bytes, float]]:
                   19: tel["el_deg"], 20: tel["roll_deg"] % 360}
         out.append((encode_uas_packet(values), t))
     return out
+
+
+def draw_buildings(image: np.ndarray, buildings: list[tuple], t: float) -> np.ndarray:
+    """The frame at time t with box buildings (east, north, half width m, height m) standing on the
+    ground, drawn far to near (walls, then the roof): what the ground model does not know."""
+    import cv2
+
+    c, R = camera_enu(t)
+    img = image.copy()
+
+    def px(p):
+        q = K() @ (R @ (np.asarray(p, float) - c))
+        return q[:2] / q[2]
+
+    for e, n, half, h in sorted(buildings, key=lambda b: -np.hypot(b[0] - c[0], b[1] - c[1])):
+        base = [(e - half, n - half), (e + half, n - half), (e + half, n + half), (e - half, n + half)]
+        walls = sorted(range(4), key=lambda k: -np.hypot(*(np.mean([base[k], base[(k + 1) % 4]], 0) - c[:2])))
+        for k in walls:
+            a, b = base[k], base[(k + 1) % 4]
+            quad = np.array([px((*a, 0.0)), px((*b, 0.0)), px((*b, h)), px((*a, h))])
+            cv2.fillConvexPoly(img, np.round(quad * 16).astype(np.int32), (95 + 12 * k,) * 3, cv2.LINE_AA, 4)
+        roof = np.array([px((*q, h)) for q in base])
+        cv2.fillConvexPoly(img, np.round(roof * 16).astype(np.int32), (200, 200, 205), cv2.LINE_AA, 4)
+    return img
+
+
+def surface_model(buildings: list[tuple], path):
+    """A digital surface model of the scene (GeoTIFF, 1 m cells, ellipsoidal heights): the flat
+    ground with the buildings standing on it (cell centres inside a footprint at its roof height),
+    georeferenced through pymap3d at the scene's origin."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    n = int(2 * HALF_M)
+    e, nn = np.meshgrid(np.arange(n) - HALF_M + 0.5, HALF_M - 0.5 - np.arange(n))
+    z = np.full((n, n), ORIGIN[2], np.float32)
+    for be, bn, half, h in buildings:
+        z[(np.abs(e - be) <= half) & (np.abs(nn - bn) <= half)] = ORIGIN[2] + h
+    lat0, lon0, _ = pymap3d.enu2geodetic(-HALF_M, HALF_M, 0.0, *ORIGIN)
+    lat1, lon1, _ = pymap3d.enu2geodetic(HALF_M, -HALF_M, 0.0, *ORIGIN)
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs="EPSG:4326",
+                       transform=from_origin(lon0, lat0, (lon1 - lon0) / n, (lat0 - lat1) / n)) as f:
+        f.write(z[None])
+    return path

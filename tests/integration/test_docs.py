@@ -135,7 +135,7 @@ def test_the_pages_open_in_a_browser_without_script_errors(site):
             errors = [e for e in d.get_log("browser") if e["level"] == "SEVERE" and "favicon" not in e["message"]]
             assert not errors, (name, errors)
         d.get(base + "index.html")
-        search = ("var q = document.getElementById('mkdocs-search-query'); q.value = 'OnDEM';"
+        search = ("var q = document.getElementById('mkdocs-search-query'); if (!q) return null; q.value = 'OnDEM';"
                   "q.dispatchEvent(new Event('keyup'));"
                   "return Array.from(document.querySelectorAll('#mkdocs-search-results a')).map(a => a.href);")
         found = WebDriverWait(d, 60, poll_frequency=0.5).until(lambda drv: drv.execute_script(search))

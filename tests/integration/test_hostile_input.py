@@ -947,7 +947,7 @@ def test_46_5_the_live_map_shows_hostile_names_as_text(tmp_path):
     url = server.start()
 
     class Update:  # a PacketUpdate's shape
-        stream, late, time_utc = "s", False, "2026-07-14T16:00:00Z"
+        kind, stream, late, time_utc = "packet", "s", False, "2026-07-14T16:00:00Z"
 
         def __init__(self, i):
             self.index, self.key = i, f"stream {INJECTIONS[i % len(INJECTIONS)]}"

@@ -7,7 +7,8 @@ the ground points are projected into the reference frame, and the map is interpo
 pixel (:func:`cv2.remap`). What the poses get wrong, a shift of a few pixels, is measured by phase
 correlation of the warped reference against the frame and taken out. Ground the reference sees
 from behind a ridge (the round trip through its own ground grid lands elsewhere), or at less than
-half the frame's resolution (a slope it sees edge-on), is not compared.
+half the frame's resolution (a slope it sees edge-on), is not compared; nor are the cells of the
+grid at a step of the surface (a wall or cliff in a DSM: the map interpolated across it would smear).
 
 A pixel has *changed* against a reference where its colour differs by more than ``threshold``
 (the largest of the channel differences, 0-255 scale). A mover is where the frame differs from
@@ -32,9 +33,10 @@ length in ``window_s``, targets the colour of the ground under them. What it rep
 not move (false-alarm sources): tall objects not in the DEM (buildings, trees, masts: their tops
 are displaced by parallax as the aircraft moves, about aircraft speed x height / altitude, and
 their walls come into and out of view; measured in ``bench/bench_detect.py``: over a town of 30
-buildings 10-40 m tall, 17 false movers in 6 s at 40 m/s, and a surface model holding the
-buildings does not remove them, the warp being interpolated across roof edges), DEM errors on
-steep slopes, moving shadows and water, lighting changes between frames.
+buildings 10-40 m tall, 17 false movers in 6 s at 40 m/s; given a surface model holding them (a
+DSM as the ``rule``), none: the warp goes over the roofs, and the cells at a surface step, where
+it would be interpolated across a wall, are not compared — so a target at a wall's foot is not
+seen there), DEM errors on steep slopes, moving shadows and water, lighting changes between frames.
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ from ..sensor.model import Pose, SensorModel
 
 MIN_TARGET_PX = 4.0  # the automatic scale keeps the smallest target this many working pixels
 RESOLUTION_RATIO = 2.0  # a reference coarser than this (per axis) where it sees the frame's ground is not used
+STEP_RATIO = 0.6  # a surface step: the grid steps either side of a point differ by this share of their lengths
 
 
 @dataclass(frozen=True)
@@ -141,6 +144,7 @@ class _Frame:
     luma: np.ndarray  # (H', W') float32, shrunk for the residual's phase correlation
     grid32: np.ndarray  # (gh, gw, 4) float32: ground ENU and pixel_m2, for cv2.remap
     p_ecef: np.ndarray  # (gh, gw, 3) the grid's ground points in ECEF m (projected into each reference)
+    steps: np.ndarray  # (gh, gw) bool: grid points at a step of the surface (not compared)
 
 
 class MotionDetector:
@@ -192,7 +196,7 @@ class MotionDetector:
         h, w = img.shape[:2]
         ground, pixel_m2, p_ecef = self._ground_grid(sensor, pose, w, h)
         fr = _Frame(index, float(time_s), img, sensor, pose, ground, pixel_m2, luma,
-                    np.dstack([ground, pixel_m2]).astype(np.float32), p_ecef)
+                    np.dstack([ground, pixel_m2]).astype(np.float32), p_ecef, self._steps(ground))
         self.frames.append(fr)
         self.pending.append(fr)
         out = []
@@ -247,6 +251,28 @@ class MotionDetector:
         area = np.linalg.norm(np.cross(np.gradient(g, axis=1), np.gradient(g, axis=0)), axis=-1) / float(step) ** 2
         return g, area, p
 
+    def _steps(self, g: np.ndarray) -> np.ndarray:
+        """Grid points at a step of the surface (a wall, a cliff, a ridge hiding the ground behind it):
+        where the ground points' second difference along a grid row or column exceeds occlusion_m
+        and half the two steps' lengths (a plane or an even slope has none): both points on either
+        side of the step are found so. Between grid points the warp is interpolated, which smears
+        across a step: the cells around those points are not compared."""
+        step = np.zeros(g.shape[:2], bool)
+        with np.errstate(invalid="ignore"):
+            for axis in (0, 1):
+                a, b, c = (np.take(g, range(k, g.shape[axis] - 2 + k), axis=axis) for k in range(3))
+                fwd, bwd = c - b, b - a
+                d2 = np.linalg.norm(fwd - bwd, axis=-1)
+                # a step, not a bend: the two sides differ by more than occlusion_m and by more than
+                # half their lengths (an even slope, or terrain bending gently, has nothing of it)
+                jump = (d2 > self.s.occlusion_m) & (d2 > STEP_RATIO * (np.linalg.norm(fwd, axis=-1)
+                                                                + np.linalg.norm(bwd, axis=-1)))
+                if axis == 0:
+                    step[1:-1] |= jump
+                else:
+                    step[:, 1:-1] |= jump
+        return step
+
     def _choose_scale(self, sensor: SensorModel, pose: Pose, width: int, height: int) -> float:
         self.scale = 1.0
         _, pixel_m2, _ = self._ground_grid(sensor, pose, width, height)
@@ -295,7 +321,7 @@ class MotionDetector:
         gap = seen[..., :3].astype(np.float64) - cur.ground
         with np.errstate(invalid="ignore"):
             ok = ((np.einsum("...i,...i->...", gap, gap) <= tol * tol) & np.isfinite(ur) & np.isfinite(vr)
-                  & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2))
+                  & (ref_m2 <= RESOLUTION_RATIO**2 * cur.pixel_m2) & ~cur.steps)
         return np.dstack([np.where(ok, ur, 0.0), np.where(ok, vr, 0.0), ok]).astype(np.float32)
 
     def _upsample(self, coarse: np.ndarray, width: int, height: int, shrink: int = 1):
