@@ -81,6 +81,21 @@ def count(ms, cars, frames_uv: dict[int, np.ndarray], n: int, radius_px: float =
     return hits, misses, false
 
 
+def posed(ms, images: list) -> list:
+    """The scene's frames as the detector takes them: (index, time s, image, sensor, pose), the
+    camera a pinhole of the scene's K on an az-el turret, its pose from the scene's telemetry."""
+    from eoloc import AzElGimbal, Camera, Pose, SensorModel
+
+    K = ms.K()
+    sensor = SensorModel(Camera(ms.W, ms.H, K[0, 0], K[1, 1], K[0, 2], K[1, 2]), AzElGimbal())
+    out = []
+    for i, img in enumerate(images):
+        tel = ms.telemetry(i / ms.FPS)
+        out.append((i, i / ms.FPS, img, sensor, Pose(tel["lat_deg"], tel["lon_deg"], tel["h_m"], 0.0, 0.0, 0.0,
+                                                     (tel["az_deg"], tel["el_deg"], tel["roll_deg"]))))
+    return out
+
+
 def plain_differencing(images, threshold: float = 40.0) -> dict[int, np.ndarray]:
     import cv2
 
@@ -97,7 +112,6 @@ def plain_differencing(images, threshold: float = 40.0) -> dict[int, np.ndarray]
 def throughput(n_frames: int) -> list[str]:
     import moving_scene as ms
 
-    from eoloc import AzElGimbal, Camera, Pose, SensorModel
     from eoloc.jobs.detect import detect_movers
     from eoloc.rules import AtHeight
 
@@ -107,15 +121,7 @@ def throughput(n_frames: int) -> list[str]:
     cars = vehicles_in_view(ms, rng, 20, seconds)
     tex = ms.ground_texture()
     images = [ms.render(tex, cars, i / ms.FPS) for i in range(n_frames)]
-    K = ms.K()
-    sensor = SensorModel(Camera(ms.W, ms.H, K[0, 0], K[1, 1], K[0, 2], K[1, 2]), AzElGimbal())
-
-    def pose(t):
-        tel = ms.telemetry(t)
-        return Pose(tel["lat_deg"], tel["lon_deg"], tel["h_m"], 0.0, 0.0, 0.0,
-                    (tel["az_deg"], tel["el_deg"], tel["roll_deg"]))
-
-    frames = [(i, i / ms.FPS, img, sensor, pose(i / ms.FPS)) for i, img in enumerate(images)]
+    frames = posed(ms, images)
     t0 = time.perf_counter()
     movers = detect_movers(frames, AtHeight(ms.ORIGIN[2]))
     eoloc_s = time.perf_counter() - t0
@@ -201,7 +207,7 @@ def buildings(n_frames: int) -> list[str]:
 
     import moving_scene as ms
 
-    from eoloc import AzElGimbal, Camera, Pose, SensorModel, open_dem
+    from eoloc import open_dem
     from eoloc.detect.movers import MoverSettings
     from eoloc.jobs.detect import detect_movers
     from eoloc.rules import AtHeight, OnDEM
@@ -219,15 +225,7 @@ def buildings(n_frames: int) -> list[str]:
             blds.append((e, n, half, h))
     tex = ms.ground_texture()
     images = [ms.draw_buildings(ms.render(tex, cars, i / ms.FPS), blds, i / ms.FPS) for i in range(n_frames)]
-    K = ms.K()
-    sensor = SensorModel(Camera(ms.W, ms.H, K[0, 0], K[1, 1], K[0, 2], K[1, 2]), AzElGimbal())
-
-    def pose(t):
-        tel = ms.telemetry(t)
-        return Pose(tel["lat_deg"], tel["lon_deg"], tel["h_m"], 0.0, 0.0, 0.0,
-                    (tel["az_deg"], tel["el_deg"], tel["roll_deg"]))
-
-    frames = [(i, i / ms.FPS, img, sensor, pose(i / ms.FPS)) for i, img in enumerate(images)]
+    frames = posed(ms, images)
     out = []
     with tempfile.TemporaryDirectory() as d:
         dsm = OnDEM(open_dem(ms.surface_model(blds, Path(d) / "dsm.tif"), vertical="ellipsoid"))
