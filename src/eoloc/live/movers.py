@@ -167,7 +167,7 @@ class LiveMovers:
 
     def _run(self) -> None:
         self.records: deque[Record] = deque(maxlen=RECORDS_KEPT)
-        self.waiting: deque[tuple[float, np.ndarray, float]] = deque()  # frames waiting for their pose
+        self.waiting: deque[tuple[int, float, np.ndarray, float]] = deque()  # frames waiting for their pose
         self.assembler = PesAssembler()
         self.decoder: VideoDecoder | None = None
         self.detector = None if self.learned is not None else MotionDetector(self.rule, self.motion)
@@ -176,7 +176,6 @@ class LiveMovers:
         self.ids: dict[str, int] = {}  # track key -> the mover's id (1, 2, ... as each is declared)
         self.earlier: dict[str, deque] = {}  # a track not (yet) a mover -> its detections so far
         self.sensors: dict[tuple, object] = {}
-        self.index = 0
         while True:
             item = self.inbox.get()
             if item[0] is END:
@@ -210,14 +209,14 @@ class LiveMovers:
     def _frames(self, frames, arrived: float) -> None:
         for fr in frames:
             self.counts["video_frames"] += 1
-            self.waiting.append((fr.pts_s, fr.image, arrived))
+            self.waiting.append((self.counts["video_frames"] - 1, fr.pts_s, fr.image, arrived))  # (its number)
         self._pose_waiting(final=False)
 
     def _pose_waiting(self, *, final: bool) -> None:
         """Pose the frames the KLV now reaches past (or every one, at the end or when too many wait)."""
         while self.waiting:
             newest = self.records[-1].pts_s if self.records else -math.inf
-            pts_s, image, arrived = self.waiting[0]
+            index, pts_s, image, arrived = self.waiting[0]
             if pts_s > newest and not final and len(self.waiting) <= FRAMES_WAITING:
                 return  # the packet after this frame has not come yet
             self.waiting.popleft()
@@ -231,8 +230,7 @@ class LiveMovers:
                 self.counts["frames_unposed"] += 1
                 continue
             self.counts["frames_posed"] += 1
-            self._search(self.index, pts_s, image, sensor, pose, rec, vals["time_s"], arrived)
-            self.index += 1
+            self._search(index, pts_s, image, sensor, pose, rec, vals["time_s"], arrived)
 
     def _pose_of(self, pts_s: float):
         """(pose, values, the record at or before) of a frame at ``pts_s``: the packet of the same
@@ -282,10 +280,11 @@ class LiveMovers:
             sensor, pose, rec, unix_s, arrived = self.posed.pop(blobs.index)
             rows = self.tracker.add(blobs, sensor, pose)
             self.counts["detections"] += len(rows)
+            when = utc_times(np.array([unix_s]), "unix")[0] if math.isfinite(unix_s) else None
             movers = []
             for row in rows:
                 key = row.pop("track")
-                row = self._feature(row, key, rec, unix_s)
+                row = self._feature(row, key, rec, when)
                 if key not in self.ids:
                     if not self.tracker.is_mover(key):
                         earlier = self.earlier.setdefault(key, deque(maxlen=EARLIER_KEPT))
@@ -301,17 +300,21 @@ class LiveMovers:
             for key in [k for k in self.earlier if k not in self.tracker.tracker.live]:  # ended as no mover
                 del self.earlier[key]
             if movers:
-                when = utc_times(np.array([unix_s]), "unix")[0] if math.isfinite(unix_s) else None
                 u = PacketUpdate(self.source, rec.stream, rec.packet, math.nan, False, None, None, None, None,
                                  time_utc=when, name=rec.name, movers=movers)
                 self.counts["mover_updates"] += 1
                 self.latency_s.append(time.perf_counter() - arrived)
                 self.outbox.put(u)
 
-    def _feature(self, row: dict, key: str, rec: Record, unix_s: float) -> dict:
-        """A detection as a mover feature (``track_id`` None until its track is a mover)."""
-        props = {"what": "mover", "track_id": self.ids.get(key), "frame": row.pop("frame"),
-                 "pts_s": row.pop("time_s"), "packet": rec.packet, **self.tracker.now(key)}
+    def _feature(self, row: dict, key: str, rec: Record, time_utc: str | None) -> dict:
+        """A detection as a mover feature (``track_id`` None until its track is a mover): like every
+        live feature with ``what``, ``stream``, ``packet`` (the KLV packet at or before its frame)
+        and ``time_utc`` (its frame's, from the KLV's time stamps); ``frame``: the video frame's
+        number since the session began (0-based, every decoded frame counted), ``pts_s`` its
+        presentation time."""
+        props = {"what": "mover", "stream": rec.stream, "packet": rec.packet, "time_utc": time_utc,
+                 "track_id": self.ids.get(key), "frame": row.pop("frame"), "pts_s": row.pop("time_s"),
+                 **self.tracker.now(key)}
         lon, lat, h = row.pop("lon_deg"), row.pop("lat_deg"), row.pop("h_m")
         return {"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat, h]},
                 "properties": props | row}

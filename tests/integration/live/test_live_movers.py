@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+from datetime import datetime
 from pathlib import Path
 
 import moving_scene as ms
@@ -154,6 +155,12 @@ def test_live_detect_over_udp_finds_locates_and_sends_the_movers(drive, tmp_path
     assert m["latency_ms_median"] >= 2000, m
     rows = [json.loads(x) for x in out.read_text().splitlines()]
     movers = [f for f in rows if f["properties"]["what"] == "mover"]
+    # each with its stream, packet and frame time as every live feature (the KLV's clock: t = frame / FPS)
+    for f in movers:
+        p = f["properties"]
+        assert p["stream"] == "PID 257" and 0 <= p["packet"] < N
+        t = datetime.fromisoformat(p["time_utc"].replace("Z", "+00:00")).timestamp() - ms.START_UNIX_S
+        assert t == pytest.approx(p["frame"] / ms.FPS, abs=1e-3)
     s = _score(movers)
     assert sorted(v["car"] for v in s.values()) == [0, 1, 2], "one mover per vehicle, no false one"
     for v in s.values():
