@@ -395,7 +395,9 @@ def packet_end(data: bytes, k: int) -> tuple[int | None, int, str]:
     except SetError as exc:
         return None, 0, f"{exc} (the packet's own length)"
     if start + length > len(data):
-        return None, 0, (f"the packet declares {length} bytes of value but only {len(data) - start} remain "
+        # (not how many bytes remain: a segment of the file (io.klv.segments) holds fewer than the
+        # file does, and its reading must say what the whole file's says)
+        return None, 0, (f"the packet declares {length} bytes of value, more than the stream holds after it "
                          "(cut short, or a corrupt length)")
     return start + length, start, ""
 
