@@ -8,7 +8,9 @@ the whole file's reading; its notes count that segment's packets (:func:`merge_n
 whole file's). Memory is bounded by the segment size, whatever the file's size.
 
 What a segment cannot know: whether keys that lost their first 5 bytes are repaired is decided per
-segment (the whole file's reading decides once), and a block with no such cut in its second half
+segment (the whole file's reading decides once); a damaged packet whose corrupt length ends inside
+the file but past the segment's cut is "truncated" there, where the whole reading reads that far
+and finds its checksum wrong ("checksum", the same offset); and a block with no such cut in its second half
 (a long stretch of damage, or a file of EG 0104 packets only) is read on until one comes, up to
 16 segments (at least 16 MB): then it is cut at its last packet key, or anywhere that splits no key,
 and the stretch's skipped bytes are reported in two issues rather than one. An MPEG-TS
