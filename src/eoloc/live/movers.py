@@ -53,7 +53,8 @@ from .video import PesAssembler, VideoDecoder
 POSE_COLUMNS = ("lat_deg", "lon_deg", "h_m", "yaw_deg", "pitch_deg", "roll_deg", "gimbal1_deg", "gimbal2_deg",
                 "sensor_roll_deg")
 VALUES = ("hfov_deg", "vfov_deg", "time_s")
-RECORDS_KEPT = 4096  # KLV packets kept to pose frames (over 2 minutes at 30 packets/s)
+RECORDS_KEPT = 4096  # KLV packets kept to pose frames at most (over 2 minutes at 30 packets/s)
+RECORDS_S = 10.0  # and only those of the last 10 s of presentation time (each frame looks at them all)
 EARLIER_KEPT = 256  # detections of a track kept until it is known to move (sent then, before its newest)
 FRAMES_WAITING = 32  # decoded frames waiting for the KLV after them (beyond: posed with what there is; ~1 s)
 END = object()
@@ -181,7 +182,10 @@ class LiveMovers:
             if item[0] is END:
                 break
             if item[0] == "pose":
-                self.records.append(item[1])
+                rec = item[1]
+                while self.records and self.records[0].pts_s < rec.pts_s - RECORDS_S:  # what no frame to come needs
+                    self.records.popleft()
+                self.records.append(rec)
                 self._pose_waiting(final=False)
                 continue
             _, stream_type, cells, arrived = item
