@@ -6,7 +6,9 @@ same partitions (checked). The baseline is the same work file by file in one pro
 One long file (5n packets) on one process: the rate where the per-file costs are amortised.
 Memory: `eoloc batch` on one long file in a child process (its own peak resident size, VmHWM):
 a file of n/2 packets and one 10x longer, read in segments of 1 MB of KLV (the default) and, for
-the baseline, whole (one segment as large as the file: what the batch did before it streamed).
+the baseline, whole (one segment as large as the file: what the batch did before it streamed);
+the same for an MPEG-TS of those packets (libavformat's muxer; the longer one the shorter 10 times
+over), its transport read 8 MB at a time (the default) or whole.
 
     python bench/bench_batch.py [--n 12000]     # n: packets in the archive (600 per file)
 """
@@ -65,21 +67,37 @@ def peak_mb(path: Path, out: Path, segment_bytes: int) -> tuple[float, float, in
     return float(mb), float(seconds), int(packets)
 
 
+def long_ts(path: Path, short: Path, times: int) -> tuple[Path, Path]:
+    """The packets of ``short`` (raw KLV) in an MPEG-TS at 30 Hz, and that TS ``times`` over (``path``)."""
+    from eoloc.io.klv.mux import write_klv_ts
+    from eoloc.io.klv.reader import split_klv
+
+    packets = [p for p, _ in split_klv(short.read_bytes())]
+    one = write_klv_ts(path.with_name("one.ts"), [[(p, k / 30) for k, p in enumerate(packets)]])
+    data = one.read_bytes()
+    with path.open("wb") as fh:
+        for _ in range(times):
+            fh.write(data)
+    return one, path
+
+
 def memory_rows(n: int) -> list[str]:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         short, long = long_flight(root / "short.klv", n // 2), long_flight(root / "long.klv", 5 * n)
+        short_ts, ts = long_ts(root / "long.ts", short, 10)
         _run_file(long, root / "warm")
         t = min(_run_file(long, root / f"o{k}") for k in range(3))
         rows = [row(f"`eoloc batch`, one recording of {5 * n:,} packets (a long file: the per-file costs "
                     "amortised), one process, best of 3", f"{5 * n / t:,.0f} packets/s ({t:.2f} s)",
                     "(target >= 50,000 per process)", None)]
-        for path in (short, long):
+        for path in (short, long, short_ts, ts):
             whole = peak_mb(path, root / "whole", 1 << 40)
             seg = peak_mb(path, root / "seg", 1_000_000)
             size = path.stat().st_size / 1e6
-            rows.append(row(f"`eoloc batch`, one file of {seg[2]:,} packets ({size:.0f} MB), peak memory, segments of "
-                            "1 MB", f"{seg[0]:.0f} MB ({seg[1]:.1f} s)",
+            what = "MPEG-TS (transport read 8 MB at a time)" if path.suffix == ".ts" else "file"
+            rows.append(row(f"`eoloc batch`, one {what} of {seg[2]:,} packets ({size:.0f} MB), peak memory, "
+                            "segments of 1 MB", f"{seg[0]:.0f} MB ({seg[1]:.1f} s)",
                             f"read whole: {whole[0]:.0f} MB ({whole[1]:.1f} s)", whole[0] / seg[0]))
     return rows
 

@@ -16,7 +16,7 @@ packets cost a lookup each, as do those on PIDs no table names.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 METADATA_STREAM_TYPES = (0x06, 0x15)  # asynchronous (private data, "KLVA") and synchronous metadata (ST 1402)
 # MPEG-1/2 video, MPEG-4 part 2, AVC (with SVC, MVC), HEVC, AVS
@@ -207,109 +207,169 @@ SPECIAL_STREAM_IDS = frozenset({0xBC, 0xBE, 0xBF, 0xF0, 0xF1, 0xF2, 0xF8, 0xFF})
 def clean_klv_payloads(data: bytes, *, max_pes_bytes: int = MAX_PES_BYTES
                        ) -> tuple[dict[int, tuple[bytes, list]], dict[int, int]] | None:
     """Each asynchronous KLV PID's PES payloads joined, with (byte offset in them, PTS seconds) per
-    PES, and per PID the PES timed by arrival (no PTS: the PTS of the video PES begun before it, as
-    :class:`KLVDemux` with ``arrival`` times them), read from a whole transport stream in
-    vectorised passes; or None where the stream is not clean enough for that (:class:`KLVDemux`
-    then reads it, damage and all).
+    PES, and per PID the PES timed by arrival, read from a whole transport stream in vectorised
+    passes (:class:`CleanTransport` given it in one piece); or None where the stream is not clean
+    enough for that (:class:`KLVDemux` then reads it, damage and all)."""
+    clean = CleanTransport(max_pes_bytes=max_pes_bytes)
+    out = clean.feed(data, final=True)
+    return (out, clean.by_arrival) if out else None
+
+
+@dataclass
+class TableCarry:
+    """What :class:`TableRepeats` carries from one chunk of a stream to the next, by PID: the
+    last packet handed on or left out (its index in the stream), the repeats left out, and the
+    last candidate packet (index, its 188 bytes)."""
+
+    last: dict = field(default_factory=dict)
+    skipped: dict = field(default_factory=dict)
+    before: dict = field(default_factory=dict)
+
+
+class CleanTransport:
+    """A clean transport stream's KLV read in vectorised passes, a chunk at a time: each
+    :meth:`feed` takes whole 188-byte packets (any number) and returns each asynchronous KLV PID's
+    PES payloads completed in them, joined, with (byte offset in them, PTS seconds) per PES; or
+    None where the stream is not clean enough for that (then :class:`KLVDemux` is to read the
+    stream from its start, damage and all). :attr:`by_arrival` counts per PID the PES timed by
+    arrival (no PTS: the PTS of the video PES begun before it, as :class:`KLVDemux` with
+    ``arrival`` times them); :attr:`whole` the KLV PIDs that gave a whole PES.
 
     Clean: every 188-byte packet in sync and readable, the program tables read without damage and
     unchanged once metadata has begun, every metadata PES whole (its declared length met) with the
     standard header and a PTS or none (not a DTS), no transport error flag on a metadata packet, no
-    synchronous (0x15) metadata. Then :class:`KLVDemux` would give exactly this and no damage (the same
-    tables, read by the same code; ``tests/unit/io/klv/test_klv_columnar.py`` compares the two), at the cost
-    of a few numpy passes instead of a Python object per transport packet."""
-    import numpy as np
-    from stanag4609.transport.demux import StreamKind
-    from stanag4609.transport.mpegts import parse_transport_packet
+    synchronous (0x15) metadata. Then :class:`KLVDemux` would give exactly this and no damage (the
+    same tables, read by the same code; ``tests/unit/io/klv/test_klv_columnar.py`` compares the
+    two, whole and in chunks), at the cost of a few numpy passes instead of a Python object per
+    transport packet. Across a chunk's end are carried: the program tables' reader (and the PATs'
+    alone), their repeats (:class:`TableCarry`), the PES still open on each metadata PID (its
+    packets, until the next PES begins or the stream ends: ``final``), the last video PES's PTS,
+    whether metadata has begun, every PID the tables have named."""
 
-    n = len(data) // TS_PACKET
-    if not n or len(data) % TS_PACKET:
-        return None
-    cells = np.frombuffer(data, np.uint8).reshape(n, TS_PACKET)
-    control = (cells[:, 3] >> 4) & 0x3
-    if (cells[:, 0] != 0x47).any() or (control == 0).any():
-        return None
-    alen = cells[:, 4].astype(np.int64)
-    adapted = control >= 2
-    if ((control == 2) & (alen != TS_PACKET - 5)).any() or (adapted & (alen > TS_PACKET - 5)).any():
-        return None
-    if not _adaptation_fields_read(data, cells, adapted & (alen > 0), alen):
-        return None
-    pid = ((cells[:, 1].astype(np.int64) & 0x1F) << 8) | cells[:, 2]
-    starts = (cells[:, 1] & 0x40) != 0
-    named = _pmt_pids_named(data, cells, pid, max_pes_bytes)  # every PID a PAT names as a PMT's
-    if named is None:
-        return None
-    demux = KLVDemux(max_pes_bytes=max_pes_bytes)
-    events: list = []
-    damage: list[Damage] = []
-    tables = TableRepeats(data, cells, pid, np.flatnonzero((pid == 0) | np.isin(pid, list(named))))
-    states = [(-1, {}, frozenset())]  # (from the packet after k: the metadata streams, the video PIDs)
-    for k, p, prev, repeat in tables:  # the program tables, in order
-        if p == 0 or p in demux.pmt_pids:
-            raw = tables.fed(k, p, prev, repeat)
-            if raw is None:  # the table packet before it again: nothing the program tables say changes
+    def __init__(self, *, max_pes_bytes: int = MAX_PES_BYTES) -> None:
+        self.max_pes_bytes = max_pes_bytes
+        self.demux = KLVDemux(max_pes_bytes=max_pes_bytes)  # the program tables, as they come
+        self.pats = KLVDemux(max_pes_bytes=max_pes_bytes)  # the PATs alone: every PID one names as a PMT's
+        self.tables, self.pat_tables = TableCarry(), TableCarry()
+        self.named: set[int] = set()
+        self.ever: set[int] = set()  # every PID a metadata stream's or a video one's at some time
+        self.begun = False  # a metadata packet has come
+        self.video_pts: int | None = None  # the PTS of the last video PES begun before the chunk
+        self.open: dict[int, tuple] = {}  # PID -> its open PES: (cells, their indices, arrival of its start)
+        self.k0 = 0  # the chunk's first packet's index in the stream
+        self.by_arrival: dict[int, int] = {}
+        self.whole: set[int] = set()
+
+    def feed(self, data: bytes, *, final: bool = True) -> dict[int, tuple[bytes, list]] | None:
+        import numpy as np
+        from stanag4609.transport.demux import StreamKind
+        from stanag4609.transport.mpegts import parse_transport_packet
+
+        n = len(data) // TS_PACKET
+        if len(data) % TS_PACKET:
+            return None
+        if not n and not final:
+            return {}
+        cells = np.frombuffer(data, np.uint8).reshape(n, TS_PACKET)
+        control = (cells[:, 3] >> 4) & 0x3
+        if (cells[:, 0] != 0x47).any() or (control == 0).any():
+            return None
+        alen = cells[:, 4].astype(np.int64)
+        adapted = control >= 2
+        if ((control == 2) & (alen != TS_PACKET - 5)).any() or (adapted & (alen > TS_PACKET - 5)).any():
+            return None
+        if not _adaptation_fields_read(data, cells, adapted & (alen > 0), alen):
+            return None
+        pid = ((cells[:, 1].astype(np.int64) & 0x1F) << 8) | cells[:, 2]
+        starts = (cells[:, 1] & 0x40) != 0
+        if not self._read_pats(data, cells, pid):
+            return None
+        demux = self.demux
+        events: list = []
+        damage: list[Damage] = []
+        tables = TableRepeats(data, cells, pid, np.flatnonzero((pid == 0) | np.isin(pid, list(self.named))),
+                              k0=self.k0, carry=self.tables)
+        states = [(-1, dict(demux.streams), frozenset(demux.video_pids))]  # from the packet after k: the
+        for k, p, prev, repeat in tables:  # the program tables, in order     metadata streams, the video PIDs
+            if p == 0 or p in demux.pmt_pids:
+                raw = tables.fed(k, p, prev, repeat)
+                if raw is None:  # the table packet before it again: nothing the program tables say changes
+                    continue
+                demux._packet(parse_transport_packet(raw, offset=(self.k0 + k) * TS_PACKET), events, damage)
+                if damage:
+                    return None
+                if demux.streams != states[-1][1] or demux.video_pids != states[-1][2]:
+                    states.append((k, dict(demux.streams), frozenset(demux.video_pids)))
+        for _, s, v in states:
+            self.ever |= set(s) | v
+        if self.ever & self.named:
+            return None  # (a PID both a table's and a stream's: KLVDemux's packet-by-packet way)
+        ends = [k for k, _, _ in states[1:]] + [n]
+        for (k0, streams, _), k1, later in zip(states, ends, [*states[1:], None], strict=True):
+            self.begun = self.begun or bool(streams and np.isin(pid[k0 + 1:k1], list(streams)).any())
+            if self.begun and later is not None and later[1] != streams:
+                return None  # the tables changed once metadata had begun
+        k_last, streams, _ = states[-1]
+        arrival = ArrivalTimes(data, pid, starts, states, ends, before=self.video_pts)
+        out: dict[int, tuple[bytes, list]] = {}
+        for p in streams:
+            ks = k_last + 1 + np.flatnonzero(pid[k_last + 1:] == p)
+            carried = self.open.pop(p, None)
+            if not ks.size and carried is None:
                 continue
-            demux._packet(parse_transport_packet(raw, offset=k * TS_PACKET), events, damage)
-            if damage:
+            _, info, kind, _ = demux.streams[p]
+            if info.stream_type == 0x15:
                 return None
-            if demux.streams != states[-1][1] or demux.video_pids != states[-1][2]:
-                states.append((k, dict(demux.streams), frozenset(demux.video_pids)))
-    if any(set(s) & named or v & named for _, s, v in states):
-        return None  # (a PID both a table's and a stream's: KLVDemux's packet-by-packet way)
-    ends = [k for k, _, _ in states[1:]] + [n]
-    begun = False  # a metadata packet has come
-    for (k0, streams, _), k1, later in zip(states, ends, [*states[1:], None], strict=True):
-        begun = begun or bool(streams and np.isin(pid[k0 + 1:k1], list(streams)).any())
-        if begun and later is not None and later[1] != streams:
-            return None  # the tables changed once metadata had begun
-    k_last, streams, _ = states[-1]
-    metadata = {p: k_last + 1 + np.flatnonzero(pid[k_last + 1:] == p) for p in streams}
-    arrival = ArrivalTimes(data, pid, starts, states, ends)
-    out: dict[int, tuple[bytes, list]] = {}
-    by_arrival: dict[int, int] = {}
-    for p, ks in metadata.items():
-        if not ks.size:
-            continue
-        _, info, kind, _ = demux.streams[p]
-        if info.stream_type == 0x15:
-            return None
-        read = _clean_pes(cells, ks, control, alen, max_pes_bytes, arrival)
-        if read is None:
-            return None
-        if kind is StreamKind.KLV and read[1]:  # (a PID without a whole PES gives nothing, as in KLVDemux)
-            out[p] = read[:2]
-            if read[2]:
-                by_arrival[p] = read[2]
-    return (out, by_arrival) if out else None
+            c, g = cells[ks], self.k0 + ks
+            if carried is not None:
+                c, g = np.concatenate([carried[0], c]), np.concatenate([carried[1], g])
 
+            def at(k: int, carried=carried) -> int | None:
+                return carried[2] if k < self.k0 else arrival.get(k - self.k0)
 
-def _pmt_pids_named(data: bytes, cells, pid, max_pes_bytes: int) -> set[int] | None:
-    """Every PID that a PAT of the stream names as a program map's (its PAT packets read alone),
-    or None where they cannot be read without damage."""
-    import numpy as np
-    from stanag4609.transport.mpegts import parse_transport_packet
+            read = _clean_pes(c, g, self.max_pes_bytes, at, final=final)
+            if read is None:
+                return None
+            body, marks, timed, tail = read
+            if tail is not None:
+                self.open[p] = (tail[0].copy(), tail[1], at(int(tail[1][0])))
+            if kind is StreamKind.KLV and marks:  # (a PID without a whole PES gives nothing, as in KLVDemux)
+                out[p] = (body, marks)
+                self.whole.add(p)
+                if timed:
+                    self.by_arrival[p] = self.by_arrival.get(p, 0) + timed
+        self.video_pts = arrival.get(n)
+        self.k0 += n
+        return out
 
-    demux, events, damage, named = KLVDemux(max_pes_bytes=max_pes_bytes), [], [], set()
-    tables = TableRepeats(data, cells, pid, np.flatnonzero(pid == 0))
-    for k, p, prev, repeat in tables:
-        raw = tables.fed(k, p, prev, repeat)
-        if raw is not None:
-            demux._packet(parse_transport_packet(raw, offset=k * TS_PACKET), events, damage)
-            named |= demux.pmt_pids
-    return None if damage else named
+    def _read_pats(self, data: bytes, cells, pid) -> bool:
+        """The chunk's PAT packets read alone (their reader carried): every PID they name as a
+        program map's added to :attr:`named`; False where they cannot be read without damage."""
+        import numpy as np
+        from stanag4609.transport.mpegts import parse_transport_packet
+
+        events: list = []
+        damage: list[Damage] = []
+        tables = TableRepeats(data, cells, pid, np.flatnonzero(pid == 0), k0=self.k0, carry=self.pat_tables)
+        for k, p, prev, repeat in tables:
+            raw = tables.fed(k, p, prev, repeat)
+            if raw is not None:
+                self.pats._packet(parse_transport_packet(raw, offset=(self.k0 + k) * TS_PACKET), events, damage)
+                self.named |= self.pats.pmt_pids
+        return not damage
 
 
 class ArrivalTimes:
     """The PTS of the video PES begun last before a packet (what :class:`KLVDemux` with
     ``arrival`` times a metadata PES without a PTS by), found when asked: the video PIDs' PES
     starts as the program tables then stood (``states``: from the packet after k, the metadata
-    streams and the video PIDs, until the next one's k, ``ends``)."""
+    streams and the video PIDs, until the next one's k, ``ends``); ``before``: what it was before
+    the first packet (a chunk of a longer stream)."""
 
-    def __init__(self, data: bytes, pid, starts, states, ends) -> None:
+    def __init__(self, data: bytes, pid, starts, states, ends, *, before: int | None = None) -> None:
         import numpy as np
 
-        self.data = data
+        self.data, self.before = data, before
         video = [k0 + 1 + np.flatnonzero(starts[k0 + 1:k1] & np.isin(pid[k0 + 1:k1], list(v - set(s))))
                  for (k0, s, v), k1 in zip(states, ends, strict=True) if v]
         self.video = np.concatenate(video) if video else np.zeros(0, np.int64)
@@ -319,7 +379,7 @@ class ArrivalTimes:
 
         j = int(np.searchsorted(self.video, k)) - 1
         if j < 0:
-            return None
+            return self.before
         v = int(self.video[j])
         return cell_pes_pts(self.data[v * TS_PACKET:(v + 1) * TS_PACKET])
 
@@ -334,42 +394,50 @@ class TableRepeats:
     does not judge a table PID's continuity today; a repeat must also be one on from the packet
     before, in case it does). ``rows``: the
     candidate table packets, in order; the repeats are found in vectorised passes, and a repeat is
-    left out only when the packet before it on its PID was itself handed on or left out."""
+    left out only when the packet before it on its PID was itself handed on or left out. In a
+    chunk of a longer stream, ``k0`` is the chunk's first packet's index in the stream and
+    ``carry`` what the chunks before it left (updated here); the packets before are then
+    given by those indices."""
 
-    def __init__(self, data: bytes, cells, pid, rows) -> None:
+    def __init__(self, data: bytes, cells, pid, rows, *, k0: int = 0, carry: TableCarry | None = None) -> None:
         import numpy as np
 
-        self.data = data
+        self.data, self.k0 = data, k0
+        self.carry = carry if carry is not None else TableCarry()
         p = pid[rows]
         order = np.lexsort((rows, p))  # grouped by PID, in stream order within each
         prev = np.full(rows.size, -1, np.int64)
         same_pid = p[order[1:]] == p[order[:-1]]
-        prev[order[1:][same_pid]] = rows[order[:-1][same_pid]]
-        c, q = cells[rows], cells[np.maximum(prev, 0)]
+        prev[order[1:][same_pid]] = k0 + rows[order[:-1][same_pid]]
+        c, q = cells[rows], cells[np.maximum(prev - k0, 0)]
+        before = self.carry.before
+        for j in np.flatnonzero(prev < 0).tolist():  # a PID's first candidate in the chunk: its last one before
+            if int(p[j]) in before:
+                prev[j], q[j] = before[int(p[j])]
         end = 8 + (((c[:, 6].astype(np.int64) & 0x0F) << 8) | c[:, 7])  # a section starting at byte 5 ends
         tail = c[np.arange(rows.size), np.minimum(end, TS_PACKET - 1)]
         repeat = ((prev >= 0) & (c[:, 3] >> 4 == 1) & (q[:, 3] >> 4 == 1) & ((c[:, 1] & 0x40) != 0) & (c[:, 4] == 0)
                   & ((c[:, 3] & 0x0F) == ((q[:, 3] + 1) & 0x0F)) & (c[:, :3] == q[:, :3]).all(axis=1)
                   & (c[:, 4:] == q[:, 4:]).all(axis=1) & ((end == TS_PACKET) | ((end < TS_PACKET) & (tail == 0xFF))))
+        for j in order[np.append(~same_pid, True)].tolist() if rows.size else []:  # each PID's last candidate,
+            before[int(p[j])] = (k0 + int(rows[j]), c[j].copy())                  # for the next chunk
         self.rows, self.pid, self.prev, self.repeat = rows.tolist(), p.tolist(), prev.tolist(), repeat.tolist()
-        self.last: dict[int, int] = {}  # PID -> its last packet handed on or left out
-        self.skipped: dict[int, int] = {}  # PID -> repeats left out
 
     def __iter__(self):
-        """(packet index, PID, the packet before it on its PID or -1, whether it repeats that one)
-        per candidate, in order: what :meth:`fed` takes."""
+        """(packet index in the chunk, PID, the packet before it on its PID (index in the stream)
+        or -1, whether it repeats that one) per candidate, in order: what :meth:`fed` takes."""
         return zip(self.rows, self.pid, self.prev, self.repeat, strict=True)
 
     def fed(self, k: int, p: int, prev: int, repeat: bool) -> bytes | None:
         """Packet ``k`` (PID ``p``, about to be read as a table) as the table reader is to get it,
         or None to leave it out."""
-        last = self.last.get(p)
-        self.last[p] = k
+        last = self.carry.last.get(p)
+        self.carry.last[p] = self.k0 + k
         if repeat and last == prev:
-            self.skipped[p] = self.skipped.get(p, 0) + 1
+            self.carry.skipped[p] = self.carry.skipped.get(p, 0) + 1
             return None
         raw = self.data[k * TS_PACKET:(k + 1) * TS_PACKET]
-        shift = self.skipped.get(p, 0)
+        shift = self.carry.skipped.get(p, 0)
         if not shift & 0x0F:
             return raw
         return raw[:3] + bytes([(raw[3] & 0xF0) | ((raw[3] - shift) & 0x0F)]) + raw[4:]
@@ -405,27 +473,38 @@ def _adaptation_fields_read(data: bytes, cells, rows, alen) -> bool:
     return bool((cells[idx] == 0xFF)[stuffing].all())
 
 
-def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: ArrivalTimes
-               ) -> tuple[bytes, list, int] | None:
-    """One metadata PID's packets (``ks``, in order) as its PES payloads joined, (offset, PTS s)
-    marks and the count of PES timed by ``arrival``; or None where the PES assembler would meet
+def _clean_pes(c, g, max_pes_bytes: int, arrival, *, final: bool = True
+               ) -> tuple[bytes, list, int, tuple | None] | None:
+    """One metadata PID's packets (``c``: their cells, in order; ``g``: their indices in the
+    stream) as its PES payloads joined, (offset, PTS s) marks, the count of PES timed by
+    ``arrival`` (a packet's index -> the PTS it is timed by) and, unless ``final``, the packets of
+    the last PES, still open (cells, indices; or None); or None where the PES assembler would meet
     anything but whole PES packets with the standard header and a PTS or none."""
     import numpy as np
 
-    if (cells[ks, 1] & 0x80).any():  # the transport error flag
+    if (c[:, 1] & 0x80).any():  # the transport error flag
         return None
-    start = np.where(control[ks] == 1, 4, 5 + alen[ks])
-    size = np.where(control[ks] & 1, TS_PACKET - start, 0)
-    pusi = (cells[ks, 1] & 0x40) != 0
+    control, alen = (c[:, 3] >> 4) & 0x3, c[:, 4].astype(np.int64)
+    start = np.where(control == 1, 4, 5 + alen)
+    size = np.where(control & 1, TS_PACKET - start, 0)
+    pusi = (c[:, 1] & 0x40) != 0
     keep = size > 0  # (a packet without payload adds nothing)
-    ks, start, size, pusi = ks[keep], start[keep], size[keep], pusi[keep]
+    c, g, start, size, pusi = c[keep], g[keep], start[keep], size[keep], pusi[keep]
     first = np.flatnonzero(pusi)
-    if not first.size:
-        return b"", []
-    ks, start, size, pusi = ks[first[0]:], start[first[0]:], size[first[0]:], pusi[first[0]:]
+    if not first.size:  # (nothing begun: the assembler drops them)
+        return b"", [], 0, None
+    tail = None
+    if not final:  # the last PES may go on in the next chunk
+        if int(size[first[-1]:].sum()) > max_pes_bytes:
+            return None
+        tail = (c[first[-1]:], g[first[-1]:])
+    sl = slice(first[0], None if final else first[-1])
+    c, g, start, size, pusi = c[sl], g[sl], start[sl], size[sl], pusi[sl]
+    if not c.shape[0]:
+        return b"", [], 0, tail
     total = int(size.sum())
     at = np.cumsum(size) - size  # each packet's payload's place in the joined bytes
-    joined = cells[ks][np.arange(TS_PACKET) >= start[:, None]]  # each packet's payload, in order
+    joined = c[np.arange(TS_PACKET) >= start[:, None]]  # each packet's payload, in order
     s = at[pusi]  # PES starts
     e = np.append(s[1:], total)
     length = e - s
@@ -448,13 +527,15 @@ def _clean_pes(cells, ks, control, alen, max_pes_bytes: int, arrival: ArrivalTim
                                                                        strict=True)]
     by_arrival = 0
     for j in np.flatnonzero(~timed).tolist():  # no PTS: the video frame before it in the stream (ST 1402)
-        video = arrival.get(int(ks[pusi][j]))
+        video = arrival(int(g[pusi][j]))
         if video is not None:
             times[j] = video / PTS_HZ
             by_arrival += 1
     p0 = s + 9 + hdl
     plen = e - p0
     mark = np.cumsum(plen) - plen
-    view = memoryview(joined)
-    body = b"".join([view[a:b] for a, b in zip(p0.tolist(), e.tolist(), strict=True)])  # each PES's payload
-    return body, list(zip(mark.tolist(), times, strict=True)), by_arrival
+    header = np.zeros(total + 1, np.int8)  # each PES's payload: the joined bytes but the PES headers
+    header[s] += 1
+    header[p0] -= 1  # (s and p0 each distinct: a header [s, p0) before each payload [p0, next s))
+    body = joined[np.cumsum(header[:-1]) == 0].tobytes()
+    return body, list(zip(mark.tolist(), times, strict=True)), by_arrival, tail

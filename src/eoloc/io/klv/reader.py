@@ -433,32 +433,44 @@ def ts_klv_parts(data: bytes, path: str, *, strict: bool, decode, fast: bool = T
     errors (lost sync, a damaged packet, a PES packet that does not add up) cost the packets they
     touch, and are reported with their byte offsets in the file (:class:`.demux.KLVDemux`).
     """
-    from .demux import clean_klv_payloads
+    from .transport import MemoryPayloads, transport_payloads
 
     issues: list[KLVIssue] = []
-    by_arrival: dict[int, int] = {}  # PID -> PES timed by the video frame before them
     torn = len(data) % TS_PACKET
     if torn:  # a recording cut off mid-packet: the whole packets before it are kept
         issues.append(torn_issue(path, len(data)))
         data = data[:len(data) - torn]
-    clean = clean_klv_payloads(data) if fast else None  # (a clean stream: vectorised, the same result)
-    if clean is not None:
-        per_pid, by_arrival = clean
-    else:
-        per_pid = _demux_klv(data, path, issues, by_arrival)
-    if not per_pid:
-        raise KLVError(f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)")
+    problems, sink, by_arrival = transport_payloads(lambda: [(data, True)], MemoryPayloads, fast=fast)
+    issues += transport_issues(path, problems)
+    if not sink.pids():
+        raise KLVError(no_klv_stream(path))
     parts = []
     n = 0
-    for pid, (buf, marks) in sorted(per_pid.items()):
-        s = decode(bytes(buf), f"{path} [PID {pid}]", pts=marks, container="mpegts", stream=f"PID {pid}",
-                   first_index=n, strict=strict)
-        arrival = (StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in "
-                              "asynchronous carriage without PTS (ST 1402): each timed by the video frame "
-                              "before it in the stream", by_arrival[pid], n) if by_arrival.get(pid) else None)
+    for pid in sink.pids():
+        s = decode(sink.payload(pid), f"{path} [PID {pid}]", pts=sink.marks[pid], container="mpegts",
+                   stream=f"PID {pid}", first_index=n, strict=strict)
+        arrival = arrival_note(pid, by_arrival, n)
         n += len(s) + s.n_bad
         parts.append((s, arrival))
     return issues, parts
+
+
+def transport_issues(path: str, problems: list[tuple[int, str]]) -> list[KLVIssue]:
+    """The transport's problems (:func:`.transport.transport_payloads`) as issues of the file."""
+    return [KLVIssue(path, None, offset, "malformed", message) for offset, message in problems]
+
+
+def no_klv_stream(path: str) -> str:
+    return f"{path}: MPEG-TS with no KLV metadata stream (no PID with stream_type 0x06 'KLVA' or 0x15)"
+
+
+def arrival_note(pid: int, by_arrival: dict[int, int], first_packet: int) -> StreamNote | None:
+    """The note on a PID's PES timed by arrival (None: none was)."""
+    if not by_arrival.get(pid):
+        return None
+    return StreamNote(f"PID {pid}", "timed by arrival", "PES", f"{by_arrival[pid]} PES packet(s) in asynchronous "
+                      "carriage without PTS (ST 1402): each timed by the video frame before it in the stream",
+                      by_arrival[pid], first_packet)
 
 
 def torn_issue(path: str, size: int) -> KLVIssue:
@@ -466,37 +478,3 @@ def torn_issue(path: str, size: int) -> KLVIssue:
     torn = size % TS_PACKET
     return KLVIssue(path, None, size - torn, "skipped bytes",
                     f"the last {torn} bytes are a transport packet cut short (the file ends mid-packet)")
-
-
-def _demux_klv(data: bytes, path: str, issues: list[KLVIssue], by_arrival: dict[int, int]
-               ) -> dict[int, tuple[bytearray, list]]:
-    """Each KLV PID's bytes and (offset, PTS s) marks by :class:`.demux.KLVDemux`, its damage added
-    to ``issues`` and the PES timed by arrival counted per PID in ``by_arrival``."""
-    from stanag4609.transport.demux import PESStreamEvent, StreamKind
-    from stanag4609.transport.metadata import parse_metadata_au_cells
-
-    from .demux import PTS_HZ, KLVDemux
-
-    demux = KLVDemux(arrival=True)
-    per_pid: dict[int, tuple[bytearray, list]] = {}
-    events, damage = demux.feed_stream(data)
-    issues += [KLVIssue(path, None, d.offset, "malformed", f"MPEG-TS: {d.message}") for d in damage]
-    for ev in events:
-        if not isinstance(ev, PESStreamEvent) or ev.kind is not StreamKind.KLV:
-            continue
-        buf, marks = per_pid.setdefault(ev.pid, (bytearray(), []))
-        payload = ev.pes.payload
-        if ev.stream.stream_type == 0x15:  # synchronous metadata: access-unit cells wrap the KLV
-            try:
-                payload = b"".join(cell.data for cell in parse_metadata_au_cells(payload))
-            except Exception as exc:
-                issues.append(KLVIssue(path, None, int(ev.pes.offset or 0), "malformed",
-                                       f"PID {ev.pid}: metadata access unit cannot be read: {one_line(exc)}"))
-                continue
-        t = ev.pes.pts_seconds
-        if t is None and demux.arrival_pts.get(ev.pes.offset) is not None:
-            t = demux.arrival_pts[ev.pes.offset] / PTS_HZ
-            by_arrival[ev.pid] = by_arrival.get(ev.pid, 0) + 1
-        marks.append((len(buf), t))
-        buf.extend(payload)
-    return per_pid

@@ -13,40 +13,50 @@ the file but past the segment's cut is "truncated" there, where the whole readin
 and finds its checksum wrong ("checksum", the same offset); and a block with no such cut in its second half
 (a long stretch of damage, or a file of EG 0104 packets only) is read on until one comes, up to
 16 segments (at least 16 MB): then it is cut at its last packet key, or anywhere that splits no key,
-and the stretch's skipped bytes are reported in two issues rather than one. An MPEG-TS
-file is demultiplexed whole (its tables and PES packets run across any cut) from the file mapped
-into memory, and its packets given in slices.
+and the stretch's skipped bytes are reported in two issues rather than one.
+
+An MPEG-TS file is read in two passes: its transport a chunk at a time (:mod:`.transport`: the
+program tables, the PES packets still open and the rest carried across each chunk's end), each KLV
+PID's bytes and PES times set aside in temporary files; then each PID's bytes decoded as raw KLV
+is, a segment at a time, PID after PID, as the whole reading numbers them. Its packets, values,
+issues and notes are the whole reading's (the PID's bytes carry no key to repair: the caveats
+above on cuts hold for them too).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import mmap
+import math
 import os
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import KLVError
-from .columnar import KLVColumns, decode_klv_columns, ts_columns
+from .columnar import KLVColumns, decode_klv_columns
 from .eg0104 import EG0104_KEY
 from .reader import (
     TS_PACKET,
     UAS_KEY,
     VMTI_KEY,
     StreamNote,
+    arrival_note,
     check_found,
     checksum_problem,
     looks_like_ts,
+    no_klv_stream,
     packet_end,
     torn_issue,
+    transport_issues,
 )
+from .transport import SpooledPayloads, transport_payloads
 
 #: bytes of KLV per segment (about 5 000 packets with 5 VMTI targets, some 40 MB at work; `eoloc batch
 #: --segment-mb`)
 SEGMENT_BYTES = 1_000_000
 _CUT_TRIES = 256  # keys looked at, from the end of a block back, for a place to cut
+TS_CHUNK_BYTES = 8_000_000  # of an MPEG-TS file's transport read at a time, at least
 MAX_BLOCKS = 16  # a block is read on to find a cut up to this many segments (at least 1 MB each), then cut anyway
 
 
@@ -75,13 +85,15 @@ def safe_cut(block: bytes, lo: int) -> int | None:
     return None
 
 
-def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict: bool = False
-                 ) -> Iterator[KLVColumns]:
-    """The packets of a KLV file (raw KLV, or MPEG-TS: demultiplexed whole, then given in slices)
-    as columns, a segment of about ``segment_bytes`` at a time, in file order: packet numbers and
-    byte offsets are the file's; issues are each segment's, notes count each segment's packets (see
-    the module notes). Raises :class:`KLVError` as :func:`.reader.read_klv` does (the last only
-    after the segments read)."""
+def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict: bool = False,
+                 ts_chunk_bytes: int | None = None) -> Iterator[KLVColumns]:
+    """The packets of a KLV file (raw KLV, or MPEG-TS: its transport read ``ts_chunk_bytes`` at a
+    time, by default 8 segments' worth and at least :data:`TS_CHUNK_BYTES`, each KLV PID's bytes set
+    aside, then decoded PID after PID) as columns, a segment of
+    about ``segment_bytes`` at a time, in file order: packet numbers and byte offsets are the
+    file's; issues are each segment's, notes count each segment's packets (see the module notes).
+    Raises :class:`KLVError` as :func:`.reader.read_klv` does (the last only after the segments
+    read)."""
     p = Path(path)
     try:
         f = p.open("rb")
@@ -92,64 +104,104 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
         if not head:
             raise KLVError(f"{path} is empty")
         if looks_like_ts(head):
-            yield from _ts_segments(f, str(path), segment_bytes, strict)
+            chunk = ts_chunk_bytes if ts_chunk_bytes is not None else max(TS_CHUNK_BYTES, 8 * int(segment_bytes))
+            yield from _ts_segments(f, str(path), segment_bytes, strict, chunk)
             return
-        block, base, n, good, bad = head, 0, 0, 0, 0
+        f.seek(0)
+        counts = yield from _segments(f, str(path), segment_bytes=segment_bytes, strict=strict)
+        check_found(path, counts[1], counts[2])
+
+
+def _segments(f, path: str, *, segment_bytes: int, strict: bool, first_index: int = 0, marks=None,
+              container: str = "klv", stream: str = "") -> Generator[KLVColumns, None, tuple[int, int, int]]:
+    """The KLV bytes of ``f`` (from where it stands to its end) decoded a segment at a time (the
+    module notes), packets numbered from ``first_index``; ``marks``: (byte offsets, PTS s with NaN
+    for none) of a transport stream's PES in these bytes. Returns the packets numbered, the good
+    and the bad ones."""
+    block, base, n, good, bad = b"", 0, first_index, 0, 0
+    want = max(int(segment_bytes), 1)
+    limit = MAX_BLOCKS * max(want, 1 << 20)
+    size = os.fstat(f.fileno()).st_size
+    while True:
+        ask = want - len(block) if want > len(block) else want
+        ask = min(ask, max(size - f.tell(), 0) + 1)  # (no buffer past the file's end)
+        more = f.read(ask)
+        block += more
+        eof = len(more) < ask  # (a file: a short read is its end)
+        cut = len(block) if eof else safe_cut(block, len(block) // 2)
+        if cut is None and len(block) >= limit:
+            cut = forced_cut(block)  # (a long stretch without a good packet: memory stays bounded)
+        if cut is None:  # no place to cut in the second half: read on (twice as much, to the limit)
+            want = min(2 * len(block), limit)
+            continue
+        pts = None if marks is None else segment_marks(marks, base, base + cut)
+        seg = shifted(decode_klv_columns(block[:cut], path, pts=pts, container=container, stream=stream,
+                                         first_index=n, strict=strict), base)
+        bad_here = seg.n_bad
+        n += len(seg) + bad_here
+        good, bad = good + len(seg), bad + bad_here
+        yield seg
+        base, block = base + cut, block[cut:]
         want = max(int(segment_bytes), 1)
-        limit = MAX_BLOCKS * max(want, 1 << 20)
-        while True:
-            ask = want - len(block) if want > len(block) else want
-            ask = min(ask, max(os.fstat(f.fileno()).st_size - f.tell(), 0) + 1)  # (no buffer past the file's end)
-            more = f.read(ask)
-            block += more
-            eof = len(more) < ask  # (a file: a short read is its end)
-            cut = len(block) if eof else safe_cut(block, len(block) // 2)
-            if cut is None and len(block) >= limit:
-                cut = forced_cut(block)  # (a long stretch without a good packet: memory stays bounded)
-            if cut is None:  # no place to cut in the second half: read on (twice as much, to the limit)
-                want = min(2 * len(block), limit)
-                continue
-            seg = shifted(decode_klv_columns(block[:cut], str(path), first_index=n, strict=strict), base)
-            bad_here = seg.n_bad
-            n += len(seg) + bad_here
-            good, bad = good + len(seg), bad + bad_here
-            yield seg
-            base, block = base + cut, block[cut:]
-            want = max(int(segment_bytes), 1)
-            if eof:
-                break
-        check_found(path, good, bad)
+        if eof:
+            return n, good, bad
 
 
-def _ts_segments(f, path: str, segment_bytes: int, strict: bool) -> Iterator[KLVColumns]:
-    """An MPEG-TS file's packets: the file mapped into memory rather than copied into it (its
-    pages are the system's file cache, which it can drop and read again; the demultiplexer's own
-    arrays take some 25 bytes per transport packet, and the KLV streams are copied out), read
-    whole, then given in slices of about ``segment_bytes`` of KLV (the transport's issues and the
-    notes with the first), so that the job's memory is bounded as for raw KLV."""
+def segment_marks(marks, a: int, b: int) -> list[tuple[int, float | None]]:
+    """The PES marks (offsets, PTS s) that time bytes ``a`` to ``b`` of a PID's stream, as offsets
+    from ``a``: those in it, after the last one before it (moved to ``a``)."""
+    offsets, times = marks
+    i = max(int(np.searchsorted(offsets, a, side="right")) - 1, 0)
+    j = int(np.searchsorted(offsets, b, side="left"))
+    o = np.maximum(np.asarray(offsets[i:j], np.int64) - a, 0).tolist()
+    return [(x, None if math.isnan(t) else t) for x, t in zip(o, np.asarray(times[i:j]).tolist(), strict=True)]
+
+
+def _ts_segments(f, path: str, segment_bytes: int, strict: bool, chunk_bytes: int) -> Iterator[KLVColumns]:
+    """An MPEG-TS file's packets: its transport read ``chunk_bytes`` at a time, each KLV PID's
+    bytes and PES marks set aside in temporary files (:class:`.transport.SpooledPayloads`), then
+    each PID decoded a segment at a time as raw KLV is, PID after PID (the reader's numbering);
+    the transport's issues with the first segment, a PID's note on timing by arrival with its
+    first. Memory is bounded by the chunk and segment sizes, whatever the file's."""
     size = os.fstat(f.fileno()).st_size
     torn = size % TS_PACKET
-    with mmap.mmap(f.fileno(), size - torn, access=mmap.ACCESS_READ) as whole:
-        cols = ts_columns(whole, path, strict=strict)
-    if torn:
-        cols.issues.insert(0, torn_issue(path, size))
-    check_found(path, len(cols), cols.n_bad)
-    per = max(int(segment_bytes) // 200, 1)  # (rows: ~200 bytes of KLV a packet)
-    for a in range(0, max(len(cols), 1), per):
-        yield row_slice(cols, a, min(a + per, len(cols)), first=a == 0)
+    step = max(int(chunk_bytes) // TS_PACKET, 1) * TS_PACKET
 
+    def chunks():
+        f.seek(0)
+        left = size - torn
+        while True:
+            data = f.read(min(step, left))
+            left -= len(data)
+            yield data, left <= 0 or not data
+            if left <= 0 or not data:
+                return
 
-def row_slice(cols: KLVColumns, a: int, b: int, *, first: bool) -> KLVColumns:
-    """Rows ``a`` to ``b`` of ``cols`` (their VMTI targets with them); its issues and notes only
-    where ``first``."""
-    t = (cols.target_i[:, 0] >= a) & (cols.target_i[:, 0] < b)
-    target_i = cols.target_i[t].copy()
-    target_i[:, 0] -= a
-    return KLVColumns(cols.path, cols.container, cols.index[a:b], cols.offset[a:b], cols.pts_s[a:b],
-                      cols.stream[a:b], cols.standard[a:b], cols.time_us[a:b], cols.values[a:b], cols.present[a:b],
-                      cols.has_vmti[a:b], cols.vmti_f[a:b], target_i, cols.target_f[t],
-                      list(cols.issues) if first else [], list(cols.notes) if first else [],
-                      cols.scanned if first else 0)
+    problems, sink, by_arrival = transport_payloads(chunks, SpooledPayloads)
+    with sink:
+        if not sink.pids():
+            raise KLVError(no_klv_stream(path))
+        issues = ([torn_issue(path, size)] if torn else []) + transport_issues(path, problems)
+        n = good = bad = 0
+        for pid in sink.pids():
+            body, offsets, times = sink.stream(pid)
+            note = arrival_note(pid, by_arrival, n)
+            parts = _segments(body, f"{path} [PID {pid}]", segment_bytes=segment_bytes, strict=strict, first_index=n,
+                              marks=(offsets, times), container="mpegts", stream=f"PID {pid}")
+            while True:
+                try:
+                    seg = next(parts)
+                except StopIteration as done:
+                    n, g, b = done.value
+                    good, bad = good + g, bad + b
+                    break
+                seg.path = path
+                seg.issues, issues = [*issues, *seg.issues], []
+                if note is not None:
+                    seg.notes, note = [note, *seg.notes], None
+                yield seg
+            del offsets, times
+    check_found(path, good, bad)
 
 
 def shifted(cols: KLVColumns, base: int) -> KLVColumns:

@@ -263,13 +263,21 @@ def test_the_control_packets_of_the_departures_are_scanned():
 # -- a clean transport stream read in vectorised passes (demux.clean_klv_payloads) ------------------
 
 
-def _same_ts_reading(data: bytes, path: str = "x.ts") -> bool:
+def _same_ts_reading(data: bytes, path: str = "x.ts", chunks=(1, 5, 64)) -> bool:
     """Read the transport both ways (the vectorised path where it is clean, KLVDemux always):
-    the same packets, values, issues and notes (or the same error). Returns whether the
-    vectorised path was taken."""
+    the same packets, values, issues and notes (or the same error); and a chunk of ``chunks``
+    transport packets at a time: the vectorised path takes a chunked stream where it takes it
+    whole, to the same bytes and marks, and the archive's streaming reader (the transport a chunk
+    at a time, each PID set aside, then decoded in segments) is the whole reading. Returns whether
+    the vectorised path was taken."""
+    import tempfile
+
+    from klvsegments import assert_segments_are_the_file
+
     from eoloc.errors import KLVError
-    from eoloc.io.klv.demux import clean_klv_payloads
+    from eoloc.io.klv.demux import CleanTransport, clean_klv_payloads
     from eoloc.io.klv.reader import ts_klv_parts
+    from eoloc.io.klv.segments import klv_segments
 
     def read(fast: bool):
         try:
@@ -278,9 +286,38 @@ def _same_ts_reading(data: bytes, path: str = "x.ts") -> bool:
             return str(exc)
         return issues, [(s.packets, s.issues, s.notes, arrival) for s, arrival in parts]
 
-    assert read(True) == read(False)
+    whole_read = read(True)
+    assert whole_read == read(False)
     whole = data[:len(data) - len(data) % 188]
-    return clean_klv_payloads(whole) is not None
+    clean = clean_klv_payloads(whole)
+    for n in chunks:
+        t, got, step = CleanTransport(), {}, 188 * n
+        for a in range(0, max(len(whole), 1), step):
+            out = t.feed(whole[a:a + step], final=a + step >= len(whole))
+            if out is None:
+                break
+            for p, (body, marks) in out.items():
+                b, m = got.setdefault(p, (bytearray(), []))
+                m += [(o + len(b), x) for o, x in marks]
+                b += body
+        else:
+            assert clean is not None, f"{n}-packet chunks read as clean, the whole stream not"
+            assert {p: (bytes(b), m) for p, (b, m) in got.items()} == clean[0] and t.by_arrival == clean[1]
+            continue
+        assert clean is None, f"{n}-packet chunks declined a stream read whole as clean"
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / path
+        f.write_bytes(data)
+        for n in chunks:
+            if isinstance(whole_read, str):
+                with pytest.raises(KLVError) as want:
+                    read_klv(f)
+                with pytest.raises(KLVError) as got:
+                    list(klv_segments(f, segment_bytes=1_500, ts_chunk_bytes=188 * n))
+                assert str(got.value) == str(want.value)
+            else:
+                assert_segments_are_the_file(f, 1_500, ts_chunk_bytes=188 * n)
+    return clean is not None
 
 
 @pytest.fixture(scope="module")
@@ -389,6 +426,18 @@ def test_each_transport_damage_reads_the_same_either_way(which, damage):
     else:  # (no PTS in asynchronous carriage: its header's marker bits '10' instead)
         ts[start + 6] &= 0x7F
     assert not _same_ts_reading(bytes(ts))
+
+
+@pytest.mark.parametrize("which", ["two", "async"])
+def test_pes_of_unbounded_length_run_to_the_next_one_in_chunks_too(which):
+    """KLV PES that declare no length (0: the packet runs to the next PES start) are read the same
+    whole, a chunk at a time (each held open across the cuts until the next one begins) and by
+    KLVDemux; a stream ends the last one."""
+    ts = bytearray(_TS_CACHE.setdefault(which, _ts_bytes(which)))
+    for k in _klv_cells(bytes(ts)):
+        start = k + 4 + (1 + ts[k + 4] if (ts[k + 3] >> 4) & 3 == 3 else 0)
+        ts[start + 4:start + 6] = b"\x00\x00"
+    assert _same_ts_reading(bytes(ts), chunks=(1, 2, 7, 64))
 
 
 def _table_cells(ts: bytes, pid: int) -> list[int]:

@@ -1,7 +1,7 @@
 """A KLV file read and located in bounded segments (issue 54, the streaming batch): the segments
 together are the whole file's reading, packet for packet, issue for issue (the reference: the
 tolerant reader on the whole file); report-on-change, the VMTI frame size and every-n-th
-footprints carry across the cuts; an MPEG-TS is read from its mapped file and given in slices;
+footprints carry across the cuts; an MPEG-TS is read a chunk of its transport at a time, then PID by PID;
 `eoloc batch` in small segments writes the same rows as in one (row groups of one GeoParquet file
 per layer, read back by pyarrow and geopandas)."""
 
@@ -18,12 +18,13 @@ import pyarrow.parquet as pq
 import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
+from klvsegments import assert_segments_are_the_file
 
 import eoloc
 from eoloc.io.klv import encode_uas_packet, encode_vmti
-from eoloc.io.klv.columnar import columns_from_stream, read_klv_columns
+from eoloc.io.klv.columnar import read_klv_columns
 from eoloc.io.klv.reader import packet_end, read_klv
-from eoloc.io.klv.segments import klv_segments, merge_notes
+from eoloc.io.klv.segments import klv_segments
 from eoloc.io.klv.synthetic import circling_flight_klv
 from eoloc.jobs.batch import LAYERS, BatchSettings, batch_job
 from eoloc.jobs.klv import klv_segment_jobs, stream_job
@@ -78,22 +79,6 @@ def damaged(data: bytes, seed: int) -> bytes:
     return bytes(b)
 
 
-def assert_segments_are_the_file(path: Path, segment_bytes: int) -> list:
-    ref = columns_from_stream(read_klv(path))
-    segs = list(klv_segments(path, segment_bytes=segment_bytes))
-    for name in ("index", "offset", "time_us", "present", "has_vmti", "stream", "standard"):
-        np.testing.assert_array_equal(np.concatenate([getattr(s, name) for s in segs]), getattr(ref, name), name)
-    for name in ("values", "vmti_f"):
-        got = np.concatenate([getattr(s, name) for s in segs])
-        np.testing.assert_allclose(got, getattr(ref, name), rtol=0, atol=1e-9, equal_nan=True, err_msg=name)
-    rows = np.cumsum([0] + [len(s) for s in segs])
-    ti = np.concatenate([s.target_i + np.array([r] + [0] * 7) for s, r in zip(segs, rows, strict=False)])
-    np.testing.assert_array_equal(ti, ref.target_i)
-    assert [i for s in segs for i in s.issues] == ref.issues
-    assert merge_notes([s.notes for s in segs]) == ref.notes
-    return segs
-
-
 @pytest.mark.parametrize("segment_bytes", [3_000, 40_000, 10 ** 9])
 def test_the_segments_are_the_whole_files_packets_issues_and_notes(tmp_path, segment_bytes):
     path = tmp_path / "f.klv"
@@ -135,16 +120,21 @@ def transport_stream(path: Path, packets: list[bytes], torn: bytes = b"") -> Pat
     return path
 
 
+@pytest.mark.parametrize("chunk", [188, 188 * 7, 188 * 300, 10 ** 9])
 @pytest.mark.parametrize("torn", [b"", b"\x47\x01\x02 cut off"])
-def test_a_transport_stream_is_read_from_its_mapped_file_and_given_in_slices(tmp_path, torn):
-    """An MPEG-TS (two KLV PIDs, video, maybe ending mid-packet) read whole from the mapped file and
-    given in slices: together the whole reading of the tolerant reader, the cut-off tail named."""
+def test_a_transport_stream_is_read_a_chunk_at_a_time(tmp_path, torn, chunk):
+    """An MPEG-TS (two KLV PIDs, video, maybe ending mid-packet) read a chunk of its transport at a
+    time (down to one transport packet: every PES and table then runs across cuts), each PID's
+    bytes set aside, then given in segments: together the whole reading of the tolerant reader,
+    the cut-off tail named in the first segment."""
     data = circling_flight_klv(90, seed=4)
     from eoloc.io.klv.reader import split_klv
 
     path = transport_stream(tmp_path / "two.ts", [p for p, _ in split_klv(data)], torn)
-    segs = assert_segments_are_the_file(path, 2_000)
+    segs = assert_segments_are_the_file(path, 2_000, ts_chunk_bytes=chunk)
     assert len(segs) > 5 and {s.container for s in segs} == {"mpegts"}
+    streams = [str(x) for s in segs for x in dict.fromkeys(s.stream.tolist())]
+    assert list(dict.fromkeys(streams)) == ["PID 257", "PID 258"]  # one PID after the other
     assert any("cut short" in i.message for i in segs[0].issues) == bool(torn)
     assert not any(s.issues for s in segs[1:])
 
