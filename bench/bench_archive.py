@@ -1,6 +1,7 @@
 """The archive scale run (issue 54): `eoloc batch` on a generated archive of many flight hours, on one
 process and on a 2-worker Dask LocalCluster, with each run's wall time, packets/s and the peak
-memory of its largest process; and the extrapolation to 10^8 packets.
+memory of its largest process; and the extrapolation to 10^8 packets. Then the same packets as
+one long recording: one task, or cut in 8 byte ranges (a task each) on one process and on 2 workers.
 
 The archive: one raw KLV file per flight hour, 30 packets/s (108 000 packets an hour), each packet
 a full ST 0601 set (pose, gimbal, fields of view, frame centre) with an ST 0903 VMTI set of 5
@@ -66,12 +67,45 @@ def write_archive(folder: Path, hours: int) -> list[Path]:
     return out
 
 
-def _run(files: list[Path], out: Path, mapper) -> tuple[float, list]:
+def _run(files: list[Path], out: Path, mapper, range_bytes: int = 0) -> tuple[float, list]:
     from eoloc.jobs.batch import BatchSettings, batch_job
 
     t0 = time.perf_counter()
-    job = batch_job([str(p) for p in files], BatchSettings(str(out)), mapper=mapper, redo=True)
+    job = batch_job([str(p) for p in files], BatchSettings(str(out), range_bytes=range_bytes), mapper=mapper,
+                    redo=True)
     return time.perf_counter() - t0, job.results
+
+
+def one_file_rows(files: list[Path], root: Path) -> list[str]:
+    """The archive as one long recording (its hours one after the other in one file): one task on
+    a 2-worker cluster (files are the unit: one worker works), against the file cut in byte ranges
+    of 1/8 of it, a task each, on one process and on the 2 workers (the same partitions either way)."""
+    import pyarrow.parquet as pq
+
+    from eoloc.accuracy.runners import dask_mapper
+
+    big = root / "all_hours.klv"
+    with big.open("wb") as fh:
+        for p in files:
+            fh.write(p.read_bytes())
+    size = big.stat().st_size
+    step = size // 8 + 1
+    t_one, res = _run([big], root / "r1", None, step)
+    with dask_mapper("local:2") as m:
+        _run(files[:2], root / "warm2", m)
+        t_whole, res_w = _run([big], root / "w2", m)
+        t_two, res2 = _run([big], root / "r2", m, step)
+    assert [r.status for r in res + res2 + res_w] == ["done"] * 3 and res[0].packets == res2[0].packets
+    parts = sorted(p.relative_to(root / "r1") for p in (root / "r1").rglob("*.parquet"))
+    same = all(pq.read_table(root / "r1" / p).equals(pq.read_table(root / "r2" / p)) for p in parts)
+    assert same and any("range-00007" in str(p) for p in parts)
+    n = res[0].packets
+    return [row(f"the archive as one {size / 1e6:.0f} MB recording: as one task on the 2 workers",
+                f"{t_whole:.0f} s, {n / t_whole:,.0f} packets/s", "", None),
+            row("the same cut in 8 byte ranges (`--range-mb`), a task each, on one process",
+                f"{t_one:.0f} s, {n / t_one:,.0f} packets/s", f"one task {t_whole:.0f} s", t_whole / t_one),
+            row("the same 8 ranges on the 2 workers (same partitions as one process: True)",
+                f"{t_two:.0f} s, {n / t_two:,.0f} packets/s", f"one task {t_whole:.0f} s", t_whole / t_two)]
 
 
 def _worker_peak_mb() -> float:
@@ -100,6 +134,9 @@ def main(hours: int = 10) -> list[str]:
         assert packets == sum(r.packets for r in res2)
         fixes = sum(r.fixes for r in res)
         out_mb = sum(p.stat().st_size for p in (root / "one").rglob("*.parquet")) / 1e6
+        for run in ("one", "two"):
+            shutil.rmtree(root / run)
+        ranged = one_file_rows(files, root)
     rate_one, rate_two = packets / t_one, packets / t_two
     per_worker = rate_two / 2
     worker_peak = f", worker peak {max(peaks.values()):.0f} MB" if peaks else ""
@@ -110,7 +147,8 @@ def main(hours: int = 10) -> list[str]:
                 f"{t_two:.0f} s, {rate_two:,.0f} packets/s{worker_peak}", f"one process {t_one:.0f} s", t_one / t_two),
             row("extrapolated: 10^8 packets (~1 000 flight hours) at the 2-worker rate per worker",
                 f"one process {1e8 / rate_one / 3600:.1f} h; 2 workers {1e8 / rate_two / 3600:.1f} h; "
-                f"a 32-worker cluster ~{1e8 / (32 * per_worker) / 60:.0f} min", "", None)]
+                f"a 32-worker cluster ~{1e8 / (32 * per_worker) / 60:.0f} min", "", None),
+            *ranged]
 
 
 if __name__ == "__main__":

@@ -28,9 +28,13 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
     issues/      what was wrong with each file (packet or line, and why)
   plus batch_status.csv (one row per file). Read a layer with geopandas.read_parquet('DIR/fixes')
   or DuckDB: SELECT * FROM read_parquet('DIR/fixes/*/*.parquet', hive_partitioning = true).
-  A raw KLV file is read and written a segment at a time (--segment-mb of KLV: memory stays
+  A KLV file is read and written a segment at a time (--segment-mb of KLV: memory stays
   bounded whatever the file's size; each layer's file holds one row group per segment, with the
-  same rows as one reading); an MPEG-TS file or a CSV is read whole.
+  same rows as one reading; an MPEG-TS has its transport read 8 segments at a time, its KLV set
+  aside in temporary files (TMPDIR), then read PID by PID); a CSV is read whole. A raw KLV file
+  longer than --range-mb is cut in byte ranges at packet boundaries, a task each, so that the
+  workers share a long recording (range-NNNNN-part-0.parquet files in its partitions; the
+  same rows as one reading).
   Resumable: files already done with the same settings are skipped; a changed file is redone;
   --redo does everything again. One bad file never stops the batch: it is listed as failed with
   the reason (exit code 2 at the end); a bug in eoloc is listed with its traceback in DIR/_logs.
@@ -52,16 +56,21 @@ eoloc batch PATTERN... --out DIR [--dem F] [--config C] [--dask ADDRESS | --dask
               help="KLV: one footprint every N packets.")
 @click.option("--strict", is_flag=True, help="KLV: drop packets that break MISB ST 0601 as written.")
 @click.option("--segment-mb", "segment_mb", type=click.FloatRange(0.001), default=1.0, show_default=True,
-              metavar="MB", help="Raw KLV: megabytes (10^6 bytes) of a file read, located and written at a time "
+              metavar="MB", help="KLV: megabytes (10^6 bytes) of a file's KLV read, located and written at a time "
                                  "(about 5 000 packets with 5 VMTI targets; a worker's memory grows by some 40 MB "
-                                 "per MB).")
+                                 "per MB; an MPEG-TS's transport is read 8 times as much, at least 8 MB, at a "
+                                 "time).")
+@click.option("--range-mb", "range_mb", type=click.FloatRange(0), default=256.0, show_default=True, metavar="MB",
+              help="Raw KLV: a file longer than this many megabytes is cut in byte ranges of about this size, a task "
+                   "each (every range is first read for its packet count and what a receiver knows at its end, then "
+                   "located from what the ranges before it leave); 0: every file one task.")
 @click.option("--redo", is_flag=True, help="Do every file again, even those already done.")
 @click.option("--keep-missing", is_flag=True, help="Keep the partitions of files that were in an earlier run into "
                                                     "--out but are not among the inputs now (default: removed, so "
                                                     "that the dataset holds each input file once).")
 @dask_option
 def batch(patterns, out_dir, rule_values, dem_paths, vertical, geoid, dem_crs, config_path, grid,
-          footprint_every, strict, segment_mb, redo, keep_missing, dask_address) -> None:
+          footprint_every, strict, segment_mb, range_mb, redo, keep_missing, dask_address) -> None:
     from ..io.writers import write_layer
     from ..jobs.accuracy import mapper
     from ..jobs.batch import BatchSettings, batch_job, find_tasks, status_records
@@ -69,7 +78,8 @@ def batch(patterns, out_dir, rule_values, dem_paths, vertical, geoid, dem_crs, c
 
     settings = BatchSettings(out_dir, tuple(dem_paths), vertical, geoid, dem_crs, config_path,
                              tuple((k, v) for k, v in rule_values.items() if v is not None), footprint_every,
-                             tuple(grid), strict, segment_bytes=int(segment_mb * 1e6))
+                             tuple(grid), strict, segment_bytes=int(segment_mb * 1e6),
+                             range_bytes=int(range_mb * 1e6))
     tasks = find_tasks(patterns)
     if dem_paths:  # open it once here, so that a DEM that cannot be read is one message, not one per file
         from .common import open_dem

@@ -290,10 +290,12 @@ class ParquetLayer:
     Parquet (zstd) otherwise. A chunk whose columns differ from the file's in name or type, or
     that has geometries where the file has none (or the reverse), starts the next file,
     ``part-1.parquet`` ...: every row kept, each file valid on its own. Files are written under a
-    temporary name and given theirs when :meth:`close`d; memory holds one chunk."""
+    temporary name and given theirs when :meth:`close`d; memory holds one chunk. ``stem``: the
+    files' names before ``-0.parquet`` (a byte range of a file: ``range-00002-part``)."""
 
-    def __init__(self, folder: str | Path) -> None:
+    def __init__(self, folder: str | Path, *, stem: str = "part") -> None:
         self.folder = Path(folder)
+        self.stem = stem
         self.parts: list[Path] = []
         self._writer = None
         self._tmp: Path | None = None
@@ -315,7 +317,7 @@ class ParquetLayer:
             self._finish()
         if self._writer is None:
             self.folder.mkdir(parents=True, exist_ok=True)
-            self._tmp = self.folder / f".part-{len(self.parts)}.parquet.tmp"
+            self._tmp = self.folder / f".{self.stem}-{len(self.parts)}.parquet.tmp"
             self._writer = pq.ParquetWriter(self._tmp, table.schema, store_schema=False,
                                             **parquet_options(table.schema))
             self._schema, self._geo = table.schema, None if geo is None else {"types": set(), "z": False,
@@ -334,7 +336,7 @@ class ParquetLayer:
             meta = column_metadata(sorted(self._geo["types"]), self._geo["z"], bbox)
             self._writer.add_key_value_metadata({"geo": geo_metadata(meta).decode()})
         self._writer.close()
-        final = self.folder / f"part-{len(self.parts)}.parquet"
+        final = self.folder / f"{self.stem}-{len(self.parts)}.parquet"
         os.replace(self._tmp, final)
         self.parts.append(final)
         self._writer = None

@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import glob
 import hashlib
+import itertools
 import json
 import os
 import shutil
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ KLV_SUFFIXES = (".klv", ".bin", ".ts", ".m2ts", ".mpg", ".mpeg")
 LAYERS = ("fixes", "packets", "frames", "footprints", "issues")
 MANIFEST = "_manifest"
 LOGS = "_logs"
+RANGE_BYTES = 256_000_000  # of a raw KLV file per task (some 10^6 packets: ~10 flight hours at 30 Hz)
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,7 @@ class BatchSettings:
     strict: bool = False
     assume: tuple[str, ...] = ()
     segment_bytes: int | None = None  # a KLV file's bytes read at a time (None: eoloc.io.klv.segments.SEGMENT_BYTES)
+    range_bytes: int = RANGE_BYTES  # a raw KLV file longer than this is cut in byte ranges, a task each (0: never)
 
     def __post_init__(self) -> None:
         def absolute(p: str | None) -> str | None:
@@ -100,6 +103,9 @@ class Task:
     path: str
     detections: str | None
     key: str
+    span: tuple[int, int] | None = None  # a byte range of a raw KLV file (the file's other ranges: other tasks)
+    part: int = 0  # the range's number in the file
+    start: Any = field(default=None, compare=False)  # what the bytes before the range leave (.klv.RangeStart)
 
     @property
     def kind(self) -> str:
@@ -233,7 +239,8 @@ def _layers_klv(task: Task, settings: BatchSettings) -> Iterator[tuple[dict[str,
     dem = _dem(settings.dem_paths, settings.vertical, settings.geoid, settings.dem_crs)
     for seg, job in klv_segment_jobs(task.path, segment_bytes=settings.segment_bytes, dem=dem, sensor=sensor,
                                      budget=budget, footprint_every=settings.footprint_every,
-                                     strict=settings.strict, assume=settings.assume):
+                                     strict=settings.strict, assume=settings.assume, span=task.span,
+                                     start=task.start):
         if job is None:
             yield {"issues": (_issue_records([str(i) for i in seg.issues]), None)}, 0
             continue
@@ -289,15 +296,20 @@ def remove_partitions(out_dir: Path, key: str) -> None:
 
 def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileResult:
     """Run one task where it is called (a worker): read, locate, write the partitions and the
-    manifest; never raises for the file's sake."""
+    manifest; never raises for the file's sake. A byte range of a file (``task.span``) writes its
+    own files in the file's partitions (``range-NNNNN-part-0.parquet``), and leaves the file's
+    partitions and manifest to the batch (:func:`batch_job`: its other ranges)."""
     out_dir = Path(settings.out_dir)
     t0 = time.perf_counter()
     result = FileResult(task.key, task.path, "done")
     writers: dict[str, ParquetLayer] = {}
+    ranged = task.span is not None
+    stem = f"range-{task.part:05d}-part" if ranged else "part"
     try:
         inputs = {q: _stamp(q) for q in (task.path, task.detections) if q}
-        remove_partitions(out_dir, task.key)
-        writers.update({layer: ParquetLayer(out_dir / layer / f"file={task.key}") for layer in LAYERS})
+        if not ranged:
+            remove_partitions(out_dir, task.key)
+        writers.update({layer: ParquetLayer(out_dir / layer / f"file={task.key}", stem=stem) for layer in LAYERS})
         for layers, n in (_layers_klv if task.kind == "klv" else _layers_csv)(task, settings):
             for layer, (records, features) in layers.items():
                 writers[layer].write(_partition_records(records, task.path, settings.grid), features)
@@ -324,15 +336,105 @@ def process_file(task: Task, settings: BatchSettings, fingerprint: str) -> FileR
     if inputs is None:  # (no partial partitions: a failed file has none)
         for w in writers.values():
             w.abort()
-        remove_partitions(out_dir, task.key)
+        if not ranged:
+            remove_partitions(out_dir, task.key)
         result.packets = result.fixes = result.fixes_ok = result.issues = 0
-    else:
-        m = manifest_path(out_dir, task.key)
-        m.parent.mkdir(parents=True, exist_ok=True)
-        tmp = m.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"path": task.path, "inputs": inputs, "fingerprint": fingerprint,
-                                   "result": result.row()}, indent=1), encoding="utf-8")
-        os.replace(tmp, m)
+    elif not ranged:
+        write_manifest(out_dir, task, inputs, fingerprint, result)
+    return result
+
+
+def write_manifest(out_dir: Path, task: Task, inputs: dict, fingerprint: str, result: FileResult) -> None:
+    m = manifest_path(out_dir, task.key)
+    m.parent.mkdir(parents=True, exist_ok=True)
+    tmp = m.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"path": task.path, "inputs": inputs, "fingerprint": fingerprint,
+                               "result": result.row()}, indent=1), encoding="utf-8")
+    os.replace(tmp, m)
+
+
+# -- a large file in byte ranges -----------------------------------------------------------------
+
+def file_spans(task: Task, range_bytes: int) -> list[tuple[int, int]] | None:
+    """The byte ranges of a raw KLV file longer than ``range_bytes`` (each begun where the reader
+    stands at a packet start: :func:`eoloc.io.klv.segments.range_cut`), or None: a file read as one
+    task (shorter, an MPEG-TS, a telemetry CSV, unreadable: its task says why)."""
+    from ..io.klv.reader import looks_like_ts
+    from ..io.klv.segments import range_cut
+
+    if range_bytes <= 0 or task.detections is not None or not task.path.lower().endswith(KLV_SUFFIXES):
+        return None
+    try:
+        size = os.stat(task.path).st_size
+        if size <= range_bytes:
+            return None
+        with open(task.path, "rb") as f:
+            if looks_like_ts(f.read(5 * 188)):
+                return None
+            cuts = [0, *(range_cut(f, k * range_bytes) for k in range(1, -(-size // range_bytes))), size]
+    except OSError:
+        return None
+    return list(itertools.pairwise(cuts))
+
+
+def summarize_range(task: Task, settings: BatchSettings) -> tuple | str:
+    """:func:`.klv.range_summary` of a range task where it is called (a worker), or why not (the
+    batch then runs the file as one task, which says it again: eoloc's message, or a bug's
+    traceback)."""
+    from .klv import range_summary
+
+    try:
+        return range_summary(task.path, task.span, segment_bytes=settings.segment_bytes, strict=settings.strict)
+    except Exception as exc:  # (any: the file's own task reports it as it would without ranges)
+        return f"{type(exc).__name__}: {exc}"
+
+
+def ranged_tasks(tasks: list[Task], settings: BatchSettings, mapper) -> tuple[list[Task], dict[str, list[Task]]]:
+    """``tasks`` with each raw KLV file longer than ``settings.range_bytes`` replaced by a task per
+    byte range, each given what the ranges before it leave (:class:`.klv.RangeStart`, from every
+    range read on its own first, through ``mapper``); and those files' range tasks by key. A file
+    whose ranges cannot all be read, or hold no good packet, stays one task (its reading says
+    why)."""
+    from .klv import range_starts
+
+    spans = {t.key: file_spans(t, settings.range_bytes) for t in tasks}
+    pieces = [replace(t, span=sp, part=k) for t in tasks for k, sp in enumerate(spans[t.key] or [])]
+    summaries = mapper(summarize_range, [(p, settings) for p in pieces]) if pieces else []
+    by_key: dict[str, list] = {}
+    for p, s in zip(pieces, summaries, strict=True):
+        by_key.setdefault(p.key, []).append((p, s))
+    out, ranges = [], {}
+    for t in tasks:
+        got = by_key.get(t.key)
+        if not got or any(isinstance(s, str) for _, s in got) or not sum(s[1] for _, s in got):
+            out.append(t)
+            continue
+        starts = range_starts([s for _, s in got])
+        ranges[t.key] = [replace(p, start=st) for (p, _), st in zip(got, starts, strict=True)]
+        out += ranges[t.key]
+    return out, ranges
+
+
+def file_result(task: Task, parts: list[FileResult], settings: BatchSettings, fingerprint: str) -> FileResult:
+    """One file's result from its ranges' (in order): done when each is, with their counts summed
+    and its manifest written; else the first range's failure, and the file's partitions removed."""
+    out_dir = Path(settings.out_dir)
+    bad = next((r for r in parts if r.status != "done"), None)
+    result = FileResult(task.key, task.path, "done", seconds=round(sum(r.seconds for r in parts), 3))
+    if bad is not None:
+        remove_partitions(out_dir, task.key)
+        result.status, result.message = bad.status, bad.message
+        return result
+    for r in parts:
+        result.packets, result.fixes = result.packets + r.packets, result.fixes + r.fixes
+        result.fixes_ok, result.issues = result.fixes_ok + r.fixes_ok, result.issues + r.issues
+    try:
+        inputs = {task.path: _stamp(task.path)}
+    except OSError as exc:
+        remove_partitions(out_dir, task.key)
+        result.status, result.message = "failed", f"{task.path}: {exc.strerror or exc}"
+        return result
+    write_manifest(out_dir, task, inputs, fingerprint, result)
     return result
 
 
@@ -388,9 +490,28 @@ def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings,
                 on_done()
         else:
             todo.append(t)
-    finished = None if on_done is None else (lambda _i: on_done())
-    for r in (mapper or local_map)(process_file, [(t, settings, fingerprint) for t in todo], finished):
-        results[r.key] = r
+    run = mapper or local_map
+    pieces, ranges = ranged_tasks(todo, settings, run)
+    for key in ranges:  # (the ranges write their own files into the file's partitions)
+        remove_partitions(out_dir, key)
+    left = {key: len(parts) for key, parts in ranges.items()}
+
+    def finished(i: int) -> None:
+        key = pieces[i].key
+        left[key] = left.get(key, 1) - 1
+        if on_done is not None and not left[key]:
+            on_done()
+
+    done_parts: dict[str, list[FileResult]] = {}
+    for task, r in zip(pieces, run(process_file, [(t, settings, fingerprint) for t in pieces], finished),
+                       strict=True):
+        if task.span is None:
+            results[r.key] = r
+        else:
+            done_parts.setdefault(task.key, []).append(r)
+    for t in todo:
+        if t.key in ranges:
+            results[t.key] = file_result(t, done_parts[t.key], settings, fingerprint)
     ordered = [results[t.key] for t in tasks]
     notes = []
     if not keep_missing:

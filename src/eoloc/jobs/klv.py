@@ -80,9 +80,52 @@ def klv_job(path, *, dem=None, sensor=None, budget=None, footprint_every: int = 
                       assume=assume, map_layers=map_layers)
 
 
+@dataclass
+class RangeStart:
+    """What a byte range of a KLV file needs from the bytes before it to read and locate as one
+    reading of the whole file would: the packets numbered before it, the telemetry rows before it
+    (the footprints' every-n-th count), and what a receiver knew at its start (report-on-change
+    items, the VMTI frame size: :func:`eoloc.io.klv.tables.carried_state`; None at the file's
+    start). Found by :func:`range_starts` from every range's :func:`range_summary`."""
+
+    first_index: int = 0
+    rows: int = 0
+    state: object | None = None
+
+
+def range_summary(path, span: tuple[int, int], *, segment_bytes: int | None = None, strict: bool = False
+                  ) -> tuple[int, int, object | None]:
+    """A byte range of a raw KLV file read on its own (no location): the packets numbered in it
+    (good and bad), the good ones (a telemetry row each), and what a receiver knows at its end
+    from it alone (:func:`eoloc.io.klv.tables.carried_state`; None: no good packet)."""
+    from ..io.klv.segments import SEGMENT_BYTES, klv_segments
+    from ..io.klv.tables import carried_state, with_state
+
+    packets, good, state = 0, 0, None
+    for seg in klv_segments(path, segment_bytes=segment_bytes or SEGMENT_BYTES, strict=strict, span=span):
+        packets, good = packets + len(seg) + seg.n_bad, good + len(seg)
+        if len(seg):
+            state = carried_state(with_state(seg, state))
+    return packets, good, state
+
+
+def range_starts(summaries: list[tuple[int, int, object | None]]) -> list[RangeStart]:
+    """Each range's :class:`RangeStart` from the :func:`range_summary` of every range, in file
+    order: packets and rows summed over the ranges before it, the state folded (each item's last
+    value wins, as it does packet by packet)."""
+    from ..io.klv.tables import carried_state, with_state
+
+    out, start = [], RangeStart()
+    for packets, good, state in summaries:
+        out.append(start)
+        folded = start.state if state is None else carried_state(with_state(state, start.state))
+        start = RangeStart(start.first_index + packets, start.rows + good, folded)
+    return out
+
+
 def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor=None, budget=None,
-                     footprint_every: int = 1, strict: bool = False, assume=()
-                     ) -> Iterator[tuple[object, KLVJob | None]]:
+                     footprint_every: int = 1, strict: bool = False, assume=(), span: tuple[int, int] | None = None,
+                     start: RangeStart | None = None) -> Iterator[tuple[object, KLVJob | None]]:
     """:func:`klv_job` (columnar, without the map's layers or the convention checks) a segment of
     the file at a time (:func:`eoloc.io.klv.segments.klv_segments`: memory bounded by
     ``segment_bytes``, whatever the file's size): (the segment's columns, its job) in file order,
@@ -90,13 +133,16 @@ def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor
     the VMTI frame size and the footprints' every-n-th count are carried from segment to segment,
     so the rows are those of the whole file's job wherever the stream's time runs forward across
     the cuts. Raises :class:`KLVError` as :func:`klv_job` does, once the file is read, when no
-    packet was good."""
+    packet was good. ``span``: a byte range of a raw KLV file only, begun from ``start`` (what
+    the bytes before it leave); then no packet is no error."""
     from ..io.klv.segments import SEGMENT_BYTES, klv_segments
     from ..io.klv.tables import carried_state, with_state
 
-    state, rows, good, issues = None, 0, 0, []
+    start = start or RangeStart()
+    state, rows, good, issues = start.state, start.rows, 0, []
     every = max(footprint_every, 1)
-    for seg in klv_segments(path, segment_bytes=segment_bytes or SEGMENT_BYTES, strict=strict):
+    for seg in klv_segments(path, segment_bytes=segment_bytes or SEGMENT_BYTES, strict=strict, span=span,
+                            first_index=start.first_index):
         if not len(seg):
             issues += seg.issues
             yield seg, None
@@ -107,7 +153,7 @@ def klv_segment_jobs(path, *, segment_bytes: int | None = None, dem=None, sensor
         state = carried_state(carried)
         rows, good = rows + len(job.telemetry), good + len(seg)
         yield seg, job
-    if not good:
+    if not good and span is None:
         raise KLVError(f"{path}: no packet could be decoded, so there is nothing to locate", [str(i) for i in issues])
 
 

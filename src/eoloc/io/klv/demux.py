@@ -534,8 +534,6 @@ def _clean_pes(c, g, max_pes_bytes: int, arrival, *, final: bool = True
     p0 = s + 9 + hdl
     plen = e - p0
     mark = np.cumsum(plen) - plen
-    header = np.zeros(total + 1, np.int8)  # each PES's payload: the joined bytes but the PES headers
-    header[s] += 1
-    header[p0] -= 1  # (s and p0 each distinct: a header [s, p0) before each payload [p0, next s))
-    body = joined[np.cumsum(header[:-1]) == 0].tobytes()
+    runs = np.column_stack([p0 - s, plen]).ravel()  # each PES: its header [s, p0), then its payload [p0, e)
+    body = joined[np.repeat(np.tile(np.array([False, True]), s.size), runs)].tobytes()  # the payloads, joined
     return body, list(zip(mark.tolist(), times, strict=True)), by_arrival, tail

@@ -86,14 +86,16 @@ def safe_cut(block: bytes, lo: int) -> int | None:
 
 
 def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict: bool = False,
-                 ts_chunk_bytes: int | None = None) -> Iterator[KLVColumns]:
+                 ts_chunk_bytes: int | None = None, span: tuple[int, int] | None = None,
+                 first_index: int = 0) -> Iterator[KLVColumns]:
     """The packets of a KLV file (raw KLV, or MPEG-TS: its transport read ``ts_chunk_bytes`` at a
     time, by default 8 segments' worth and at least :data:`TS_CHUNK_BYTES`, each KLV PID's bytes set
     aside, then decoded PID after PID) as columns, a segment of
     about ``segment_bytes`` at a time, in file order: packet numbers and byte offsets are the
     file's; issues are each segment's, notes count each segment's packets (see the module notes).
     Raises :class:`KLVError` as :func:`.reader.read_klv` does (the last only after the segments
-    read)."""
+    read). ``span``: bytes ``start`` to ``end`` of a raw KLV file only (each from :func:`range_cut`),
+    its packets numbered from ``first_index`` (those before it), not checked for having any."""
     p = Path(path)
     try:
         f = p.open("rb")
@@ -104,30 +106,65 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
         if not head:
             raise KLVError(f"{path} is empty")
         if looks_like_ts(head):
+            if span is not None:
+                raise KLVError(f"{path}: an MPEG-TS file is read whole, not by byte ranges (its PIDs' packets are "
+                               "numbered one PID after the other)")
             chunk = ts_chunk_bytes if ts_chunk_bytes is not None else max(TS_CHUNK_BYTES, 8 * int(segment_bytes))
             yield from _ts_segments(f, str(path), segment_bytes, strict, chunk)
             return
-        f.seek(0)
-        counts = yield from _segments(f, str(path), segment_bytes=segment_bytes, strict=strict)
-        check_found(path, counts[1], counts[2])
+        start, end = span if span is not None else (0, os.fstat(f.fileno()).st_size)
+        f.seek(start)
+        counts = yield from _segments(f, str(path), segment_bytes=segment_bytes, strict=strict, first_index=first_index,
+                                      start=start, end=end)
+        if span is None:
+            check_found(path, counts[1], counts[2])
+
+
+def range_cut(f, at: int, *, window: int = 1 << 20) -> int:
+    """Where the byte range of a raw KLV file (``f``, open) that begins near byte ``at`` begins: at
+    the first ST 0601 key at or after ``at`` that a good packet starting at the key before it (at
+    or after ``at``) ends on; there the reader stands at a packet start with nothing pending (as at
+    :func:`safe_cut`). The file's end where there is none (a packet is looked for within ``window``
+    bytes of the key before it). The ranges on either side of ``at`` find the same place."""
+    size = os.fstat(f.fileno()).st_size
+    if at <= 0 or at >= size:
+        return min(max(at, 0), size)
+    pos = at
+    while pos < size:
+        f.seek(pos)
+        block = f.read(window)
+        k = block.find(UAS_KEY)
+        while k >= 0:
+            nxt = block.find(UAS_KEY, k + 1)
+            if nxt < 0:
+                break
+            end, _, _ = packet_end(block, k)
+            if end == nxt and checksum_problem(block[k:nxt]) is None:
+                return pos + nxt
+            k = nxt
+        if len(block) < window:
+            return size
+        pos += k if k > 0 else len(block) - len(UAS_KEY) + 1  # (from the last key, or on without splitting one)
+    return size
 
 
 def _segments(f, path: str, *, segment_bytes: int, strict: bool, first_index: int = 0, marks=None,
-              container: str = "klv", stream: str = "") -> Generator[KLVColumns, None, tuple[int, int, int]]:
-    """The KLV bytes of ``f`` (from where it stands to its end) decoded a segment at a time (the
-    module notes), packets numbered from ``first_index``; ``marks``: (byte offsets, PTS s with NaN
-    for none) of a transport stream's PES in these bytes. Returns the packets numbered, the good
-    and the bad ones."""
-    block, base, n, good, bad = b"", 0, first_index, 0, 0
+              container: str = "klv", stream: str = "", start: int = 0, end: int | None = None
+              ) -> Generator[KLVColumns, None, tuple[int, int, int]]:
+    """The KLV bytes of ``f`` from where it stands (byte ``start``) to byte ``end`` (default: its
+    end) decoded a segment at a time (the module notes), packets numbered from ``first_index``;
+    ``marks``: (byte offsets, PTS s with NaN for none) of a transport stream's PES in these bytes.
+    Returns the packets numbered, the good and the bad ones."""
+    block, base, n, good, bad = b"", start, first_index, 0, 0
     want = max(int(segment_bytes), 1)
     limit = MAX_BLOCKS * max(want, 1 << 20)
-    size = os.fstat(f.fileno()).st_size
+    end = os.fstat(f.fileno()).st_size if end is None else end
     while True:
         ask = want - len(block) if want > len(block) else want
-        ask = min(ask, max(size - f.tell(), 0) + 1)  # (no buffer past the file's end)
+        ask = min(ask, max(end - f.tell(), 0))
         more = f.read(ask)
         block += more
-        eof = len(more) < ask  # (a file: a short read is its end)
+        eof = len(more) < ask or f.tell() >= end
         cut = len(block) if eof else safe_cut(block, len(block) // 2)
         if cut is None and len(block) >= limit:
             cut = forced_cut(block)  # (a long stretch without a good packet: memory stays bounded)

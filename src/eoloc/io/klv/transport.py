@@ -34,7 +34,10 @@ class MemoryPayloads:
         """``body`` after the PID's bytes so far, with its ``marks`` (offsets in ``body``)."""
         at = self.size.get(pid, 0)
         self.parts.setdefault(pid, []).append(body)
-        self.marks.setdefault(pid, []).extend((o + at, t) for o, t in marks)
+        if pid not in self.marks:  # (a whole stream's PID: its marks as they are)
+            self.marks[pid] = marks if not at else [(o + at, t) for o, t in marks]
+        else:
+            self.marks[pid] += [(o + at, t) for o, t in marks]
         self.size[pid] = at + len(body)
 
     def pids(self) -> list[int]:
