@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import random
 import shutil
-from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +17,10 @@ import pyarrow.parquet as pq
 import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
-from klvsegments import assert_segments_are_the_file
+from klvsegments import assert_segments_are_the_file, job_tables, same_columns, sparse_flight, transport_stream
 
 import eoloc
-from eoloc.io.klv import encode_uas_packet, encode_vmti
-from eoloc.io.klv.columnar import columns_from_stream, read_klv_columns
+from eoloc.io.klv.columnar import read_klv_columns
 from eoloc.io.klv.reader import packet_end, read_klv
 from eoloc.io.klv.segments import klv_segments
 from eoloc.io.klv.synthetic import circling_flight_klv
@@ -30,37 +28,6 @@ from eoloc.jobs.batch import LAYERS, BatchSettings, batch_job
 from eoloc.jobs.klv import klv_segment_jobs, stream_job
 
 MOUNTAIN = Path(eoloc.__file__).parent / "data" / "demo" / "mountain"
-
-
-def sparse_flight(n: int, seed: int = 0) -> bytes:
-    """A circling flight as an encoder that reports on change sends it: the slow items (height,
-    fields of view, frame centre, the VMTI frame size) only every 7th or 11th packet, some items in
-    no packet until late in the stream."""
-    rng = np.random.default_rng(seed)
-    t0 = datetime(2026, 3, 1, tzinfo=UTC)
-    out = []
-    for k in range(n):
-        phase = k / 300
-        v = {2: t0 + timedelta(seconds=k / 30), 5: float((np.degrees(phase) + 90) % 360),
-             6: float(rng.normal(0, 1)), 7: -8.0, 13: 40.0 + 0.03 * np.cos(phase), 14: -105.0 + 0.04 * np.sin(phase),
-             18: 270.0, 19: -45.0 + float(rng.normal(0, 0.3)), 20: 0.0}
-        if k % 7 == 0:
-            v |= {15: 3000.0, 16: 20.0, 17: 11.3}
-        if k % 11 == 0 and k > 40:
-            v |= {23: 40.0 + 0.03 * np.cos(phase) - 0.02, 24: -105.0 + 0.04 * np.sin(phase), 25: 1600.0}
-        targets = [(j + 1, float(rng.uniform(50, 1200)), float(rng.uniform(50, 650))) for j in range(3)]
-        vset = encode_vmti(targets, 1280, 720)
-        v[74] = vset if k % 5 == 0 else _without_frame_size(targets)
-        out.append(encode_uas_packet(v))
-    return b"".join(out)
-
-
-def _without_frame_size(targets) -> bytes:
-    """A VMTI set whose targets are given by row and column only (no frame width, tags 8/9)."""
-    from stanag4609.st0903 import VTargetData, encode_vmti_local_set
-
-    packs = [VTargetData(tid, {19: round(v) + 1, 20: round(u) + 1}) for tid, u, v in targets]
-    return encode_vmti_local_set({4: 5}, targets=packs)
 
 
 def damaged(data: bytes, seed: int) -> bytes:
@@ -110,16 +77,6 @@ def test_damage_anywhere_gives_the_whole_files_reading(tmp_path_factory, seed, s
     assert_segments_are_the_file(path, segment_bytes)
 
 
-def transport_stream(path: Path, packets: list[bytes], torn: bytes = b"") -> Path:
-    """A video TS with two KLV PIDs (libavformat) carrying ``packets``, and ``torn`` after it."""
-    from eoloc.io.klv.mux import write_klv_ts
-
-    write_klv_ts(path, [[(p, k / 10) for k, p in enumerate(packets)],
-                        [(p, k / 5) for k, p in enumerate(packets[: len(packets) // 3])]], video_fps=10)
-    path.write_bytes(path.read_bytes() + torn)
-    return path
-
-
 @pytest.mark.parametrize("chunk", [188, 188 * 7, 188 * 300, 10 ** 9])
 @pytest.mark.parametrize("torn", [b"", b"\x47\x01\x02 cut off"])
 def test_a_transport_stream_is_read_a_chunk_at_a_time(tmp_path, torn, chunk):
@@ -152,25 +109,6 @@ def test_a_file_of_nothing_is_refused_as_the_reader_refuses_it(tmp_path):
         assert str(got.value) == str(want.value)
 
 
-def _job_tables(job) -> dict[str, dict]:
-    from eoloc.jobs.klv import frame_records, telemetry_records
-
-    props, geoms = job.footprint_table
-    return {"telemetry": telemetry_records(job.telemetry).columns, "fixes": job.records.columns,
-            "frames": frame_records(job.telemetry, job.check).columns,
-            "footprints": {**props.columns, "wkb": np.array(geoms.column.to_pylist(), object)}}
-
-
-def _same(a: dict, b: dict, what: str) -> None:
-    assert list(a) == list(b), what
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        if x.dtype.kind == "f":
-            np.testing.assert_array_equal(x, y, err_msg=f"{what}.{k}")  # (NaN equal to NaN)
-        else:
-            assert x.tolist() == y.tolist(), f"{what}.{k}"
-
-
 @pytest.mark.parametrize("every", [1, 3])
 def test_the_segment_jobs_are_the_whole_files_job(tmp_path, every):
     """Report-on-change items sent every 7th/11th packet, VMTI frame sizes every 5th: the rows,
@@ -181,9 +119,9 @@ def test_the_segment_jobs_are_the_whole_files_job(tmp_path, every):
     whole = stream_job(path, read_klv_columns(path), map_layers=False, footprint_every=every)
     parts = list(klv_segment_jobs(path, segment_bytes=4_000, footprint_every=every))
     assert len(parts) > 25 and all(job is not None for _, job in parts)
-    for name, ref in _job_tables(whole).items():
-        got = [_job_tables(job)[name] for _, job in parts]
-        _same({k: np.concatenate([g[k] for g in got]) for k in ref}, ref, name)
+    for name, ref in job_tables(whole).items():
+        got = [job_tables(job)[name] for _, job in parts]
+        same_columns({k: np.concatenate([g[k] for g in got]) for k in ref}, ref, name)
     assert whole.records["status"].tolist().count("OK") > 2000  # (the carried frame centre and size at work)
     assert [str(i) for _, j in parts for i in j.issues] == [str(i) for i in whole.issues]
 
@@ -278,95 +216,27 @@ def test_the_forced_cut_splits_no_key():
     assert forced_cut(b"\x00" * 100) == 84  # (no key in it: 16 bytes before the end)
 
 
-# -- a large raw KLV file in byte ranges (a task each: Dask workers share one file) -----------------
-
-
-def _ranges(path: Path, range_bytes: int) -> list[tuple[int, int]]:
-    from eoloc.jobs.batch import Task, file_spans
-
-    return file_spans(Task(str(path), None, "k"), range_bytes) or [(0, path.stat().st_size)]
-
-
-@pytest.mark.parametrize("range_bytes", [5_000, 23_000, 10 ** 9])
-def test_byte_ranges_read_on_their_own_are_the_whole_files_reading(tmp_path, range_bytes):
-    """A raw KLV file (report-on-change, with garbage between packets and at the end) cut in byte
-    ranges: each range starts where the tolerant reader, on the whole file, has just ended a good
-    packet and starts the next; each range read on its own (first for its packet count and what a
-    receiver knows at its end, then from what the ranges before it leave) gives together the
-    whole reading's packets, numbers, offsets, values and issues, and the whole file's job."""
+@pytest.mark.parametrize("range_bytes", [3_000, 17_000])
+def test_a_byte_range_begins_where_a_good_packet_ends(tmp_path, range_bytes):
+    """range_cut (where a byte range of a raw KLV file begins, for a task of its own): at a packet
+    that the tolerant reader, on the whole file, reads right after a good one ending there; the
+    same place whichever range asks; the file's end where no such place follows."""
     from eoloc.io.klv.reader import split_klv
-    from eoloc.jobs.klv import range_starts, range_summary
+    from eoloc.io.klv.segments import range_cut
 
-    packets = [p for p, _ in split_klv(sparse_flight(500, seed=4))]
-    path = tmp_path / "r.klv"
-    path.write_bytes(b"".join(packets[:200]) + b"\x06\x0e\x2b\x34 noise " * 40 + b"".join(packets[200:]) + b"tail")
+    packets = [p for p, _ in split_klv(sparse_flight(300, seed=9))]
+    path = tmp_path / "c.klv"
+    path.write_bytes(b"".join(packets[:100]) + b"\x06\x0e\x2b\x34\x02 junk " * 300 + b"".join(packets[100:])
+                     + b"\x06\x0e\x2b\x34 tail without a packet" * 50)
     ref = read_klv(path)
     ends = {p.offset + len(p.raw) for p in ref.packets} & {p.offset for p in ref.packets}
-    spans = _ranges(path, range_bytes)
-    assert (len(spans) > 10) == (range_bytes == 5_000)
-    assert all(a in ends for a, _ in spans[1:]) and spans[-1][1] == path.stat().st_size
-    summaries = [range_summary(path, sp, segment_bytes=3_000) for sp in spans]
-    starts = range_starts(summaries)
-    segs = [s for sp, st in zip(spans, starts, strict=True)
-            for s in klv_segments(path, segment_bytes=3_000, span=sp, first_index=st.first_index)]
-    ref_cols = columns_from_stream(ref)
-    for name in ("index", "offset", "time_us", "present", "has_vmti"):
-        np.testing.assert_array_equal(np.concatenate([getattr(s, name) for s in segs]), getattr(ref_cols, name), name)
-    np.testing.assert_allclose(np.concatenate([s.values for s in segs]), ref_cols.values, rtol=0, atol=1e-9,
-                               equal_nan=True)  # (the compiled decoder and the tolerant one: to ~1e-13)
-    assert [i for s in segs for i in s.issues] == ref.issues
-    assert sum(s[0] for s in summaries) == ref.n_good + ref.n_bad
-    whole = stream_job(path, read_klv_columns(path), map_layers=False, footprint_every=3)
-    parts = [job for sp, st in zip(spans, starts, strict=True)
-             for _, job in klv_segment_jobs(path, segment_bytes=3_000, footprint_every=3, span=sp, start=st) if job]
-    for name, want in _job_tables(whole).items():
-        got = [_job_tables(job)[name] for job in parts]
-        _same({k: np.concatenate([g[k] for g in got]) for k in want}, want, name)
-
-
-def _files(out: Path, layer: str) -> dict[str, pa.Table]:
-    return {f"{p.parent.name}/{p.name}": pq.read_table(p) for p in sorted((out / layer).glob("file=*/*.parquet"))}
-
-
-def test_a_large_file_in_byte_ranges_is_the_same_dataset_on_dask_and_in_one_process(tmp_path):
-    """`eoloc batch` with files longer than the range size cut in byte ranges, a task each: on a
-    2-worker Dask LocalCluster the same partition files as on one process, byte ranges and all;
-    every layer's rows those of the batch without ranges; a transport stream and a short file stay
-    whole; a second run skips the files (their manifests)."""
-    from eoloc.accuracy.runners import dask_mapper
-    from eoloc.io.klv.reader import split_klv
-
-    src = tmp_path / "in"
-    src.mkdir()
-    (src / "sparse.klv").write_bytes(sparse_flight(700, seed=2))
-    (src / "circling.klv").write_bytes(circling_flight_klv(500, seed=5) + b"\x00" * 3000)
-    shutil.copy(MOUNTAIN / "flight.klv", src / "mountain.klv")
-    transport_stream(src / "two.ts", [p for p, _ in split_klv(sparse_flight(120, seed=3))])
-    noise = np.random.default_rng(3).integers(0, 256, 30_000, dtype=np.uint8).tobytes()
-    flight = circling_flight_klv(200, seed=7)
-    (src / "gap.klv").write_bytes(flight[:20_000] + noise + flight[20_000:])  # ranges of noise alone among them
-    (src / "noise.klv").write_bytes(noise)  # no packet: failed, as without ranges
-    size = (src / "mountain.klv").stat().st_size
-    kw = {"footprint_every": 3, "segment_bytes": 8_000}
-    whole = batch_job([str(src)], BatchSettings(str(tmp_path / "whole"), range_bytes=0, **kw))
-    one = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), range_bytes=6_000, **kw))
-    with dask_mapper("local:2") as m:
-        dask = batch_job([str(src)], BatchSettings(str(tmp_path / "dask"), range_bytes=6_000, **kw), mapper=m)
-    assert size > 6_000  # (the demo's flight is cut too)
-    assert [r.status for r in whole.results] == ["done"] * 3 + ["failed"] + ["done"] * 2
-    rows = [(r.key, r.status, r.packets, r.fixes, r.fixes_ok, r.issues, r.message) for r in whole.results]
-    assert [(r.key, r.status, r.packets, r.fixes, r.fixes_ok, r.issues, r.message) for r in one.results] == rows
-    assert [(r.key, r.status, r.packets, r.fixes, r.fixes_ok, r.issues, r.message) for r in dask.results] == rows
-    for layer in LAYERS:
-        a, b = _files(tmp_path / "one", layer), _files(tmp_path / "dask", layer)
-        assert a.keys() == b.keys() and all(a[k].equals(b[k]) for k in a), layer
-        ranged = {k.split("/")[0] for k in a if "/range-" in k}
-        if layer != "issues":
-            assert {k.split("-")[0] for k in ranged} == {"file=sparse", "file=circling", "file=mountain", "file=gap"}
-        for key in {k.split("/")[0] for k in a}:  # the ranges' rows, in order, are the file's
-            got = pa.concat_tables([a[k] for k in sorted(a) if k.startswith(key + "/")])
-            want = pa.concat_tables([t for k, t in sorted(_files(tmp_path / "whole", layer).items())
-                                     if k.startswith(key + "/")])
-            assert got.equals(want), (layer, key)
-    again = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), range_bytes=6_000, **kw))
-    assert [r.status for r in again.results] == ["skipped"] * 3 + ["failed"] + ["skipped"] * 2
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        cuts = [range_cut(f, k) for k in range(0, size + range_bytes, range_bytes)]
+        again = [range_cut(f, k, window=4_096) for k in range(0, size + range_bytes, range_bytes)]
+    assert cuts == again and cuts[0] == 0 and cuts[-1] == size
+    assert all(c in ends or c == size for c in cuts[1:])
+    assert cuts == sorted(cuts) and len(set(cuts)) > 3
+    last_good = max(ends)
+    assert all(c == size for k, c in zip(range(0, size + range_bytes, range_bytes), cuts, strict=True)
+               if k > last_good)
