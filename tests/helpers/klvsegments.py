@@ -35,10 +35,10 @@ def assert_segments_are_the_file(path: Path, segment_bytes: int, **kw) -> list:
     return segs
 
 
-def sparse_flight(n: int, seed: int = 0) -> bytes:
+def sparse_flight(n: int, seed: int = 0, slow: int = 7) -> bytes:
     """A circling flight as an encoder that reports on change sends it: the slow items (height,
-    fields of view, frame centre, the VMTI frame size) only every 7th or 11th packet, some items in
-    no packet until late in the stream."""
+    fields of view) only every ``slow``-th packet (default 7), the frame centre every 11th, the VMTI
+    frame size every 5th, some items in no packet until late in the stream."""
     rng = np.random.default_rng(seed)
     t0 = datetime(2026, 3, 1, tzinfo=UTC)
     out = []
@@ -47,7 +47,7 @@ def sparse_flight(n: int, seed: int = 0) -> bytes:
         v = {2: t0 + timedelta(seconds=k / 30), 5: float((np.degrees(phase) + 90) % 360),
              6: float(rng.normal(0, 1)), 7: -8.0, 13: 40.0 + 0.03 * np.cos(phase), 14: -105.0 + 0.04 * np.sin(phase),
              18: 270.0, 19: -45.0 + float(rng.normal(0, 0.3)), 20: 0.0}
-        if k % 7 == 0:
+        if k % slow == 0:
             v |= {15: 3000.0, 16: 20.0, 17: 11.3}
         if k % 11 == 0 and k > 40:
             v |= {23: 40.0 + 0.03 * np.cos(phase) - 0.02, 24: -105.0 + 0.04 * np.sin(phase), 25: 1600.0}

@@ -41,7 +41,7 @@ def test_byte_ranges_read_on_their_own_are_the_whole_files_reading(tmp_path, ran
     from eoloc.io.klv.reader import split_klv
     from eoloc.jobs.klv import range_starts, range_summary
 
-    packets = [p for p, _ in split_klv(sparse_flight(500, seed=4))]
+    packets = [p for p, _ in split_klv(sparse_flight(500, seed=4, slow=350))]  # height and FOV: packets 0, 350
     packets[320] = packets[320][:40] + bytes([packets[320][40] ^ 0x5A]) + packets[320][41:]  # a bad checksum
     path = tmp_path / "r.klv"
     path.write_bytes(b"".join(packets[:200]) + b"\x06\x0e\x2b\x34 noise " * 40 + b"".join(packets[200:]) + b"tail")

@@ -225,11 +225,16 @@ def test_a_byte_range_begins_where_a_good_packet_ends(tmp_path, range_bytes):
     from eoloc.io.klv.segments import range_cut
 
     packets = [p for p, _ in split_klv(sparse_flight(300, seed=9))]
+    for k in range(120, 220, 2):  # a stretch where every other packet fails its checksum
+        packets[k] = packets[k][:30] + bytes([packets[k][30] ^ 0x11]) + packets[k][31:]
     path = tmp_path / "c.klv"
     path.write_bytes(b"".join(packets[:100]) + b"\x06\x0e\x2b\x34\x02 junk " * 300 + b"".join(packets[100:])
                      + b"\x06\x0e\x2b\x34 tail without a packet" * 50)
     ref = read_klv(path)
-    ends = {p.offset + len(p.raw) for p in ref.packets} & {p.offset for p in ref.packets}
+    data = path.read_bytes()
+    ends = {p.offset + len(p.raw) for p in ref.packets}  # where a good packet ends ...
+    ends = {e for e in ends if data[e:e + 16] == bytes.fromhex("060E2B34020B01010E01030101000000")}  # ... a key starts
+    assert sum(i.kind == "checksum" for i in ref.issues) == 50
     size = path.stat().st_size
     with path.open("rb") as f:
         cuts = [range_cut(f, k) for k in range(0, size + range_bytes, range_bytes)]
