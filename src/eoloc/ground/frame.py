@@ -47,6 +47,28 @@ def frame_sensor(base: SensorModel, hfov_deg: float, vfov_deg: float | None, wid
     return replace(base, camera=Camera.from_hfov(hfov_deg, width, height, vfov_deg=vfov_deg))
 
 
+class FrameSensors:
+    """The sensors of frames (:func:`frame_sensor` of ``base``, by default :func:`misb_sensor`),
+    kept by frame size and fields of view: a stream's fields change now and then, not with every
+    frame or packet (at most ``keep`` kept: a stream whose zoom never rests starts over)."""
+
+    def __init__(self, base: SensorModel | None = None, *, keep: int = 64) -> None:
+        self.base = base or misb_sensor()
+        self.keep = keep
+        self.sensors: dict[tuple, SensorModel | None] = {}
+
+    def get(self, width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:
+        """The sensor of a ``width`` x ``height`` frame (degrees: tags 16, 17 or the VMTI set's); None
+        without a usable horizontal field of view (a vertical one out of (0, 180): square pixels)."""
+        key = (width, height, hfov_deg, vfov_deg)
+        if key not in self.sensors:
+            if len(self.sensors) >= self.keep:
+                self.sensors.clear()
+            v = vfov_deg if 0 < vfov_deg < 180 else None
+            self.sensors[key] = frame_sensor(self.base, hfov_deg, v, width, height) if 0 < hfov_deg < 180 else None
+        return self.sensors[key]
+
+
 def misb_frame_sensor(width: int, height: int, hfov_deg: float, vfov_deg: float) -> SensorModel | None:
     """The ST 0601 sensor of one frame: a pinhole whose fields of view span the image (tags 16,
     17), on the az-el turret with sensor roll; None without a usable field of view."""

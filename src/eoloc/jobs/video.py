@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError, KLVError
-from ..ground.frame import misb_frame_sensor
+from ..ground.frame import FrameSensors, misb_frame_sensor
 from ..io.videofile import VideoInfo, iter_frames, probe_video
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
@@ -409,7 +409,7 @@ def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, ba
     gets each frame's UNIX time from its metadata (NaN where it has none)."""
     t0 = float(times[0])
     by_pts = {round(float(t) * 90_000): i for i, t in enumerate(times)}
-    sensors: dict[tuple, SensorModel | None] = {}
+    sensors = FrameSensors()
     for fr in iter_frames(video, errors=errors):
         if fr.image is None:
             continue
@@ -418,10 +418,7 @@ def posed_frames(video, times: np.ndarray, poses: FramePoses, meta: Metadata, ba
         sensor = base_sensor
         if ok and sensor is None:
             h, w = fr.image.shape[:2]
-            key = (w, h, vals["hfov_deg"], vals["vfov_deg"])
-            if key not in sensors:
-                sensors[key] = misb_frame_sensor(*key)
-            sensor = sensors[key]
+            sensor = sensors.get(w, h, vals["hfov_deg"], vals["vfov_deg"])
         if ok and sensor is not None:
             if unix is not None:
                 unix[fr.index] = vals.get("unix_s", math.nan)

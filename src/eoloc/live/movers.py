@@ -43,7 +43,7 @@ import numpy as np
 from ..detect.learned import LearnedDetector
 from ..detect.motion import MotionDetector, MotionSettings
 from ..detect.movers import MoverSettings, MoverTracker
-from ..ground.frame import frame_sensor, misb_sensor, packet_pose
+from ..ground.frame import FrameSensors, misb_sensor, packet_pose
 from ..io.export import utc_times
 from ..rules import StopRule
 from ..sequence.sync import Metadata, poses_at_frames
@@ -176,7 +176,7 @@ class LiveMovers:
         self.posed: dict[int, tuple] = {}  # frame index -> (sensor, pose, record, unix s, arrival)
         self.ids: dict[str, int] = {}  # track key -> the mover's id (1, 2, ... as each is declared)
         self.earlier: dict[str, deque] = {}  # a track not (yet) a mover -> its detections so far
-        self.sensors: dict[tuple, object] = {}
+        self.sensors = FrameSensors(self.base)  # each frame's: its size and the packet's fields of view
         while True:
             item = self.inbox.get()
             if item[0] is END:
@@ -229,7 +229,7 @@ class LiveMovers:
                 self.counts["frames_unposed"] += 1
                 continue
             pose, vals, rec = posed
-            sensor = self._sensor(image.shape[1], image.shape[0], vals["hfov_deg"], vals["vfov_deg"])
+            sensor = self.sensors.get(image.shape[1], image.shape[0], vals["hfov_deg"], vals["vfov_deg"])
             if sensor is None:
                 self.counts["frames_unposed"] += 1
                 continue
@@ -256,16 +256,6 @@ class LiveMovers:
             return None
         pose, vals = fp.take(0)
         return pose, vals, recs[int(fp.record[0])]
-
-    def _sensor(self, width: int, height: int, hfov: float, vfov: float):
-        key = (width, height, round(hfov, 6), round(vfov, 6))
-        if key not in self.sensors:
-            if len(self.sensors) > 64:
-                self.sensors.clear()
-            ok = 0 < hfov < 180
-            self.sensors[key] = frame_sensor(self.base, hfov, vfov if 0 < vfov < 180 else None, width,
-                                             height) if ok else None
-        return self.sensors[key]
 
     def _search(self, index: int, pts_s: float, image: np.ndarray, sensor, pose, rec: Record, unix_s: float,
                 arrived: float) -> None:

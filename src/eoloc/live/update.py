@@ -149,7 +149,7 @@ class PacketLocator:
     target's covariance comes with its fix (one call per VMTI frame camera)."""
 
     def __init__(self, *, dem=None, sensor=None, budget=None) -> None:
-        from ..ground.frame import misb_sensor
+        from ..ground.frame import FrameSensors, misb_sensor
         from ..sensor.camera import Camera
 
         self.sensor = sensor or misb_sensor()
@@ -157,7 +157,7 @@ class PacketLocator:
         self.budget = budget
         # the frame's own rays in normalised image coordinates: a camera whose pixels are them
         self.view = replace(self.sensor, camera=Camera(1, 1, 1.0, 1.0, 0.0, 0.0))
-        self.frames: dict[tuple, object] = {}  # (hfov, vfov, width, height) -> the VMTI frame's sensor
+        self.frames = FrameSensors(self.sensor)  # the VMTI frames' sensors
         load_compiled()  # a live session runs for long: numba loaded now, not in the first packet's time
 
     def locate(self, source: str, packet, known=None, *, late: bool = False) -> PacketUpdate:
@@ -250,15 +250,7 @@ class PacketLocator:
 
     def _frame_sensor(self, hfov: float, vfov: float, width: int, height: int):
         """The sensor of a VMTI frame: a pinhole over its size with the given fields of view."""
-        key = (hfov, vfov, width, height)
-        sensor = self.frames.get(key)
-        if sensor is None:
-            from ..ground.frame import frame_sensor
-
-            if len(self.frames) > 64:
-                self.frames.clear()
-            sensor = self.frames[key] = frame_sensor(self.sensor, hfov, vfov, width, height)
-        return sensor
+        return self.frames.get(width, height, hfov, vfov)
 
     def _target_rays(self, det, c: dict, usable: bool) -> TargetRays:
         """The VMTI targets' rays: each pixel through its frame's camera to normalised image
