@@ -107,8 +107,8 @@ def klv_segments(path: str | Path, *, segment_bytes: int = SEGMENT_BYTES, strict
             raise KLVError(f"{path} is empty")
         if looks_like_ts(head):
             if span is not None:
-                raise KLVError(f"{path}: an MPEG-TS file is read whole, not by byte ranges (its PIDs' packets are "
-                               "numbered one PID after the other)")
+                raise KLVError(f"{path}: an MPEG-TS file is read from its start (streamed), not by byte ranges "
+                               "(its PIDs' packets are numbered one PID after the other)")
             chunk = ts_chunk_bytes if ts_chunk_bytes is not None else max(TS_CHUNK_BYTES, 8 * int(segment_bytes))
             yield from _ts_segments(f, str(path), segment_bytes, strict, chunk)
             return
