@@ -92,7 +92,7 @@ def batch(patterns, out_dir, rule_values, dem_paths, vertical, geoid, dem_crs, c
     with mapper(dask_address) as m, progress() as bar:
         task = bar.add_task(f"{len(tasks)} files", total=len(tasks))
         job = batch_job(tasks, settings, mapper=m, redo=redo, keep_missing=keep_missing,
-                        on_done=lambda: bar.advance(task, 1))
+                        on_done=lambda part=1.0: bar.advance(task, part))  # (a byte range: its part of a file)
     console.print(batch_table(job))
     for note in job.notes:
         warn(note, "note")

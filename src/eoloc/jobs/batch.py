@@ -467,12 +467,13 @@ def prune(out_dir: Path, keys: set[str]) -> list[str]:
 
 
 def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings, *, mapper=None, redo: bool = False,
-              keep_missing: bool = False, on_done: Callable[[], None] | None = None) -> BatchJob:
+              keep_missing: bool = False, on_done: Callable[..., None] | None = None) -> BatchJob:
     """Every task of ``patterns`` (or the given tasks) through ``mapper`` (:mod:`eoloc.accuracy.runners`:
     here by default, or a Dask cluster); ``redo`` ignores the manifests. The dataset then holds the
     files of this run and no others: the partitions of files no longer among the inputs (renamed,
     moved, deleted) are removed, unless ``keep_missing``. ``on_done()`` after each file, skipped
-    ones included (progress)."""
+    ones included, and ``on_done(1 / k)`` after each of a file's ``k`` byte ranges (progress: the
+    calls add up to the number of files)."""
     from ..accuracy.runners import local_map
 
     patterns = list(patterns)
@@ -494,13 +495,10 @@ def batch_job(patterns: Sequence[str] | Iterable[Task], settings: BatchSettings,
     pieces, ranges = ranged_tasks(todo, settings, run)
     for key in ranges:  # (the ranges write their own files into the file's partitions)
         remove_partitions(out_dir, key)
-    left = {key: len(parts) for key, parts in ranges.items()}
-
     def finished(i: int) -> None:
-        key = pieces[i].key
-        left[key] = left.get(key, 1) - 1
-        if on_done is not None and not left[key]:
-            on_done()
+        if on_done is not None:
+            key = pieces[i].key
+            on_done() if key not in ranges else on_done(1.0 / len(ranges[key]))
 
     done_parts: dict[str, list[FileResult]] = {}
     for task, r in zip(pieces, run(process_file, [(t, settings, fingerprint) for t in pieces], finished),

@@ -94,7 +94,10 @@ def test_a_large_file_in_byte_ranges_is_the_same_dataset_on_dask_and_in_one_proc
     size = (src / "mountain.klv").stat().st_size
     kw = {"footprint_every": 3, "segment_bytes": 8_000}
     whole = batch_job([str(src)], BatchSettings(str(tmp_path / "whole"), range_bytes=0, **kw))
-    one = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), range_bytes=6_000, **kw))
+    progress = []
+    one = batch_job([str(src)], BatchSettings(str(tmp_path / "one"), range_bytes=6_000, **kw),
+                    on_done=lambda part=1.0: progress.append(part))
+    assert len(progress) > 20 and sum(progress) == pytest.approx(6)  # a range: its part of a file
     with dask_mapper("local:2") as m:
         dask = batch_job([str(src)], BatchSettings(str(tmp_path / "dask"), range_bytes=6_000, **kw), mapper=m)
     assert size > 6_000  # (the demo's flight is cut too)
