@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError, KLVError
-from ..ground.frame import FrameSensors, misb_frame_sensor
+from ..ground.frame import FrameSensors
 from ..io.videofile import VideoInfo, iter_frames, probe_video
 from ..sensor.model import Pose, SensorModel
 from ..sequence.sync import FramePoses, Metadata, poses_at_frames
@@ -273,6 +273,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, gro
             pending.append(f)
             return f
 
+        frame_sensors = FrameSensors()
         for fr in iter_frames(video, want=lambda i, t: i in wanted, errors=decode_errors):
             if fr.image is None:
                 continue
@@ -290,7 +291,7 @@ def video_job(video, *, out: str | Path, klv=None, telemetry=None, cfg=None, gro
                         f"in a metadata gap longer than {max_gap_s:g} s")
             elif sensor is None:
                 h, w = fr.image.shape[:2]
-                sensor = misb_frame_sensor(w, h, vals["hfov_deg"], vals["vfov_deg"])
+                sensor = frame_sensors.get(w, h, vals["hfov_deg"], vals["vfov_deg"])
                 if sensor is None:
                     status, note = "INVALID_INPUT", "no usable field of view (tags 16, 17)"
             frame_ground = ground if ground is not None else AtHeight(vals.get("fc_h_m", math.nan))
