@@ -200,7 +200,7 @@ MUTANTS = [
             "same_packets",),
            "a PES begun before a chunk's end and timed by arrival loses its time (ST 1402 carriage)"),
     Mutant("range-cut-any-key", "io/klv/segments.py",
-           "if end == nxt and checksum_problem(block[k:nxt]) is None:", "if end == nxt:",
+           "if good_packet(block, k, nxt):", "if packet_end(block, k)[0] == nxt:",
            ("tests/unit/io/klv/test_klv_segments.py::test_a_byte_range_begins_where_a_good_packet_ends",),
            "a byte range may begin after a packet whose checksum fails (not where the reader stands)"),
     Mutant("range-numbering", "jobs/klv.py",

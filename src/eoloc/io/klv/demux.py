@@ -526,8 +526,9 @@ def _clean_pes(c, g, max_pes_bytes: int, arrival, *, final: bool = True
     times: list[float | None] = [t if ok_t else None for t, ok_t in zip((pts / PTS_HZ).tolist(), timed.tolist(),
                                                                        strict=True)]
     by_arrival = 0
+    begins = g[pusi]  # each PES's first packet
     for j in np.flatnonzero(~timed).tolist():  # no PTS: the video frame before it in the stream (ST 1402)
-        video = arrival(int(g[pusi][j]))
+        video = arrival(int(begins[j]))
         if video is not None:
             times[j] = video / PTS_HZ
             by_arrival += 1

@@ -68,6 +68,12 @@ def forced_cut(block: bytes) -> int:
     return last if last > 0 else len(block) - 16
 
 
+def good_packet(block: bytes, a: int, b: int) -> bool:
+    """Whether the packet whose key is at ``a`` ends at ``b`` (its length) and passes its checksum."""
+    end, _, _ = packet_end(block, a)
+    return end == b and checksum_problem(block[a:b]) is None
+
+
 def safe_cut(block: bytes, lo: int) -> int | None:
     """The last position at or after ``lo`` where an ST 0601 key starts right after a good packet
     (its key, length and checksum in ``block``, ending there), or None."""
@@ -78,8 +84,7 @@ def safe_cut(block: bytes, lo: int) -> int | None:
         p = block.rfind(UAS_KEY, 0, c)
         if p < 0:
             return None
-        end, _, _ = packet_end(block, p)
-        if end == c and checksum_problem(block[p:c]) is None:
+        if good_packet(block, p, c):
             return c
         c = p
     return None
@@ -138,8 +143,7 @@ def range_cut(f, at: int, *, window: int = 1 << 20) -> int:
             nxt = block.find(UAS_KEY, k + 1)
             if nxt < 0:
                 break
-            end, _, _ = packet_end(block, k)
-            if end == nxt and checksum_problem(block[k:nxt]) is None:
+            if good_packet(block, k, nxt):
                 return pos + nxt
             k = nxt
         if len(block) < window:

@@ -34,10 +34,7 @@ class MemoryPayloads:
         """``body`` after the PID's bytes so far, with its ``marks`` (offsets in ``body``)."""
         at = self.size.get(pid, 0)
         self.parts.setdefault(pid, []).append(body)
-        if pid not in self.marks:  # (a whole stream's PID: its marks as they are)
-            self.marks[pid] = marks if not at else [(o + at, t) for o, t in marks]
-        else:
-            self.marks[pid] += [(o + at, t) for o, t in marks]
+        self.marks.setdefault(pid, []).extend([(o + at, t) for o, t in marks] if at else marks)
         self.size[pid] = at + len(body)
 
     def pids(self) -> list[int]:
@@ -138,6 +135,7 @@ def _demuxed(chunks: Chunks, sink) -> tuple[list[tuple[int, str]], object, dict[
     for data, final in chunks():
         events, damage = demux.feed_stream(data, final=final)
         damaged += [(d.offset, f"MPEG-TS: {d.message}") for d in damage]
+        got: dict[int, list] = {}  # the chunk's PES per PID (payloads, marks, bytes): handed to the sink at once
         for ev in events:
             if not isinstance(ev, PESStreamEvent):
                 continue
@@ -156,5 +154,10 @@ def _demuxed(chunks: Chunks, sink) -> tuple[list[tuple[int, str]], object, dict[
             if t is None and video is not None:
                 t = video / PTS_HZ
                 by_arrival[ev.pid] = by_arrival.get(ev.pid, 0) + 1
-            sink.add(ev.pid, payload, [(0, t)])
+            pes = got.setdefault(ev.pid, [[], [], 0])
+            pes[0].append(payload)
+            pes[1].append((pes[2], t))
+            pes[2] += len(payload)
+        for pid, (parts, marks, _) in got.items():
+            sink.add(pid, b"".join(parts), marks)
     return damaged + unread, sink, by_arrival
