@@ -5,19 +5,12 @@ slept for."""
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from eoloc.live.sources import DatagramSink
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def until_listening(proc: subprocess.Popen) -> str:
@@ -45,6 +38,21 @@ def wait_for_packets(ndjson: Path, n: int, proc: subprocess.Popen, timeout_s: fl
     return seen
 
 
+def summary_of(log: str, stopped: str = "eoloc live stopped") -> dict:
+    """The JSON summary `eoloc live` prints after its ``stopped`` line (``"eoloc live stopped
+    (SIGINT)"`` to insist on why it stopped)."""
+    return json.loads(log[log.index("{", log.index(stopped)):].splitlines()[0])
+
+
+def wait_until(ready, what: str, timeout_s: float = 60.0) -> None:
+    """Until ``ready()`` is true: waited for, however slow this machine is today; ``timeout_s`` only
+    a safety net, after which the test fails naming ``what`` it waited for."""
+    deadline = time.monotonic() + timeout_s
+    while not ready():
+        assert time.monotonic() < deadline, f"not after {timeout_s:.0f} s: {what}"
+        time.sleep(0.02)
+
+
 class CotReceiver(DatagramSink):
     """Every datagram on a UDP address (a multicast group joined) parsed as one CoT event."""
 
@@ -52,6 +60,11 @@ class CotReceiver(DatagramSink):
         self.events: list[ET.Element] = []
         self.bad: list[bytes] = []
         super().__init__(url, self._parse)
+
+    def wait_for(self, n: int, timeout_s: float = 60.0) -> None:
+        """Until ``n`` datagrams have been read (the sender's count: on loopback none is lost, but
+        the last ones may still wait in the socket's buffer when the sender has finished)."""
+        wait_until(lambda: len(self.events) + len(self.bad) >= n, f"{n} CoT datagrams", timeout_s)
 
     def _parse(self, data: bytes, _arrival: float) -> None:
         try:

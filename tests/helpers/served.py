@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import socket
 import subprocess
 import sys
 import tempfile
@@ -11,6 +10,7 @@ import time
 from pathlib import Path
 
 import httpx
+from ports import free_tcp_port
 
 PROCESSES: dict[str, subprocess.Popen] = {}  # base URL -> the server's process, while it runs
 LOGS: dict = {}  # base URL -> the file its output goes to
@@ -30,18 +30,12 @@ def stop_and_log(url: str) -> str:
     return _read(LOGS[url])
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @contextlib.contextmanager
 def eoloc_serve(*args: str):
     """Run `eoloc serve ARGS --port P` until the block ends; yields its base URL once /v1/health
     answers. Its output goes to a file (a pipe nobody reads would fill with the access log and stop
     the server after some 800 requests)."""
-    port = free_port()
+    port = free_tcp_port()
     log = tempfile.TemporaryFile()
     proc = subprocess.Popen([str(Path(sys.executable).parent / "eoloc"), "serve", *args, "--port", str(port)],
                             stdout=log, stderr=subprocess.STDOUT)

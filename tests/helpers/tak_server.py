@@ -18,14 +18,10 @@ import xml.etree.ElementTree as ET
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
+from ports import free_tcp_port
+
 ROOT = Path(__file__).resolve().parents[2]
 TAK_PYTHON = ROOT / ".venv-tak" / "bin" / "python"
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 CERT_PASSWORD = "eoloc-test-secret"  # the password of the .p12 files FreeTAKServer makes here
@@ -123,18 +119,37 @@ class TakClient:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=5)
         if tls is not None:  # an ssl.SSLContext with the client's certificate
             self.sock = tls.wrap_socket(self.sock, server_hostname="127.0.0.1")
-        now = datetime.now(UTC)
+        self.callsign = callsign
+        self.announce()
+        self.buffer = b""
+        self.events: list[ET.Element] = []
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def announce(self) -> None:
+        """Its presence (SA) event, as ATAK sends it on connecting."""
+        now, callsign = datetime.now(UTC), self.callsign
         self.sock.sendall(
             f'<?xml version="1.0" encoding="UTF-8"?><event version="2.0" uid="ANDROID-{callsign}" type="a-f-G-U-C" '
             f'how="h-e" time="{_iso(now)}" start="{_iso(now)}" stale="{_iso(now + timedelta(minutes=10))}">'
             f'<point lat="40.0" lon="-105.0" hae="1600" ce="10" le="10"/><detail><contact callsign="{callsign}" '
             f'endpoint="*:-1:stcp"/><__group name="Cyan" role="Team Member"/><takv platform="test" version="1"/>'
             f"</detail></event>".encode())
-        self.buffer = b""
-        self.events: list[ET.Element] = []
-        self.running = True
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+
+    def wait_routed(self, port: int, tls=None, timeout_s: float = 60.0) -> None:
+        """Until the server relays to this client: a second client announces itself (again, every
+        half second) until its presence arrives here; then it leaves."""
+        probe = TakClient(port, callsign=f"{self.callsign}-probe", tls=tls)
+        arrived = lambda evs: any(e.get("uid") == f"ANDROID-{probe.callsign}" for e in evs)  # noqa: E731
+        deadline = time.monotonic() + timeout_s
+        try:
+            while not arrived(self.events):
+                assert time.monotonic() < deadline, f"the server relays nothing to {self.callsign}"
+                probe.announce()
+                self.wait_for(arrived, 0.5)
+        finally:
+            probe.close()
 
     def _run(self) -> None:
         self.sock.settimeout(0.5)

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from livecmd import free_udp_port, until_listening, wait_for_packets
+from livecmd import summary_of, until_listening, wait_for_packets
+from ports import free_udp_port
 
 import eoloc
 from eoloc.cli import main
@@ -113,7 +114,7 @@ def test_46_1_eoloc_live_goes_on_after_the_packet(tmp_path):
     log, _ = proc.communicate(timeout=30)
     log = head + log
     assert proc.returncode == 0 and "Traceback" not in log, log
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+    summary = summary_of(log)
     assert summary["packets"] == n - 1 and summary["corrupt"] == 1, summary
     assert seen == n - 1
 

@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 
 import pytest
-from livecmd import free_udp_port, until_listening, wait_for_packets
+from livecmd import summary_of, until_listening, wait_for_packets
+from ports import free_udp_port
 
 import eoloc
 from eoloc.io.klv.reader import split_klv
@@ -81,7 +82,7 @@ def test_live_over_udp_with_faults_equals_the_batch_path(tmp_path):
     log = head + "".join(said)
     assert proc.returncode == 0, log
     assert "Traceback" not in log
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped (SIGINT)")):].splitlines()[0])
+    summary = summary_of(log, "eoloc live stopped (SIGINT)")
     assert summary["packets"] == 39 + 3 and summary["duplicates"] == 1 and summary["corrupt"] == 1
     assert summary["not_klv"] == 1 and summary["late"] >= 1 and summary["restarts"] == 1
     assert summary["latency_ms_median"] < 50

@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from livecmd import summary_of, wait_until
+from ports import free_udp_port
 
 import eoloc
 from eoloc.io.klv import read_klv
@@ -37,10 +39,10 @@ EOLOC = str(Path(sys.executable).parent / "eoloc")
 LAT_RES, LON_RES, H_RES, CE_RES = 180 / (2**32 - 2), 360 / (2**32 - 2), 19900 / 65535, 4095 / 65535
 
 
-def _port(kind=socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _packets_per_pid(ts: bytes) -> dict[int, int]:
+    cells = np.frombuffer(ts[:len(ts) - len(ts) % 188], np.uint8).reshape(-1, 188)
+    pids, counts = np.unique((cells[:, 1].astype(int) & 0x1F) << 8 | cells[:, 2], return_counts=True)
+    return dict(zip(pids.tolist(), counts.tolist(), strict=True))
 
 
 def _av_packets(path: Path) -> dict[str, list[tuple[bytes, int]]]:
@@ -84,7 +86,7 @@ def _lowest_fixes(ndjson: Path) -> dict[str, dict]:
 
 def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
     src = write_klv_ts(tmp_path / "in.ts", [split_klv(FLIGHT.read_bytes())], video_fps=10)
-    rx_port, tx_port = _port(), _port()
+    rx_port, tx_port = free_udp_port(), free_udp_port()
     sink = DatagramSink(f"udp://127.0.0.1:{rx_port}")
     got = sink.datagrams
     ndjson = tmp_path / "live.ndjson"
@@ -103,13 +105,17 @@ def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
     while time.monotonic() < deadline and (not ndjson.exists() or
                                            ndjson.read_text(encoding="utf-8").count('"aircraft"') < 39):
         time.sleep(0.1)
-    time.sleep(0.5)
+    # every transport packet passed on (the video after the last KLV too) before it is stopped: as
+    # many on each PID as came in (the KLV's own PES only grow by the tags written into them)
+    wanted = _packets_per_pid(src.read_bytes())
+    wait_until(lambda: all(_packets_per_pid(b"".join(list(got))).get(pid, 0) >= n for pid, n in wanted.items()),
+               f"the transport packets passed on ({sum(wanted.values())} in)")
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
     log = "".join(head) + log
     sink.stop()
     assert proc.returncode == 0 and "Traceback" not in log, log
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+    summary = summary_of(log)
     assert summary["packets"] == 39 and summary["klv_out"]["with_target"] == 39, log
     assert all(len(d) % 188 == 0 and d[0] == 0x47 for d in got)
     out = tmp_path / "out.ts"

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from browser import chromium
+from livecmd import summary_of
+from ports import free_tcp_port, free_udp_port
 
 import eoloc
 from eoloc.io.klv.reader import split_klv
@@ -39,12 +41,6 @@ FLIGHT = MOUNTAIN / "flight.klv"
 DEM = MOUNTAIN / "longs_peak_srtmgl3.tif"
 CONFIG = MOUNTAIN / "klv.toml"
 EOLOC = str(Path(sys.executable).parent / "eoloc")
-
-
-def _free_port(kind=socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _live_run(model: str, dem: bool = False):
@@ -121,10 +117,6 @@ def test_moving_targets_tracked_live_equal_the_batch_kalman():
         assert p["speed_sigma_mps"] == pytest.approx(float(tracks[tid].speed_sigma_mps[-1]), rel=1e-9)
 
 
-def _summary(log: str) -> dict:
-    return json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
-
-
 def _wait(fn, timeout_s: float = 15.0, what: str = ""):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -136,7 +128,7 @@ def _wait(fn, timeout_s: float = 15.0, what: str = ""):
 
 
 def test_the_live_map_in_chromium_follows_the_stream_and_shows_silence(tmp_path):
-    udp, http = _free_port(socket.SOCK_DGRAM), _free_port()
+    udp, http = free_udp_port(), free_tcp_port()
     ndjson = tmp_path / "live.ndjson"
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{udp}", "--dem", str(DEM), "--config", str(CONFIG),
                              "--map", f"127.0.0.1:{http}", "--ndjson", str(ndjson), "--silence", "1"],
@@ -206,7 +198,7 @@ def test_the_live_map_in_chromium_follows_the_stream_and_shows_silence(tmp_path)
         proc.send_signal(signal.SIGINT)
         log, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0 and "Traceback" not in log, log
-    summary = _summary(log)
+    summary = summary_of(log)
     assert summary["packets"] == 39 and summary["map"]["connections"] >= 1 and summary["map"]["dropped"] == 0
 
 

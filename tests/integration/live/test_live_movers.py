@@ -22,7 +22,8 @@ import pymap3d
 import pytest
 import rasterio
 from browser import chromium
-from livecmd import CotReceiver, free_udp_port, settle, until_listening
+from livecmd import CotReceiver, settle, summary_of, until_listening
+from ports import free_udp_port
 from rasterio.transform import from_origin
 from where import DATA
 
@@ -147,7 +148,7 @@ def test_live_detect_over_udp_finds_locates_and_sends_the_movers(drive, tmp_path
         log, _ = proc.communicate(timeout=60)
         rx.stop()
     assert proc.returncode == 0 and "Traceback" not in log, log
-    summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+    summary = summary_of(log)
     m = summary["movers"]
     assert m["video_frames"] == N and m["frames_posed"] == N and m["decode_errors"] == 0, m
     assert m["frames_searched"] == N and m["frames_skipped"] == 0 and m["movers"] == 3, m

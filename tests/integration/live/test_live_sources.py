@@ -27,6 +27,8 @@ import time
 from pathlib import Path
 
 import pytest
+from livecmd import summary_of
+from ports import free_tcp_port, free_udp_port
 from where import HELPERS
 
 from eoloc.io.klv.mux import write_klv_ts
@@ -38,12 +40,6 @@ EOLOC = str(Path(sys.executable).parent / "eoloc")
 SYSTEM_PYTHON = "/usr/bin/python3"  # Debian's, which has python3-gi for the RTSP server
 RTSP_SERVER = HELPERS / "rtsp_server.py"
 N_PACKETS, N_TARGETS = 80, 400  # two 10 Hz streams of 40 packets, 5 VMTI targets each
-
-
-def _free_port(kind=socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -71,11 +67,6 @@ def slow_stream(tmp_path_factory):
     return ts, sorted(ref.stdout.splitlines())
 
 
-def _summary(log: str) -> dict:
-    at = log.index("eoloc live stopped")
-    return json.loads(log[log.index("{", at):].splitlines()[0])
-
-
 def _live(source: str, *extra: str, started=None, timeout: float = 60.0) -> tuple[list[str], dict]:
     """`eoloc live SOURCE --ndjson - --packets 80 ...`; ``started(proc)`` runs once it says where it
     reads from. Returns its NDJSON lines, sorted, and its summary."""
@@ -98,7 +89,7 @@ def _live(source: str, *extra: str, started=None, timeout: float = 60.0) -> tupl
         r.join()
     log = "".join(err)
     assert proc.returncode == 0 and "Traceback" not in log, log
-    return sorted(line.rstrip("\n") for line in out), _summary(log)
+    return sorted(line.rstrip("\n") for line in out), summary_of(log)
 
 
 def _check(summary: dict) -> None:
@@ -109,7 +100,7 @@ def _check(summary: dict) -> None:
 
 @pytest.fixture
 def rtsp_server(stream):
-    port = _free_port(socket.SOCK_STREAM)
+    port = free_tcp_port()
     proc = subprocess.Popen([SYSTEM_PYTHON, str(RTSP_SERVER), str(stream[0]), str(port)], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     assert proc.stdout.readline().strip() == "ready", proc.communicate(timeout=10)[0]
@@ -122,12 +113,12 @@ def test_rtsp_from_a_real_rtsp_server_gives_what_the_file_gives(stream, rtsp_ser
     """MPEG-TS over RTP from gst-rtsp-server, paced at the stream's clock (4 s), with CoT out."""
     from livecmd import CotReceiver
 
-    cot_port = _free_port()
+    cot_port = free_udp_port()
     with CotReceiver(f"udp://127.0.0.1:{cot_port}") as rx:
         started = time.monotonic()
         lines, summary = _live(rtsp_server, "--cot", f"udp://127.0.0.1:{cot_port}")
         took = time.monotonic() - started
-        time.sleep(0.3)
+        rx.wait_for(summary["cot"][0]["sent"])
     assert lines == stream[1]
     _check(summary)
     assert took > 3.5  # sent at its own clock (3.9 s of packets), not at once
@@ -138,7 +129,7 @@ def test_rtsp_from_a_real_rtsp_server_gives_what_the_file_gives(stream, rtsp_ser
 def test_srt_through_srt_live_transmit_gives_what_the_file_gives(stream):
     """The encoder's SRT output (srt-live-transmit, listener, fed the TS by UDP at its own clock);
     eoloc live srt://... calls it through its own srt-live-transmit bridge."""
-    udp_in, srt_port = _free_port(), _free_port()
+    udp_in, srt_port = free_udp_port(), free_udp_port()
     sender = subprocess.Popen(["srt-live-transmit", f"udp://127.0.0.1:{udp_in}", f"srt://:{srt_port}"],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     said: list[str] = []
@@ -195,7 +186,7 @@ def test_tcp_and_http_byte_streams_give_what_the_file_gives(stream, tmp_path):
 
 
 def test_unreachable_or_unsupported_sources_are_named_without_a_traceback(tmp_path):
-    closed = _free_port(socket.SOCK_STREAM)
+    closed = free_tcp_port()
     for url, said in [(f"rtsp://127.0.0.1:{closed}/x", "Connection refused"),
                       (f"tcp://127.0.0.1:{closed}", "Connection refused"),
                       ("ftp://example.org/x.ts", "eoloc live reads udp://")]:
@@ -230,7 +221,7 @@ def test_rtsp_server_restarting_is_reconnected_and_nothing_is_lost_or_doubled(sl
     stream from its start: eoloc live reconnects (with back-off, saying so), drops the packets it
     had already (duplicates) and ends with every packet once: the file's targets exactly."""
     ts, ref = slow_stream
-    port = _free_port(socket.SOCK_STREAM)
+    port = free_tcp_port()
 
     def serve():
         proc = subprocess.Popen([SYSTEM_PYTHON, str(RTSP_SERVER), str(ts), str(port)], stdout=subprocess.PIPE,
@@ -282,4 +273,4 @@ def _live_collect(source: str, started, out_lines: list[str]) -> tuple[list[str]
         r.join()
     log = "".join(err)
     assert proc.returncode == 0 and "Traceback" not in log, log
-    return sorted(line.rstrip("\n") for line in out_lines), _summary(log), log
+    return sorted(line.rstrip("\n") for line in out_lines), summary_of(log), log

@@ -15,8 +15,9 @@ import time
 from pathlib import Path
 
 import pytest
-from livecmd import wait_for_packets
-from tak_server import TakClient, free_tcp_port, freetakserver
+from livecmd import summary_of, wait_for_packets, wait_until
+from ports import free_tcp_port, free_udp_port
+from tak_server import TakClient, freetakserver
 
 import eoloc
 from eoloc.io.klv.reader import decode_klv_bytes, split_klv
@@ -32,7 +33,7 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
     """The mountain flight sent to `eoloc live` over UDP, CoT by TCP to FreeTAKServer, read back by
     a TAK client connected to the server: every event arrives, each target where eoloc put it."""
     out = tmp_path / "live.ndjson"
-    port_in = _free_udp_port()
+    port_in = free_udp_port()
     with freetakserver(tmp_path) as port:
         client = TakClient(port)
         client.wait_for(lambda evs: any(e.get("type") == "b-t-f" for e in evs), 60)  # its welcome: routing is up
@@ -57,7 +58,7 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
         proc.send_signal(signal.SIGINT)
         log, _ = proc.communicate(timeout=30)
         log = "".join(head) + log
-        summary = json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
+        summary = summary_of(log)
         client.wait_for(lambda evs: len(ours(evs)) >= summary["cot_events"], 120)  # the server relays at its pace
         client.close()
     assert proc.returncode == 0 and "Traceback" not in log, log
@@ -149,18 +150,6 @@ class TcpSink:
         return [e for e in re.split(rb"(?=<event[ >/])", data) if e.strip()]
 
 
-def _wait(cond, timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.05)
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_tak_server_down_then_restarting_costs_nothing_but_the_gap():
     """Server down at the start: events queue (send never waits); it comes up: the sender connects
     (back-off), says hello and sends the queue. The server restarts: the sender reconnects and
@@ -173,7 +162,7 @@ def test_tak_server_down_then_restarting_costs_nothing_but_the_gap():
     assert len(sender.queue) == 50 and sender.connects == 0
     sink = TcpSink(port)
     sink.start()
-    _wait(lambda: len(sink.events(0)) == 51)
+    wait_until(lambda: len(sink.events(0)) == 51, "the hello and the 50 queued events")
     first = sink.events(0)
     assert b"a-f-G-E-S" in first[0] and [e.split(b'uid="')[1].split(b'"')[0] for e in first[1:]] == \
         [b"early-%d" % i for i in range(50)]
@@ -189,7 +178,7 @@ def test_tak_server_down_then_restarting_costs_nothing_but_the_gap():
     def late_ones():
         return [e.split(b'uid="')[1].split(b'"')[0] for e in later() if b"late-" in e]
 
-    _wait(lambda: len(late_ones()) + sender.lost == 20)
+    wait_until(lambda: len(late_ones()) + sender.lost == 20, "the 20 late events delivered or counted lost")
     sender.close()
     got = late_ones()
     assert sender.connects == 2 and b"a-f-G-E-S" in later()[0]

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import importlib
-import json
 import socket
 import ssl
 import subprocess
@@ -28,7 +27,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import rsa
 from cryptography.hazmat.primitives.serialization import pkcs12
 from cryptography.x509.oid import NameOID
-from tak_server import TakClient, free_tcp_port, taky_client, taky_server
+from livecmd import summary_of, wait_until
+from ports import free_udp_port
+from tak_server import TakClient, taky_client, taky_server
 from where import DATA
 
 import eoloc
@@ -113,7 +114,7 @@ def listener(tak, tmp_path) -> TakClient:
     ctx.load_verify_locations(cadata=pem(tak["ca"][0]).decode())
     ctx.load_cert_chain(tmp_path / "listener.pem")
     client = TakClient(tak["port"], tls=ctx)
-    time.sleep(1.0)  # its presence routed before the stream starts
+    client.wait_routed(tak["port"], tls=ctx)  # the server relays to it before the stream starts
     return client
 
 
@@ -136,16 +137,6 @@ def live_paced(args: list[str], timeout_s: float = 120.0) -> subprocess.Complete
             time.sleep(0.05)
     out, err = proc.communicate(timeout=timeout_s)
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, "".join(head) + line + err)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def summary_of(log: str) -> dict:
-    return json.loads(log[log.index("{", log.index("eoloc live stopped")):].splitlines()[0])
 
 
 def klv_fixes(tmp_path) -> dict[str, list[tuple[float, float]]]:
@@ -271,8 +262,8 @@ class NegotiatingServer:
     the client's request, then reads TAK protocol 1 frames (0xbf, varint length, TakMessage)."""
 
     def __init__(self) -> None:
-        self.port = free_tcp_port()
-        self.listener = socket.create_server(("127.0.0.1", self.port))
+        self.listener = socket.create_server(("127.0.0.1", 0))  # the port the OS gives: no race
+        self.port = self.listener.getsockname()[1]
         self.xml_before: list[bytes] = []
         self.frames: list[bytes] = []
         self.request = None
@@ -331,8 +322,9 @@ class UdpSink:
             except TimeoutError:
                 continue
 
-    def stop(self) -> list[bytes]:
-        time.sleep(0.5)
+    def stop(self, n: int) -> list[bytes]:
+        """Every datagram, once the ``n`` the sender counted are in (on loopback none is lost)."""
+        wait_until(lambda: len(self.datagrams) >= n, f"{n} datagrams")
         self.running = False
         self.thread.join()
         self.sock.close()
@@ -379,12 +371,13 @@ def test_51_tak_protocol_1_negotiated_and_meshed_equals_the_xml(tak_pb2, tmp_pat
     r0 = subprocess.run([*common, "--cot", f"udp://127.0.0.1:{reference.port}"], capture_output=True, text=True,
                         timeout=120)
     assert r1.returncode == r0.returncode == 0, r1.stderr + r0.stderr
-    datagrams, xml_events = mesh.stop(), [ET.fromstring(d[d.find(b"<event"):]) for d in reference.stop()]
     summary = summary_of(r1.stderr)
+    datagrams = mesh.stop(summary["cot"][0]["sent"])
+    xml_events = [ET.fromstring(d[d.find(b"<event"):]) for d in reference.stop(summary_of(r0.stderr)["cot"][0]["sent"])]
     assert summary["cot"][1]["tak_protocol"] == "1" and "TAK protocol 1 (protobuf) agreed" in r1.stderr
     assert server.request is not None and server.request.find("detail/TakControl/TakRequest").get("version") == "1"
     assert [ET.fromstring(d[d.find(b"<event"):]).get("type") for d in server.xml_before] == ["a-f-G-E-S"]  # hello
-    time.sleep(0.5)
+    wait_until(lambda: len(server.frames) >= summary["cot_events"], "the server's protobuf frames")
     assert len(datagrams) == len(server.frames) == len(xml_events) == summary["cot_events"] > 100
     for datagram, frame, want in zip(datagrams, server.frames, xml_events, strict=True):
         assert datagram[:3] == b"\xbf\x01\xbf"
@@ -426,7 +419,7 @@ def test_51_video_link_and_video_package(tmp_path):
                         "--video-url", url, "--video-package", str(tmp_path / "video.zip")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    events = [ET.fromstring(d[d.find(b"<event"):]) for d in sink.stop()]
+    events = [ET.fromstring(d[d.find(b"<event"):]) for d in sink.stop(summary_of(r.stderr)["cot"][0]["sent"])]
     platforms = [e for e in events if e.get("type") == "a-f-A-M-F-Q"]
     assert len(platforms) == 5
     for e in platforms:
@@ -576,7 +569,7 @@ def test_51_a_silent_tls_server_is_not_a_dead_one(tmp_path):
     sender.close()
     assert sender.sent == 20 and sender.connects == 1 and sender.fatal is None, sender.summary()
     assert elapsed < 3.0  # the 1 s probe for a refusal, not a 5 s wait on the tickets
-    time.sleep(0.2)
+    wait_until(lambda: b"".join(received).count(b"<event") >= 20, "the 20 events at the server")
     assert b"".join(received).count(b"<event") == 20
 
 
