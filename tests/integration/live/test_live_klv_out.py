@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from livecmd import summary_of, wait_until
+from livecmd import summary_of, until_listening, wait_for_packets, wait_until
 from ports import free_udp_port
 
 import eoloc
@@ -93,18 +93,12 @@ def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{tx_port}", "--dem", str(DEM), "--config", str(CONFIG),
                              "--klv-out", f"udp://127.0.0.1:{rx_port}", "--ndjson", str(ndjson)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    head = []
-    while not any("listening on" in line for line in head):  # the receiver is bound
-        head.append(proc.stdout.readline())
-        assert head[-1], "".join(head)
+    head = until_listening(proc)  # the receiver is bound
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     for datagram, _ in ts_file_datagrams(src.read_bytes()):
         tx.sendto(datagram, ("127.0.0.1", tx_port))
         time.sleep(0.002)
-    deadline = time.monotonic() + 60  # the first packets wait for the compiled kernels
-    while time.monotonic() < deadline and (not ndjson.exists() or
-                                           ndjson.read_text(encoding="utf-8").count('"aircraft"') < 39):
-        time.sleep(0.1)
+    wait_for_packets(ndjson, 39, proc)  # (the first packets wait for the compiled kernels)
     # every transport packet passed on (the video after the last KLV too) before it is stopped: as
     # many on each PID as came in (the KLV's own PES only grow by the tags written into them)
     wanted = _packets_per_pid(src.read_bytes())
@@ -112,7 +106,7 @@ def test_ts_with_video_over_udp_keeps_the_video_and_carries_the_fixes(tmp_path):
                f"the transport packets passed on ({sum(wanted.values())} in)")
     proc.send_signal(signal.SIGINT)
     log, _ = proc.communicate(timeout=30)
-    log = "".join(head) + log
+    log = head + log
     sink.stop()
     assert proc.returncode == 0 and "Traceback" not in log, log
     summary = summary_of(log)

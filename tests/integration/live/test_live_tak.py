@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from livecmd import summary_of, wait_for_packets, wait_until
+from livecmd import summary_of, until_listening, wait_for_packets, wait_until
 from ports import free_tcp_port, free_udp_port
 from tak_server import TakClient, freetakserver
 
@@ -41,8 +41,7 @@ def test_targets_reach_a_tak_client_through_freetakserver(tmp_path):
                                  str(CONFIG), "--cot", f"tcp://127.0.0.1:{port}", "--ndjson", str(out),
                                  "--silence", "1"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        while "listening on" not in proc.stdout.readline():
-            assert proc.poll() is None
+        until_listening(proc)
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         for raw, _ in split_klv(FLIGHT.read_bytes()):
             tx.sendto(raw, ("127.0.0.1", port_in))

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from livecmd import CotReceiver, settle, summary_of
+from livecmd import CotReceiver, settle, summary_of, until_listening
 from ports import free_udp_port
 
 import eoloc
@@ -52,15 +52,6 @@ def _two_pid_ts(path: Path) -> tuple[Path, int]:
     return path, s.n_good
 
 
-def _wait_listening(proc) -> str:
-    """The receiver's first lines, up to the one saying it listens (it binds before that)."""
-    lines = []
-    while "listening on" not in (line := proc.stdout.readline()):
-        assert line, "".join(lines)
-        lines.append(line)
-    return "".join(lines)
-
-
 def _parse_time(iso: str) -> float:
     return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp()
 
@@ -79,7 +70,7 @@ def test_ts_over_udp_to_cot_multicast_equals_the_batch_path(tmp_path):
     sends.insert(10, sends[9])  # and two sent twice: their KLV packets are seen again and dropped
     sends.insert(30, sends[29])
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    _wait_listening(proc)
+    until_listening(proc)
     for d in sends:
         tx.sendto(d, ("127.0.0.1", port))
         time.sleep(0.002)
@@ -146,7 +137,7 @@ def test_ts_replayed_at_its_own_rate_every_packet_and_cot_event_arrives(tmp_path
     rx = CotReceiver(f"udp://127.0.0.1:{cot_port}")
     proc = subprocess.Popen([EOLOC, "live", f"udp://127.0.0.1:{port}", "--cot", f"udp://127.0.0.1:{cot_port}",
                              "--packets", "80"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    _wait_listening(proc)
+    until_listening(proc)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     started = time.monotonic()
     for d, _ in file_datagrams(str(ts), lambda: False, realtime=True):
